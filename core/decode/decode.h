@@ -1,0 +1,70 @@
+// Per-camera-pixel decoding of a structured-light scan into projector coordinates.
+//
+// Gray code gives each pixel an integer projector column/row; the phase-shifted sinusoids give
+// the sub-pixel position within one period, and the Gray code picks the period (so a Gray-code
+// bit error at a stripe boundary moves the Gray value by one pixel and changes nothing). A
+// noise-aware local linear fit (weights = signal power, robust to depth steps) then estimates
+// each pixel's coordinate from its neighbourhood, so dark ink borrows from nearby paper.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/patterns/patterns.h"
+
+namespace vellum {
+
+struct DecodeOptions {
+  bool use_phase = true;           // Use the phase patterns when present (false: Gray code only).
+  double min_contrast_dn = 5.0;    // Minimum white - black difference, camera DN.
+  double min_modulation_dn = 2.5;  // Minimum sinusoid amplitude, camera DN.
+  double uncertain_bit_dn = 3.0;   // A Gray bit with |pattern - inverse| below this is uncertain.
+  double max_unwrap_error = 0.3;   // Max |Gray - phase| disagreement, fraction of the period.
+  int saturation_dn = 255;         // A white frame value >= this is clipped: pixel invalid.
+  double noise_dn = 1.5;           // Camera noise standard deviation, DN (sets fit weights).
+  int smooth_radius_px = 3;        // Local fit window radius, camera pixels; 0 = no fit.
+  int smooth_passes = 2;           // Robust (Tukey) reweighting passes of the local fit.
+  double outlier_sigmas = 4.685;   // Tukey cut-off, in units of a pixel's expected noise.
+
+  bool Check(std::string* why) const;
+};
+
+struct DecodeStats {
+  int pixels = 0;              // Camera pixels decoded.
+  int lit = 0;                 // Pixels with enough white/black contrast (projector reaches them).
+  int valid = 0;               // Pixels with a projector coordinate.
+  int rejected_saturated = 0;  // Pixels with a clipped white frame.
+  int rejected_bits = 0;       // Lit pixels with two or more uncertain coarse Gray bits.
+  int rejected_modulation = 0; // Lit pixels whose sinusoid amplitude is too low.
+  int rejected_unwrap = 0;     // Lit pixels whose Gray code and phase disagree.
+  int fit_fallbacks = 0;       // Pixels where the local fit was inconsistent (depth step).
+};
+
+struct DecodeResult {
+  Status status = Status::Error("decode not run");
+  cv::Mat projector_x;  // CV_32F projector column (pixel centres at integers), NaN if invalid.
+  cv::Mat projector_y;  // CV_32F projector row, NaN if invalid or rows not encoded.
+  cv::Mat valid;        // CV_8U, 255 where the pixel decoded.
+  cv::Mat amplitude;    // CV_32F (white - black) / 2, camera DN.
+  bool has_columns = false;  // The sequence encoded projector columns.
+  bool has_rows = false;     // The sequence encoded projector rows.
+  DecodeStats stats;
+};
+
+// frames[k] is the camera image (CV_8U, one channel) taken while sequence.patterns[k] was shown.
+DecodeResult Decode(const PatternSequence& sequence, const std::vector<cv::Mat>& frames,
+                    const DecodeOptions& options = DecodeOptions());
+
+// Weighted local linear fit (value ~ a + b du + c dv over a (2r+1)^2 window) of one or two
+// value planes with shared weights; writes the fitted value at each pixel with weight > 0.
+// Pixels whose window is degenerate get the weighted mean. Exposed for tests and benchmarks.
+void LocalLinearFit(const std::vector<cv::Mat>& values, const cv::Mat& weights, int radius,
+                    std::vector<cv::Mat>* fitted);
+
+// atan2 to about 1e-7 rad, vectorisable; exposed for its test.
+float FastAtan2(float y, float x);
+
+}  // namespace vellum

@@ -1,0 +1,118 @@
+#include "core/geometry/calibration.h"
+
+#include <cmath>
+#include <limits>
+
+namespace vellum {
+namespace {
+
+bool FiniteMatx(const double* v, int n) {
+  for (int i = 0; i < n; ++i) {
+    if (!std::isfinite(v[i])) return false;
+  }
+  return true;
+}
+
+// Applies OpenCV's distortion model to ideal normalised coordinates.
+cv::Point2d Distort(const cv::Vec<double, 5>& d, double x, double y) {
+  const double r2 = x * x + y * y;
+  const double radial = 1 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
+  return {x * radial + 2 * d[2] * x * y + d[3] * (r2 + 2 * x * x),
+          y * radial + d[2] * (r2 + 2 * y * y) + 2 * d[3] * x * y};
+}
+
+}  // namespace
+
+bool CameraModel::Check(std::string* why) const {
+  if (size.width <= 0 || size.height <= 0) {
+    *why = "image size must be positive";
+    return false;
+  }
+  if (!FiniteMatx(matrix.val, 9) || !FiniteMatx(distortion.val, 5) ||
+      !FiniteMatx(rotation.val, 9) || !FiniteMatx(translation.val, 3)) {
+    *why = "a matrix holds a NaN or infinity";
+    return false;
+  }
+  if (!(matrix(0, 0) > 0 && matrix(1, 1) > 0) || matrix(1, 0) != 0 || matrix(2, 0) != 0 ||
+      matrix(2, 1) != 0 || matrix(2, 2) != 1) {
+    *why = "the intrinsic matrix must be [fx s cx; 0 fy cy; 0 0 1] with fx, fy > 0";
+    return false;
+  }
+  const cv::Matx33d should_be_identity = rotation * rotation.t() - cv::Matx33d::eye();
+  if (cv::norm(should_be_identity) > 1e-6) {
+    *why = "the rotation matrix is not orthonormal";
+    return false;
+  }
+  if (cv::determinant(rotation) < 0) {
+    *why = "the rotation matrix is a reflection (det = -1): a mirror left in the model";
+    return false;
+  }
+  return true;
+}
+
+bool CameraModel::HasDistortion() const {
+  for (int i = 0; i < 5; ++i) {
+    if (distortion[i] != 0) return true;
+  }
+  return false;
+}
+
+cv::Vec3d CameraModel::Center() const { return -(rotation.t() * translation); }
+
+cv::Point2d CameraModel::Project(const cv::Vec3d& world) const {
+  const cv::Vec3d p = rotation * world + translation;
+  if (!(p[2] > 0)) {
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    return {nan, nan};
+  }
+  const cv::Point2d d = Distort(distortion, p[0] / p[2], p[1] / p[2]);
+  return {matrix(0, 0) * d.x + matrix(0, 1) * d.y + matrix(0, 2), matrix(1, 1) * d.y + matrix(1, 2)};
+}
+
+cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel) const {
+  const double yd = (pixel.y - matrix(1, 2)) / matrix(1, 1);
+  const double xd = (pixel.x - matrix(0, 2) - matrix(0, 1) * yd) / matrix(0, 0);
+  if (!HasDistortion()) return {xd, yd};
+  // Fixed-point inversion of the distortion, refined until it reproduces the pixel.
+  double x = xd, y = yd;
+  for (int i = 0; i < 20; ++i) {
+    const cv::Point2d d = Distort(distortion, x, y);
+    const double ex = d.x - xd, ey = d.y - yd;
+    x -= ex;
+    y -= ey;
+    if (ex * ex + ey * ey < 1e-24) break;
+  }
+  return {x, y};
+}
+
+cv::Vec3d CameraModel::RayDirection(const cv::Point2d& pixel) const {
+  const cv::Point2d n = Normalize(pixel);
+  return cv::normalize(rotation.t() * cv::Vec3d(n.x, n.y, 1.0));
+}
+
+bool Calibration::Check(std::string* why) const {
+  std::string sub;
+  if (!camera.Check(&sub)) {
+    *why = "camera: " + sub;
+    return false;
+  }
+  if (!projector.Check(&sub)) {
+    *why = "projector: " + sub;
+    return false;
+  }
+  if (cv::norm(camera.Center() - projector.Center()) < 1e-6) {
+    *why = "camera and projector share one centre: no baseline to triangulate";
+    return false;
+  }
+  return true;
+}
+
+cv::Matx33d LookAt(const cv::Vec3d& eye, const cv::Vec3d& target, const cv::Vec3d& right) {
+  const cv::Vec3d z = cv::normalize(target - eye);
+  cv::Vec3d x = right - z * z.dot(right);
+  x = cv::normalize(x);
+  const cv::Vec3d y = z.cross(x);
+  return cv::Matx33d(x[0], x[1], x[2], y[0], y[1], y[2], z[0], z[1], z[2]);
+}
+
+}  // namespace vellum

@@ -1,0 +1,42 @@
+// The calibration model of the paper's section 3.2: a pinhole camera and a projector modelled
+// as an inverse camera (the virtual, unmirrored one), both in a world frame on the table
+// (mm, z = 0 on the table, +z towards the camera), with OpenCV's 5-term lens distortion.
+#pragma once
+
+#include <string>
+
+#include <opencv2/core.hpp>
+
+namespace vellum {
+
+struct CameraModel {
+  cv::Size size;                 // Image size, pixels.
+  cv::Matx33d matrix = cv::Matx33d::eye();  // Intrinsics K, pixels.
+  cv::Vec<double, 5> distortion = cv::Vec<double, 5>::all(0);  // k1 k2 p1 p2 k3 (OpenCV).
+  cv::Matx33d rotation = cv::Matx33d::eye();  // camera_from_world rotation.
+  cv::Vec3d translation = cv::Vec3d(0, 0, 0);  // camera_from_world translation, mm.
+
+  bool Check(std::string* why) const;
+  bool HasDistortion() const;
+  // Optical centre in world coordinates, mm.
+  cv::Vec3d Center() const;
+  // World point (mm) to image pixel, with distortion. Points behind the camera give NaN.
+  cv::Point2d Project(const cv::Vec3d& world) const;
+  // Image pixel to ideal (undistorted) normalised coordinates (x/z, y/z in the camera frame).
+  cv::Point2d Normalize(const cv::Point2d& pixel) const;
+  // Unit ray direction in world coordinates through an image pixel.
+  cv::Vec3d RayDirection(const cv::Point2d& pixel) const;
+};
+
+struct Calibration {
+  CameraModel camera;
+  CameraModel projector;
+
+  bool Check(std::string* why) const;
+};
+
+// Builds a camera_from_world rotation for a device at `eye` looking at `target`, with the image
+// x axis as close as possible to world direction `right` (all in world coordinates).
+cv::Matx33d LookAt(const cv::Vec3d& eye, const cv::Vec3d& target, const cv::Vec3d& right);
+
+}  // namespace vellum

@@ -1,0 +1,16 @@
+// Calibration YAML (cv::FileStorage) with the keys of DESIGN.md: camera_size, camera_matrix,
+// camera_distortion, camera_rotation, camera_translation and the same with projector_.
+#pragma once
+
+#include <string>
+
+#include "core/common/status.h"
+#include "core/geometry/calibration.h"
+
+namespace vellum {
+
+// Reads and checks a calibration. Errors name the file and the key.
+Status ReadCalibration(const std::string& path, Calibration* calibration);
+Status WriteCalibration(const std::string& path, const Calibration& calibration);
+
+}  // namespace vellum

@@ -1,0 +1,77 @@
+#include "core/io/ply.h"
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+namespace vellum {
+
+Status WritePointsPly(const std::string& path, const cv::Mat& points) {
+  if (points.type() != CV_32FC3) return Status::Error(path + ": point map must be CV_32FC3");
+  std::vector<PlyPoint> out;
+  out.reserve(points.total() / 2);
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < points.cols; ++u) {
+      if (std::isfinite(row[u][0]) && std::isfinite(row[u][1]) && std::isfinite(row[u][2])) {
+        out.push_back({row[u][0], row[u][1], row[u][2], static_cast<float>(u), static_cast<float>(v)});
+      }
+    }
+  }
+  std::ofstream f(path, std::ios::binary);
+  if (!f) return Status::Error(path + ": cannot open for writing");
+  f << "ply\nformat binary_little_endian 1.0\n"
+    << "comment vellum points: x y z world frame mm (z = 0 on the table), u v camera pixel\n"
+    << "element vertex " << out.size() << "\n"
+    << "property float x\nproperty float y\nproperty float z\n"
+    << "property float u\nproperty float v\nend_header\n";
+  static_assert(sizeof(PlyPoint) == 20, "PlyPoint must be packed");
+  f.write(reinterpret_cast<const char*>(out.data()),
+          static_cast<std::streamsize>(out.size() * sizeof(PlyPoint)));
+  if (!f) return Status::Error(path + ": write failed (disk full?)");
+  return Status::Ok();
+}
+
+Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return Status::Error(path + ": cannot open");
+  std::string line;
+  std::getline(f, line);
+  if (line != "ply") return Status::Error(path + ": not a PLY file");
+  long count = -1;
+  std::vector<std::string> props;
+  bool binary_le = false;
+  while (std::getline(f, line)) {
+    if (line == "end_header") break;
+    std::istringstream is(line);
+    std::string word;
+    is >> word;
+    if (word == "format") {
+      std::string fmt;
+      is >> fmt;
+      binary_le = fmt == "binary_little_endian";
+    } else if (word == "element") {
+      std::string name;
+      is >> name >> count;
+      if (name != "vertex") return Status::Error(path + ": expected a vertex element");
+    } else if (word == "property") {
+      std::string type, name;
+      is >> type >> name;
+      if (type != "float") return Status::Error(path + ": property " + name + " is not float");
+      props.push_back(name);
+    }
+  }
+  if (!binary_le) return Status::Error(path + ": only binary_little_endian is read");
+  if (count < 0 || props != std::vector<std::string>{"x", "y", "z", "u", "v"}) {
+    return Status::Error(path + ": expected vertex properties x y z u v");
+  }
+  points->resize(static_cast<size_t>(count));
+  f.read(reinterpret_cast<char*>(points->data()), static_cast<std::streamsize>(count * sizeof(PlyPoint)));
+  if (f.gcount() != static_cast<std::streamsize>(count * sizeof(PlyPoint))) {
+    return Status::Error(path + ": truncated: fewer vertices than the header's " + std::to_string(count));
+  }
+  return Status::Ok();
+}
+
+}  // namespace vellum

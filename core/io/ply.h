@@ -1,0 +1,22 @@
+// PLY files: points.ply has one vertex per decoded camera pixel with properties x y z (float,
+// mm, world) and u v (float, camera pixel); binary little endian.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+
+namespace vellum {
+
+struct PlyPoint {
+  float x, y, z, u, v;
+};
+
+// Writes every finite point of an organised CV_32FC3 point map with its pixel.
+Status WritePointsPly(const std::string& path, const cv::Mat& points);
+Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points);
+
+}  // namespace vellum

@@ -1,0 +1,41 @@
+// Scan directories (DESIGN.md): scan.yaml (projector size, camera size, pattern sequence),
+// texture.png, frame_000.png, ... with frame k taken while pattern k was shown.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/patterns/patterns.h"
+
+namespace vellum {
+
+struct Scan {
+  PatternSequence sequence;
+  cv::Size camera_size;         // 0x0 when unknown (a pattern set not yet captured).
+  cv::Mat texture;              // 8-bit gray or BGR.
+  std::vector<cv::Mat> frames;  // 8-bit gray, one per pattern.
+};
+
+std::string FrameName(int index);    // "frame_007.png"
+std::string PatternName(int index);  // "pattern_007.png"
+
+// Reads scan.yaml only.
+Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size);
+// Writes scan.yaml; camera_size may be empty.
+Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size);
+
+// Reads and validates a whole scan directory; errors name the file and the problem.
+Status ReadScan(const std::string& dir, Scan* scan);
+// Writes scan.yaml, texture.png and the frames (creating the directory).
+Status WriteScan(const std::string& dir, const Scan& scan);
+// Writes the projector images pattern_000.png, ... and scan.yaml (no camera size).
+Status WritePatterns(const std::string& dir, const PatternSequence& sequence);
+
+// Writes an image, creating nothing; errors name the file.
+Status WriteImage(const std::string& path, const cv::Mat& image);
+Status MakeDirectories(const std::string& dir);
+
+}  // namespace vellum

@@ -1,0 +1,259 @@
+#include "core/patterns/patterns.h"
+
+#include <cmath>
+
+#include "core/common/check.h"
+
+namespace vellum {
+
+const char* ToString(PatternKind kind) {
+  switch (kind) {
+    case PatternKind::kWhite:
+      return "white";
+    case PatternKind::kBlack:
+      return "black";
+    case PatternKind::kGray:
+      return "gray";
+    case PatternKind::kPhase:
+      return "phase";
+  }
+  return "?";
+}
+
+const char* ToString(Axis axis) { return axis == Axis::kColumn ? "column" : "row"; }
+
+bool ParsePatternKind(const std::string& text, PatternKind* kind) {
+  for (PatternKind k :
+       {PatternKind::kWhite, PatternKind::kBlack, PatternKind::kGray, PatternKind::kPhase}) {
+    if (text == ToString(k)) {
+      *kind = k;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool ParseAxis(const std::string& text, Axis* axis) {
+  if (text == "column") {
+    *axis = Axis::kColumn;
+  } else if (text == "row") {
+    *axis = Axis::kRow;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+bool PatternSpec::operator==(const PatternSpec& o) const {
+  return kind == o.kind && axis == o.axis && bit == o.bit && inverted == o.inverted &&
+         step == o.step && steps == o.steps && period_px == o.period_px;
+}
+
+bool PatternOptions::Check(std::string* why) const {
+  if (projector_size.width < 2 || projector_size.height < 2) {
+    *why = "projector size must be at least 2x2 pixels";
+    return false;
+  }
+  if (!columns && !rows) {
+    *why = "at least one of columns and rows must be encoded";
+    return false;
+  }
+  if (phase_steps != 0 && phase_steps < 3) {
+    *why = "phase_steps must be 0 (Gray code only) or at least 3";
+    return false;
+  }
+  if (phase_steps != 0 && phase_period_px < 4) {
+    *why = "phase_period_px must be at least 4 projector pixels";
+    return false;
+  }
+  return true;
+}
+
+int GrayBitsFor(int extent) {
+  int bits = 0;
+  while ((1 << bits) < extent) ++bits;
+  return bits;
+}
+
+PatternSequence MakePatternSequence(const PatternOptions& options) {
+  std::string why;
+  VELLUM_DEMAND(options.Check(&why));
+  PatternSequence seq;
+  seq.projector_size = options.projector_size;
+  auto& p = seq.patterns;
+  p.push_back({PatternKind::kWhite});
+  p.push_back({PatternKind::kBlack});
+  for (Axis axis : {Axis::kColumn, Axis::kRow}) {
+    if ((axis == Axis::kColumn && !options.columns) || (axis == Axis::kRow && !options.rows)) {
+      continue;
+    }
+    const int extent =
+        axis == Axis::kColumn ? options.projector_size.width : options.projector_size.height;
+    for (int bit = GrayBitsFor(extent) - 1; bit >= 0; --bit) {  // Coarse to fine.
+      for (bool inverted : {false, true}) {
+        PatternSpec s;
+        s.kind = PatternKind::kGray;
+        s.axis = axis;
+        s.bit = bit;
+        s.inverted = inverted;
+        p.push_back(s);
+      }
+    }
+  }
+  if (options.phase_steps > 0) {
+    for (Axis axis : {Axis::kColumn, Axis::kRow}) {
+      if ((axis == Axis::kColumn && !options.columns) || (axis == Axis::kRow && !options.rows)) {
+        continue;
+      }
+      for (int k = 0; k < options.phase_steps; ++k) {
+        PatternSpec s;
+        s.kind = PatternKind::kPhase;
+        s.axis = axis;
+        s.step = k;
+        s.steps = options.phase_steps;
+        s.period_px = options.phase_period_px;
+        p.push_back(s);
+      }
+    }
+  }
+  return seq;
+}
+
+bool PatternSequence::Check(std::string* why) const {
+  if (projector_size.width < 2 || projector_size.height < 2) {
+    *why = "projector size must be at least 2x2 pixels";
+    return false;
+  }
+  if (Find(PatternKind::kWhite) < 0 || Find(PatternKind::kBlack) < 0) {
+    *why = "the pattern sequence needs a white and a black pattern";
+    return false;
+  }
+  bool any_axis = false;
+  for (Axis axis : {Axis::kColumn, Axis::kRow}) {
+    const int bits = GrayBits(axis);
+    if (bits == 0) continue;
+    any_axis = true;
+    const int extent = axis == Axis::kColumn ? projector_size.width : projector_size.height;
+    if (bits != GrayBitsFor(extent)) {
+      *why = std::string("the ") + ToString(axis) + " Gray code has " + std::to_string(bits) +
+             " bits; a projector extent of " + std::to_string(extent) + " needs " +
+             std::to_string(GrayBitsFor(extent));
+      return false;
+    }
+    for (int bit = 0; bit < bits; ++bit) {
+      if (Find(PatternKind::kGray, axis, bit, false) < 0 ||
+          Find(PatternKind::kGray, axis, bit, true) < 0) {
+        *why = std::string("the ") + ToString(axis) + " Gray code lacks bit " +
+               std::to_string(bit) + " or its inverse";
+        return false;
+      }
+    }
+    const int steps = PhaseSteps(axis);
+    if (steps > 0) {
+      if (steps < 3 || PhasePeriod(axis) < 4) {
+        *why = std::string("the ") + ToString(axis) + " phase patterns need >= 3 steps and a period >= 4 px";
+        return false;
+      }
+      for (int k = 0; k < steps; ++k) {
+        if (Find(PatternKind::kPhase, axis, 0, false, k) < 0) {
+          *why = std::string("the ") + ToString(axis) + " phase patterns lack step " + std::to_string(k);
+          return false;
+        }
+      }
+    }
+  }
+  if (!any_axis) {
+    *why = "the pattern sequence encodes neither columns nor rows";
+    return false;
+  }
+  for (const PatternSpec& s : patterns) {
+    if (s.kind == PatternKind::kPhase &&
+        (s.steps != PhaseSteps(s.axis) || s.period_px != PhasePeriod(s.axis))) {
+      *why = "phase patterns of one axis must share their steps and period";
+      return false;
+    }
+    if (s.kind == PatternKind::kPhase && GrayBits(s.axis) == 0) {
+      *why = "phase patterns need the Gray code of the same axis to unwrap them";
+      return false;
+    }
+  }
+  return true;
+}
+
+int PatternSequence::Find(PatternKind kind, Axis axis, int bit, bool inverted, int step) const {
+  for (size_t i = 0; i < patterns.size(); ++i) {
+    const PatternSpec& s = patterns[i];
+    if (s.kind != kind) continue;
+    if (kind == PatternKind::kWhite || kind == PatternKind::kBlack) return static_cast<int>(i);
+    if (s.axis != axis) continue;
+    if (kind == PatternKind::kGray && s.bit == bit && s.inverted == inverted) {
+      return static_cast<int>(i);
+    }
+    if (kind == PatternKind::kPhase && s.step == step) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+int PatternSequence::GrayBits(Axis axis) const {
+  int bits = 0;
+  for (const PatternSpec& s : patterns) {
+    if (s.kind == PatternKind::kGray && s.axis == axis) bits = std::max(bits, s.bit + 1);
+  }
+  return bits;
+}
+
+int PatternSequence::PhaseSteps(Axis axis) const {
+  for (const PatternSpec& s : patterns) {
+    if (s.kind == PatternKind::kPhase && s.axis == axis) return s.steps;
+  }
+  return 0;
+}
+
+int PatternSequence::PhasePeriod(Axis axis) const {
+  for (const PatternSpec& s : patterns) {
+    if (s.kind == PatternKind::kPhase && s.axis == axis) return s.period_px;
+  }
+  return 0;
+}
+
+cv::Mat RenderPattern(const PatternSpec& spec, cv::Size size) {
+  cv::Mat image(size, CV_8U);
+  switch (spec.kind) {
+    case PatternKind::kWhite:
+      image.setTo(255);
+      return image;
+    case PatternKind::kBlack:
+      image.setTo(0);
+      return image;
+    case PatternKind::kGray:
+    case PatternKind::kPhase:
+      break;
+  }
+  const bool columns = spec.axis == Axis::kColumn;
+  const int extent = columns ? size.width : size.height;
+  // One projector line (a row for column codes, a column for row codes) as a 1D profile.
+  std::vector<uint8_t> profile(extent);
+  for (int c = 0; c < extent; ++c) {
+    if (spec.kind == PatternKind::kGray) {
+      const int gray = c ^ (c >> 1);
+      const bool lit = ((gray >> spec.bit) & 1) != spec.inverted;
+      profile[c] = lit ? 255 : 0;
+    } else {
+      // Intensity 1/2 + 1/2 cos(2 pi c / P - 2 pi k / N), pixel centres at integer c.
+      const double phase =
+          2.0 * M_PI * (static_cast<double>(c) / spec.period_px - static_cast<double>(spec.step) / spec.steps);
+      profile[c] = cv::saturate_cast<uint8_t>(std::lround(127.5 + 127.5 * std::cos(phase)));
+    }
+  }
+  for (int y = 0; y < size.height; ++y) {
+    uint8_t* row = image.ptr<uint8_t>(y);
+    if (columns) {
+      std::copy(profile.begin(), profile.end(), row);
+    } else {
+      std::fill(row, row + size.width, profile[y]);
+    }
+  }
+  return image;
+}
+
+}  // namespace vellum

@@ -1,0 +1,283 @@
+#include "core/sim/gantry.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace vellum {
+namespace {
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr double kMeshStepMm = 1.0;  // Rasterisation mesh; Newton refinement makes it exact.
+
+// Depth-buffer rasterisation of the page mesh into a device image (scaled by `scale`), storing
+// the device-frame depth and the interpolated page coordinate of the nearest surface.
+void Rasterize(const CameraModel& device, double scale, const Page& page, cv::Mat* depth,
+               cv::Mat* page_coord) {
+  const cv::Size size(static_cast<int>(device.size.width * scale),
+                      static_cast<int>(device.size.height * scale));
+  depth->create(size, CV_32F);
+  depth->setTo(std::numeric_limits<float>::infinity());
+  if (page_coord) {
+    page_coord->create(size, CV_32FC2);
+    page_coord->setTo(cv::Scalar(kNaN, kNaN));
+  }
+  const double w = page.options().size_mm.width, h = page.options().size_mm.height;
+  const int ns = static_cast<int>(std::ceil(w / kMeshStepMm)) + 1;
+  const int nt = static_cast<int>(std::ceil(h / kMeshStepMm)) + 1;
+  std::vector<cv::Vec3d> vert(static_cast<size_t>(ns) * nt);  // Image x, y, depth.
+  std::vector<cv::Vec2d> st(vert.size());
+  for (int j = 0; j < nt; ++j) {
+    for (int i = 0; i < ns; ++i) {
+      const double s = std::min(w, i * kMeshStepMm), t = std::min(h, j * kMeshStepMm);
+      const cv::Vec3d x = page.Point(s, t);
+      const cv::Point2d p = device.Project(x);
+      const double z = (device.rotation * x + device.translation)[2];
+      // Pixel centres of the scaled image sit at (i + 0.5) / scale - 0.5 device pixels.
+      vert[j * ns + i] = {(p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5, z};
+      st[j * ns + i] = {s, t};
+    }
+  }
+  auto raster = [&](int ia, int ib, int ic) {
+    const cv::Vec3d &a = vert[ia], &b = vert[ib], &c = vert[ic];
+    if (!std::isfinite(a[0]) || !std::isfinite(b[0]) || !std::isfinite(c[0])) return;
+    const double area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+    if (std::fabs(area) < 1e-12) return;
+    const int x0 = std::max(0, static_cast<int>(std::ceil(std::min({a[0], b[0], c[0]}))));
+    const int x1 = std::min(size.width - 1, static_cast<int>(std::floor(std::max({a[0], b[0], c[0]}))));
+    const int y0 = std::max(0, static_cast<int>(std::ceil(std::min({a[1], b[1], c[1]}))));
+    const int y1 = std::min(size.height - 1, static_cast<int>(std::floor(std::max({a[1], b[1], c[1]}))));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        const double wa = ((b[0] - x) * (c[1] - y) - (b[1] - y) * (c[0] - x)) / area;
+        const double wb = ((c[0] - x) * (a[1] - y) - (c[1] - y) * (a[0] - x)) / area;
+        const double wc = 1.0 - wa - wb;
+        if (wa < -1e-9 || wb < -1e-9 || wc < -1e-9) continue;
+        const float z = static_cast<float>(wa * a[2] + wb * b[2] + wc * c[2]);
+        float& zb = depth->at<float>(y, x);
+        if (z < zb) {
+          zb = z;
+          if (page_coord) {
+            const cv::Vec2d p = wa * st[ia] + wb * st[ib] + wc * st[ic];
+            page_coord->at<cv::Vec2f>(y, x) = cv::Vec2f(static_cast<float>(p[0]), static_cast<float>(p[1]));
+          }
+        }
+      }
+    }
+  };
+  for (int j = 0; j + 1 < nt; ++j) {
+    for (int i = 0; i + 1 < ns; ++i) {
+      const int q = j * ns + i;
+      raster(q, q + 1, q + ns + 1);
+      raster(q, q + ns + 1, q + ns);
+    }
+  }
+}
+
+}  // namespace
+
+Calibration DefaultRig() {
+  Calibration rig;
+  CameraModel& cam = rig.camera;
+  cam.size = {1600, 1200};
+  cam.matrix = cv::Matx33d(2400, 0, 799.5, 0, 2400, 599.5, 0, 0, 1);
+  cam.distortion = cv::Vec<double, 5>(-0.02, 0.01, 0, 0, 0);
+  const cv::Vec3d cam_eye(0, 0, 600);
+  cam.rotation = LookAt(cam_eye, {0, 0, 0}, {1, 0, 0});
+  cam.translation = -(cam.rotation * cam_eye);
+  CameraModel& prj = rig.projector;
+  prj.size = {1024, 768};
+  prj.matrix = cv::Matx33d(1800, 0, 511.5, 0, 1800, 383.5, 0, 0, 1);
+  const cv::Vec3d prj_eye(-225, 0, 650);
+  prj.rotation = LookAt(prj_eye, {0, 0, 0}, {1, 0, 0});
+  prj.translation = -(prj.rotation * prj_eye);
+  return rig;
+}
+
+VirtualGantry::VirtualGantry(const Calibration& rig, const PageOptions& page_options,
+                             const TextureOptions& texture_options, const LightOptions& light)
+    : rig_(rig), light_(light) {
+  const Page page(page_options);
+  const PageTexture texture(texture_options, page_options.size_mm);
+  TraceCamera(page);
+  ShadeSetup(page, texture);
+}
+
+void VirtualGantry::TraceCamera(const Page& page) {
+  const CameraModel& cam = rig_.camera;
+  const cv::Size size = cam.size;
+  cv::Mat depth, guess;
+  Rasterize(cam, 1.0, page, &depth, &guess);
+  truth_.points.create(size, CV_32FC3);
+  truth_.page.create(size, CV_32FC2);
+  truth_.on_page.create(size, CV_8U);
+  const cv::Vec3d centre = cam.Center();
+  const double w = page.options().size_mm.width, h = page.options().size_mm.height;
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      for (int u = 0; u < size.width; ++u) {
+        const cv::Point2d pixel(u, v);
+        cv::Vec2f& pc = truth_.page.at<cv::Vec2f>(v, u);
+        const cv::Vec2f g = guess.at<cv::Vec2f>(v, u);
+        bool hit = false;
+        cv::Vec3d x;
+        if (!std::isnan(g[0])) {
+          // Newton on Project(Page(s, t)) = pixel, from the mesh's guess.
+          double s = g[0], t = g[1];
+          for (int it = 0; it < 6; ++it) {
+            const cv::Point2d p = cam.Project(page.Point(s, t));
+            const cv::Point2d r = p - pixel;
+            const double e = 1e-4;
+            const cv::Point2d ps = (cam.Project(page.Point(s + e, t)) - p) / e;
+            const cv::Point2d pt = (cam.Project(page.Point(s, t + e)) - p) / e;
+            const double det = ps.x * pt.y - ps.y * pt.x;
+            if (std::fabs(det) < 1e-12) break;
+            const double ds = (r.x * pt.y - r.y * pt.x) / det;
+            const double dt = (ps.x * r.y - ps.y * r.x) / det;
+            s -= ds;
+            t -= dt;
+            if (ds * ds + dt * dt < 1e-16) break;
+          }
+          const cv::Point2d p = cam.Project(page.Point(s, t));
+          hit = s >= 0 && s <= w && t >= 0 && t <= h && cv::norm(p - pixel) < 1e-6;
+          if (hit) {
+            x = page.Point(s, t);
+            pc = cv::Vec2f(static_cast<float>(s), static_cast<float>(t));
+          }
+        }
+        if (!hit) {
+          const cv::Vec3d d = cam.RayDirection(pixel);
+          x = d[2] < 0 ? centre - (centre[2] / d[2]) * d : cv::Vec3d(kNaN, kNaN, kNaN);
+          pc = cv::Vec2f(kNaN, kNaN);
+        }
+        truth_.points.at<cv::Vec3f>(v, u) =
+            cv::Vec3f(static_cast<float>(x[0]), static_cast<float>(x[1]), static_cast<float>(x[2]));
+        truth_.on_page.at<uint8_t>(v, u) = hit ? 255 : 0;
+      }
+    }
+  });
+}
+
+void VirtualGantry::ShadeSetup(const Page& page, const PageTexture& texture) {
+  const CameraModel& prj = rig_.projector;
+  const cv::Size size = rig_.camera.size;
+  constexpr double kShadowScale = 2.0;
+  cv::Mat shadow_depth;
+  Rasterize(prj, kShadowScale, page, &shadow_depth, nullptr);
+  projector_map_.create(size, CV_32FC2);
+  gain_.create(size, CV_32F);
+  offset_.create(size, CV_32F);
+  albedo_.create(size, CV_32F);
+  truth_.lit.create(size, CV_8U);
+  const cv::Vec3d prj_centre = prj.Center();
+  const int ss = std::max(1, light_.albedo_supersampling);
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      for (int u = 0; u < size.width; ++u) {
+        const cv::Vec3f xf = truth_.points.at<cv::Vec3f>(v, u);
+        const cv::Vec3d x(xf[0], xf[1], xf[2]);
+        const bool on_page = truth_.on_page.at<uint8_t>(v, u) != 0;
+        const cv::Vec2f st = truth_.page.at<cv::Vec2f>(v, u);
+        double albedo = light_.table_albedo;
+        cv::Vec3d normal(0, 0, 1);
+        if (on_page) {
+          normal = page.Normal(st[0], st[1]);
+          // Area-average the albedo over the pixel using the local page-from-pixel Jacobian.
+          auto page_at = [&](int uu, int vv, cv::Vec2f* out) {
+            if (uu < 0 || vv < 0 || uu >= size.width || vv >= size.height) return false;
+            if (!truth_.on_page.at<uint8_t>(vv, uu)) return false;
+            *out = truth_.page.at<cv::Vec2f>(vv, uu);
+            return true;
+          };
+          cv::Vec2f a, b;
+          cv::Vec2d du(0, 0), dv(0, 0);
+          if (page_at(u + 1, v, &a) && page_at(u - 1, v, &b)) du = cv::Vec2d(a - b) * 0.5;
+          if (page_at(u, v + 1, &a) && page_at(u, v - 1, &b)) dv = cv::Vec2d(a - b) * 0.5;
+          double sum = 0;
+          for (int j = 0; j < ss; ++j) {
+            for (int i = 0; i < ss; ++i) {
+              const double ou = (i + 0.5) / ss - 0.5, ov = (j + 0.5) / ss - 0.5;
+              const cv::Vec2d p = cv::Vec2d(st[0], st[1]) + ou * du + ov * dv;
+              sum += texture.Albedo(p[0], p[1]);
+            }
+          }
+          albedo = sum / (ss * ss);
+        }
+        const cv::Point2d p = prj.Project(x);
+        const double depth = (prj.rotation * x + prj.translation)[2];
+        const double cos_in = normal.dot(cv::normalize(prj_centre - x));
+        bool lit = std::isfinite(p.x) && p.x > -0.5 && p.y > -0.5 && p.x < prj.size.width - 0.5 &&
+                   p.y < prj.size.height - 0.5 && cos_in > 0;
+        if (lit) {
+          const int sx = static_cast<int>((p.x + 0.5) * kShadowScale);
+          const int sy = static_cast<int>((p.y + 0.5) * kShadowScale);
+          const float occluder = shadow_depth.at<float>(std::min(sy, shadow_depth.rows - 1),
+                                                        std::min(sx, shadow_depth.cols - 1));
+          lit = depth <= occluder + light_.shadow_bias_mm;
+        }
+        projector_map_.at<cv::Vec2f>(v, u) = cv::Vec2f(static_cast<float>(p.x), static_cast<float>(p.y));
+        albedo_.at<float>(v, u) = static_cast<float>(albedo);
+        gain_.at<float>(v, u) =
+            lit ? static_cast<float>(255.0 * albedo * light_.projector_gain * cos_in) : 0.0f;
+        offset_.at<float>(v, u) = static_cast<float>(255.0 * albedo * light_.ambient);
+        truth_.lit.at<uint8_t>(v, u) = lit ? 255 : 0;
+      }
+    }
+  });
+}
+
+cv::Mat VirtualGantry::RenderFrame(const cv::Mat& projector_image, uint64_t seed) const {
+  CV_Assert(projector_image.type() == CV_8U && projector_image.size() == rig_.projector.size);
+  cv::Mat pattern;
+  projector_image.convertTo(pattern, CV_32F, 1.0 / 255.0);
+  if (light_.defocus_sigma_px > 0) {
+    cv::GaussianBlur(pattern, pattern, cv::Size(0, 0), light_.defocus_sigma_px, 0,
+                     cv::BORDER_CONSTANT);
+  }
+  cv::Mat noise(rig_.camera.size, CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
+  cv::Mat frame(rig_.camera.size, CV_8U);
+  const int pw = pattern.cols, ph = pattern.rows;
+  cv::parallel_for_(cv::Range(0, frame.rows), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      const cv::Vec2f* map = projector_map_.ptr<cv::Vec2f>(v);
+      const float* gain = gain_.ptr<float>(v);
+      const float* offset = offset_.ptr<float>(v);
+      const float* n = noise.ptr<float>(v);
+      uint8_t* out = frame.ptr<uint8_t>(v);
+      for (int u = 0; u < frame.cols; ++u) {
+        float light = 0.0f;
+        if (gain[u] > 0) {
+          // Exact bilinear sample (cv::remap quantises positions to 1/32 pixel).
+          const float x = std::clamp(map[u][0], 0.0f, pw - 1.0f);
+          const float y = std::clamp(map[u][1], 0.0f, ph - 1.0f);
+          const int x0 = std::min(static_cast<int>(x), pw - 2);
+          const int y0 = std::min(static_cast<int>(y), ph - 2);
+          const float fx = x - x0, fy = y - y0;
+          const float* r0 = pattern.ptr<float>(y0);
+          const float* r1 = pattern.ptr<float>(y0 + 1);
+          light = (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
+                  fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
+        }
+        out[u] = cv::saturate_cast<uint8_t>(std::lround(offset[u] + gain[u] * light + n[u]));
+      }
+    }
+  });
+  return frame;
+}
+
+cv::Mat VirtualGantry::RenderTexture(uint64_t seed) const {
+  cv::Mat noise(rig_.camera.size, CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
+  cv::Mat frame;
+  cv::Mat light = albedo_ * (255.0 * light_.studio_light) + noise;
+  light.convertTo(frame, CV_8U);  // Rounds and saturates.
+  return frame;
+}
+
+}  // namespace vellum

@@ -1,0 +1,69 @@
+// The virtual gantry: renders what the station's camera sees of a known warped page under any
+// projector image, with the light model of a real rig (albedo, ambient light, incidence angle,
+// projector defocus and shadows, camera noise, 8-bit quantisation), and the exact ground truth
+// (3D point and flat page coordinate) of every camera pixel. Replaces the hardware in the demo
+// and in every accuracy test.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "core/geometry/calibration.h"
+#include "core/sim/page.h"
+#include "core/sim/texture.h"
+
+namespace vellum {
+
+struct LightOptions {
+  double ambient = 0.08;         // Ambient light, fraction of full scale.
+  double projector_gain = 0.85;  // Projector light at normal incidence, fraction of full scale.
+  double studio_light = 0.9;     // Studio light of the texture frame, fraction of full scale.
+  double defocus_sigma_px = 0.7; // Projector defocus, Gaussian sigma, projector pixels.
+  double noise_dn = 1.5;         // Camera noise standard deviation, DN.
+  double table_albedo = 0.35;    // Reflectance of the table around the page.
+  double shadow_bias_mm = 1.0;   // Depth tolerance of the projector shadow test, mm.
+  int albedo_supersampling = 4;  // Albedo samples per pixel side (area-integrates ink edges).
+};
+
+// The default station: camera 1600x1200, f = 2400 px, 600 mm above the table (0.25 mm/px),
+// projector 1024x768, f = 1800 px, 225 mm to the side and 650 mm up, aimed at the page.
+Calibration DefaultRig();
+
+// Per camera pixel ground truth.
+struct GroundTruth {
+  cv::Mat points;    // CV_32FC3 true world point of the surface seen by the pixel, mm.
+  cv::Mat page;      // CV_32FC2 true flat page coordinate (s, t), mm; NaN off the page.
+  cv::Mat on_page;   // CV_8U 255 where the pixel sees the page.
+  cv::Mat lit;       // CV_8U 255 where the projector lights the surface directly.
+};
+
+class VirtualGantry {
+ public:
+  VirtualGantry(const Calibration& rig, const PageOptions& page, const TextureOptions& texture,
+                const LightOptions& light = LightOptions());
+
+  const GroundTruth& truth() const { return truth_; }
+  const Calibration& rig() const { return rig_; }
+
+  // Camera frame (CV_8U) while the projector shows `projector_image` (CV_8U, projector size,
+  // virtual unmirrored frame). `seed` makes the noise repeatable.
+  cv::Mat RenderFrame(const cv::Mat& projector_image, uint64_t seed) const;
+  // Camera frame under studio light, projector black.
+  cv::Mat RenderTexture(uint64_t seed) const;
+
+ private:
+  void TraceCamera(const Page& page);
+  void ShadeSetup(const Page& page, const PageTexture& texture);
+
+  Calibration rig_;
+  LightOptions light_;
+  GroundTruth truth_;
+  cv::Mat projector_map_;  // CV_32FC2 projector pixel hit by each camera pixel's point.
+  cv::Mat gain_;           // CV_32F DN per unit projector intensity (0 in shadow).
+  cv::Mat offset_;         // CV_32F DN of the ambient light.
+  cv::Mat albedo_;         // CV_32F albedo seen by each pixel.
+};
+
+}  // namespace vellum

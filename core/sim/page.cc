@@ -1,0 +1,148 @@
+#include "core/sim/page.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace vellum {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+// Walks a chain of constant-curvature segments from (0, 0) heading along +across; returns the
+// point at arc length `sigma` (>= 0). Each segment is integrated in closed form.
+cv::Vec2d Walk(const std::vector<std::pair<double, double>>& segs, double sigma) {
+  double q = 0, z = 0, theta = 0;
+  for (const auto& [length, kappa] : segs) {
+    const double l = std::min(sigma, length);
+    if (std::fabs(kappa) < 1e-12) {
+      q += l * std::cos(theta);
+      z += l * std::sin(theta);
+    } else {
+      const double theta1 = theta + kappa * l;
+      q += (std::sin(theta1) - std::sin(theta)) / kappa;
+      z -= (std::cos(theta1) - std::cos(theta)) / kappa;
+      theta = theta1;
+    }
+    sigma -= l;
+    if (sigma <= 0) return {q, z};
+  }
+  // Past the last segment: continue straight.
+  return {q + sigma * std::cos(theta), z + sigma * std::sin(theta)};
+}
+
+}  // namespace
+
+const char* ToString(PageShape shape) {
+  switch (shape) {
+    case PageShape::kFlat:
+      return "flat";
+    case PageShape::kCurl:
+      return "curl";
+    case PageShape::kFold:
+      return "fold";
+    case PageShape::kCone:
+      return "cone";
+    case PageShape::kBump:
+      return "bump";
+  }
+  return "?";
+}
+
+bool ParsePageShape(const std::string& text, PageShape* shape) {
+  for (PageShape s : {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone,
+                      PageShape::kBump}) {
+    if (text == ToString(s)) {
+      *shape = s;
+      return true;
+    }
+  }
+  return false;
+}
+
+Page::Page(const PageOptions& options) : options_(options) {
+  const double w = options.size_mm.width, h = options.size_mm.height;
+  if (options.shape == PageShape::kCurl) {
+    // Flat from the left edge; the last curl_length_mm of the page roll up.
+    across_dir_ = {1.0, 0.0};
+    sigma_origin_ = 0.0;
+    forward_ = {{w - options.curl_length_mm, 0.0}, {1e9, 1.0 / options.curl_radius_mm}};
+  } else if (options.shape == PageShape::kFold) {
+    const double a = options.fold_angle_deg * kDeg;
+    across_dir_ = {-std::sin(a), std::cos(a)};  // Perpendicular to the fold line.
+    sigma_origin_ = across_dir_.dot(cv::Vec2d(w / 2, h / 2));
+    const double slope = options.fold_slope_deg * kDeg;
+    const double half_arc = slope * options.fold_radius_mm;
+    forward_ = {{half_arc, -1.0 / options.fold_radius_mm}};
+    backward_ = forward_;
+  }
+  if (options.shape == PageShape::kFold) {
+    double zmin = 0;
+    for (double s : {0.0, w}) {
+      for (double t : {0.0, h}) zmin = std::min(zmin, Point(s, t)[2]);
+    }
+    z_offset_ = -zmin;
+  }
+}
+
+cv::Vec2d Page::Profile(double sigma) const {
+  std::vector<std::pair<double, double>> segs;
+  const auto& src = sigma >= 0 ? forward_ : backward_;
+  for (const Segment& s : src) segs.emplace_back(s.length, s.curvature);
+  cv::Vec2d p = Walk(segs, std::fabs(sigma));
+  if (sigma < 0) p[0] = -p[0];
+  return p;
+}
+
+cv::Vec3d Page::Point(double s, double t) const {
+  const PageOptions& o = options_;
+  const double w = o.size_mm.width, h = o.size_mm.height;
+  const double cx = o.centre_mm[0], cy = o.centre_mm[1];
+  switch (o.shape) {
+    case PageShape::kFlat:
+      return {cx + s - w / 2, cy + t - h / 2, 0.0};
+    case PageShape::kBump: {
+      const double ds = s - w / 2, dt = t - h / 2;
+      const double z = o.bump_height_mm * std::exp(-(ds * ds + dt * dt) /
+                                                   (2 * o.bump_sigma_mm * o.bump_sigma_mm));
+      return {cx + ds, cy + dt, z};
+    }
+    case PageShape::kCurl:
+    case PageShape::kFold: {
+      const cv::Vec2d st(s, t);
+      const double sigma = across_dir_.dot(st) - sigma_origin_;
+      const cv::Vec2d along(-across_dir_[1], across_dir_[0]);
+      const double tau = along.dot(st);
+      const cv::Vec2d prof = Profile(sigma);
+      // Page point = origin + across * profile.q + along * tau, lifted by profile.z.
+      const cv::Vec2d origin = across_dir_ * sigma_origin_;
+      const cv::Vec2d flat = origin + across_dir_ * prof[0] + along * tau;
+      return {cx + flat[0] - w / 2, cy + flat[1] - h / 2, prof[1] + z_offset_};
+    }
+    case PageShape::kCone: {
+      // Apex below the t = 0 edge on the page's centre line; the generator along +t rests
+      // on the table. Unrolling: page angle phi maps to cone azimuth phi / sin(beta).
+      const double beta = o.cone_half_angle_deg * kDeg;
+      const double sa = w / 2, ta = -o.cone_apex_distance_mm;
+      const double ds = s - sa, dt = t - ta;
+      const double rho = std::hypot(ds, dt);
+      const double psi = std::atan2(ds, dt) / std::sin(beta);
+      const double sb = std::sin(beta), cb = std::cos(beta);
+      const cv::Vec3d g(sb * std::sin(psi), cb * cb + sb * sb * std::cos(psi),
+                        cb * sb * (1 - std::cos(psi)));
+      const cv::Vec3d apex(cx + sa - w / 2, cy + ta - h / 2, 0.0);
+      return apex + rho * g;
+    }
+  }
+  return {0, 0, 0};
+}
+
+cv::Vec3d Page::Normal(double s, double t) const {
+  const double e = 1e-3;
+  const cv::Vec3d ds = Point(s + e, t) - Point(s - e, t);
+  const cv::Vec3d dt = Point(s, t + e) - Point(s, t - e);
+  cv::Vec3d n = cv::normalize(ds.cross(dt));
+  if (n[2] < 0) n = -n;
+  return n;
+}
+
+}  // namespace vellum

@@ -1,0 +1,64 @@
+// Warped pages for the virtual gantry. Every shape but kBump is an isometric (developable)
+// deformation of the flat page, so the true flat page coordinate of every surface point is
+// known exactly: generalised cylinders (curl, fold) and a cone.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace vellum {
+
+enum class PageShape {
+  kFlat,  // Lies on the table.
+  kCurl,  // Binder curl: flat, then one side rolls up on a circular arc.
+  kFold,  // Rounded diagonal fold: a ridge along a diagonal, resting on its edges.
+  kCone,  // Rests on one generator of a cone and rises on both sides.
+  kBump,  // Flat with a Gaussian bubble (not developable: real vellum).
+};
+
+const char* ToString(PageShape shape);
+bool ParsePageShape(const std::string& text, PageShape* shape);
+
+struct PageOptions {
+  PageShape shape = PageShape::kFlat;
+  cv::Size2d size_mm{190.0, 240.0};  // Page width (s) and height (t), mm.
+  cv::Vec2d centre_mm{0.0, 0.0};     // World x, y of the flat page's centre, mm.
+  double curl_radius_mm = 60.0;      // kCurl: radius of the rolled part, mm.
+  double curl_length_mm = 70.0;      // kCurl: arc length of the rolled part, mm.
+  double fold_angle_deg = 35.0;      // kFold: fold line direction from the page's s axis.
+  double fold_radius_mm = 15.0;      // kFold: radius of the rounded ridge, mm.
+  double fold_slope_deg = 12.0;      // kFold: slope of each flank, degrees.
+  double cone_half_angle_deg = 35.0; // kCone: cone half-angle, degrees.
+  double cone_apex_distance_mm = 250.0;  // kCone: apex distance below the page's t = 0 edge.
+  double bump_height_mm = 3.0;       // kBump: peak height, mm.
+  double bump_sigma_mm = 25.0;       // kBump: Gaussian sigma, mm.
+};
+
+class Page {
+ public:
+  explicit Page(const PageOptions& options);
+
+  const PageOptions& options() const { return options_; }
+  // World point (mm) of flat page coordinate (s, t) in [0, width] x [0, height], mm.
+  cv::Vec3d Point(double s, double t) const;
+  // Unit surface normal with +z component (towards the camera), by central differences.
+  cv::Vec3d Normal(double s, double t) const;
+  bool Developable() const { return options_.shape != PageShape::kBump; }
+
+ private:
+  // Generalised cylinder profile: arc-length sigma across the ridge -> (across, z).
+  cv::Vec2d Profile(double sigma) const;
+
+  struct Segment {
+    double length, curvature;
+  };
+  PageOptions options_;
+  std::vector<Segment> forward_, backward_;  // Profile segments for sigma >= 0 and sigma < 0.
+  cv::Vec2d across_dir_{1.0, 0.0};            // Page direction of increasing sigma.
+  double sigma_origin_ = 0.0;                 // Page sigma of the profile's reference point.
+  double z_offset_ = 0.0;                     // Lifts the shape so its lowest point is z = 0.
+};
+
+}  // namespace vellum

@@ -1,0 +1,39 @@
+// Page albedo for the virtual gantry: what the page looks like (paper, ink).
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include <opencv2/core.hpp>
+
+namespace vellum {
+
+enum class TextureKind { kPlain, kCheckerboard, kText, kImage };
+
+const char* ToString(TextureKind kind);
+bool ParseTextureKind(const std::string& text, TextureKind* kind);
+
+struct TextureOptions {
+  TextureKind kind = TextureKind::kCheckerboard;
+  double paper_albedo = 0.85;  // Reflectance of bare paper, 0..1.
+  double ink_albedo = 0.08;    // Reflectance of ink, 0..1.
+  double square_mm = 10.0;     // kCheckerboard: square side, mm.
+  cv::Point2d board_origin_mm{5.0, 0.0};  // kCheckerboard: page position of a square corner.
+  uint64_t seed = 1;           // kText: seed of the generated text.
+  cv::Mat image;               // kImage: 8-bit gray or BGR image covering the whole page.
+};
+
+class PageTexture {
+ public:
+  PageTexture(const TextureOptions& options, cv::Size2d page_size_mm);
+  // Albedo (0..1) at page coordinate (s, t) mm.
+  double Albedo(double s, double t) const;
+
+ private:
+  TextureOptions options_;
+  cv::Size2d page_size_;
+  cv::Mat albedo_;  // CV_32F albedo image for kText and kImage.
+  double px_per_mm_x_ = 1.0, px_per_mm_y_ = 1.0;
+};
+
+}  // namespace vellum
