@@ -23,7 +23,7 @@ struct DecodeOptions {
   double min_modulation_dn = 2.5;  // Minimum sinusoid amplitude, camera DN.
   double uncertain_bit_dn = 3.0;   // A Gray bit with |pattern - inverse| below this is uncertain.
   double max_unwrap_error = 0.3;   // Max |Gray - phase| disagreement, fraction of the period.
-  int saturation_dn = 255;         // A white frame value >= this is clipped: pixel invalid.
+  int saturation_dn = 255;         // A white frame value >= this is clipped (256: never).
   double noise_dn = 1.5;           // Camera noise standard deviation, DN (sets fit weights).
   int smooth_radius_px = 3;        // Local fit window radius, camera pixels; 0 = no fit.
   int smooth_passes = 2;           // Robust (Tukey) reweighting passes of the local fit.

@@ -9,6 +9,30 @@
 #include "core/common/check.h"
 
 namespace vellum {
+namespace {
+
+// Ray parameter t of the point C + t d whose projection a + t b (projector pixel homogeneous
+// coordinates) is closest to the measured projector pixel; `residual` gets the distance from
+// the measurement to the ray's image (the epipolar line) when both coordinates are known.
+double RayParameter(const cv::Vec3d& a, const cv::Vec3d& b, bool cols, bool rows, double mx,
+                    double my, double* residual) {
+  *residual = 0.0;
+  if (cols && rows) {
+    const cv::Vec3d l = a.cross(b);
+    const double norm = std::sqrt(l[0] * l[0] + l[1] * l[1]);
+    const double dist = (l[0] * mx + l[1] * my + l[2]) / norm;
+    *residual = std::fabs(dist);
+    // Foot of the perpendicular, then least squares of (a_i + t b_i) = f_i (a_z + t b_z).
+    const double fx = mx - dist * l[0] / norm, fy = my - dist * l[1] / norm;
+    const double ex = b[0] - fx * b[2], ey = b[1] - fy * b[2];
+    const double gx = fx * a[2] - a[0], gy = fy * a[2] - a[1];
+    return (ex * gx + ey * gy) / (ex * ex + ey * ey);
+  }
+  if (cols) return (mx * a[2] - a[0]) / (b[0] - mx * b[2]);
+  return (my * a[2] - a[1]) / (b[1] - my * b[2]);
+}
+
+}  // namespace
 
 bool TriangulateOptions::Check(std::string* why) const {
   if (!(max_epipolar_error_px > 0)) {
@@ -79,32 +103,27 @@ PointMap Triangulator::Triangulate(const DecodeResult& decoded,
         point[u] = cv::Vec3f(NAN, NAN, NAN);
         res[u] = NAN;
         if (!ok[u]) continue;
-        double mx = cols ? px[u] : nan, my = rows ? py[u] : nan;
-        if (undistort) {
-          // Decoded coordinates are in the distorted projector image; undistort to ideal pixels.
-          const cv::Point2d n = prj.Normalize({cols ? mx : prj.matrix(0, 2), rows ? my : prj.matrix(1, 2)});
-          if (cols) mx = prj.matrix(0, 0) * n.x + prj.matrix(0, 1) * n.y + prj.matrix(0, 2);
-          if (rows) my = prj.matrix(1, 1) * n.y + prj.matrix(1, 2);
-        }
         const cv::Vec3d d(ray[u][0], ray[u][1], ray[u][2]);
         const cv::Vec3d b = kr * d;
-        double t, r = 0.0;
-        if (cols && rows) {
-          // Epipolar line l = a x b; foot of the perpendicular from m onto it.
-          const cv::Vec3d l = a.cross(b);
-          const double ln2 = l[0] * l[0] + l[1] * l[1];
-          const double dist = (l[0] * mx + l[1] * my + l[2]) / std::sqrt(ln2);
-          r = std::fabs(dist);
-          const double fx = mx - dist * l[0] / std::sqrt(ln2);
-          const double fy = my - dist * l[1] / std::sqrt(ln2);
-          // Least squares of (a_i + t b_i) = f_i (a_z + t b_z), i = x, y.
-          const double ex = b[0] - fx * b[2], ey = b[1] - fy * b[2];
-          const double gx = fx * a[2] - a[0], gy = fy * a[2] - a[1];
-          t = (ex * gx + ey * gy) / (ex * ex + ey * ey);
-        } else if (cols) {
-          t = (mx * a[2] - a[0]) / (b[0] - mx * b[2]);
-        } else {
-          t = (my * a[2] - a[1]) / (b[1] - my * b[2]);
+        const double raw_x = cols ? px[u] : nan, raw_y = rows ? py[u] : nan;
+        double t = nan, r = 0.0;
+        // Decoded coordinates are in the distorted projector image. With both, undistort once;
+        // with one, the other comes from the current point (a few fixed-point rounds).
+        double guess_x = prj.matrix(0, 2), guess_y = prj.matrix(1, 2);
+        const int rounds = !undistort ? 1 : (cols && rows ? 1 : 4);
+        for (int round = 0; round < rounds; ++round) {
+          double mx = raw_x, my = raw_y;
+          if (undistort) {
+            const cv::Point2d n = prj.Normalize({cols ? raw_x : guess_x, rows ? raw_y : guess_y});
+            mx = prj.matrix(0, 0) * n.x + prj.matrix(0, 1) * n.y + prj.matrix(0, 2);
+            my = prj.matrix(1, 1) * n.y + prj.matrix(1, 2);
+          }
+          t = RayParameter(a, b, cols, rows, mx, my, &r);
+          if (round + 1 < rounds) {
+            const cv::Point2d p = prj.Project(c_world + t * d);
+            guess_x = p.x;
+            guess_y = p.y;
+          }
         }
         if (r > options.max_epipolar_error_px) {
           ++epi;

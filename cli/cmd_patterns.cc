@@ -1,0 +1,52 @@
+#include <cstdio>
+
+#include "cli/commands.h"
+#include "cli/flags.h"
+#include "core/io/scan_io.h"
+#include "core/patterns/patterns.h"
+
+namespace vellum {
+
+// The pattern flags shared by `patterns` and `render`.
+std::vector<Flags::Spec> PatternFlagSpecs() {
+  return {
+      {"phase-steps", "N", "phase shifts per axis; 0 = Gray code only", "8"},
+      {"period", "PX", "sinusoid period, projector pixels", "16"},
+  };
+}
+
+PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
+  PatternOptions o;
+  o.projector_size = projector;
+  o.phase_steps = flags.GetInt("phase-steps", 0, 64);
+  o.phase_period_px = flags.GetInt("period", 4, 4096);
+  std::string why;
+  if (!o.Check(&why)) throw UsageError(why);
+  return o;
+}
+
+int RunPatterns(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = {
+      {"projector", "WIDTHxHEIGHT", "projector image size, any size", "1024x768"},
+      {"out", "DIR", "output directory", ""},
+  };
+  for (const auto& s : PatternFlagSpecs()) specs.push_back(s);
+  Flags flags("vellum patterns",
+              "Writes the projector images of one scan (pattern_000.png, ... in projection order)\n"
+              "and the matching scan.yaml. Show pattern k, capture frame_k.png.",
+              specs);
+  if (!flags.Parse(args)) return 0;
+  const std::string out = flags.Require("out");
+  const PatternSequence seq =
+      MakePatternSequence(PatternOptionsFromFlags(flags, flags.GetSize("projector")));
+  const Status s = WritePatterns(out, seq);
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum patterns: %s\n", s.message().c_str());
+    return 1;
+  }
+  std::printf("wrote %zu patterns for a %dx%d projector to %s\n", seq.patterns.size(),
+              seq.projector_size.width, seq.projector_size.height, out.c_str());
+  return 0;
+}
+
+}  // namespace vellum

@@ -1,0 +1,104 @@
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "cli/commands.h"
+#include "core/io/calibration_io.h"
+#include "core/io/scan_io.h"
+#include "core/sim/evaluate.h"
+#include "core/sim/gantry.h"
+
+namespace vellum {
+
+int RunRender(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = {
+      {"out", "DIR", "scan directory to write", ""},
+      {"calibration", "FILE", "rig calibration YAML (default: the built-in default rig)", ""},
+      {"page", "SHAPE", "flat, curl, fold, cone or bump", "curl"},
+      {"texture", "KIND|FILE", "checkerboard, text, plain, or an image file of the page", "checkerboard"},
+      {"page-size", "WxH", "page size, mm", "190x240"},
+      {"noise", "DN", "camera noise sigma, DN", "1.5"},
+      {"ambient", "FRACTION", "ambient light", "0.08"},
+      {"defocus", "PX", "projector defocus sigma, projector pixels", "0.7"},
+      {"seed", "N", "noise seed (the same seed gives the same images)", "1"},
+      {"truth", "BOOL", "also write truth_points.tiff and truth_page.tiff", "true"},
+  };
+  for (const auto& s : PatternFlagSpecs()) specs.push_back(s);
+  Flags flags("vellum render",
+              "Renders a scan of a warped page with the virtual gantry: scan.yaml, texture.png,\n"
+              "frame_000.png, ..., the rig's calibration.yaml, and the ground truth of every\n"
+              "camera pixel (truth_points.tiff: x y z mm; truth_page.tiff: s t mm and page mask).",
+              specs);
+  if (!flags.Parse(args)) return 0;
+  const std::string out = flags.Require("out");
+  Calibration rig = DefaultRig();
+  if (flags.Has("calibration")) {
+    const Status s = ReadCalibration(flags.Get("calibration"), &rig);
+    if (!s.ok()) {
+      std::fprintf(stderr, "vellum render: %s\n", s.message().c_str());
+      return 1;
+    }
+  }
+  PageOptions page;
+  if (!ParsePageShape(flags.Get("page"), &page.shape)) {
+    throw UsageError("--page must be flat, curl, fold, cone or bump, got '" + flags.Get("page") + "'");
+  }
+  const cv::Size page_size = flags.GetSize("page-size");
+  page.size_mm = cv::Size2d(page_size.width, page_size.height);
+  TextureOptions texture;
+  const std::string tex = flags.Get("texture");
+  if (!ParseTextureKind(tex, &texture.kind) || texture.kind == TextureKind::kImage) {
+    texture.kind = TextureKind::kImage;
+    texture.image = cv::imread(tex, cv::IMREAD_COLOR);
+    if (texture.image.empty()) {
+      std::fprintf(stderr, "vellum render: %s: not a readable image (and not a texture name)\n",
+                   tex.c_str());
+      return 1;
+    }
+  }
+  LightOptions light;
+  light.noise_dn = flags.GetDouble("noise", 0, 100);
+  light.ambient = flags.GetDouble("ambient", 0, 1);
+  light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
+  const uint64_t seed = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
+  texture.seed = seed;
+  const PatternSequence seq = MakePatternSequence(PatternOptionsFromFlags(flags, rig.projector.size));
+
+  const auto t0 = std::chrono::steady_clock::now();
+  std::fprintf(stderr, "render: tracing a %s page...\n", ToString(page.shape));
+  const VirtualGantry gantry(rig, page, texture, light);
+  Scan scan;
+  scan.sequence = seq;
+  scan.camera_size = rig.camera.size;
+  scan.texture = gantry.RenderTexture(seed);
+  std::fprintf(stderr, "render: %zu frames...\n", seq.patterns.size());
+  scan.frames = RenderSequence(gantry, seq, seed);
+  Status s = WriteScan(out, scan);
+  namespace fs = std::filesystem;
+  if (s.ok()) s = WriteCalibration((fs::path(out) / "calibration.yaml").string(), rig);
+  if (s.ok() && flags.GetBool("truth")) {
+    s = WriteImage((fs::path(out) / "truth_points.tiff").string(), gantry.truth().points);
+    if (s.ok()) {
+      std::vector<cv::Mat> planes;
+      cv::split(gantry.truth().page, planes);
+      cv::Mat mask;
+      gantry.truth().on_page.convertTo(mask, CV_32F, 1.0 / 255);
+      planes.push_back(mask);
+      cv::Mat page_truth;
+      cv::merge(planes, page_truth);
+      s = WriteImage((fs::path(out) / "truth_page.tiff").string(), page_truth);
+    }
+  }
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum render: %s\n", s.message().c_str());
+    return 1;
+  }
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("rendered a %s page (%zu frames, %.1f s) to %s\n", ToString(page.shape),
+              seq.patterns.size(), secs, out.c_str());
+  return 0;
+}
+
+}  // namespace vellum

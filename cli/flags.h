@@ -1,0 +1,44 @@
+// Command-line flags of the vellum tools: --name value or --name=value, and --help.
+#pragma once
+
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace vellum {
+
+// Thrown for bad command lines; main prints its message and exits with status 2.
+struct UsageError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+class Flags {
+ public:
+  struct Spec {
+    std::string name, value_name, help, default_value;
+  };
+  Flags(std::string command, std::string summary, std::vector<Spec> specs);
+
+  // Parses args; returns false when --help was asked (the help is then printed to stdout).
+  bool Parse(const std::vector<std::string>& args);
+  std::string Help() const;
+
+  bool Has(const std::string& name) const;
+  std::string Get(const std::string& name) const;
+  // Typed getters throw UsageError naming the flag when the value does not parse.
+  int GetInt(const std::string& name, int min, int max) const;
+  double GetDouble(const std::string& name, double min, double max) const;
+  bool GetBool(const std::string& name) const;
+  cv::Size GetSize(const std::string& name) const;  // WIDTHxHEIGHT
+  std::string Require(const std::string& name) const;
+
+ private:
+  std::string command_, summary_;
+  std::vector<Spec> specs_;
+  std::map<std::string, std::string> values_;
+};
+
+}  // namespace vellum

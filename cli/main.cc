@@ -1,0 +1,49 @@
+// vellum: the station's command-line tool.
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/utility.hpp>
+
+#include "cli/commands.h"
+#include "cli/flags.h"
+
+namespace {
+
+constexpr char kUsage[] =
+    "usage: vellum COMMAND [flags]\n"
+    "\n"
+    "Restores images of warped documents from structured-light scans.\n"
+    "\n"
+    "commands:\n"
+    "  patterns   write the projector pattern images and scan.yaml of a scan\n"
+    "  render     render a scan of a warped page with the virtual gantry\n"
+    "  process    decode and triangulate a scan directory into a point cloud\n"
+    "\n"
+    "Run 'vellum COMMAND --help' for a command's flags.\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h" ||
+      std::string(argv[1]) == "help") {
+    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  cv::setNumThreads(cv::getNumberOfCPUs());
+  const std::string command = argv[1];
+  const std::vector<std::string> args(argv + 2, argv + argc);
+  try {
+    if (command == "patterns") return vellum::RunPatterns(args);
+    if (command == "render") return vellum::RunRender(args);
+    if (command == "process") return vellum::RunProcess(args);
+    std::fprintf(stderr, "vellum: unknown command '%s'\n\n%s", command.c_str(), kUsage);
+    return 2;
+  } catch (const vellum::UsageError& e) {
+    std::fprintf(stderr, "vellum %s: %s\n", command.c_str(), e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "vellum %s: error: %s\n", command.c_str(), e.what());
+    return 1;
+  }
+}

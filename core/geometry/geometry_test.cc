@@ -1,0 +1,116 @@
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "core/geometry/calibration.h"
+#include "core/geometry/triangulate.h"
+#include "core/sim/gantry.h"
+
+namespace vellum {
+namespace {
+
+TEST(CameraModel, ProjectInvertsRayDirectionWithDistortion) {
+  CameraModel cam = DefaultRig().camera;
+  cam.distortion = cv::Vec<double, 5>(-0.08, 0.03, 0.001, -0.0005, 0.002);
+  const cv::Vec3d c = cam.Center();
+  double worst = 0;
+  for (double v = 0; v < cam.size.height; v += 97) {
+    for (double u = 0; u < cam.size.width; u += 89) {
+      const cv::Point2d p = cam.Project(c + 500.0 * cam.RayDirection({u, v}));
+      worst = std::max(worst, cv::norm(p - cv::Point2d(u, v)));
+    }
+  }
+  EXPECT_LT(worst, 1e-6);
+}
+
+TEST(CameraModel, CheckRejectsAMirroredRotation) {
+  CameraModel cam = DefaultRig().projector;
+  cam.rotation = cam.rotation * cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, 1);
+  std::string why;
+  EXPECT_FALSE(cam.Check(&why));
+  EXPECT_NE(why.find("reflection"), std::string::npos) << why;
+}
+
+// Exact correspondences of a known surface triangulate back to it, with and without rows and
+// with projector distortion.
+class TriangulateExact : public ::testing::TestWithParam<std::tuple<bool, bool>> {};
+
+TEST_P(TriangulateExact, RecoversTheSurface) {
+  const auto [rows, distorted] = GetParam();
+  Calibration calib = DefaultRig();
+  if (distorted) calib.projector.distortion = cv::Vec<double, 5>(0.04, -0.01, 0.0005, 0, 0);
+  const CameraModel& cam = calib.camera;
+  DecodeResult d;
+  d.status = Status::Ok();
+  d.has_columns = true;
+  d.has_rows = rows;
+  d.projector_x.create(cam.size, CV_32F);
+  d.projector_y.create(cam.size, CV_32F);
+  d.projector_x.setTo(NAN);
+  d.projector_y.setTo(NAN);
+  d.valid = cv::Mat::zeros(cam.size, CV_8U);
+  cv::Mat truth(cam.size, CV_32FC3, cv::Scalar::all(NAN));
+  const cv::Vec3d c = cam.Center();
+  for (int v = 0; v < cam.size.height; v += 7) {
+    for (int u = 0; u < cam.size.width; u += 7) {
+      // Tilted plane z = 20 + 0.1 x + 0.05 y.
+      const cv::Vec3d d_ = cam.RayDirection(cv::Point2d(u, v));
+      const double t = (20 - c[2] + 0.1 * c[0] + 0.05 * c[1]) / (d_[2] - 0.1 * d_[0] - 0.05 * d_[1]);
+      const cv::Vec3d x = c + t * d_;
+      const cv::Point2d p = calib.projector.Project(x);
+      if (!(p.x >= 0 && p.y >= 0 && p.x < 1023 && p.y < 767)) continue;
+      d.projector_x.at<float>(v, u) = static_cast<float>(p.x);
+      if (rows) d.projector_y.at<float>(v, u) = static_cast<float>(p.y);
+      d.valid.at<uint8_t>(v, u) = 255;
+      truth.at<cv::Vec3f>(v, u) = cv::Vec3f(x);
+    }
+  }
+  const Triangulator tri(calib);
+  const PointMap map = tri.Triangulate(d);
+  ASSERT_TRUE(map.status.ok()) << map.status.message();
+  EXPECT_EQ(map.valid, cv::countNonZero(d.valid));
+  double worst = 0;
+  for (int v = 0; v < cam.size.height; ++v) {
+    for (int u = 0; u < cam.size.width; ++u) {
+      if (!d.valid.at<uint8_t>(v, u)) continue;
+      worst = std::max(worst, cv::norm(cv::Vec3d(map.points.at<cv::Vec3f>(v, u)) -
+                                       cv::Vec3d(truth.at<cv::Vec3f>(v, u))));
+    }
+  }
+  // float storage of projector coordinates (~3e-5 px at 1000) is ~3e-5 mm of depth.
+  EXPECT_LT(worst, 1e-3);
+}
+
+INSTANTIATE_TEST_SUITE_P(RowsAndDistortion, TriangulateExact,
+                         ::testing::Combine(::testing::Bool(), ::testing::Bool()));
+
+TEST(Triangulate, RejectsPointsOffTheirEpipolarLine) {
+  const Calibration calib = DefaultRig();
+  DecodeResult d;
+  d.status = Status::Ok();
+  d.has_columns = d.has_rows = true;
+  d.valid = cv::Mat::zeros(calib.camera.size, CV_8U);
+  d.projector_x = cv::Mat(calib.camera.size, CV_32F, cv::Scalar(NAN));
+  d.projector_y = d.projector_x.clone();
+  const cv::Vec3d x(10, 20, 5);
+  const cv::Point2d pc = calib.camera.Project(x), pp = calib.projector.Project(x);
+  const cv::Point at(cvRound(pc.x), cvRound(pc.y));
+  d.valid.at<uint8_t>(at) = 255;
+  d.projector_x.at<float>(at) = static_cast<float>(pp.x);
+  d.projector_y.at<float>(at) = static_cast<float>(pp.y + 5.0);  // 5 px off: inconsistent.
+  const PointMap map = Triangulator(calib).Triangulate(d);
+  EXPECT_EQ(map.valid, 0);
+  EXPECT_EQ(map.rejected_epipolar, 1);
+}
+
+TEST(Triangulate, RejectsAMismatchedCameraSize) {
+  DecodeResult d;
+  d.status = Status::Ok();
+  d.valid = cv::Mat::zeros(100, 100, CV_8U);
+  const PointMap map = Triangulator(DefaultRig()).Triangulate(d);
+  EXPECT_FALSE(map.status.ok());
+  EXPECT_NE(map.status.message().find("1600x1200"), std::string::npos) << map.status.message();
+}
+
+}  // namespace
+}  // namespace vellum

@@ -1,0 +1,175 @@
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/io/calibration_io.h"
+#include "core/io/ply.h"
+#include "core/io/scan_io.h"
+#include "core/sim/gantry.h"
+
+namespace vellum {
+namespace {
+
+namespace fs = std::filesystem;
+
+class IoTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("vellum_io_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+TEST_F(IoTest, CalibrationRoundTrip) {
+  Calibration c = DefaultRig();
+  c.projector.distortion = cv::Vec<double, 5>(0.01, -0.02, 0.001, 0.002, 0.003);
+  ASSERT_TRUE(WriteCalibration(Path("c.yaml"), c).ok());
+  Calibration r;
+  const Status s = ReadCalibration(Path("c.yaml"), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.camera.size, c.camera.size);
+  EXPECT_LT(cv::norm(r.projector.distortion - c.projector.distortion), 1e-12);
+  EXPECT_LT(cv::norm(r.projector.rotation - c.projector.rotation), 1e-12);
+  EXPECT_LT(cv::norm(r.camera.translation - c.camera.translation), 1e-9);
+}
+
+// What Python's cv2.FileStorage writes: sizes as 1x2 integer matrices, float matrices, and a
+// translation as 1x3.
+TEST_F(IoTest, ReadsPythonStyleSizesAndRowTranslations) {
+  const Calibration c = DefaultRig();
+  std::ofstream f(Path("py.yaml"));
+  f << "%YAML:1.0\n---\n";
+  for (const char* dev : {"camera", "projector"}) {
+    const CameraModel& m = std::string(dev) == "camera" ? c.camera : c.projector;
+    f << dev << "_size: !!opencv-matrix\n   rows: 1\n   cols: 2\n   dt: i\n   data: [ "
+      << m.size.width << ", " << m.size.height << " ]\n";
+    auto mat = [&](const std::string& key, const double* v, int rows, int cols) {
+      f << dev << "_" << key << ": !!opencv-matrix\n   rows: " << rows << "\n   cols: " << cols
+        << "\n   dt: f\n   data: [ ";
+      for (int i = 0; i < rows * cols; ++i) f << (i ? ", " : "") << v[i];
+      f << " ]\n";
+    };
+    mat("matrix", m.matrix.val, 3, 3);
+    mat("distortion", m.distortion.val, 1, 5);
+    mat("rotation", m.rotation.val, 3, 3);
+    mat("translation", m.translation.val, 1, 3);
+  }
+  f.close();
+  Calibration r;
+  const Status s = ReadCalibration(Path("py.yaml"), &r);
+  // float storage of the rotation rounds it at 1e-7; Check() allows 1e-6.
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.projector.size, cv::Size(1024, 768));
+  EXPECT_NEAR(r.camera.translation[2], 600, 1e-3);
+}
+
+TEST_F(IoTest, CalibrationErrorsNameTheFileAndKey) {
+  ASSERT_TRUE(WriteCalibration(Path("c.yaml"), DefaultRig()).ok());
+  std::ifstream in(Path("c.yaml"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // Rename a key.
+  std::string bad = text;
+  bad.replace(bad.find("projector_matrix"), 16, "projector_matrx");
+  std::ofstream(Path("bad_key.yaml")) << bad;
+  Calibration r;
+  Status s = ReadCalibration(Path("bad_key.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("bad_key.yaml"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("projector_matrix"), std::string::npos) << s.message();
+  // A 3x3 where 1x5 belongs.
+  cv::FileStorage fs(Path("bad_size.yaml"), cv::FileStorage::WRITE);
+  const Calibration c = DefaultRig();
+  fs << "camera_size" << c.camera.size << "camera_matrix" << cv::Mat(c.camera.matrix)
+     << "camera_distortion" << cv::Mat(c.camera.matrix);
+  fs.release();
+  s = ReadCalibration(Path("bad_size.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("camera_distortion"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("1x5"), std::string::npos) << s.message();
+  // Not YAML at all.
+  std::ofstream(Path("junk.yaml")) << "\x01\x02 not yaml {{{";
+  s = ReadCalibration(Path("junk.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("junk.yaml"), std::string::npos) << s.message();
+}
+
+Scan SmallScan() {
+  Scan scan;
+  PatternOptions o;
+  o.projector_size = {40, 30};
+  scan.sequence = MakePatternSequence(o);
+  scan.camera_size = {32, 24};
+  scan.texture = cv::Mat(24, 32, CV_8U, cv::Scalar(100));
+  for (size_t k = 0; k < scan.sequence.patterns.size(); ++k) {
+    scan.frames.push_back(cv::Mat(24, 32, CV_8U, cv::Scalar(static_cast<double>(k))));
+  }
+  return scan;
+}
+
+TEST_F(IoTest, ScanRoundTrip) {
+  const Scan scan = SmallScan();
+  ASSERT_TRUE(WriteScan(Path("scan"), scan).ok());
+  Scan r;
+  const Status s = ReadScan(Path("scan"), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(r.sequence.patterns.size(), scan.sequence.patterns.size());
+  for (size_t k = 0; k < r.frames.size(); ++k) {
+    EXPECT_TRUE(r.sequence.patterns[k] == scan.sequence.patterns[k]);
+    EXPECT_EQ(cv::norm(r.frames[k], scan.frames[k], cv::NORM_INF), 0);
+  }
+}
+
+TEST_F(IoTest, ScanErrorsNameTheFileAndProblem) {
+  const Scan scan = SmallScan();
+  Scan r;
+  // Missing frame.
+  ASSERT_TRUE(WriteScan(Path("missing"), scan).ok());
+  fs::remove(Path("missing/" + FrameName(5)));
+  Status s = ReadScan(Path("missing"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_005.png: file is missing"), std::string::npos) << s.message();
+  // Mixed sizes.
+  ASSERT_TRUE(WriteScan(Path("mixed"), scan).ok());
+  cv::imwrite(Path("mixed/" + FrameName(7)), cv::Mat(20, 20, CV_8U, cv::Scalar(0)));
+  s = ReadScan(Path("mixed"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_007.png: image is 20x20"), std::string::npos) << s.message();
+  // Not an image.
+  ASSERT_TRUE(WriteScan(Path("junk"), scan).ok());
+  std::ofstream(Path("junk/" + FrameName(2))) << "this is not a PNG";
+  s = ReadScan(Path("junk"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_002.png: not a readable image"), std::string::npos) << s.message();
+  // Corrupt scan.yaml.
+  ASSERT_TRUE(WriteScan(Path("yaml"), scan).ok());
+  std::ofstream(Path("yaml/scan.yaml")) << "%YAML:1.0\n---\nprojector_size: [ 40, 30 ]\npatterns: 7\n";
+  s = ReadScan(Path("yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("scan.yaml"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("patterns"), std::string::npos) << s.message();
+}
+
+TEST_F(IoTest, PlyRoundTrip) {
+  cv::Mat points(3, 4, CV_32FC3, cv::Scalar::all(NAN));
+  points.at<cv::Vec3f>(1, 2) = cv::Vec3f(1.5f, -2.0f, 3.25f);
+  points.at<cv::Vec3f>(2, 3) = cv::Vec3f(4, 5, 6);
+  ASSERT_TRUE(WritePointsPly(Path("p.ply"), points).ok());
+  std::vector<PlyPoint> r;
+  ASSERT_TRUE(ReadPointsPly(Path("p.ply"), &r).ok());
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[0].x, 1.5f);
+  EXPECT_EQ(r[0].u, 2.0f);
+  EXPECT_EQ(r[0].v, 1.0f);
+  EXPECT_EQ(r[1].z, 6.0f);
+}
+
+}  // namespace
+}  // namespace vellum

@@ -1,0 +1,95 @@
+#include "core/patterns/patterns.h"
+
+#include <set>
+
+#include <gtest/gtest.h>
+
+namespace vellum {
+namespace {
+
+TEST(Patterns, SequenceLayoutFor1024x768) {
+  const PatternSequence seq = MakePatternSequence(PatternOptions());
+  std::string why;
+  ASSERT_TRUE(seq.Check(&why)) << why;
+  EXPECT_EQ(seq.GrayBits(Axis::kColumn), 10);
+  EXPECT_EQ(seq.GrayBits(Axis::kRow), 10);
+  // White, black, 2 x 10 x 2 Gray, 2 x 8 phase.
+  EXPECT_EQ(seq.patterns.size(), 2u + 40u + 16u);
+  EXPECT_EQ(seq.patterns[0].kind, PatternKind::kWhite);
+  EXPECT_EQ(seq.patterns[1].kind, PatternKind::kBlack);
+}
+
+TEST(Patterns, GrayBitsForNonPowersOfTwo) {
+  EXPECT_EQ(GrayBitsFor(1024), 10);
+  EXPECT_EQ(GrayBitsFor(1025), 11);
+  EXPECT_EQ(GrayBitsFor(854), 10);
+  EXPECT_EQ(GrayBitsFor(480), 9);
+  EXPECT_EQ(GrayBitsFor(800), 10);
+  EXPECT_EQ(GrayBitsFor(1280), 11);
+}
+
+// Every projector column and row of odd sizes gets its own code, and neighbours differ in
+// exactly one bit (the Gray property that bounds boundary errors to one pixel).
+TEST(Patterns, EveryColumnAndRowHasAUniqueGrayCode) {
+  for (cv::Size size : {cv::Size(1280, 800), cv::Size(854, 480), cv::Size(37, 5)}) {
+    PatternOptions o;
+    o.projector_size = size;
+    const PatternSequence seq = MakePatternSequence(o);
+    for (Axis axis : {Axis::kColumn, Axis::kRow}) {
+      const int extent = axis == Axis::kColumn ? size.width : size.height;
+      std::vector<int> code(extent, 0);
+      for (int bit = 0; bit < seq.GrayBits(axis); ++bit) {
+        const cv::Mat on = RenderPattern(seq.patterns[seq.Find(PatternKind::kGray, axis, bit, false)], size);
+        const cv::Mat off = RenderPattern(seq.patterns[seq.Find(PatternKind::kGray, axis, bit, true)], size);
+        for (int c = 0; c < extent; ++c) {
+          const cv::Point p = axis == Axis::kColumn ? cv::Point(c, size.height / 2) : cv::Point(size.width / 2, c);
+          ASSERT_NE(on.at<uint8_t>(p), off.at<uint8_t>(p)) << "inverse must differ";
+          code[c] |= (on.at<uint8_t>(p) > 0) << bit;
+        }
+      }
+      std::set<int> unique(code.begin(), code.end());
+      EXPECT_EQ(static_cast<int>(unique.size()), extent) << size << " " << ToString(axis);
+      for (int c = 1; c < extent; ++c) {
+        EXPECT_EQ(__builtin_popcount(code[c] ^ code[c - 1]), 1);
+      }
+    }
+  }
+}
+
+TEST(Patterns, PhaseSinusoidHasTheStatedPeriodAndShift) {
+  PatternSpec s;
+  s.kind = PatternKind::kPhase;
+  s.axis = Axis::kColumn;
+  s.steps = 8;
+  s.step = 2;
+  s.period_px = 16;
+  const cv::Mat img = RenderPattern(s, {64, 4});
+  // 2 pi c / 16 - 2 pi 2 / 8 = 0 at c = 4: the maximum.
+  EXPECT_EQ(img.at<uint8_t>(0, 4), 255);
+  EXPECT_EQ(img.at<uint8_t>(0, 4 + 16), 255);
+  EXPECT_EQ(img.at<uint8_t>(0, 12), 0);
+}
+
+TEST(Patterns, OptionsCheckRejectsBadValues) {
+  std::string why;
+  PatternOptions o;
+  o.phase_steps = 2;
+  EXPECT_FALSE(o.Check(&why));
+  o = PatternOptions();
+  o.phase_period_px = 3;
+  EXPECT_FALSE(o.Check(&why));
+  o = PatternOptions();
+  o.columns = o.rows = false;
+  EXPECT_FALSE(o.Check(&why));
+}
+
+TEST(Patterns, SequenceCheckFindsAMissingInverse) {
+  PatternSequence seq = MakePatternSequence(PatternOptions());
+  seq.patterns.erase(seq.patterns.begin() + seq.Find(PatternKind::kGray, Axis::kRow, 3, true));
+  std::string why;
+  EXPECT_FALSE(seq.Check(&why));
+  EXPECT_NE(why.find("bit 3"), std::string::npos) << why;
+}
+
+}  // namespace
+}  // namespace vellum

@@ -1,0 +1,174 @@
+// The `vellum` tool as a user runs it: help, the pattern/render/process chain on a small rig,
+// and bad input (missing frame, mixed sizes, non-image, wrong calibration) giving one clear
+// error that names the file and the problem, a non-zero exit, and never a crash.
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/io/calibration_io.h"
+#include "core/io/ply.h"
+#include "core/io/scan_io.h"
+#include "core/sim/gantry.h"
+
+namespace vellum {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Result {
+  int exit_code = -1;  // -1: killed by a signal (a crash).
+  std::string output;
+};
+
+Result RunVellum(const std::string& args) {
+  const std::string cmd = std::string(VELLUM_BIN) + " " + args + " 2>&1";
+  Result r;
+  FILE* p = popen(cmd.c_str(), "r");
+  char buf[4096];
+  size_t n;
+  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.output.append(buf, n);
+  const int status = pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+// A small rig (camera 400x300 at 1 mm/px, projector 320x200) keeps these tests quick.
+Calibration SmallRig() {
+  Calibration rig = DefaultRig();
+  rig.camera.size = {400, 300};
+  rig.camera.matrix = cv::Matx33d(600, 0, 199.5, 0, 600, 149.5, 0, 0, 1);
+  rig.projector.size = {320, 200};
+  rig.projector.matrix = cv::Matx33d(560, 0, 159.5, 0, 560, 99.5, 0, 0, 1);
+  return rig;
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = fs::temp_directory_path() / ("vellum_cli_test_" + std::to_string(::getpid()));
+    fs::remove_all(root_);
+    fs::create_directories(root_);
+    ASSERT_TRUE(WriteCalibration((root_ / "rig.yaml").string(), SmallRig()).ok());
+    const Result r = RunVellum("render --page curl --calibration " + (root_ / "rig.yaml").string() +
+                         " --out " + (root_ / "scan").string());
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  static void TearDownTestSuite() { fs::remove_all(root_); }
+
+  // A copy of the good scan to break.
+  static std::string CopyScan(const std::string& name) {
+    const fs::path dst = root_ / name;
+    fs::remove_all(dst);
+    fs::copy(root_ / "scan", dst, fs::copy_options::recursive);
+    return dst.string();
+  }
+  static std::string Process(const std::string& scan, const std::string& calib) {
+    return "process --scan " + scan + " --calibration " + calib + " --out " +
+           (root_ / "out").string();
+  }
+  static std::string Rig() { return (root_ / "rig.yaml").string(); }
+  static fs::path root_;
+};
+fs::path CliTest::root_;
+
+TEST_F(CliTest, EveryCommandHasHelp) {
+  for (const char* cmd : {"--help", "patterns --help", "render --help", "process --help"}) {
+    const Result r = RunVellum(cmd);
+    EXPECT_EQ(r.exit_code, 0) << cmd;
+    EXPECT_NE(r.output.find("usage: vellum"), std::string::npos) << r.output;
+  }
+  const Result r = RunVellum("process --bogus 1");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("unknown flag --bogus"), std::string::npos) << r.output;
+}
+
+TEST_F(CliTest, PatternsWritesImagesAndScanYaml) {
+  const std::string dir = (root_ / "patterns").string();
+  const Result r = RunVellum("patterns --projector 854x480 --out " + dir);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  PatternSequence seq;
+  cv::Size camera;
+  ASSERT_TRUE(ReadScanYaml(dir, &seq, &camera).ok());
+  EXPECT_EQ(seq.projector_size, cv::Size(854, 480));
+  EXPECT_EQ(seq.GrayBits(Axis::kColumn), 10);
+  EXPECT_EQ(seq.GrayBits(Axis::kRow), 9);
+  for (size_t k = 0; k < seq.patterns.size(); ++k) {
+    const cv::Mat img = cv::imread((fs::path(dir) / PatternName(static_cast<int>(k))).string(),
+                                   cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(img.size(), cv::Size(854, 480)) << k;
+    EXPECT_EQ(cv::norm(img, RenderPattern(seq.patterns[k], seq.projector_size), cv::NORM_INF), 0);
+  }
+  EXPECT_FALSE(fs::exists(fs::path(dir) / PatternName(static_cast<int>(seq.patterns.size()))));
+}
+
+TEST_F(CliTest, ProcessWritesPointsAndReport) {
+  const Result r = RunVellum(Process((root_ / "scan").string(), Rig()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::vector<PlyPoint> points;
+  ASSERT_TRUE(ReadPointsPly((root_ / "out" / "points.ply").string(), &points).ok());
+  // Most of the 400x300 camera sees lit table or page.
+  EXPECT_GT(points.size(), 60000u);
+  std::ifstream report(root_ / "out" / "report.json");
+  const std::string text((std::istreambuf_iterator<char>(report)), std::istreambuf_iterator<char>());
+  for (const char* key : {"\"decode\"", "\"triangulate\"", "\"valid\"", "\"options\""}) {
+    EXPECT_NE(text.find(key), std::string::npos) << key << " in " << text;
+  }
+}
+
+void ExpectCleanError(const Result& r, const std::string& file, const std::string& problem) {
+  EXPECT_EQ(r.exit_code, 1) << "expected a clean failure, got: " << r.output;
+  EXPECT_NE(r.output.find(file), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(problem), std::string::npos) << r.output;
+  // One clear line, not a stack of messages.
+  EXPECT_LE(std::count(r.output.begin(), r.output.end(), '\n'), 2) << r.output;
+}
+
+TEST_F(CliTest, MissingFrame) {
+  const std::string scan = CopyScan("missing");
+  fs::remove(fs::path(scan) / FrameName(9));
+  ExpectCleanError(RunVellum(Process(scan, Rig())), "frame_009.png", "file is missing");
+}
+
+TEST_F(CliTest, FramesOfMixedSizes) {
+  const std::string scan = CopyScan("mixed");
+  cv::imwrite((fs::path(scan) / FrameName(4)).string(), cv::Mat(300, 200, CV_8U, cv::Scalar(9)));
+  ExpectCleanError(RunVellum(Process(scan, Rig())), "frame_004.png", "image is 200x300");
+}
+
+TEST_F(CliTest, NonImageFile) {
+  const std::string scan = CopyScan("junk");
+  std::ofstream(fs::path(scan) / FrameName(12)) << "GIF89a? no, just text";
+  ExpectCleanError(RunVellum(Process(scan, Rig())), "frame_012.png", "not a readable image");
+  const std::string scan2 = CopyScan("junk_texture");
+  std::ofstream(fs::path(scan2) / "texture.png", std::ios::trunc) << "";
+  ExpectCleanError(RunVellum(Process(scan2, Rig())), "texture.png", "not a readable image");
+}
+
+TEST_F(CliTest, CalibrationWithWrongKeys) {
+  std::ifstream in(Rig());
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  text.replace(text.find("camera_rotation"), 15, "camera_rotat1on");
+  const std::string bad = (root_ / "bad_key.yaml").string();
+  std::ofstream(bad) << text;
+  ExpectCleanError(RunVellum(Process((root_ / "scan").string(), bad)), "bad_key.yaml",
+                   "'camera_rotation' is missing");
+}
+
+TEST_F(CliTest, CalibrationOfTheWrongSize) {
+  const std::string big = (root_ / "default_rig.yaml").string();
+  ASSERT_TRUE(WriteCalibration(big, DefaultRig()).ok());
+  ExpectCleanError(RunVellum(Process((root_ / "scan").string(), big)), "default_rig.yaml",
+                   "1600x1200 camera");
+}
+
+TEST_F(CliTest, MissingScanDirectory) {
+  ExpectCleanError(RunVellum(Process((root_ / "nowhere").string(), Rig())), "nowhere", "not a directory");
+}
+
+}  // namespace
+}  // namespace vellum
