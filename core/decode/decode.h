@@ -54,7 +54,25 @@ struct DecodeResult {
   DecodeStats stats;
 };
 
-// frames[k] is the camera image (CV_8U, one channel) taken while sequence.patterns[k] was shown.
+// Decodes scans and keeps its scratch buffers between calls (a daemon decodes many scans; fresh
+// 8 MB buffers per call would cost more in page faults than the arithmetic).
+class Decoder {
+ public:
+  explicit Decoder(const DecodeOptions& options = DecodeOptions()) : options_(options) {}
+
+  const DecodeOptions& options() const { return options_; }
+  // frames[k] is the camera image (CV_8U, one channel) taken while sequence.patterns[k] was
+  // shown. Writes *result, reusing its images when they already have the right size and type.
+  void Decode(const PatternSequence& sequence, const std::vector<cv::Mat>& frames,
+              DecodeResult* result);
+
+ private:
+  DecodeOptions options_;
+  cv::Mat weight_, sigma_, robust_weight_;  // Per-pixel fit weight, expected noise (px), IRLS weight.
+  std::vector<cv::Mat> fit_;                // Fitted coordinates per encoded axis.
+};
+
+// One-shot convenience: a fresh Decoder and result.
 DecodeResult Decode(const PatternSequence& sequence, const std::vector<cv::Mat>& frames,
                     const DecodeOptions& options = DecodeOptions());
 

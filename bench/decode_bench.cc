@@ -1,0 +1,172 @@
+// Decode + triangulation of one 1600x1200 scan (default rig, curled checkerboard page), beside
+// OpenCV's cv::structured_light::GrayCodePattern decoding the same page from its own Gray-code
+// frames (same virtual gantry, same noise). The ratios are printed at the end of the run.
+//
+//   ./build/bench/decode_bench [--benchmark_min_time=2]
+#include <cstdio>
+#include <map>
+#include <memory>
+
+#include <benchmark/benchmark.h>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/structured_light.hpp>
+
+#include "core/decode/decode.h"
+#include "core/geometry/triangulate.h"
+#include "core/sim/evaluate.h"
+
+namespace vellum {
+namespace {
+
+// One rendered scan shared by every benchmark.
+struct Fixture {
+  Fixture() {
+    PageOptions page;
+    page.shape = PageShape::kCurl;
+    gantry = std::make_unique<VirtualGantry>(DefaultRig(), page, TextureOptions());
+    sequence = MakePatternSequence(PatternOptions());
+    frames = RenderSequence(*gantry, sequence, 21);
+    triangulator = std::make_unique<Triangulator>(gantry->rig());
+    cv::structured_light::GrayCodePattern::Params params;
+    params.width = sequence.projector_size.width;
+    params.height = sequence.projector_size.height;
+    opencv = cv::structured_light::GrayCodePattern::create(params);
+    std::vector<cv::Mat> patterns;
+    opencv->generate(patterns);
+    cv::Mat black, white;
+    opencv->getImagesForShadowMasks(black, white);
+    uint64_t seed = 1000;
+    for (const cv::Mat& p : patterns) {
+      cv::Mat gray = p.channels() == 1 ? p : cv::Mat();
+      if (gray.empty()) cv::cvtColor(p, gray, cv::COLOR_BGR2GRAY);
+      opencv_frames.push_back(gantry->RenderFrame(gray, ++seed));
+    }
+    auto to_gray = [](const cv::Mat& m) {
+      cv::Mat g = m;
+      if (m.channels() != 1) cv::cvtColor(m, g, cv::COLOR_BGR2GRAY);
+      return g;
+    };
+    opencv_white = gantry->RenderFrame(to_gray(white), ++seed);
+    opencv_black = gantry->RenderFrame(to_gray(black), ++seed);
+  }
+  std::unique_ptr<VirtualGantry> gantry;
+  PatternSequence sequence;
+  std::vector<cv::Mat> frames;
+  std::unique_ptr<Triangulator> triangulator;
+  cv::Ptr<cv::structured_light::GrayCodePattern> opencv;
+  std::vector<cv::Mat> opencv_frames;
+  cv::Mat opencv_white, opencv_black;
+};
+
+Fixture& Shared() {
+  static Fixture f;
+  return f;
+}
+
+void BM_Vellum_DecodeTriangulate(benchmark::State& state) {
+  Fixture& f = Shared();
+  DecodeOptions options;
+  int valid = 0;
+  for (auto _ : state) {
+    const DecodeResult d = Decode(f.sequence, f.frames, options);
+    const PointMap m = f.triangulator->Triangulate(d);
+    valid = m.valid;
+    benchmark::DoNotOptimize(m.points.data);
+  }
+  state.counters["valid_px"] = valid;
+  const PointErrorStats s =
+      ComparePoints(f.gantry->truth(), f.triangulator->Triangulate(Decode(f.sequence, f.frames, options)).points);
+  state.counters["median_mm"] = s.median_mm;
+  state.counters["rms_mm"] = s.rms_mm;
+  state.counters["valid_frac"] = s.valid_fraction;
+}
+
+void BM_Vellum_Decode(benchmark::State& state) {
+  Fixture& f = Shared();
+  DecodeOptions options;
+  options.use_phase = state.range(0) != 0;
+  for (auto _ : state) {
+    const DecodeResult d = Decode(f.sequence, f.frames, options);
+    benchmark::DoNotOptimize(d.projector_x.data);
+  }
+  state.SetLabel(options.use_phase ? "gray+phase" : "gray only");
+}
+
+// OpenCV's decoder as its API offers it for a projector-camera pair: a shadow mask from the
+// white/black frames, then getProjPixel per camera pixel (run on all cores with parallel_for_).
+void BM_OpenCV_GrayCodeDecode(benchmark::State& state) {
+  Fixture& f = Shared();
+  const cv::Size size = f.opencv_white.size();
+  cv::Mat proj_x(size, CV_32F), proj_y(size, CV_32F);
+  const int black_threshold = 5;  // OpenCV's default shadow threshold.
+  for (auto _ : state) {
+    cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+      for (int y = range.start; y < range.end; ++y) {
+        for (int x = 0; x < size.width; ++x) {
+          float px = NAN, py = NAN;
+          if (f.opencv_white.at<uint8_t>(y, x) - f.opencv_black.at<uint8_t>(y, x) > black_threshold) {
+            cv::Point p;
+            // getProjPixel returns true on error.
+            if (!f.opencv->getProjPixel(f.opencv_frames, x, y, p)) {
+              px = static_cast<float>(p.x);
+              py = static_cast<float>(p.y);
+            }
+          }
+          proj_x.at<float>(y, x) = px;
+          proj_y.at<float>(y, x) = py;
+        }
+      }
+    });
+    benchmark::DoNotOptimize(proj_x.data);
+  }
+  // Accuracy of OpenCV's integer decode through our triangulation, for the record.
+  DecodeResult d;
+  d.status = Status::Ok();
+  d.has_columns = d.has_rows = true;
+  d.projector_x = proj_x;
+  d.projector_y = proj_y;
+  d.valid = proj_x == proj_x;
+  const PointErrorStats s = ComparePoints(f.gantry->truth(), f.triangulator->Triangulate(d).points);
+  state.counters["median_mm"] = s.median_mm;
+  state.counters["rms_mm"] = s.rms_mm;
+  state.counters["valid_frac"] = s.valid_fraction;
+}
+
+BENCHMARK(BM_Vellum_DecodeTriangulate)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_Decode)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_OpenCV_GrayCodeDecode)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+// Collects each run's real time so the ratios can be printed after the table.
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& r : runs) times_[r.benchmark_name()] = r.GetAdjustedRealTime();
+    ConsoleReporter::ReportRuns(runs);
+  }
+  std::map<std::string, double> times_;
+};
+
+}  // namespace
+}  // namespace vellum
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  std::printf("threads: %d (cv::getNumThreads)\n", cv::getNumThreads());
+  vellum::RatioReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  auto find = [&](const std::string& prefix) {
+    for (const auto& [name, t] : reporter.times_) {
+      if (name.rfind(prefix, 0) == 0) return t;
+    }
+    return 0.0;
+  };
+  const double ours = find("BM_Vellum_DecodeTriangulate");
+  const double opencv = find("BM_OpenCV_GrayCodeDecode");
+  if (ours > 0 && opencv > 0) {
+    std::printf("\nvellum decode+triangulate: %.1f ms; OpenCV GrayCodePattern decode alone: %.1f ms; "
+                "ratio OpenCV / vellum = %.1fx\n", ours, opencv, opencv / ours);
+  }
+  benchmark::Shutdown();
+  return 0;
+}
