@@ -51,7 +51,7 @@ int RunProcess(const std::vector<std::string>& args) {
           {"calibration", "FILE", "calibration YAML of camera and projector", ""},
           {"out", "DIR", "output directory", ""},
           {"decoder", "NAME", "phase (Gray code + phase shift) or gray (Gray code only)", "phase"},
-          {"smooth-radius", "PX", "local fit radius, camera pixels; 0 = per-pixel decode", "3"},
+          {"smooth-radius", "PX", "local fit radius, camera pixels (0..8); 0 = per-pixel decode", "3"},
           {"max-epipolar", "PX", "reject points farther from their epipolar line, projector px",
            "1.5"},
       });
@@ -65,7 +65,7 @@ int RunProcess(const std::vector<std::string>& args) {
     throw UsageError("--decoder must be phase or gray, got '" + decoder + "'");
   }
   decode_options.use_phase = decoder == "phase";
-  decode_options.smooth_radius_px = flags.GetInt("smooth-radius", 0, 32);
+  decode_options.smooth_radius_px = flags.GetInt("smooth-radius", 0, 8);
   TriangulateOptions tri_options;
   tri_options.max_epipolar_error_px = flags.GetDouble("max-epipolar", 0.01, 100);
 

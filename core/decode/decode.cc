@@ -21,6 +21,8 @@ constexpr int kFitStripRows = 48;
 // Gray bits with stripes of 8 or more projector pixels survive defocus; only they vote on
 // whether a pixel sees the projector at all.
 constexpr int kFirstVotingBit = 2;
+// Largest local fit radius (the fit is compiled per radius).
+constexpr int kMaxFitRadius = 8;
 
 // atan2 on [0, 1] by the odd polynomial of Abramowitz & Stegun 4.4.49 (|error| <= 2e-8), with
 // branch-free octant folding so loops over it vectorise.
@@ -191,8 +193,8 @@ bool DecodeOptions::Check(std::string* why) const {
     *why = "max_unwrap_error must lie in (0, 0.5) of a period";
     return false;
   }
-  if (smooth_radius_px < 0 || smooth_radius_px > 32) {
-    *why = "smooth_radius_px must lie in [0, 32]";
+  if (smooth_radius_px < 0 || smooth_radius_px > kMaxFitRadius) {
+    *why = "smooth_radius_px must lie in [0, " + std::to_string(kMaxFitRadius) + "]";
     return false;
   }
   if (smooth_passes < 1 || noise_dn <= 0 || outlier_sigmas <= 0) {
@@ -204,6 +206,161 @@ bool DecodeOptions::Check(std::string* why) const {
 
 float FastAtan2(float y, float x) { return Atan2Inline(y, x); }
 
+namespace {
+
+// The local fit for a compile-time radius R and plane count N, so the tap loops unroll and the
+// loops over x vectorise with every moment held in registers. Rows are processed in strips; a
+// ring of 2R + 1 rows of horizontal moments (w, w du, w du^2, w v, w v du per plane) feeds the
+// vertical sums, which are solved in place.
+template <int R, int N>
+void LocalLinearFitImpl(const cv::Mat* values, const cv::Mat& weights, cv::Mat* fitted) {
+  const int width = weights.cols, height = weights.rows;
+  constexpr int kPlanes = 3 + 2 * N;
+  constexpr int kRing = 2 * R + 1;
+  const int strips = (height + kFitStripRows - 1) / kFitStripRows;
+  cv::parallel_for_(cv::Range(0, strips), [&](const cv::Range& strip_range) {
+    const int padded = width + 2 * R;
+    std::vector<float> wpad(padded, 0.0f), vpad(static_cast<size_t>(N) * padded, 0.0f);
+    std::vector<float> ring(static_cast<size_t>(kRing) * kPlanes * width);
+    const std::vector<float> zeros(static_cast<size_t>(kPlanes) * width, 0.0f);
+    auto ring_row = [&](int y) { return &ring[static_cast<size_t>(y % kRing) * kPlanes * width]; };
+    auto horizontal = [&](int y) {
+      const float* w = weights.ptr<float>(y);
+      float* wp = wpad.data() + R;
+      for (int x = 0; x < width; ++x) {
+        const float wx = w[x];
+        wp[x] = wx > 0 ? wx : 0.0f;
+      }
+      for (int p = 0; p < N; ++p) {
+        const float* v = values[p].ptr<float>(y);
+        float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
+        for (int x = 0; x < width; ++x) {
+          const float wx = w[x], vx = v[x];
+          vp[x] = wx > 0 ? wx * vx : 0.0f;
+        }
+      }
+      // One output per loop: each reads a single padded source row, so every loop vectorises.
+      float* m = ring_row(y);
+      auto taps = [&](const float* src, float* dst, int power) {
+        for (int x = 0; x < width; ++x) {
+          float acc = 0;
+#pragma GCC unroll 17
+          for (int d = -R; d <= R; ++d) {
+            const float c = power == 0 ? 1.0f : (power == 1 ? float(d) : float(d * d));
+            acc += src[x + d] * c;
+          }
+          dst[x] = acc;
+        }
+      };
+      taps(wp, m, 0);
+      taps(wp, m + width, 1);
+      taps(wp, m + 2 * width, 2);
+      for (int p = 0; p < N; ++p) {
+        const float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
+        taps(vp, m + (3 + 2 * p) * width, 0);
+        taps(vp, m + (4 + 2 * p) * width, 1);
+      }
+    };
+    for (int strip = strip_range.start; strip < strip_range.end; ++strip) {
+      const int y0 = strip * kFitStripRows, y1 = std::min(height, y0 + kFitStripRows);
+      for (int y = std::max(0, y0 - R); y < std::min(height, y0 + R); ++y) horizontal(y);
+      for (int y = y0; y < y1; ++y) {
+        if (y + R < height) horizontal(y + R);
+        const float* rows[kRing];  // Local so the unrolled loop below keeps them in registers.
+        for (int d = -R; d <= R; ++d) {
+          const int yy = y + d;
+          rows[d + R] = (yy < 0 || yy >= height) ? zeros.data() : ring_row(yy);
+        }
+        const float* w = weights.ptr<float>(y);
+        float* out0 = fitted[0].ptr<float>(y);
+        float* out1 = fitted[N > 1 ? 1 : 0].ptr<float>(y);
+        // Vertical sums in chunks of kChunk pixels, accumulated in L1-resident arrays:
+        // S, Su, Sv, Suu, Suv, Svv, then X, Xu, Xv per plane.
+        constexpr int kChunk = 64;
+        constexpr int kSums = 6 + 3 * N;
+        alignas(32) float acc[kSums][kChunk];
+        for (int x0 = 0; x0 < width; x0 += kChunk) {
+          const int len = std::min(kChunk, width - x0);
+          for (int k = 0; k < kSums; ++k) {
+            for (int i = 0; i < kChunk; ++i) acc[k][i] = 0.0f;
+          }
+          for (int d = -R; d <= R; ++d) {
+            const float* m = rows[d + R] + x0;
+            const float fd = static_cast<float>(d), fd2 = fd * fd;
+            const float* m0 = m;
+            const float* m1 = m + width;
+            const float* m2 = m + 2 * width;
+            for (int i = 0; i < len; ++i) {
+              acc[0][i] += m0[i];
+              acc[1][i] += m1[i];
+              acc[2][i] += m0[i] * fd;
+              acc[3][i] += m2[i];
+              acc[4][i] += m1[i] * fd;
+              acc[5][i] += m0[i] * fd2;
+            }
+            const float* a0 = m + 3 * width;
+            const float* a1 = m + 4 * width;
+            for (int i = 0; i < len; ++i) {
+              acc[6][i] += a0[i];
+              acc[7][i] += a1[i];
+              acc[8][i] += a0[i] * fd;
+            }
+            if constexpr (N > 1) {
+              const float* b0 = m + 5 * width;
+              const float* b1 = m + 6 * width;
+              for (int i = 0; i < len; ++i) {
+                acc[9][i] += b0[i];
+                acc[10][i] += b1[i];
+                acc[11][i] += b0[i] * fd;
+              }
+            }
+          }
+          for (int i = 0; i < len; ++i) {
+            const float S = acc[0][i], Su = acc[1][i], Sv = acc[2][i];
+            const float Suu = acc[3][i], Suv = acc[4][i], Svv = acc[5][i];
+            // Intercept of the 3x3 weighted normal equations: first row of the adjugate. Float
+            // suffices: weights are O(1) and the window coordinates small integers.
+            const float c0 = Suu * Svv - Suv * Suv;
+            const float c1 = Sv * Suv - Su * Svv;
+            const float c2 = Su * Suv - Suu * Sv;
+            const float det = S * c0 + Su * c1 + Sv * c2;
+            const bool solvable = det > 1e-4f * S * Suu * Svv && S > 0;
+            const float inv_det = solvable ? 1.0f / det : 0.0f;
+            const float inv_s = 1.0f / std::max(S, 1e-30f);
+            const bool keep = w[x0 + i] > 0;
+            const float fit0 = solvable ? (c0 * acc[6][i] + c1 * acc[7][i] + c2 * acc[8][i]) * inv_det
+                                        : acc[6][i] * inv_s;
+            out0[x0 + i] = keep ? fit0 : kNaN;
+            if constexpr (N > 1) {
+              const float fit1 =
+                  solvable ? (c0 * acc[9][i] + c1 * acc[10][i] + c2 * acc[11][i]) * inv_det
+                           : acc[9][i] * inv_s;
+              out1[x0 + i] = keep ? fit1 : kNaN;
+            }
+          }
+        }
+      }
+    }
+  }, strips);
+}
+
+template <int N>
+void LocalLinearFitN(int radius, const cv::Mat* values, const cv::Mat& weights, cv::Mat* fitted) {
+  switch (radius) {
+    case 1: return LocalLinearFitImpl<1, N>(values, weights, fitted);
+    case 2: return LocalLinearFitImpl<2, N>(values, weights, fitted);
+    case 3: return LocalLinearFitImpl<3, N>(values, weights, fitted);
+    case 4: return LocalLinearFitImpl<4, N>(values, weights, fitted);
+    case 5: return LocalLinearFitImpl<5, N>(values, weights, fitted);
+    case 6: return LocalLinearFitImpl<6, N>(values, weights, fitted);
+    case 7: return LocalLinearFitImpl<7, N>(values, weights, fitted);
+    case 8: return LocalLinearFitImpl<8, N>(values, weights, fitted);
+  }
+  VELLUM_DEMAND(radius >= 1 && radius <= kMaxFitRadius);
+}
+
+}  // namespace
+
 void LocalLinearFit(const std::vector<cv::Mat>& values, const cv::Mat& weights, int radius,
                     std::vector<cv::Mat>* fitted) {
   VELLUM_DEMAND(weights.type() == CV_32F);
@@ -211,125 +368,13 @@ void LocalLinearFit(const std::vector<cv::Mat>& values, const cv::Mat& weights, 
   for (const cv::Mat& v : values) {
     VELLUM_DEMAND(v.type() == CV_32F && v.size() == weights.size());
   }
-  const int width = weights.cols, height = weights.rows, r = radius;
-  const int n = static_cast<int>(values.size());
-  fitted->resize(n);
-  for (int p = 0; p < n; ++p) (*fitted)[p].create(weights.size(), CV_32F);
-  const int strips = (height + kFitStripRows - 1) / kFitStripRows;
-  // Horizontal moments per row: w, w du, w du^2, then per plane w v, w v du.
-  const int planes = 3 + 2 * n;
-  const int ring_rows = 2 * r + 1;
-  const size_t row_floats = static_cast<size_t>(planes) * width;
-
-  cv::parallel_for_(cv::Range(0, strips), [&](const cv::Range& strip_range) {
-    const int padded = width + 2 * r;
-    std::vector<float> wpad(padded, 0.0f), vpad(static_cast<size_t>(n) * padded, 0.0f);
-    std::vector<float> acc(static_cast<size_t>(6 + 3 * n) * width);
-    // Ring of the 2r + 1 rows of horizontal moments a vertical window needs (fits in L2).
-    std::vector<float> ring(ring_rows * row_floats);
-    auto horizontal = [&](int y) {
-      const float* w = weights.ptr<float>(y);
-      for (int x = 0; x < width; ++x) {
-        const float wx = w[x];
-        wpad[x + r] = wx > 0 ? wx : 0.0f;
-      }
-      for (int p = 0; p < n; ++p) {
-        const float* v = values[p].ptr<float>(y);
-        float* vp = &vpad[static_cast<size_t>(p) * padded];
-        for (int x = 0; x < width; ++x) {
-          const float wx = w[x], vx = v[x];
-          vp[x + r] = wx > 0 ? wx * vx : 0.0f;
-        }
-      }
-      float* m = &ring[static_cast<size_t>(y % ring_rows) * row_floats];
-      std::fill(m, m + row_floats, 0.0f);
-      float* m0 = m;
-      float* m1 = m + width;
-      float* m2 = m + 2 * width;
-      for (int dx = -r; dx <= r; ++dx) {
-        const float fdx = static_cast<float>(dx), fdx2 = fdx * fdx;
-        const float* src = &wpad[r + dx];
-        for (int x = 0; x < width; ++x) {
-          m0[x] += src[x];
-          m1[x] += src[x] * fdx;
-          m2[x] += src[x] * fdx2;
-        }
-        for (int p = 0; p < n; ++p) {
-          const float* vs = &vpad[static_cast<size_t>(p) * padded + r + dx];
-          float* mv0 = m + (3 + 2 * p) * width;
-          float* mv1 = mv0 + width;
-          for (int x = 0; x < width; ++x) {
-            mv0[x] += vs[x];
-            mv1[x] += vs[x] * fdx;
-          }
-        }
-      }
-    };
-    for (int strip = strip_range.start; strip < strip_range.end; ++strip) {
-      const int y0 = strip * kFitStripRows, y1 = std::min(height, y0 + kFitStripRows);
-      for (int y = std::max(0, y0 - r); y < std::min(height, y0 + r); ++y) horizontal(y);
-      for (int y = y0; y < y1; ++y) {
-        if (y + r < height) horizontal(y + r);
-        std::fill(acc.begin(), acc.end(), 0.0f);
-        float* S = &acc[0];
-        float* Su = S + width;
-        float* Sv = Su + width;
-        float* Suu = Sv + width;
-        float* Suv = Suu + width;
-        float* Svv = Suv + width;
-        for (int dy = -r; dy <= r; ++dy) {
-          const int yy = y + dy;
-          if (yy < 0 || yy >= height) continue;
-          const float fdy = static_cast<float>(dy), fdy2 = fdy * fdy;
-          const float* m = &ring[static_cast<size_t>(yy % ring_rows) * row_floats];
-          const float* m0 = m;
-          const float* m1 = m + width;
-          const float* m2 = m + 2 * width;
-          for (int x = 0; x < width; ++x) {
-            S[x] += m0[x];
-            Sv[x] += m0[x] * fdy;
-            Svv[x] += m0[x] * fdy2;
-            Su[x] += m1[x];
-            Suv[x] += m1[x] * fdy;
-            Suu[x] += m2[x];
-          }
-          for (int p = 0; p < n; ++p) {
-            const float* mv0 = m + (3 + 2 * p) * width;
-            const float* mv1 = mv0 + width;
-            float* X = &acc[static_cast<size_t>(6 + 3 * p) * width];
-            float* Xu = X + width;
-            float* Xv = Xu + width;
-            for (int x = 0; x < width; ++x) {
-              X[x] += mv0[x];
-              Xv[x] += mv0[x] * fdy;
-              Xu[x] += mv1[x];
-            }
-          }
-        }
-        const float* w = weights.ptr<float>(y);
-        for (int p = 0; p < n; ++p) {
-          const float* X = &acc[static_cast<size_t>(6 + 3 * p) * width];
-          const float* Xu = X + width;
-          const float* Xv = Xu + width;
-          float* out = (*fitted)[p].ptr<float>(y);
-          for (int x = 0; x < width; ++x) {
-            // Intercept of the 3x3 weighted normal equations: first row of the adjugate.
-            // Float suffices: weights are O(1) and the window coordinates small integers.
-            const float s = S[x], su = Su[x], sv = Sv[x];
-            const float suu = Suu[x], suv = Suv[x], svv = Svv[x];
-            const float c0 = suu * svv - suv * suv;
-            const float c1 = sv * suv - su * svv;
-            const float c2 = su * suv - suu * sv;
-            const float det = s * c0 + su * c1 + sv * c2;
-            const bool solvable = det > 1e-4f * s * suu * svv && s > 0;
-            const float fit = solvable ? (c0 * X[x] + c1 * Xu[x] + c2 * Xv[x]) / det
-                                       : X[x] / std::max(s, 1e-30f);
-            out[x] = w[x] > 0 ? fit : kNaN;
-          }
-        }
-      }
-    }
-  }, strips);
+  fitted->resize(values.size());
+  for (cv::Mat& f : *fitted) f.create(weights.size(), CV_32F);
+  if (values.size() == 1) {
+    LocalLinearFitN<1>(radius, values.data(), weights, fitted->data());
+  } else {
+    LocalLinearFitN<2>(radius, values.data(), weights, fitted->data());
+  }
 }
 
 void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>& frames,
@@ -446,13 +491,20 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
   if (options.smooth_radius_px > 0) {
     const float cut = static_cast<float>(options.outlier_sigmas);
     // Largest |raw - fit| over the axes, in units of the pixel's expected noise (NaN fit: inf).
-    auto residual = [&](int y, int x) {
-      float worst = 0.0f;
+    // Row y's largest |raw - fit| over the axes, in units of each pixel's expected noise
+    // (a NaN fit counts as infinitely far).
+    auto residual_row = [&](int y, float* out) {
+      const float* sg = sigma_.ptr<float>(y);
+      std::fill(out, out + width, 0.0f);
       for (size_t p = 0; p < raw.size(); ++p) {
-        const float d = std::fabs(raw[p].ptr<float>(y)[x] - fit_[p].ptr<float>(y)[x]);
-        worst = d == d ? std::max(worst, d) : std::numeric_limits<float>::infinity();
+        const float* r = raw[p].ptr<float>(y);
+        const float* f = fit_[p].ptr<float>(y);
+        for (int x = 0; x < width; ++x) {
+          const float d = std::fabs(r[x] - f[x]);
+          out[x] = d == d ? std::max(out[x], d) : std::numeric_limits<float>::infinity();
+        }
       }
-      return worst / sigma_.ptr<float>(y)[x];
+      for (int x = 0; x < width; ++x) out[x] /= sg[x];
     };
     LocalLinearFit(raw, weight_, options.smooth_radius_px, &fit_);
     // Robust reweighting: a pixel far from its own local fit (a depth step, a bad decode) loses
@@ -460,17 +512,15 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
     for (int pass = 1; pass < options.smooth_passes; ++pass) {
       robust_weight_.create(size, CV_32F);
       cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+        std::vector<float> res(width);
         for (int y = range.start; y < range.end; ++y) {
+          residual_row(y, res.data());
           const float* w = weight_.ptr<float>(y);
           float* rw = robust_weight_.ptr<float>(y);
           for (int x = 0; x < width; ++x) {
-            if (!(w[x] > 0)) {
-              rw[x] = 0.0f;
-              continue;
-            }
-            const float u = residual(y, x) / cut;
+            const float u = res[x] / cut;
             const float t = u < 1.0f ? 1.0f - u * u : 0.0f;
-            rw[x] = w[x] * t * t;
+            rw[x] = w[x] > 0 ? w[x] * t * t : 0.0f;
           }
         }
       });
@@ -479,16 +529,16 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
     // Keep the fit where it agrees with the pixel; where it does not (a depth step inside the
     // window, or a pixel that lost its robust weight) keep the raw decode: unbiased, noisier.
     cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+      std::vector<float> res(width);
       int n = 0;
       for (int y = range.start; y < range.end; ++y) {
+        residual_row(y, res.data());
         const float* w = weight_.ptr<float>(y);
-        for (int x = 0; x < width; ++x) {
-          if (!(w[x] > 0)) continue;
-          if (residual(y, x) > cut) {
-            ++n;
-            continue;
-          }
-          for (size_t p = 0; p < raw.size(); ++p) raw[p].ptr<float>(y)[x] = fit_[p].ptr<float>(y)[x];
+        for (int x = 0; x < width; ++x) n += (w[x] > 0) & (res[x] > cut);
+        for (size_t p = 0; p < raw.size(); ++p) {
+          float* r = raw[p].ptr<float>(y);
+          const float* f = fit_[p].ptr<float>(y);
+          for (int x = 0; x < width; ++x) r[x] = (w[x] > 0) & (res[x] <= cut) ? f[x] : r[x];
         }
       }
       fallbacks += n;

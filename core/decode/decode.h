@@ -25,7 +25,7 @@ struct DecodeOptions {
   double max_unwrap_error = 0.3;   // Max |Gray - phase| disagreement, fraction of the period.
   int saturation_dn = 255;         // A white frame value >= this is clipped (256: never).
   double noise_dn = 1.5;           // Camera noise standard deviation, DN (sets fit weights).
-  int smooth_radius_px = 3;        // Local fit window radius, camera pixels; 0 = no fit.
+  int smooth_radius_px = 3;        // Local fit window radius, camera pixels, 0..8; 0 = no fit.
   int smooth_passes = 2;           // Robust (Tukey) reweighting passes of the local fit.
   double outlier_sigmas = 4.685;   // Tukey cut-off, in units of a pixel's expected noise.
 

@@ -62,14 +62,23 @@ Triangulator::Triangulator(const Calibration& calibration) : calibration_(calibr
 PointMap Triangulator::Triangulate(const DecodeResult& decoded,
                                    const TriangulateOptions& options) const {
   PointMap out;
+  Triangulate(decoded, options, &out);
+  return out;
+}
+
+void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOptions& options,
+                               PointMap* result) const {
+  PointMap& out = *result;
+  out.status = Status::Error("triangulation not run");
+  out.valid = out.rejected_epipolar = out.rejected_volume = 0;
   std::string why;
   if (!options.Check(&why)) {
     out.status = Status::Error("triangulation options: " + why);
-    return out;
+    return;
   }
   if (!decoded.status.ok()) {
     out.status = Status::Error("cannot triangulate a failed decode: " + decoded.status.message());
-    return out;
+    return;
   }
   const cv::Size size = decoded.valid.size();
   if (size != calibration_.camera.size) {
@@ -77,7 +86,7 @@ PointMap Triangulator::Triangulate(const DecodeResult& decoded,
                                std::to_string(size.height) + " but the calibration's camera is " +
                                std::to_string(calibration_.camera.size.width) + "x" +
                                std::to_string(calibration_.camera.size.height));
-    return out;
+    return;
   }
   const CameraModel& prj = calibration_.projector;
   const bool cols = decoded.has_columns, rows = decoded.has_rows;
@@ -148,7 +157,6 @@ PointMap Triangulator::Triangulate(const DecodeResult& decoded,
   out.rejected_epipolar = n_epi;
   out.rejected_volume = n_vol;
   out.status = Status::Ok();
-  return out;
 }
 
 }  // namespace vellum

@@ -41,6 +41,9 @@ class Triangulator {
   const Calibration& calibration() const { return calibration_; }
   PointMap Triangulate(const DecodeResult& decoded,
                        const TriangulateOptions& options = TriangulateOptions()) const;
+  // The same into *out, reusing its images when they already have the right size and type.
+  void Triangulate(const DecodeResult& decoded, const TriangulateOptions& options,
+                   PointMap* out) const;
 
  private:
   Calibration calibration_;
