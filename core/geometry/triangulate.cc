@@ -12,22 +12,27 @@ namespace vellum {
 namespace {
 
 // Ray parameter t of the point C + t d whose projection a + t b (projector pixel homogeneous
-// coordinates) is closest to the measured projector pixel; `residual` gets the distance from
-// the measurement to the ray's image (the epipolar line) when both coordinates are known.
+// coordinates) is closest to the measured projector pixel (mx, my); `residual` gets the
+// distance from the measurement to the ray's image, the epipolar line l = a x b. Branch-free,
+// so the loop that calls it vectorises.
+inline double RayParameterBoth(double a0, double a1, double a2, double b0, double b1, double b2,
+                               double mx, double my, double* residual) {
+  const double l0 = a1 * b2 - a2 * b1, l1 = a2 * b0 - a0 * b2, l2 = a0 * b1 - a1 * b0;
+  const double inv_norm = 1.0 / std::sqrt(l0 * l0 + l1 * l1);
+  const double dist = (l0 * mx + l1 * my + l2) * inv_norm;
+  *residual = std::fabs(dist);
+  // Foot of the perpendicular, then least squares of (a_i + t b_i) = f_i (a_z + t b_z).
+  const double fx = mx - dist * l0 * inv_norm, fy = my - dist * l1 * inv_norm;
+  const double ex = b0 - fx * b2, ey = b1 - fy * b2;
+  const double gx = fx * a2 - a0, gy = fy * a2 - a1;
+  return (ex * gx + ey * gy) / (ex * ex + ey * ey);
+}
+
+// The same with one coordinate (a column or a row plane): exact, no residual.
 double RayParameter(const cv::Vec3d& a, const cv::Vec3d& b, bool cols, bool rows, double mx,
                     double my, double* residual) {
+  if (cols && rows) return RayParameterBoth(a[0], a[1], a[2], b[0], b[1], b[2], mx, my, residual);
   *residual = 0.0;
-  if (cols && rows) {
-    const cv::Vec3d l = a.cross(b);
-    const double norm = std::sqrt(l[0] * l[0] + l[1] * l[1]);
-    const double dist = (l[0] * mx + l[1] * my + l[2]) / norm;
-    *residual = std::fabs(dist);
-    // Foot of the perpendicular, then least squares of (a_i + t b_i) = f_i (a_z + t b_z).
-    const double fx = mx - dist * l[0] / norm, fy = my - dist * l[1] / norm;
-    const double ex = b[0] - fx * b[2], ey = b[1] - fy * b[2];
-    const double gx = fx * a[2] - a[0], gy = fy * a[2] - a[1];
-    return (ex * gx + ey * gy) / (ex * ex + ey * ey);
-  }
   if (cols) return (mx * a[2] - a[0]) / (b[0] - mx * b[2]);
   return (my * a[2] - a[1]) / (b[1] - my * b[2]);
 }
@@ -108,6 +113,44 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
       const cv::Vec3f* ray = rays_.ptr<cv::Vec3f>(v);
       cv::Vec3f* point = out.points.ptr<cv::Vec3f>(v);
       float* res = out.residual.ptr<float>(v);
+      if (!undistort && cols && rows) {
+        // The common case (an ideal projector, both axes) without branches, so it vectorises.
+        const float* rf = reinterpret_cast<const float*>(ray);
+        float* pf = reinterpret_cast<float*>(point);
+        // Invariants as locals, so the compiler keeps them in registers.
+        const double max_r = options.max_epipolar_error_px;
+        const double zmin = options.min_z_mm, zmax = options.max_z_mm;
+        const double k00 = kr(0, 0), k01 = kr(0, 1), k02 = kr(0, 2), k10 = kr(1, 0),
+                     k11 = kr(1, 1), k12 = kr(1, 2), k20 = kr(2, 0), k21 = kr(2, 1),
+                     k22 = kr(2, 2);
+        const double a0 = a[0], a1 = a[1], a2 = a[2];
+        const double cx = c_world[0], cy = c_world[1], cz = c_world[2];
+        int n_valid = 0, n_epi = 0, n_vol = 0;
+        for (int u = 0; u < size.width; ++u) {
+          const double dx = rf[3 * u], dy = rf[3 * u + 1], dz = rf[3 * u + 2];
+          const double b0 = k00 * dx + k01 * dy + k02 * dz;
+          const double b1 = k10 * dx + k11 * dy + k12 * dz;
+          const double b2 = k20 * dx + k21 * dy + k22 * dz;
+          double dist;
+          const double t = RayParameterBoth(a0, a1, a2, b0, b1, b2, px[u], py[u], &dist);
+          const double x = cx + t * dx, y = cy + t * dy, z = cz + t * dz;
+          const int decoded_ok = ok[u] != 0;
+          const int on_line = dist <= max_r;
+          const int in_volume = (t > 0) & (z >= zmin) & (z <= zmax);
+          const int good = decoded_ok & on_line & in_volume;
+          n_epi += decoded_ok & (1 - on_line);
+          n_vol += decoded_ok & on_line & (1 - in_volume);
+          n_valid += good;
+          pf[3 * u] = good ? static_cast<float>(x) : NAN;
+          pf[3 * u + 1] = good ? static_cast<float>(y) : NAN;
+          pf[3 * u + 2] = good ? static_cast<float>(z) : NAN;
+          res[u] = good ? static_cast<float>(dist) : NAN;
+        }
+        valid += n_valid;
+        epi += n_epi;
+        vol += n_vol;
+        continue;
+      }
       for (int u = 0; u < size.width; ++u) {
         point[u] = cv::Vec3f(NAN, NAN, NAN);
         res[u] = NAN;
