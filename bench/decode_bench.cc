@@ -3,11 +3,11 @@
 // frames (same virtual gantry, same noise). The ratios are printed at the end of the run.
 //
 //   ./build/bench/decode_bench [--benchmark_min_time=2]
+#include <benchmark/benchmark.h>
+
 #include <cstdio>
 #include <map>
 #include <memory>
-
-#include <benchmark/benchmark.h>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/structured_light.hpp>
@@ -110,7 +110,8 @@ void BM_OpenCV_GrayCodeDecode(benchmark::State& state) {
       for (int y = range.start; y < range.end; ++y) {
         for (int x = 0; x < size.width; ++x) {
           float px = NAN, py = NAN;
-          if (f.opencv_white.at<uint8_t>(y, x) - f.opencv_black.at<uint8_t>(y, x) > black_threshold) {
+          if (f.opencv_white.at<uint8_t>(y, x) - f.opencv_black.at<uint8_t>(y, x) >
+              black_threshold) {
             cv::Point p;
             // getProjPixel returns true on error.
             if (!f.opencv->getProjPixel(f.opencv_frames, x, y, p)) {
@@ -140,8 +141,18 @@ void BM_OpenCV_GrayCodeDecode(benchmark::State& state) {
 }
 
 BENCHMARK(BM_Vellum_DecodeTriangulate)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
-BENCHMARK(BM_Vellum_Decode)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
-BENCHMARK(BM_OpenCV_GrayCodeDecode)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_Decode)
+    ->Arg(1)
+    ->Arg(0)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
+BENCHMARK(BM_OpenCV_GrayCodeDecode)
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
 
 // Collects each run's real time so the ratios can be printed after the table.
 class RatioReporter : public benchmark::ConsoleReporter {
@@ -171,9 +182,10 @@ int main(int argc, char** argv) {
   for (int threads : {1, 2}) {
     const double opencv = find("BM_OpenCV_GrayCodeDecode/" + std::to_string(threads) + "/");
     if (ours > 0 && opencv > 0) {
-      std::printf("vellum decode+triangulate %.1f ms vs OpenCV GrayCodePattern decode alone on %d "
-                  "thread%s %.1f ms: OpenCV / vellum = %.1fx\n",
-                  ours, threads, threads > 1 ? "s" : "", opencv, opencv / ours);
+      std::printf(
+          "vellum decode+triangulate %.1f ms vs OpenCV GrayCodePattern decode alone on %d "
+          "thread%s %.1f ms: OpenCV / vellum = %.1fx\n",
+          ours, threads, threads > 1 ? "s" : "", opencv, opencv / ours);
     }
   }
   benchmark::Shutdown();

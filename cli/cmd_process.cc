@@ -3,7 +3,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-
 #include <opencv2/imgproc.hpp>
 
 #include "cli/commands.h"
@@ -19,7 +18,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string SizeText(cv::Size s) { return std::to_string(s.width) + "x" + std::to_string(s.height); }
+std::string SizeText(cv::Size s) {
+  return std::to_string(s.width) + "x" + std::to_string(s.height);
+}
 
 // Height map as a picture: z mapped to colour over the valid points' range, invalid black.
 cv::Mat DepthPicture(const cv::Mat& points, double* zmin, double* zmax) {
@@ -51,7 +52,8 @@ int RunProcess(const std::vector<std::string>& args) {
           {"calibration", "FILE", "calibration YAML of camera and projector", ""},
           {"out", "DIR", "output directory", ""},
           {"decoder", "NAME", "phase (Gray code + phase shift) or gray (Gray code only)", "phase"},
-          {"smooth-radius", "PX", "local fit radius, camera pixels (0..8); 0 = per-pixel decode", "3"},
+          {"smooth-radius", "PX", "local fit radius, camera pixels (0..8); 0 = per-pixel decode",
+           "3"},
           {"max-epipolar", "PX", "reject points farther from their epipolar line, projector px",
            "1.5"},
       });
@@ -97,9 +99,9 @@ int RunProcess(const std::vector<std::string>& args) {
                 calib_path + " calibrates a " + SizeText(calibration.camera.size) + " camera");
   }
   if (scan.sequence.projector_size != calibration.projector.size) {
-    return fail(scan_dir + "/scan.yaml: projector_size is " + SizeText(scan.sequence.projector_size) +
-                " but " + calib_path + " calibrates a " + SizeText(calibration.projector.size) +
-                " projector");
+    return fail(scan_dir + "/scan.yaml: projector_size is " +
+                SizeText(scan.sequence.projector_size) + " but " + calib_path + " calibrates a " +
+                SizeText(calibration.projector.size) + " projector");
   }
   s = MakeDirectories(out);
   if (!s.ok()) return fail(s.message());

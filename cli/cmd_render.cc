@@ -1,7 +1,6 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-
 #include <opencv2/imgcodecs.hpp>
 
 #include "cli/commands.h"
@@ -17,7 +16,8 @@ int RunRender(const std::vector<std::string>& args) {
       {"out", "DIR", "scan directory to write", ""},
       {"calibration", "FILE", "rig calibration YAML (default: the built-in default rig)", ""},
       {"page", "SHAPE", "flat, curl, fold, cone or bump", "curl"},
-      {"texture", "KIND|FILE", "checkerboard, text, plain, or an image file of the page", "checkerboard"},
+      {"texture", "KIND|FILE", "checkerboard, text, plain, or an image file of the page",
+       "checkerboard"},
       {"page-size", "WxH", "page size, mm", "190x240"},
       {"noise", "DN", "camera noise sigma, DN", "1.5"},
       {"ambient", "FRACTION", "ambient light", "0.08"},
@@ -43,7 +43,8 @@ int RunRender(const std::vector<std::string>& args) {
   }
   PageOptions page;
   if (!ParsePageShape(flags.Get("page"), &page.shape)) {
-    throw UsageError("--page must be flat, curl, fold, cone or bump, got '" + flags.Get("page") + "'");
+    throw UsageError("--page must be flat, curl, fold, cone or bump, got '" + flags.Get("page") +
+                     "'");
   }
   const cv::Size page_size = flags.GetSize("page-size");
   page.size_mm = cv::Size2d(page_size.width, page_size.height);
@@ -64,7 +65,8 @@ int RunRender(const std::vector<std::string>& args) {
   light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
   const uint64_t seed = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
   texture.seed = seed;
-  const PatternSequence seq = MakePatternSequence(PatternOptionsFromFlags(flags, rig.projector.size));
+  const PatternSequence seq =
+      MakePatternSequence(PatternOptionsFromFlags(flags, rig.projector.size));
 
   const auto t0 = std::chrono::steady_clock::now();
   std::fprintf(stderr, "render: tracing a %s page...\n", ToString(page.shape));

@@ -43,8 +43,10 @@ std::string Flags::Help() const {
   for (const Spec& s : specs_) {
     std::string left = "  --" + s.name + (s.value_name.empty() ? "" : " " + s.value_name);
     o << left;
-    if (left.size() < 28) o << std::string(28 - left.size(), ' ');
-    else o << "\n" << std::string(28, ' ');
+    if (left.size() < 28)
+      o << std::string(28 - left.size(), ' ');
+    else
+      o << "\n" << std::string(28, ' ');
     o << s.help;
     if (!s.default_value.empty()) o << " (default: " << s.default_value << ")";
     o << "\n";
@@ -91,7 +93,8 @@ double Flags::GetDouble(const std::string& name, double min, double max) const {
   } catch (const std::exception&) {
   }
   std::ostringstream o;
-  o << "flag --" << name << " must be a number in [" << min << ", " << max << "], got '" << v << "'";
+  o << "flag --" << name << " must be a number in [" << min << ", " << max << "], got '" << v
+    << "'";
   throw UsageError(o.str());
 }
 

@@ -2,11 +2,10 @@
 #pragma once
 
 #include <map>
+#include <opencv2/core.hpp>
 #include <stdexcept>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 namespace vellum {
 

@@ -1,9 +1,8 @@
 // vellum: the station's command-line tool.
 #include <cstdio>
+#include <opencv2/core/utility.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core/utility.hpp>
 
 #include "cli/commands.h"
 #include "cli/flags.h"

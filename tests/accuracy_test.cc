@@ -8,9 +8,9 @@
 // window averages ~49 pixels (ink next to paper borrows the paper's precision), so the median
 // error is ~0.01 mm and the RMS is dominated by the page's edges and ink interiors. The bounds
 // (median 0.03, RMS 0.06, p99 0.2 mm) are the issue's; they leave a factor 2-4 of margin.
-#include <cstdio>
-
 #include <gtest/gtest.h>
+
+#include <cstdio>
 
 #include "core/decode/decode.h"
 #include "core/geometry/triangulate.h"
@@ -48,7 +48,8 @@ Measured Measure(const Calibration& rig, PageShape shape, uint64_t seed) {
     for (int v = 0; v < truth.points.rows; ++v) {
       for (int u = 0; u < truth.points.cols; ++u) {
         const float x = decoded.projector_x.at<float>(v, u);
-        if (!truth.on_page.at<uint8_t>(v, u) || !truth.lit.at<uint8_t>(v, u) || std::isnan(x)) continue;
+        if (!truth.on_page.at<uint8_t>(v, u) || !truth.lit.at<uint8_t>(v, u) || std::isnan(x))
+          continue;
         const double t = rig.projector.Project(cv::Vec3d(truth.points.at<cv::Vec3f>(v, u))).x;
         m.max_projector_error_px = std::max(m.max_projector_error_px, std::fabs(x - t));
       }
@@ -58,11 +59,13 @@ Measured Measure(const Calibration& rig, PageShape shape, uint64_t seed) {
 }
 
 void Report(const std::string& name, const Measured& m) {
-  for (const auto& [label, s] : {std::pair{"phase+gray", m.phase}, std::pair{"gray only ", m.gray}}) {
-    std::printf("[accuracy] %-10s %s: valid %.4f of %d lit page px, median %.4f mm, RMS %.4f mm, "
-                "p99 %.4f mm, max %.3f mm\n",
-                name.c_str(), label, s.valid_fraction, s.page_lit_pixels, s.median_mm, s.rms_mm,
-                s.p99_mm, s.max_mm);
+  for (const auto& [label, s] :
+       {std::pair{"phase+gray", m.phase}, std::pair{"gray only ", m.gray}}) {
+    std::printf(
+        "[accuracy] %-10s %s: valid %.4f of %d lit page px, median %.4f mm, RMS %.4f mm, "
+        "p99 %.4f mm, max %.3f mm\n",
+        name.c_str(), label, s.valid_fraction, s.page_lit_pixels, s.median_mm, s.rms_mm, s.p99_mm,
+        s.max_mm);
   }
   ::testing::Test::RecordProperty("median_mm", std::to_string(m.phase.median_mm));
   ::testing::Test::RecordProperty("rms_mm", std::to_string(m.phase.rms_mm));

@@ -4,11 +4,10 @@
 #include <cstdio>
 #include <cstdlib>
 
-#define VELLUM_DEMAND(condition)                                                       \
-  do {                                                                                 \
-    if (!(condition)) {                                                                \
-      std::fprintf(stderr, "%s:%d: VELLUM_DEMAND failed: %s\n", __FILE__, __LINE__,    \
-                   #condition);                                                        \
-      std::abort();                                                                    \
-    }                                                                                  \
+#define VELLUM_DEMAND(condition)                                                                 \
+  do {                                                                                           \
+    if (!(condition)) {                                                                          \
+      std::fprintf(stderr, "%s:%d: VELLUM_DEMAND failed: %s\n", __FILE__, __LINE__, #condition); \
+      std::abort();                                                                              \
+    }                                                                                            \
   } while (0)

@@ -4,7 +4,6 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
-
 #include <opencv2/core/utility.hpp>
 
 #include "core/common/check.h"
@@ -51,9 +50,9 @@ struct AxisPlan {
   std::vector<int> pattern, inverse;  // Frame indices per bit, index 0 = finest bit.
   int steps = 0;                      // Phase steps, 0 if no phase patterns are used.
   int period = 0;
-  std::vector<int> phase;             // Frame indices per step.
+  std::vector<int> phase;  // Frame indices per step.
   std::vector<float> cos_k, sin_k;
-  double sigma_scale = 0.5;           // Expected coordinate noise (px) x amplitude (DN).
+  double sigma_scale = 0.5;  // Expected coordinate noise (px) x amplitude (DN).
 };
 
 AxisPlan PlanAxis(const PatternSequence& seq, Axis axis, const DecodeOptions& options) {
@@ -86,8 +85,7 @@ struct Counters {
 // Per-row scratch of the decode pass.
 struct RowScratch {
   explicit RowScratch(int width)
-      : code(width), uncertain(width), s(width), c(width), amp(width), coord(width),
-        error(width) {}
+      : code(width), uncertain(width), s(width), c(width), amp(width), coord(width), error(width) {}
   std::vector<uint16_t> code, uncertain;
   std::vector<float> s, c, amp, coord, error;
 };
@@ -109,9 +107,11 @@ void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int
     const uint8_t* q = frames[plan.inverse[b]].ptr<uint8_t>(y);
     const uint16_t votes = b >= kFirstVotingBit ? 1 : 0;
     for (int x = 0; x < width; ++x) {
-      const int16_t d = static_cast<int16_t>(static_cast<int16_t>(p[x]) - static_cast<int16_t>(q[x]));
+      const int16_t d =
+          static_cast<int16_t>(static_cast<int16_t>(p[x]) - static_cast<int16_t>(q[x]));
       code[x] = static_cast<uint16_t>((code[x] << 1) | (d > 0 ? 1 : 0));
-      uncertain[x] = static_cast<uint16_t>(uncertain[x] + ((d < margin && d > -margin) ? votes : 0));
+      uncertain[x] =
+          static_cast<uint16_t>(uncertain[x] + ((d < margin && d > -margin) ? votes : 0));
     }
   }
   for (int x = 0; x < width; ++x) {  // Reflected Gray code to binary.
@@ -218,143 +218,157 @@ void LocalLinearFitImpl(const cv::Mat* values, const cv::Mat& weights, cv::Mat* 
   constexpr int kPlanes = 3 + 2 * N;
   constexpr int kRing = 2 * R + 1;
   const int strips = (height + kFitStripRows - 1) / kFitStripRows;
-  cv::parallel_for_(cv::Range(0, strips), [&](const cv::Range& strip_range) {
-    const int padded = width + 2 * R;
-    std::vector<float> wpad(padded, 0.0f), vpad(static_cast<size_t>(N) * padded, 0.0f);
-    std::vector<float> ring(static_cast<size_t>(kRing) * kPlanes * width);
-    const std::vector<float> zeros(static_cast<size_t>(kPlanes) * width, 0.0f);
-    auto ring_row = [&](int y) { return &ring[static_cast<size_t>(y % kRing) * kPlanes * width]; };
-    auto horizontal = [&](int y) {
-      const float* w = weights.ptr<float>(y);
-      float* wp = wpad.data() + R;
-      for (int x = 0; x < width; ++x) {
-        const float wx = w[x];
-        wp[x] = wx > 0 ? wx : 0.0f;
-      }
-      for (int p = 0; p < N; ++p) {
-        const float* v = values[p].ptr<float>(y);
-        float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
-        for (int x = 0; x < width; ++x) {
-          const float wx = w[x], vx = v[x];
-          vp[x] = wx > 0 ? wx * vx : 0.0f;
-        }
-      }
-      // One output per loop: each reads a single padded source row, so every loop vectorises.
-      float* m = ring_row(y);
-      auto taps = [&](const float* src, float* dst, int power) {
-        for (int x = 0; x < width; ++x) {
-          float acc = 0;
+  cv::parallel_for_(
+      cv::Range(0, strips),
+      [&](const cv::Range& strip_range) {
+        const int padded = width + 2 * R;
+        std::vector<float> wpad(padded, 0.0f), vpad(static_cast<size_t>(N) * padded, 0.0f);
+        std::vector<float> ring(static_cast<size_t>(kRing) * kPlanes * width);
+        const std::vector<float> zeros(static_cast<size_t>(kPlanes) * width, 0.0f);
+        auto ring_row = [&](int y) {
+          return &ring[static_cast<size_t>(y % kRing) * kPlanes * width];
+        };
+        auto horizontal = [&](int y) {
+          const float* w = weights.ptr<float>(y);
+          float* wp = wpad.data() + R;
+          for (int x = 0; x < width; ++x) {
+            const float wx = w[x];
+            wp[x] = wx > 0 ? wx : 0.0f;
+          }
+          for (int p = 0; p < N; ++p) {
+            const float* v = values[p].ptr<float>(y);
+            float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
+            for (int x = 0; x < width; ++x) {
+              const float wx = w[x], vx = v[x];
+              vp[x] = wx > 0 ? wx * vx : 0.0f;
+            }
+          }
+          // One output per loop: each reads a single padded source row, so every loop vectorises.
+          float* m = ring_row(y);
+          auto taps = [&](const float* src, float* dst, int power) {
+            for (int x = 0; x < width; ++x) {
+              float acc = 0;
 #pragma GCC unroll 17
-          for (int d = -R; d <= R; ++d) {
-            const float c = power == 0 ? 1.0f : (power == 1 ? float(d) : float(d * d));
-            acc += src[x + d] * c;
-          }
-          dst[x] = acc;
-        }
-      };
-      taps(wp, m, 0);
-      taps(wp, m + width, 1);
-      taps(wp, m + 2 * width, 2);
-      for (int p = 0; p < N; ++p) {
-        const float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
-        taps(vp, m + (3 + 2 * p) * width, 0);
-        taps(vp, m + (4 + 2 * p) * width, 1);
-      }
-    };
-    for (int strip = strip_range.start; strip < strip_range.end; ++strip) {
-      const int y0 = strip * kFitStripRows, y1 = std::min(height, y0 + kFitStripRows);
-      for (int y = std::max(0, y0 - R); y < std::min(height, y0 + R); ++y) horizontal(y);
-      for (int y = y0; y < y1; ++y) {
-        if (y + R < height) horizontal(y + R);
-        const float* rows[kRing];  // Local so the unrolled loop below keeps them in registers.
-        for (int d = -R; d <= R; ++d) {
-          const int yy = y + d;
-          rows[d + R] = (yy < 0 || yy >= height) ? zeros.data() : ring_row(yy);
-        }
-        const float* w = weights.ptr<float>(y);
-        float* out0 = fitted[0].ptr<float>(y);
-        float* out1 = fitted[N > 1 ? 1 : 0].ptr<float>(y);
-        // Vertical sums in chunks of kChunk pixels, accumulated in L1-resident arrays:
-        // S, Su, Sv, Suu, Suv, Svv, then X, Xu, Xv per plane.
-        constexpr int kChunk = 64;
-        constexpr int kSums = 6 + 3 * N;
-        alignas(32) float acc[kSums][kChunk];
-        for (int x0 = 0; x0 < width; x0 += kChunk) {
-          const int len = std::min(kChunk, width - x0);
-          for (int k = 0; k < kSums; ++k) {
-            for (int i = 0; i < kChunk; ++i) acc[k][i] = 0.0f;
-          }
-          for (int d = -R; d <= R; ++d) {
-            const float* m = rows[d + R] + x0;
-            const float fd = static_cast<float>(d), fd2 = fd * fd;
-            const float* m0 = m;
-            const float* m1 = m + width;
-            const float* m2 = m + 2 * width;
-            for (int i = 0; i < len; ++i) {
-              acc[0][i] += m0[i];
-              acc[1][i] += m1[i];
-              acc[2][i] += m0[i] * fd;
-              acc[3][i] += m2[i];
-              acc[4][i] += m1[i] * fd;
-              acc[5][i] += m0[i] * fd2;
+              for (int d = -R; d <= R; ++d) {
+                const float c = power == 0 ? 1.0f : (power == 1 ? float(d) : float(d * d));
+                acc += src[x + d] * c;
+              }
+              dst[x] = acc;
             }
-            const float* a0 = m + 3 * width;
-            const float* a1 = m + 4 * width;
-            for (int i = 0; i < len; ++i) {
-              acc[6][i] += a0[i];
-              acc[7][i] += a1[i];
-              acc[8][i] += a0[i] * fd;
+          };
+          taps(wp, m, 0);
+          taps(wp, m + width, 1);
+          taps(wp, m + 2 * width, 2);
+          for (int p = 0; p < N; ++p) {
+            const float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
+            taps(vp, m + (3 + 2 * p) * width, 0);
+            taps(vp, m + (4 + 2 * p) * width, 1);
+          }
+        };
+        for (int strip = strip_range.start; strip < strip_range.end; ++strip) {
+          const int y0 = strip * kFitStripRows, y1 = std::min(height, y0 + kFitStripRows);
+          for (int y = std::max(0, y0 - R); y < std::min(height, y0 + R); ++y) horizontal(y);
+          for (int y = y0; y < y1; ++y) {
+            if (y + R < height) horizontal(y + R);
+            const float* rows[kRing];  // Local so the unrolled loop below keeps them in registers.
+            for (int d = -R; d <= R; ++d) {
+              const int yy = y + d;
+              rows[d + R] = (yy < 0 || yy >= height) ? zeros.data() : ring_row(yy);
             }
-            if constexpr (N > 1) {
-              const float* b0 = m + 5 * width;
-              const float* b1 = m + 6 * width;
+            const float* w = weights.ptr<float>(y);
+            float* out0 = fitted[0].ptr<float>(y);
+            float* out1 = fitted[N > 1 ? 1 : 0].ptr<float>(y);
+            // Vertical sums in chunks of kChunk pixels, accumulated in L1-resident arrays:
+            // S, Su, Sv, Suu, Suv, Svv, then X, Xu, Xv per plane.
+            constexpr int kChunk = 64;
+            constexpr int kSums = 6 + 3 * N;
+            alignas(32) float acc[kSums][kChunk];
+            for (int x0 = 0; x0 < width; x0 += kChunk) {
+              const int len = std::min(kChunk, width - x0);
+              for (int k = 0; k < kSums; ++k) {
+                for (int i = 0; i < kChunk; ++i) acc[k][i] = 0.0f;
+              }
+              for (int d = -R; d <= R; ++d) {
+                const float* m = rows[d + R] + x0;
+                const float fd = static_cast<float>(d), fd2 = fd * fd;
+                const float* m0 = m;
+                const float* m1 = m + width;
+                const float* m2 = m + 2 * width;
+                for (int i = 0; i < len; ++i) {
+                  acc[0][i] += m0[i];
+                  acc[1][i] += m1[i];
+                  acc[2][i] += m0[i] * fd;
+                  acc[3][i] += m2[i];
+                  acc[4][i] += m1[i] * fd;
+                  acc[5][i] += m0[i] * fd2;
+                }
+                const float* a0 = m + 3 * width;
+                const float* a1 = m + 4 * width;
+                for (int i = 0; i < len; ++i) {
+                  acc[6][i] += a0[i];
+                  acc[7][i] += a1[i];
+                  acc[8][i] += a0[i] * fd;
+                }
+                if constexpr (N > 1) {
+                  const float* b0 = m + 5 * width;
+                  const float* b1 = m + 6 * width;
+                  for (int i = 0; i < len; ++i) {
+                    acc[9][i] += b0[i];
+                    acc[10][i] += b1[i];
+                    acc[11][i] += b0[i] * fd;
+                  }
+                }
+              }
               for (int i = 0; i < len; ++i) {
-                acc[9][i] += b0[i];
-                acc[10][i] += b1[i];
-                acc[11][i] += b0[i] * fd;
+                const float S = acc[0][i], Su = acc[1][i], Sv = acc[2][i];
+                const float Suu = acc[3][i], Suv = acc[4][i], Svv = acc[5][i];
+                // Intercept of the 3x3 weighted normal equations: first row of the adjugate. Float
+                // suffices: weights are O(1) and the window coordinates small integers.
+                const float c0 = Suu * Svv - Suv * Suv;
+                const float c1 = Sv * Suv - Su * Svv;
+                const float c2 = Su * Suv - Suu * Sv;
+                const float det = S * c0 + Su * c1 + Sv * c2;
+                const bool solvable = det > 1e-4f * S * Suu * Svv && S > 0;
+                const float inv_det = solvable ? 1.0f / det : 0.0f;
+                const float inv_s = 1.0f / std::max(S, 1e-30f);
+                const bool keep = w[x0 + i] > 0;
+                const float fit0 =
+                    solvable ? (c0 * acc[6][i] + c1 * acc[7][i] + c2 * acc[8][i]) * inv_det
+                             : acc[6][i] * inv_s;
+                out0[x0 + i] = keep ? fit0 : kNaN;
+                if constexpr (N > 1) {
+                  const float fit1 =
+                      solvable ? (c0 * acc[9][i] + c1 * acc[10][i] + c2 * acc[11][i]) * inv_det
+                               : acc[9][i] * inv_s;
+                  out1[x0 + i] = keep ? fit1 : kNaN;
+                }
               }
             }
           }
-          for (int i = 0; i < len; ++i) {
-            const float S = acc[0][i], Su = acc[1][i], Sv = acc[2][i];
-            const float Suu = acc[3][i], Suv = acc[4][i], Svv = acc[5][i];
-            // Intercept of the 3x3 weighted normal equations: first row of the adjugate. Float
-            // suffices: weights are O(1) and the window coordinates small integers.
-            const float c0 = Suu * Svv - Suv * Suv;
-            const float c1 = Sv * Suv - Su * Svv;
-            const float c2 = Su * Suv - Suu * Sv;
-            const float det = S * c0 + Su * c1 + Sv * c2;
-            const bool solvable = det > 1e-4f * S * Suu * Svv && S > 0;
-            const float inv_det = solvable ? 1.0f / det : 0.0f;
-            const float inv_s = 1.0f / std::max(S, 1e-30f);
-            const bool keep = w[x0 + i] > 0;
-            const float fit0 = solvable ? (c0 * acc[6][i] + c1 * acc[7][i] + c2 * acc[8][i]) * inv_det
-                                        : acc[6][i] * inv_s;
-            out0[x0 + i] = keep ? fit0 : kNaN;
-            if constexpr (N > 1) {
-              const float fit1 =
-                  solvable ? (c0 * acc[9][i] + c1 * acc[10][i] + c2 * acc[11][i]) * inv_det
-                           : acc[9][i] * inv_s;
-              out1[x0 + i] = keep ? fit1 : kNaN;
-            }
-          }
         }
-      }
-    }
-  }, strips);
+      },
+      strips);
 }
 
 template <int N>
 void LocalLinearFitN(int radius, const cv::Mat* values, const cv::Mat& weights, cv::Mat* fitted) {
   switch (radius) {
-    case 1: return LocalLinearFitImpl<1, N>(values, weights, fitted);
-    case 2: return LocalLinearFitImpl<2, N>(values, weights, fitted);
-    case 3: return LocalLinearFitImpl<3, N>(values, weights, fitted);
-    case 4: return LocalLinearFitImpl<4, N>(values, weights, fitted);
-    case 5: return LocalLinearFitImpl<5, N>(values, weights, fitted);
-    case 6: return LocalLinearFitImpl<6, N>(values, weights, fitted);
-    case 7: return LocalLinearFitImpl<7, N>(values, weights, fitted);
-    case 8: return LocalLinearFitImpl<8, N>(values, weights, fitted);
+    case 1:
+      return LocalLinearFitImpl<1, N>(values, weights, fitted);
+    case 2:
+      return LocalLinearFitImpl<2, N>(values, weights, fitted);
+    case 3:
+      return LocalLinearFitImpl<3, N>(values, weights, fitted);
+    case 4:
+      return LocalLinearFitImpl<4, N>(values, weights, fitted);
+    case 5:
+      return LocalLinearFitImpl<5, N>(values, weights, fitted);
+    case 6:
+      return LocalLinearFitImpl<6, N>(values, weights, fitted);
+    case 7:
+      return LocalLinearFitImpl<7, N>(values, weights, fitted);
+    case 8:
+      return LocalLinearFitImpl<8, N>(values, weights, fitted);
   }
   VELLUM_DEMAND(radius >= 1 && radius <= kMaxFitRadius);
 }

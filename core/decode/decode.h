@@ -7,10 +7,9 @@
 // each pixel's coordinate from its neighbourhood, so dark ink borrows from nearby paper.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/common/status.h"
 #include "core/patterns/patterns.h"
@@ -33,22 +32,22 @@ struct DecodeOptions {
 };
 
 struct DecodeStats {
-  int pixels = 0;              // Camera pixels decoded.
-  int lit = 0;                 // Pixels with enough white/black contrast (projector reaches them).
-  int valid = 0;               // Pixels with a projector coordinate.
-  int rejected_saturated = 0;  // Pixels with a clipped white frame.
-  int rejected_bits = 0;       // Lit pixels with two or more uncertain coarse Gray bits.
-  int rejected_modulation = 0; // Lit pixels whose sinusoid amplitude is too low.
-  int rejected_unwrap = 0;     // Lit pixels whose Gray code and phase disagree.
-  int fit_fallbacks = 0;       // Pixels where the local fit was inconsistent (depth step).
+  int pixels = 0;               // Camera pixels decoded.
+  int lit = 0;                  // Pixels with enough white/black contrast (projector reaches them).
+  int valid = 0;                // Pixels with a projector coordinate.
+  int rejected_saturated = 0;   // Pixels with a clipped white frame.
+  int rejected_bits = 0;        // Lit pixels with two or more uncertain coarse Gray bits.
+  int rejected_modulation = 0;  // Lit pixels whose sinusoid amplitude is too low.
+  int rejected_unwrap = 0;      // Lit pixels whose Gray code and phase disagree.
+  int fit_fallbacks = 0;        // Pixels where the local fit was inconsistent (depth step).
 };
 
 struct DecodeResult {
   Status status = Status::Error("decode not run");
-  cv::Mat projector_x;  // CV_32F projector column (pixel centres at integers), NaN if invalid.
-  cv::Mat projector_y;  // CV_32F projector row, NaN if invalid or rows not encoded.
-  cv::Mat valid;        // CV_8U, 255 where the pixel decoded.
-  cv::Mat amplitude;    // CV_32F (white - black) / 2, camera DN.
+  cv::Mat projector_x;       // CV_32F projector column (pixel centres at integers), NaN if invalid.
+  cv::Mat projector_y;       // CV_32F projector row, NaN if invalid or rows not encoded.
+  cv::Mat valid;             // CV_8U, 255 where the pixel decoded.
+  cv::Mat amplitude;         // CV_32F (white - black) / 2, camera DN.
   bool has_columns = false;  // The sequence encoded projector columns.
   bool has_rows = false;     // The sequence encoded projector rows.
   DecodeStats stats;
@@ -68,8 +67,9 @@ class Decoder {
 
  private:
   DecodeOptions options_;
-  cv::Mat weight_, sigma_, robust_weight_;  // Per-pixel fit weight, expected noise (px), IRLS weight.
-  std::vector<cv::Mat> fit_;                // Fitted coordinates per encoded axis.
+  cv::Mat weight_, sigma_,
+      robust_weight_;         // Per-pixel fit weight, expected noise (px), IRLS weight.
+  std::vector<cv::Mat> fit_;  // Fitted coordinates per encoded axis.
 };
 
 // One-shot convenience: a fresh Decoder and result.

@@ -1,8 +1,8 @@
 #include "core/decode/decode.h"
 
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 namespace vellum {
 namespace {
@@ -20,7 +20,8 @@ TEST(FastAtan2, MatchesStdAtan2) {
     const double a = i * 2 * M_PI / 3600;
     for (double r : {1e-3, 1.0, 250.0}) {
       const float y = static_cast<float>(r * std::sin(a)), x = static_cast<float>(r * std::cos(a));
-      worst = std::max(worst, std::fabs(double(FastAtan2(y, x)) - std::atan2(double(y), double(x))));
+      worst =
+          std::max(worst, std::fabs(double(FastAtan2(y, x)) - std::atan2(double(y), double(x))));
     }
   }
   // float rounding of pi/2 - r and pi - r dominates: a few ulp of pi.

@@ -66,7 +66,8 @@ cv::Point2d CameraModel::Project(const cv::Vec3d& world) const {
     return {nan, nan};
   }
   const cv::Point2d d = Distort(distortion, p[0] / p[2], p[1] / p[2]);
-  return {matrix(0, 0) * d.x + matrix(0, 1) * d.y + matrix(0, 2), matrix(1, 1) * d.y + matrix(1, 2)};
+  return {matrix(0, 0) * d.x + matrix(0, 1) * d.y + matrix(0, 2),
+          matrix(1, 1) * d.y + matrix(1, 2)};
 }
 
 cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel) const {

@@ -3,18 +3,17 @@
 // (mm, z = 0 on the table, +z towards the camera), with OpenCV's 5-term lens distortion.
 #pragma once
 
-#include <string>
-
 #include <opencv2/core.hpp>
+#include <string>
 
 namespace vellum {
 
 struct CameraModel {
-  cv::Size size;                 // Image size, pixels.
-  cv::Matx33d matrix = cv::Matx33d::eye();  // Intrinsics K, pixels.
+  cv::Size size;                                               // Image size, pixels.
+  cv::Matx33d matrix = cv::Matx33d::eye();                     // Intrinsics K, pixels.
   cv::Vec<double, 5> distortion = cv::Vec<double, 5>::all(0);  // k1 k2 p1 p2 k3 (OpenCV).
-  cv::Matx33d rotation = cv::Matx33d::eye();  // camera_from_world rotation.
-  cv::Vec3d translation = cv::Vec3d(0, 0, 0);  // camera_from_world translation, mm.
+  cv::Matx33d rotation = cv::Matx33d::eye();                   // camera_from_world rotation.
+  cv::Vec3d translation = cv::Vec3d(0, 0, 0);                  // camera_from_world translation, mm.
 
   bool Check(std::string* why) const;
   bool HasDistortion() const;

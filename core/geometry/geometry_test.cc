@@ -1,6 +1,6 @@
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/geometry/calibration.h"
 #include "core/geometry/triangulate.h"
@@ -55,7 +55,8 @@ TEST_P(TriangulateExact, RecoversTheSurface) {
     for (int u = 0; u < cam.size.width; u += 7) {
       // Tilted plane z = 20 + 0.1 x + 0.05 y.
       const cv::Vec3d d_ = cam.RayDirection(cv::Point2d(u, v));
-      const double t = (20 - c[2] + 0.1 * c[0] + 0.05 * c[1]) / (d_[2] - 0.1 * d_[0] - 0.05 * d_[1]);
+      const double t =
+          (20 - c[2] + 0.1 * c[0] + 0.05 * c[1]) / (d_[2] - 0.1 * d_[0] - 0.05 * d_[1]);
       const cv::Vec3d x = c + t * d_;
       const cv::Point2d p = calib.projector.Project(x);
       if (!(p.x >= 0 && p.y >= 0 && p.x < 1023 && p.y < 767)) continue;

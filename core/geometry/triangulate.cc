@@ -3,7 +3,6 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
-
 #include <opencv2/core/utility.hpp>
 
 #include "core/common/check.h"
@@ -120,9 +119,8 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
         // Invariants as locals, so the compiler keeps them in registers.
         const double max_r = options.max_epipolar_error_px;
         const double zmin = options.min_z_mm, zmax = options.max_z_mm;
-        const double k00 = kr(0, 0), k01 = kr(0, 1), k02 = kr(0, 2), k10 = kr(1, 0),
-                     k11 = kr(1, 1), k12 = kr(1, 2), k20 = kr(2, 0), k21 = kr(2, 1),
-                     k22 = kr(2, 2);
+        const double k00 = kr(0, 0), k01 = kr(0, 1), k02 = kr(0, 2), k10 = kr(1, 0), k11 = kr(1, 1),
+                     k12 = kr(1, 2), k20 = kr(2, 0), k21 = kr(2, 1), k22 = kr(2, 2);
         const double a0 = a[0], a1 = a[1], a2 = a[2];
         const double cx = c_world[0], cy = c_world[1], cz = c_world[2];
         int n_valid = 0, n_epi = 0, n_vol = 0;
@@ -186,8 +184,8 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
           ++vol;
           continue;
         }
-        point[u] = cv::Vec3f(static_cast<float>(m[0]), static_cast<float>(m[1]),
-                             static_cast<float>(m[2]));
+        point[u] =
+            cv::Vec3f(static_cast<float>(m[0]), static_cast<float>(m[1]), static_cast<float>(m[2]));
         res[u] = static_cast<float>(r);
         ++valid;
       }

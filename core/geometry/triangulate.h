@@ -5,9 +5,8 @@
 // (the epipolar line) is the point's residual; inconsistent points are rejected.
 #pragma once
 
-#include <string>
-
 #include <opencv2/core.hpp>
+#include <string>
 
 #include "core/common/status.h"
 #include "core/decode/decode.h"

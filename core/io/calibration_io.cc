@@ -7,8 +7,8 @@ namespace {
 
 // Reads a numeric matrix node of any depth into doubles, accepting rows x cols or its
 // transpose when `either_orientation` (a 3x1 translation may come as 1x3).
-bool ReadMatrix(const cv::FileNode& node, int rows, int cols, bool either_orientation,
-                cv::Mat* out, std::string* why) {
+bool ReadMatrix(const cv::FileNode& node, int rows, int cols, bool either_orientation, cv::Mat* out,
+                std::string* why) {
   if (node.empty() || node.isNone()) {
     *why = "is missing";
     return false;

@@ -1,7 +1,7 @@
+#include <gtest/gtest.h>
+
 #include <filesystem>
 #include <fstream>
-
-#include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/io/calibration_io.h"
@@ -43,6 +43,22 @@ TEST_F(IoTest, CalibrationRoundTrip) {
 
 // What Python's cv2.FileStorage writes: sizes as 1x2 integer matrices, float matrices, and a
 // translation as 1x3.
+// The shipped example calibration is the virtual gantry's default rig.
+TEST_F(IoTest, ShippedDefaultCalibrationIsTheDefaultRig) {
+  Calibration shipped;
+  const Status s = ReadCalibration(VELLUM_SOURCE_DIR "/config/default_calibration.yaml", &shipped);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const Calibration rig = DefaultRig();
+  for (const auto& [a, b] :
+       {std::pair{&shipped.camera, &rig.camera}, std::pair{&shipped.projector, &rig.projector}}) {
+    EXPECT_EQ(a->size, b->size);
+    EXPECT_LT(cv::norm(a->matrix - b->matrix), 1e-9);
+    EXPECT_LT(cv::norm(a->distortion - b->distortion), 1e-12);
+    EXPECT_LT(cv::norm(a->rotation - b->rotation), 1e-12);
+    EXPECT_LT(cv::norm(a->translation - b->translation), 1e-9);
+  }
+}
+
 TEST_F(IoTest, ReadsPythonStyleSizesAndRowTranslations) {
   const Calibration c = DefaultRig();
   std::ofstream f(Path("py.yaml"));
@@ -147,10 +163,12 @@ TEST_F(IoTest, ScanErrorsNameTheFileAndProblem) {
   std::ofstream(Path("junk/" + FrameName(2))) << "this is not a PNG";
   s = ReadScan(Path("junk"), &r);
   EXPECT_FALSE(s.ok());
-  EXPECT_NE(s.message().find("frame_002.png: not a readable image"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("frame_002.png: not a readable image"), std::string::npos)
+      << s.message();
   // Corrupt scan.yaml.
   ASSERT_TRUE(WriteScan(Path("yaml"), scan).ok());
-  std::ofstream(Path("yaml/scan.yaml")) << "%YAML:1.0\n---\nprojector_size: [ 40, 30 ]\npatterns: 7\n";
+  std::ofstream(Path("yaml/scan.yaml"))
+      << "%YAML:1.0\n---\nprojector_size: [ 40, 30 ]\npatterns: 7\n";
   s = ReadScan(Path("yaml"), &r);
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("scan.yaml"), std::string::npos) << s.message();

@@ -15,7 +15,8 @@ Status WritePointsPly(const std::string& path, const cv::Mat& points) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
     for (int u = 0; u < points.cols; ++u) {
       if (std::isfinite(row[u][0]) && std::isfinite(row[u][1]) && std::isfinite(row[u][2])) {
-        out.push_back({row[u][0], row[u][1], row[u][2], static_cast<float>(u), static_cast<float>(v)});
+        out.push_back(
+            {row[u][0], row[u][1], row[u][2], static_cast<float>(u), static_cast<float>(v)});
       }
     }
   }
@@ -67,9 +68,11 @@ Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points) {
     return Status::Error(path + ": expected vertex properties x y z u v");
   }
   points->resize(static_cast<size_t>(count));
-  f.read(reinterpret_cast<char*>(points->data()), static_cast<std::streamsize>(count * sizeof(PlyPoint)));
+  f.read(reinterpret_cast<char*>(points->data()),
+         static_cast<std::streamsize>(count * sizeof(PlyPoint)));
   if (f.gcount() != static_cast<std::streamsize>(count * sizeof(PlyPoint))) {
-    return Status::Error(path + ": truncated: fewer vertices than the header's " + std::to_string(count));
+    return Status::Error(path + ": truncated: fewer vertices than the header's " +
+                         std::to_string(count));
   }
   return Status::Ok();
 }

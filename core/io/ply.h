@@ -2,10 +2,9 @@
 // mm, world) and u v (float, camera pixel); binary little endian.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/common/status.h"
 

@@ -2,7 +2,6 @@
 
 #include <cstdio>
 #include <filesystem>
-
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -76,7 +75,8 @@ Status WriteImage(const std::string& path, const cv::Mat& image) {
   return ok ? Status::Ok() : Status::Error(path + ": cannot write image");
 }
 
-Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size) {
+Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence,
+                     cv::Size camera_size) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   try {
     cv::FileStorage out(path, cv::FileStorage::WRITE);
@@ -86,14 +86,16 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
     out << "projector_size" << sequence.projector_size;
     if (camera_size.area() > 0) out << "camera_size" << camera_size;
     out << "texture" << kTexture;
-    out << "patterns" << "[";
+    out << "patterns"
+        << "[";
     for (const PatternSpec& s : sequence.patterns) {
-      out << "{" << "kind" << ToString(s.kind);
+      out << "{"
+          << "kind" << ToString(s.kind);
       if (s.kind == PatternKind::kGray) {
         out << "axis" << ToString(s.axis) << "bit" << s.bit << "inverted" << (s.inverted ? 1 : 0);
       } else if (s.kind == PatternKind::kPhase) {
-        out << "axis" << ToString(s.axis) << "step" << s.step << "steps" << s.steps
-            << "period_px" << s.period_px;
+        out << "axis" << ToString(s.axis) << "step" << s.step << "steps" << s.steps << "period_px"
+            << s.period_px;
       }
       out << "}";
     }
@@ -154,7 +156,8 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
     for (const cv::FileNode& n : list) {
       PatternSpec spec;
       const std::string where = path + ": pattern " + std::to_string(index);
-      if (!n.isMap() || !ParsePatternKind(n["kind"].isString() ? std::string(n["kind"]) : "", &spec.kind)) {
+      if (!n.isMap() ||
+          !ParsePatternKind(n["kind"].isString() ? std::string(n["kind"]) : "", &spec.kind)) {
         return Status::Error(where + ": 'kind' must be white, black, gray or phase");
       }
       if (spec.kind == PatternKind::kGray || spec.kind == PatternKind::kPhase) {
@@ -171,7 +174,8 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
         if (spec.bit < 0 || spec.bit > 20) return Status::Error(where + ": 'bit' out of range");
       } else if (spec.kind == PatternKind::kPhase) {
         if (!n["step"].isInt() || !n["steps"].isInt() || !n["period_px"].isInt()) {
-          return Status::Error(where + ": a phase pattern needs integer 'step', 'steps', 'period_px'");
+          return Status::Error(where +
+                               ": a phase pattern needs integer 'step', 'steps', 'period_px'");
         }
         spec.step = static_cast<int>(n["step"]);
         spec.steps = static_cast<int>(n["steps"]);

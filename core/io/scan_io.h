@@ -2,10 +2,9 @@
 // texture.png, frame_000.png, ... with frame k taken while pattern k was shown.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/common/status.h"
 #include "core/patterns/patterns.h"

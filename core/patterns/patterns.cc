@@ -151,12 +151,14 @@ bool PatternSequence::Check(std::string* why) const {
     const int steps = PhaseSteps(axis);
     if (steps > 0) {
       if (steps < 3 || PhasePeriod(axis) < 4) {
-        *why = std::string("the ") + ToString(axis) + " phase patterns need >= 3 steps and a period >= 4 px";
+        *why = std::string("the ") + ToString(axis) +
+               " phase patterns need >= 3 steps and a period >= 4 px";
         return false;
       }
       for (int k = 0; k < steps; ++k) {
         if (Find(PatternKind::kPhase, axis, 0, false, k) < 0) {
-          *why = std::string("the ") + ToString(axis) + " phase patterns lack step " + std::to_string(k);
+          *why = std::string("the ") + ToString(axis) + " phase patterns lack step " +
+                 std::to_string(k);
           return false;
         }
       }
@@ -241,7 +243,8 @@ cv::Mat RenderPattern(const PatternSpec& spec, cv::Size size) {
     } else {
       // Intensity 1/2 + 1/2 cos(2 pi c / P - 2 pi k / N), pixel centres at integer c.
       const double phase =
-          2.0 * M_PI * (static_cast<double>(c) / spec.period_px - static_cast<double>(spec.step) / spec.steps);
+          2.0 * M_PI *
+          (static_cast<double>(c) / spec.period_px - static_cast<double>(spec.step) / spec.steps);
       profile[c] = cv::saturate_cast<uint8_t>(std::lround(127.5 + 127.5 * std::cos(phase)));
     }
   }

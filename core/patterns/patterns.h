@@ -3,10 +3,9 @@
 // section 3.2 uses Gray code; the phase shift adds sub-pixel projector coordinates).
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 namespace vellum {
 

@@ -1,8 +1,8 @@
 #include "core/patterns/patterns.h"
 
-#include <set>
-
 #include <gtest/gtest.h>
+
+#include <set>
 
 namespace vellum {
 namespace {
@@ -39,10 +39,13 @@ TEST(Patterns, EveryColumnAndRowHasAUniqueGrayCode) {
       const int extent = axis == Axis::kColumn ? size.width : size.height;
       std::vector<int> code(extent, 0);
       for (int bit = 0; bit < seq.GrayBits(axis); ++bit) {
-        const cv::Mat on = RenderPattern(seq.patterns[seq.Find(PatternKind::kGray, axis, bit, false)], size);
-        const cv::Mat off = RenderPattern(seq.patterns[seq.Find(PatternKind::kGray, axis, bit, true)], size);
+        const cv::Mat on =
+            RenderPattern(seq.patterns[seq.Find(PatternKind::kGray, axis, bit, false)], size);
+        const cv::Mat off =
+            RenderPattern(seq.patterns[seq.Find(PatternKind::kGray, axis, bit, true)], size);
         for (int c = 0; c < extent; ++c) {
-          const cv::Point p = axis == Axis::kColumn ? cv::Point(c, size.height / 2) : cv::Point(size.width / 2, c);
+          const cv::Point p =
+              axis == Axis::kColumn ? cv::Point(c, size.height / 2) : cv::Point(size.width / 2, c);
           ASSERT_NE(on.at<uint8_t>(p), off.at<uint8_t>(p)) << "inverse must differ";
           code[c] |= (on.at<uint8_t>(p) > 0) << bit;
         }

@@ -24,10 +24,12 @@ PointErrorStats ComparePoints(const GroundTruth& truth, const cv::Mat& points) {
     }
   }
   st.valid = static_cast<int>(errors.size());
-  if (st.page_lit_pixels > 0) st.valid_fraction = static_cast<double>(st.valid) / st.page_lit_pixels;
+  if (st.page_lit_pixels > 0)
+    st.valid_fraction = static_cast<double>(st.valid) / st.page_lit_pixels;
   if (errors.empty()) return st;
   auto quantile = [&](double q) {
-    const size_t k = std::min(errors.size() - 1, static_cast<size_t>(q * (errors.size() - 1) + 0.5));
+    const size_t k =
+        std::min(errors.size() - 1, static_cast<size_t>(q * (errors.size() - 1) + 0.5));
     std::nth_element(errors.begin(), errors.begin() + k, errors.end());
     return errors[k];
   };
@@ -43,8 +45,8 @@ std::vector<cv::Mat> RenderSequence(const VirtualGantry& gantry, const PatternSe
   std::vector<cv::Mat> frames;
   frames.reserve(sequence.patterns.size());
   for (size_t k = 0; k < sequence.patterns.size(); ++k) {
-    frames.push_back(gantry.RenderFrame(RenderPattern(sequence.patterns[k], sequence.projector_size),
-                                        seed + k + 1));
+    frames.push_back(gantry.RenderFrame(
+        RenderPattern(sequence.patterns[k], sequence.projector_size), seed + k + 1));
   }
   return frames;
 }

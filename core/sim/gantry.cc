@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -47,9 +46,11 @@ void Rasterize(const CameraModel& device, double scale, const Page& page, cv::Ma
     const double area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
     if (std::fabs(area) < 1e-12) return;
     const int x0 = std::max(0, static_cast<int>(std::ceil(std::min({a[0], b[0], c[0]}))));
-    const int x1 = std::min(size.width - 1, static_cast<int>(std::floor(std::max({a[0], b[0], c[0]}))));
+    const int x1 =
+        std::min(size.width - 1, static_cast<int>(std::floor(std::max({a[0], b[0], c[0]}))));
     const int y0 = std::max(0, static_cast<int>(std::ceil(std::min({a[1], b[1], c[1]}))));
-    const int y1 = std::min(size.height - 1, static_cast<int>(std::floor(std::max({a[1], b[1], c[1]}))));
+    const int y1 =
+        std::min(size.height - 1, static_cast<int>(std::floor(std::max({a[1], b[1], c[1]}))));
     for (int y = y0; y <= y1; ++y) {
       for (int x = x0; x <= x1; ++x) {
         const double wa = ((b[0] - x) * (c[1] - y) - (b[1] - y) * (c[0] - x)) / area;
@@ -62,7 +63,8 @@ void Rasterize(const CameraModel& device, double scale, const Page& page, cv::Ma
           zb = z;
           if (page_coord) {
             const cv::Vec2d p = wa * st[ia] + wb * st[ib] + wc * st[ic];
-            page_coord->at<cv::Vec2f>(y, x) = cv::Vec2f(static_cast<float>(p[0]), static_cast<float>(p[1]));
+            page_coord->at<cv::Vec2f>(y, x) =
+                cv::Vec2f(static_cast<float>(p[0]), static_cast<float>(p[1]));
           }
         }
       }
@@ -218,7 +220,8 @@ void VirtualGantry::ShadeSetup(const Page& page, const PageTexture& texture) {
                                                         std::min(sx, shadow_depth.cols - 1));
           lit = depth <= occluder + light_.shadow_bias_mm;
         }
-        projector_map_.at<cv::Vec2f>(v, u) = cv::Vec2f(static_cast<float>(p.x), static_cast<float>(p.y));
+        projector_map_.at<cv::Vec2f>(v, u) =
+            cv::Vec2f(static_cast<float>(p.x), static_cast<float>(p.y));
         albedo_.at<float>(v, u) = static_cast<float>(albedo);
         gain_.at<float>(v, u) =
             lit ? static_cast<float>(255.0 * albedo * light_.projector_gain * cos_in) : 0.0f;

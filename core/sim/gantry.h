@@ -6,9 +6,8 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
-
 #include <opencv2/core.hpp>
+#include <string>
 
 #include "core/geometry/calibration.h"
 #include "core/sim/page.h"
@@ -17,14 +16,14 @@
 namespace vellum {
 
 struct LightOptions {
-  double ambient = 0.08;         // Ambient light, fraction of full scale.
-  double projector_gain = 0.85;  // Projector light at normal incidence, fraction of full scale.
-  double studio_light = 0.9;     // Studio light of the texture frame, fraction of full scale.
-  double defocus_sigma_px = 0.7; // Projector defocus, Gaussian sigma, projector pixels.
-  double noise_dn = 1.5;         // Camera noise standard deviation, DN.
-  double table_albedo = 0.35;    // Reflectance of the table around the page.
-  double shadow_bias_mm = 1.0;   // Depth tolerance of the projector shadow test, mm.
-  int albedo_supersampling = 4;  // Albedo samples per pixel side (area-integrates ink edges).
+  double ambient = 0.08;          // Ambient light, fraction of full scale.
+  double projector_gain = 0.85;   // Projector light at normal incidence, fraction of full scale.
+  double studio_light = 0.9;      // Studio light of the texture frame, fraction of full scale.
+  double defocus_sigma_px = 0.7;  // Projector defocus, Gaussian sigma, projector pixels.
+  double noise_dn = 1.5;          // Camera noise standard deviation, DN.
+  double table_albedo = 0.35;     // Reflectance of the table around the page.
+  double shadow_bias_mm = 1.0;    // Depth tolerance of the projector shadow test, mm.
+  int albedo_supersampling = 4;   // Albedo samples per pixel side (area-integrates ink edges).
 };
 
 // The default station: camera 1600x1200, f = 2400 px, 600 mm above the table (0.25 mm/px),
@@ -33,10 +32,10 @@ Calibration DefaultRig();
 
 // Per camera pixel ground truth.
 struct GroundTruth {
-  cv::Mat points;    // CV_32FC3 true world point of the surface seen by the pixel, mm.
-  cv::Mat page;      // CV_32FC2 true flat page coordinate (s, t), mm; NaN off the page.
-  cv::Mat on_page;   // CV_8U 255 where the pixel sees the page.
-  cv::Mat lit;       // CV_8U 255 where the projector lights the surface directly.
+  cv::Mat points;   // CV_32FC3 true world point of the surface seen by the pixel, mm.
+  cv::Mat page;     // CV_32FC2 true flat page coordinate (s, t), mm; NaN off the page.
+  cv::Mat on_page;  // CV_8U 255 where the pixel sees the page.
+  cv::Mat lit;      // CV_8U 255 where the projector lights the surface directly.
 };
 
 class VirtualGantry {

@@ -49,8 +49,8 @@ const char* ToString(PageShape shape) {
 }
 
 bool ParsePageShape(const std::string& text, PageShape* shape) {
-  for (PageShape s : {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone,
-                      PageShape::kBump}) {
+  for (PageShape s :
+       {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone, PageShape::kBump}) {
     if (text == ToString(s)) {
       *shape = s;
       return true;
@@ -102,8 +102,8 @@ cv::Vec3d Page::Point(double s, double t) const {
       return {cx + s - w / 2, cy + t - h / 2, 0.0};
     case PageShape::kBump: {
       const double ds = s - w / 2, dt = t - h / 2;
-      const double z = o.bump_height_mm * std::exp(-(ds * ds + dt * dt) /
-                                                   (2 * o.bump_sigma_mm * o.bump_sigma_mm));
+      const double z = o.bump_height_mm *
+                       std::exp(-(ds * ds + dt * dt) / (2 * o.bump_sigma_mm * o.bump_sigma_mm));
       return {cx + ds, cy + dt, z};
     }
     case PageShape::kCurl:

@@ -3,10 +3,9 @@
 // known exactly: generalised cylinders (curl, fold) and a cone.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 namespace vellum {
 
@@ -23,17 +22,17 @@ bool ParsePageShape(const std::string& text, PageShape* shape);
 
 struct PageOptions {
   PageShape shape = PageShape::kFlat;
-  cv::Size2d size_mm{190.0, 240.0};  // Page width (s) and height (t), mm.
-  cv::Vec2d centre_mm{0.0, 0.0};     // World x, y of the flat page's centre, mm.
-  double curl_radius_mm = 60.0;      // kCurl: radius of the rolled part, mm.
-  double curl_length_mm = 70.0;      // kCurl: arc length of the rolled part, mm.
-  double fold_angle_deg = 35.0;      // kFold: fold line direction from the page's s axis.
-  double fold_radius_mm = 15.0;      // kFold: radius of the rounded ridge, mm.
-  double fold_slope_deg = 12.0;      // kFold: slope of each flank, degrees.
-  double cone_half_angle_deg = 35.0; // kCone: cone half-angle, degrees.
+  cv::Size2d size_mm{190.0, 240.0};      // Page width (s) and height (t), mm.
+  cv::Vec2d centre_mm{0.0, 0.0};         // World x, y of the flat page's centre, mm.
+  double curl_radius_mm = 60.0;          // kCurl: radius of the rolled part, mm.
+  double curl_length_mm = 70.0;          // kCurl: arc length of the rolled part, mm.
+  double fold_angle_deg = 35.0;          // kFold: fold line direction from the page's s axis.
+  double fold_radius_mm = 15.0;          // kFold: radius of the rounded ridge, mm.
+  double fold_slope_deg = 12.0;          // kFold: slope of each flank, degrees.
+  double cone_half_angle_deg = 35.0;     // kCone: cone half-angle, degrees.
   double cone_apex_distance_mm = 250.0;  // kCone: apex distance below the page's t = 0 edge.
-  double bump_height_mm = 3.0;       // kBump: peak height, mm.
-  double bump_sigma_mm = 25.0;       // kBump: Gaussian sigma, mm.
+  double bump_height_mm = 3.0;           // kBump: peak height, mm.
+  double bump_sigma_mm = 25.0;           // kBump: Gaussian sigma, mm.
 };
 
 class Page {
@@ -56,9 +55,9 @@ class Page {
   };
   PageOptions options_;
   std::vector<Segment> forward_, backward_;  // Profile segments for sigma >= 0 and sigma < 0.
-  cv::Vec2d across_dir_{1.0, 0.0};            // Page direction of increasing sigma.
-  double sigma_origin_ = 0.0;                 // Page sigma of the profile's reference point.
-  double z_offset_ = 0.0;                     // Lifts the shape so its lowest point is z = 0.
+  cv::Vec2d across_dir_{1.0, 0.0};           // Page direction of increasing sigma.
+  double sigma_origin_ = 0.0;                // Page sigma of the profile's reference point.
+  double z_offset_ = 0.0;                    // Lifts the shape so its lowest point is z = 0.
 };
 
 }  // namespace vellum

@@ -1,6 +1,6 @@
-#include <cmath>
-
 #include <gtest/gtest.h>
+
+#include <cmath>
 
 #include "core/sim/evaluate.h"
 #include "core/sim/gantry.h"
@@ -24,8 +24,8 @@ TEST(Page, DevelopableShapesAreIsometricAndAboveTheTable) {
         const cv::Vec3d p = page.Point(s, t);
         worst = std::max(worst, std::fabs(cv::norm(page.Point(s + h, t) - p) - h) / h);
         worst = std::max(worst, std::fabs(cv::norm(page.Point(s, t + h) - p) - h) / h);
-        worst = std::max(worst,
-                         std::fabs(cv::norm(page.Point(s + h, t + h) - p) - h * M_SQRT2) / h);
+        worst =
+            std::max(worst, std::fabs(cv::norm(page.Point(s + h, t + h) - p) - h * M_SQRT2) / h);
         lowest = std::min(lowest, p[2]);
       }
     }

@@ -1,7 +1,6 @@
 #include "core/sim/texture.h"
 
 #include <cmath>
-
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -89,8 +88,10 @@ double PageTexture::Albedo(double s, double t) const {
     case TextureKind::kPlain:
       return options_.paper_albedo;
     case TextureKind::kCheckerboard: {
-      const long i = static_cast<long>(std::floor((s - options_.board_origin_mm.x) / options_.square_mm));
-      const long j = static_cast<long>(std::floor((t - options_.board_origin_mm.y) / options_.square_mm));
+      const long i =
+          static_cast<long>(std::floor((s - options_.board_origin_mm.x) / options_.square_mm));
+      const long j =
+          static_cast<long>(std::floor((t - options_.board_origin_mm.y) / options_.square_mm));
       return ((i + j) & 1) ? options_.paper_albedo : options_.ink_albedo;
     }
     case TextureKind::kText:
