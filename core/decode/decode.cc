@@ -90,29 +90,95 @@ struct RowScratch {
   std::vector<float> s, c, amp, coord, error;
 };
 
+// Direct and global light of one camera row (Nayar et al. 2006, as Xu & Aliaga and Moreno &
+// Taubin's scan3d-capture use it): over high-frequency patterns, each lighting half the scene,
+// a pixel sees Lmax = Ld + Lg / 2 and Lmin = Lg / 2. The black frame is subtracted first, so
+// ambient light and the projector's black level do not count as global light.
+struct LightRow {
+  std::vector<int16_t> black, direct, global, lmax, lmin;
+};
+
+// Restrict-qualified parameters of functions that stay out of line are what lets GCC
+// vectorise these loops (restrict on locals, or after inlining, is ignored).
+void LightFromExtremes(const int16_t* __restrict lmax, const int16_t* __restrict lmin,
+                       const uint8_t* __restrict b, int16_t* __restrict black,
+                       int16_t* __restrict direct, int16_t* __restrict global, int width) {
+  for (int x = 0; x < width; ++x) {
+    const int16_t lo = static_cast<int16_t>(std::max(0, lmin[x] - b[x]));
+    black[x] = b[x];
+    direct[x] = static_cast<int16_t>(lmax[x] - lmin[x]);
+    global[x] = static_cast<int16_t>(2 * lo);
+  }
+}
+
+// Classifies one Gray bit of a row into code (shifted in) and counts uncertain votes. Bit
+// classification of Xu & Aliaga: where direct light dominates, pattern vs inverse (with a
+// noise margin); where global light dominates, only a pattern clearly below the direct level
+// with its inverse above the global level (or the reverse) decides.
+__attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const uint8_t* __restrict q,
+                                           const int16_t* __restrict black,
+                                           const int16_t* __restrict direct,
+                                           const int16_t* __restrict global, int16_t margin,
+                                           int16_t min_direct, uint16_t votes,
+                                           uint16_t* __restrict code,
+                                           uint16_t* __restrict uncertain, int width) {
+  const int16_t neg_margin = static_cast<int16_t>(-margin);
+  for (int x = 0; x < width; ++x) {
+    const int16_t pv = static_cast<int16_t>(p[x] - black[x]);
+    const int16_t qv = static_cast<int16_t>(q[x] - black[x]);
+    const int16_t d = static_cast<int16_t>(pv - qv);
+    // 0/1 integers rather than bools: the vectoriser handles their selects.
+    const uint16_t direct_wins = direct[x] > global[x];
+    const uint16_t one = (pv >= global[x]) & (qv <= direct[x]);
+    const uint16_t zero = (pv <= direct[x]) & (qv >= global[x]);
+    const uint16_t bit = static_cast<uint16_t>((direct_wins & (d > 0)) | ((1 - direct_wins) & one));
+    const uint16_t near = (d < margin) & (d > neg_margin);
+    const uint16_t unsure = static_cast<uint16_t>((direct[x] < min_direct) | (direct_wins & near) |
+                                                  ((1 - direct_wins) & (1 - (one | zero))));
+    code[x] = static_cast<uint16_t>((code[x] << 1) | bit);
+    uncertain[x] = static_cast<uint16_t>(uncertain[x] + unsure * votes);
+  }
+}
+
+void EstimateLight(const std::vector<int>& high_frequency, const std::vector<cv::Mat>& frames,
+                   const cv::Mat& black_frame, int y, LightRow* light) {
+  const int width = frames[0].cols;
+  for (auto* v : {&light->black, &light->direct, &light->global, &light->lmax, &light->lmin}) {
+    v->resize(width);
+  }
+  int16_t* __restrict lmax = light->lmax.data();
+  int16_t* __restrict lmin = light->lmin.data();
+  std::fill(lmax, lmax + width, 0);
+  std::fill(lmin, lmin + width, 255);
+  for (int index : high_frequency) {
+    const uint8_t* __restrict f = frames[index].ptr<uint8_t>(y);
+    for (int x = 0; x < width; ++x) {
+      lmax[x] = std::max<int16_t>(lmax[x], f[x]);
+      lmin[x] = std::min<int16_t>(lmin[x], f[x]);
+    }
+  }
+  LightFromExtremes(lmax, lmin, black_frame.ptr<uint8_t>(y), light->black.data(),
+                    light->direct.data(), light->global.data(), width);
+}
+
 // Decodes one axis of one camera row: `coordinate` gets the projector coordinate, NaN where
 // the pixel is rejected, and `modulation` the sinusoid amplitude (or (white - black) / 2 for
 // Gray code alone). Pixels with lit[x] == 0 are skipped and not counted.
 void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int y,
                    const DecodeOptions& options, const uint8_t* lit, const float* half_contrast,
-                   RowScratch* sc, float* coordinate, float* modulation, Counters* count) {
+                   const LightRow& light, RowScratch* sc, float* coordinate, float* modulation,
+                   Counters* count) {
   const int width = frames[0].cols;
-  uint16_t* code = sc->code.data();
-  uint16_t* uncertain = sc->uncertain.data();
+  uint16_t* __restrict code = sc->code.data();
+  uint16_t* __restrict uncertain = sc->uncertain.data();
   std::fill(code, code + width, 0);
   std::fill(uncertain, uncertain + width, 0);
   const int16_t margin = static_cast<int16_t>(std::ceil(options.uncertain_bit_dn));
+  const int16_t min_direct = static_cast<int16_t>(std::ceil(options.min_contrast_dn));
   for (int b = plan.bits - 1; b >= 0; --b) {
-    const uint8_t* p = frames[plan.pattern[b]].ptr<uint8_t>(y);
-    const uint8_t* q = frames[plan.inverse[b]].ptr<uint8_t>(y);
-    const uint16_t votes = b >= kFirstVotingBit ? 1 : 0;
-    for (int x = 0; x < width; ++x) {
-      const int16_t d =
-          static_cast<int16_t>(static_cast<int16_t>(p[x]) - static_cast<int16_t>(q[x]));
-      code[x] = static_cast<uint16_t>((code[x] << 1) | (d > 0 ? 1 : 0));
-      uncertain[x] =
-          static_cast<uint16_t>(uncertain[x] + ((d < margin && d > -margin) ? votes : 0));
-    }
+    ClassifyBit(frames[plan.pattern[b]].ptr<uint8_t>(y), frames[plan.inverse[b]].ptr<uint8_t>(y),
+                light.black.data(), light.direct.data(), light.global.data(), margin, min_direct,
+                b >= kFirstVotingBit ? 1 : 0, code, uncertain, width);
   }
   for (int x = 0; x < width; ++x) {  // Reflected Gray code to binary.
     uint16_t v = code[x];
@@ -425,6 +491,19 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
   const AxisPlan row = PlanAxis(sequence, Axis::kRow, options);
   const cv::Mat& white = frames[sequence.Find(PatternKind::kWhite)];
   const cv::Mat& black = frames[sequence.Find(PatternKind::kBlack)];
+  // High-frequency patterns for the direct/global estimate: Gray bits 1 and 2 (stripes of 4
+  // and 8 projector pixels: fine, yet above the defocus) of each axis, with their inverses.
+  std::vector<int> high_frequency;
+  for (const AxisPlan* plan : {&col, &row}) {
+    for (int b = 1; b <= 2 && b < plan->bits; ++b) {
+      high_frequency.push_back(plan->pattern[b]);
+      high_frequency.push_back(plan->inverse[b]);
+    }
+  }
+  if (high_frequency.empty()) {  // A projector of 2 or 3 pixels: its only bit.
+    high_frequency = {col.present ? col.pattern[0] : row.pattern[0],
+                      col.present ? col.inverse[0] : row.inverse[0]};
+  }
 
   cv::Mat& out_x = result->projector_x;
   cv::Mat& out_y = result->projector_y;
@@ -438,6 +517,7 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
 
   cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
     RowScratch scratch(width);
+    LightRow light;
     std::vector<uint8_t> on(width);
     std::vector<float> mod_x(width, 0.0f), mod_y(width, 0.0f);
     Counters count;
@@ -455,17 +535,20 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
         count.lit += has_light;
         count.saturated += has_light & clipped;
       }
+      EstimateLight(high_frequency, frames, black, y, &light);
       float* px = out_x.ptr<float>(y);
       float* py = out_y.ptr<float>(y);
       if (col.present) {
-        DecodeAxisRow(col, frames, y, options, on.data(), amp, &scratch, px, mod_x.data(), &count);
+        DecodeAxisRow(col, frames, y, options, on.data(), amp, light, &scratch, px, mod_x.data(),
+                      &count);
         // A pixel rejected by the column code is not counted again by the row code.
         for (int x = 0; x < width; ++x) on[x] = on[x] & (px[x] == px[x]);
       } else {
         std::fill(px, px + width, kNaN);
       }
       if (row.present) {
-        DecodeAxisRow(row, frames, y, options, on.data(), amp, &scratch, py, mod_y.data(), &count);
+        DecodeAxisRow(row, frames, y, options, on.data(), amp, light, &scratch, py, mod_y.data(),
+                      &count);
         for (int x = 0; x < width; ++x) px[x] = py[x] == py[x] ? px[x] : kNaN;
       } else {
         std::fill(py, py + width, kNaN);

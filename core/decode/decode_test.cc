@@ -135,6 +135,56 @@ TEST(Decode, ShadowAndDarkPixelsAreInvalid) {
   EXPECT_EQ(r.stats.rejected_saturated, 64 * 32 - 25);
 }
 
+// Interreflections: where global light outweighs direct light and changes with the coarse
+// patterns (a lit neighbour bouncing light in), comparing a pattern with its inverse reads the
+// bit wrongly. The direct/global rule must reject those pixels rather than decode garbage.
+TEST(Decode, StrongGlobalLightIsRejectedNotMisread) {
+  const PatternSequence seq = MakePatternSequence(PatternOptions{{64, 32}});
+  const cv::Rect region(10, 8, 20, 12);
+  std::vector<cv::Mat> frames;
+  for (const PatternSpec& spec : seq.patterns) {
+    const cv::Mat pattern = RenderPattern(spec, seq.projector_size);
+    cv::Mat frame(pattern.size(), CV_8U);
+    for (int y = 0; y < frame.rows; ++y) {
+      for (int x = 0; x < frame.cols; ++x) {
+        const double f = pattern.at<uint8_t>(y, x) / 255.0;
+        double v = 10 + 120 * f;  // Black level 10 DN, direct light 120 DN.
+        if (region.contains({x, y})) {
+          // Direct light 30 DN; global light 30 DN under fine patterns (half the scene lit),
+          // 60 DN under white, and under coarse Gray bits more light when the pixel is dark.
+          const bool coarse = spec.kind == PatternKind::kGray && spec.bit >= 3;
+          if (spec.kind == PatternKind::kBlack) {
+            v = 10;
+          } else if (spec.kind == PatternKind::kWhite) {
+            v = 10 + 30 + 60;
+          } else if (coarse) {
+            v = 10 + (f > 0.5 ? 40 : 50);
+          } else {
+            v = 10 + 30 * f + 30;
+          }
+        }
+        frame.at<uint8_t>(y, x) = cv::saturate_cast<uint8_t>(v);
+      }
+    }
+    frames.push_back(frame);
+  }
+  DecodeOptions d;
+  d.smooth_radius_px = 0;
+  const DecodeResult r = Decode(seq, frames, d);
+  ASSERT_TRUE(r.status.ok());
+  for (int y = 0; y < 32; ++y) {
+    for (int x = 0; x < 64; ++x) {
+      if (region.contains({x, y})) {
+        EXPECT_EQ(r.valid.at<uint8_t>(y, x), 0) << "misread at " << x << "," << y;
+      } else {
+        ASSERT_EQ(r.valid.at<uint8_t>(y, x), 255) << x << "," << y;
+        EXPECT_NEAR(r.projector_x.at<float>(y, x), x, 0.05);
+      }
+    }
+  }
+  EXPECT_EQ(r.stats.rejected_bits, region.area());
+}
+
 TEST(Decode, RejectsWrongFrameCountAndMixedSizes) {
   const PatternSequence seq = MakePatternSequence(PatternOptions{{64, 32}});
   std::vector<cv::Mat> frames = IdealFrames(seq);
