@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/core.hpp>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -211,23 +212,34 @@ Status ReadScan(const std::string& dir, Scan* scan) {
   }
   const int n = static_cast<int>(scan->sequence.patterns.size());
   scan->frames.assign(n, cv::Mat());
-  for (int k = 0; k < n; ++k) {
-    const std::string path = (root / FrameName(k)).string();
-    if (!fs::exists(path)) {
-      return Status::Error(path + ": file is missing (frame " + std::to_string(k) + " of " +
-                           std::to_string(n) + ", pattern '" +
-                           Describe(scan->sequence.patterns[k]) + "')");
+  // PNG decoding dominates reading a scan: frames are read in parallel, and the error of the
+  // lowest-numbered bad frame is reported, as a serial read would.
+  std::vector<Status> errors(n, Status::Ok());
+  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
+    for (int k = range.start; k < range.end; ++k) {
+      const std::string path = (root / FrameName(k)).string();
+      if (!fs::exists(path)) {
+        errors[k] = Status::Error(path + ": file is missing (frame " + std::to_string(k) + " of " +
+                                  std::to_string(n) + ", pattern '" +
+                                  Describe(scan->sequence.patterns[k]) + "')");
+        continue;
+      }
+      cv::Mat img;
+      errors[k] = ReadImageFile(path, &img);
+      if (!errors[k].ok()) continue;
+      if (img.size() != expected) {
+        errors[k] = Status::Error(path + ": image is " + std::to_string(img.cols) + "x" +
+                                  std::to_string(img.rows) + " but " + expected_from + " says " +
+                                  std::to_string(expected.width) + "x" +
+                                  std::to_string(expected.height));
+        continue;
+      }
+      if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
+      scan->frames[k] = img;
     }
-    cv::Mat img;
-    s = ReadImageFile(path, &img);
-    if (!s.ok()) return s;
-    if (img.size() != expected) {
-      return Status::Error(path + ": image is " + std::to_string(img.cols) + "x" +
-                           std::to_string(img.rows) + " but " + expected_from + " says " +
-                           std::to_string(expected.width) + "x" + std::to_string(expected.height));
-    }
-    if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
-    scan->frames[k] = img;
+  });
+  for (const Status& e : errors) {
+    if (!e.ok()) return e;
   }
   if (fs::exists(root / FrameName(n))) {
     return Status::Error((root / FrameName(n)).string() + ": more frames than the " +
