@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
+#include <opencv2/imgproc.hpp>
+
+#include "core/geometry/rigid2d.h"
+
 namespace vellum {
 
 PointErrorStats ComparePoints(const GroundTruth& truth, const cv::Mat& points) {
@@ -37,6 +41,58 @@ PointErrorStats ComparePoints(const GroundTruth& truth, const cv::Mat& points) {
   st.p99_mm = quantile(0.99);
   st.max_mm = *std::max_element(errors.begin(), errors.end());
   st.rms_mm = std::sqrt(sum2 / errors.size());
+  return st;
+}
+
+FlatErrorStats CompareFlat(const GroundTruth& truth, const Mesh& mesh,
+                           const std::vector<cv::Point2d>& flat) {
+  FlatErrorStats st;
+  std::vector<cv::Point2d> from, to, to_mirror;
+  std::vector<int> nodes;
+  std::vector<cv::Point2d> page(mesh.kind.size(), cv::Point2d(NAN, NAN));
+  for (size_t k = 0; k < mesh.kind.size(); ++k) {
+    if (mesh.kind[k] != NodeKind::kMeasured && mesh.kind[k] != NodeKind::kFilled) continue;
+    const cv::Point px(cvRound(mesh.pixel[k].x), cvRound(mesh.pixel[k].y));
+    if (!cv::Rect(0, 0, truth.page.cols, truth.page.rows).contains(px)) continue;
+    if (!truth.on_page.at<uint8_t>(px)) continue;
+    // The truth at the node's own (sub-pixel) position: bilinear in the page coordinates.
+    const cv::Point2d p = mesh.pixel[k];
+    const int u0 = std::min(static_cast<int>(p.x), truth.page.cols - 2);
+    const int v0 = std::min(static_cast<int>(p.y), truth.page.rows - 2);
+    const double fu = p.x - u0, fv = p.y - v0;
+    const cv::Vec2f st2 = (1 - fv) * ((1 - fu) * truth.page.at<cv::Vec2f>(v0, u0) +
+                                      fu * truth.page.at<cv::Vec2f>(v0, u0 + 1)) +
+                          fv * ((1 - fu) * truth.page.at<cv::Vec2f>(v0 + 1, u0) +
+                                fu * truth.page.at<cv::Vec2f>(v0 + 1, u0 + 1));
+    if (!std::isfinite(st2[0])) continue;
+    page[k] = cv::Point2d(st2[0], st2[1]);
+    from.push_back(flat[k]);
+    to.push_back(page[k]);
+    to_mirror.emplace_back(st2[0], -st2[1]);
+    nodes.push_back(static_cast<int>(k));
+  }
+  st.nodes = static_cast<int>(nodes.size());
+  if (nodes.empty()) return st;
+  const Rigid2D fit = FitRigid2D(from, to), fit_m = FitRigid2D(from, to_mirror);
+  double sum2 = 0, sum2_m = 0;
+  for (size_t k = 0; k < from.size(); ++k) {
+    const double e = cv::norm(fit.Apply(from[k]) - to[k]);
+    sum2 += e * e;
+    st.max_mm = std::max(st.max_mm, e);
+    const double em = cv::norm(fit_m.Apply(from[k]) - to_mirror[k]);
+    sum2_m += em * em;
+  }
+  st.rms_mm = std::sqrt(sum2 / from.size());
+  st.mirrored = sum2_m < sum2;
+  double edge = 0;
+  int edges = 0;
+  for (const Spring& s : mesh.springs) {
+    if (!std::isfinite(page[s.a].x) || !std::isfinite(page[s.b].x)) continue;
+    const double truth_len = cv::norm(page[s.a] - page[s.b]);
+    edge += std::fabs(cv::norm(flat[s.a] - flat[s.b]) / truth_len - 1.0);
+    ++edges;
+  }
+  st.mean_edge_error = edges ? edge / edges : 0;
   return st;
 }
 

@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
+#include "core/mesh/mesh.h"
 #include "core/patterns/patterns.h"
 #include "core/sim/gantry.h"
 
@@ -19,6 +20,18 @@ struct PointErrorStats {
 
 // Compares a CV_32FC3 point map with the truth over page pixels lit by the projector.
 PointErrorStats ComparePoints(const GroundTruth& truth, const cv::Mat& points);
+
+struct FlatErrorStats {
+  int nodes = 0;                 // Sheet nodes on the page (measured or filled) compared.
+  double rms_mm = 0, max_mm = 0; // Flat node vs true page coordinate, after a rigid fit.
+  double mean_edge_error = 0;    // Mean |flat edge / true geodesic length - 1| over springs.
+  bool mirrored = false;         // A reflection fits better than the rigid motion.
+};
+
+// Compares a flattened sheet with the true flat page: each page node's true page coordinate
+// is the truth at its camera pixel; geodesic lengths on a developable page are flat lengths.
+FlatErrorStats CompareFlat(const GroundTruth& truth, const Mesh& mesh,
+                           const std::vector<cv::Point2d>& flat);
 
 // Renders one camera frame per pattern of the sequence; frame k uses noise seed seed + k + 1.
 std::vector<cv::Mat> RenderSequence(const VirtualGantry& gantry, const PatternSequence& sequence,

@@ -88,10 +88,14 @@ double PageTexture::Albedo(double s, double t) const {
     case TextureKind::kPlain:
       return options_.paper_albedo;
     case TextureKind::kCheckerboard: {
-      const long i =
-          static_cast<long>(std::floor((s - options_.board_origin_mm.x) / options_.square_mm));
-      const long j =
-          static_cast<long>(std::floor((t - options_.board_origin_mm.y) / options_.square_mm));
+      // Whole squares centred on the page, inside a margin of bare paper.
+      const double m = options_.margin_mm, q = options_.square_mm;
+      const int nx = static_cast<int>((page_size_.width - 2 * m) / q);
+      const int ny = static_cast<int>((page_size_.height - 2 * m) / q);
+      const double x0 = 0.5 * (page_size_.width - nx * q), y0 = 0.5 * (page_size_.height - ny * q);
+      const double u = (s - x0) / q, v = (t - y0) / q;
+      if (u < 0 || v < 0 || u >= nx || v >= ny) return options_.paper_albedo;
+      const long i = static_cast<long>(std::floor(u)), j = static_cast<long>(std::floor(v));
       return ((i + j) & 1) ? options_.paper_albedo : options_.ink_albedo;
     }
     case TextureKind::kText:

@@ -17,7 +17,7 @@ struct TextureOptions {
   double paper_albedo = 0.85;             // Reflectance of bare paper, 0..1.
   double ink_albedo = 0.08;               // Reflectance of ink, 0..1.
   double square_mm = 10.0;                // kCheckerboard: square side, mm.
-  cv::Point2d board_origin_mm{5.0, 0.0};  // kCheckerboard: page position of a square corner.
+  double margin_mm = 10.0;     // kCheckerboard: bare paper around the board, mm.
   uint64_t seed = 1;                      // kText: seed of the generated text.
   cv::Mat image;  // kImage: 8-bit gray or BGR image covering the whole page.
 };

@@ -1,0 +1,430 @@
+#include "core/flatten/flatten.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Sparse>
+#include <Eigen/SparseCholesky>
+
+#include "core/common/check.h"
+#include "core/geometry/rigid2d.h"
+
+namespace vellum {
+namespace {
+
+// Active nodes get consecutive variable indices.
+struct Indexing {
+  explicit Indexing(const Mesh& mesh) : var(mesh.kind.size(), -1) {
+    for (size_t k = 0; k < mesh.kind.size(); ++k) {
+      if (mesh.Active(static_cast<int>(k))) {
+        var[k] = static_cast<int>(node.size());
+        node.push_back(static_cast<int>(k));
+      }
+    }
+  }
+  std::vector<int> var;   // Node -> variable (-1: inactive).
+  std::vector<int> node;  // Variable -> node.
+};
+
+// Rotates and translates flat positions onto the nodes' original (x, y) (least squares,
+// no reflection, no scale), so the flat page lies where the page was and is never mirrored.
+void AlignToOriginal(const Mesh& mesh, const Indexing& idx, std::vector<cv::Point2d>* flat) {
+  std::vector<cv::Point2d> from, to;
+  for (int k : idx.node) {
+    from.push_back((*flat)[k]);
+    to.emplace_back(mesh.point[k][0], mesh.point[k][1]);
+  }
+  const Rigid2D r = FitRigid2D(from, to);
+  for (int k : idx.node) (*flat)[k] = r.Apply((*flat)[k]);
+}
+
+FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
+  FlattenResult result;
+  const Indexing idx(mesh);
+  const int n = static_cast<int>(idx.node.size());
+  // Fold-free start: the height map dropped onto the plane.
+  Eigen::VectorXd x(2 * n);
+  for (int v = 0; v < n; ++v) {
+    x[2 * v] = mesh.point[idx.node[v]][0];
+    x[2 * v + 1] = mesh.point[idx.node[v]][1];
+  }
+  auto energy = [&](const Eigen::VectorXd& y) {
+    double e = 0;
+    for (const Spring& s : mesh.springs) {
+      const int a = idx.var[s.a], b = idx.var[s.b];
+      const double dx = y[2 * a] - y[2 * b], dy = y[2 * a + 1] - y[2 * b + 1];
+      const double r = std::sqrt(dx * dx + dy * dy) - s.rest_mm;
+      e += r * r;
+    }
+    return e;
+  };
+  // Local/global iterations first (Liu et al. 2013): each projects every spring onto its rest
+  // length (local) and solves one fixed, pre-factored Laplacian system (global). The energy
+  // falls monotonically, which carries the compressed height map out of the basins where a
+  // bare Gauss-Newton from the same start can stall; Gauss-Newton then converges fast.
+  {
+    const double prox = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
+    std::vector<Eigen::Triplet<double>> lt;
+    for (const Spring& s : mesh.springs) {
+      const int a = idx.var[s.a], b = idx.var[s.b];
+      lt.emplace_back(a, a, 1.0);
+      lt.emplace_back(b, b, 1.0);
+      lt.emplace_back(a, b, -1.0);
+      lt.emplace_back(b, a, -1.0);
+    }
+    for (int v = 0; v < n; ++v) lt.emplace_back(v, v, prox);
+    Eigen::SparseMatrix<double> lap(n, n);
+    lap.setFromTriplets(lt.begin(), lt.end());
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> lap_solver(lap);
+    if (lap_solver.info() != Eigen::Success) {
+      result.status = Status::Error("flattening: the sheet's Laplacian is singular");
+      return result;
+    }
+    Eigen::VectorXd bx(n), by(n), px(n), py(n);
+    for (int v = 0; v < n; ++v) {
+      px[v] = x[2 * v];
+      py[v] = x[2 * v + 1];
+    }
+    double e_prev = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < options.local_global_iterations; ++k) {
+      bx = prox * px;
+      by = prox * py;
+      for (const Spring& s : mesh.springs) {
+        const int a = idx.var[s.a], b = idx.var[s.b];
+        const double dx = px[a] - px[b], dy = py[a] - py[b];
+        const double len = std::max(std::hypot(dx, dy), 1e-12);
+        const double fx = s.rest_mm * dx / len, fy = s.rest_mm * dy / len;
+        bx[a] += fx;
+        bx[b] -= fx;
+        by[a] += fy;
+        by[b] -= fy;
+      }
+      px = lap_solver.solve(bx);
+      py = lap_solver.solve(by);
+      for (int v = 0; v < n; ++v) {
+        x[2 * v] = px[v];
+        x[2 * v + 1] = py[v];
+      }
+      const double e_now = energy(x);
+      if (e_prev - e_now < 1e-3 * e_now) break;  // Slowing down: hand over to Gauss-Newton.
+      e_prev = e_now;
+    }
+  }
+  // J^T J has a fixed pattern: analyse it once, factor it per iteration. A tiny diagonal
+  // (Levenberg) term removes the rigid-motion null space without moving the minimum.
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(mesh.springs.size() * 16 + 2 * n);
+  Eigen::SparseMatrix<double> jtj(2 * n, 2 * n);
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
+  bool analysed = false;
+  double lambda = 1e-6;
+  double e = energy(x);
+  int it = 0;
+  for (; it < options.max_iterations; ++it) {
+    triplets.clear();
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(2 * n);
+    for (const Spring& s : mesh.springs) {
+      const int a = idx.var[s.a], b = idx.var[s.b];
+      const double dx = x[2 * a] - x[2 * b], dy = x[2 * a + 1] - x[2 * b + 1];
+      const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
+      const double ux = dx / len, uy = dy / len, r = len - s.rest_mm;
+      const double jv[4] = {ux, uy, -ux, -uy};
+      const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
+      for (int p = 0; p < 4; ++p) {
+        g[col[p]] += jv[p] * r;
+        for (int q = 0; q < 4; ++q) triplets.emplace_back(col[p], col[q], jv[p] * jv[q]);
+      }
+    }
+    for (int v = 0; v < 2 * n; ++v) triplets.emplace_back(v, v, lambda);
+    jtj.setFromTriplets(triplets.begin(), triplets.end());
+    if (!analysed) {
+      solver.analyzePattern(jtj);
+      analysed = true;
+    }
+    solver.factorize(jtj);
+    if (solver.info() != Eigen::Success) {
+      result.status = Status::Error("flattening: the sheet's normal equations are singular");
+      return result;
+    }
+    const Eigen::VectorXd delta = -solver.solve(g);
+    const Eigen::VectorXd next = x + delta;
+    const double e_next = energy(next);
+    if (!(e_next <= e) && e > 1e-24) {
+      lambda *= 10;  // Levenberg: a smaller step.
+      if (lambda > 1e6) break;
+      continue;
+    }
+    x = next;
+    e = e_next;
+    lambda = std::max(1e-9, lambda * 0.1);
+    double step = 0;
+    for (int v = 0; v < n; ++v) step = std::max(step, std::hypot(delta[2 * v], delta[2 * v + 1]));
+    if (step < options.tolerance_mm) {
+      ++it;
+      break;
+    }
+  }
+  result.flat.assign(mesh.kind.size(), cv::Point2d(0, 0));
+  for (int v = 0; v < n; ++v) result.flat[idx.node[v]] = cv::Point2d(x[2 * v], x[2 * v + 1]);
+  AlignToOriginal(mesh, idx, &result.flat);
+  result.iterations = it;
+  result.status = Status::Ok();
+  return result;
+}
+
+// The paper's particle system. State per active particle: position and velocity (3D).
+class Simulator {
+ public:
+  Simulator(const Mesh& mesh, const FlattenOptions& options)
+      : mesh_(mesh), o_(options), idx_(mesh), n_(static_cast<int>(idx_.node.size())) {
+    x_.resize(n_);
+    v_.assign(n_, cv::Vec3d(0, 0, 0));
+    for (int p = 0; p < n_; ++p) x_[p] = mesh.point[idx_.node[p]];
+    // Shift so the lowest particle touches the plane: "the page lies on the table".
+    double zmin = x_.empty() ? 0 : x_[0][2];
+    for (const cv::Vec3d& p : x_) zmin = std::min(zmin, p[2]);
+    for (cv::Vec3d& p : x_) p[2] -= zmin;
+    for (const Spring& s : mesh.springs) springs_.push_back({idx_.var[s.a], idx_.var[s.b], s.rest_mm});
+  }
+
+  FlattenResult Run() {
+    FlattenResult result;
+    double dt = o_.time_step;
+    double last_force = -1;
+    int step = 0, good_steps = 0;
+    std::vector<cv::Vec3d> x0, v0;
+    for (; step < o_.max_steps; ++step) {
+      if (o_.record_every > 0 && step % o_.record_every == 0) Record(&result);
+      x0 = x_;
+      v0 = v_;
+      double internal = 0;
+      for (;;) {
+        internal = o_.solver == FlattenSolver::kEuler ? EulerStep(dt) : RungeKuttaStep(dt);
+        // Penetration: restore the previous state and halve the time step (paper, 3.7.2).
+        bool penetrated = false;
+        for (const cv::Vec3d& p : x_) penetrated |= p[2] < -o_.plane_epsilon_mm;
+        if (!penetrated) break;
+        x_ = x0;
+        v_ = v0;
+        dt *= 0.5;
+        good_steps = 0;
+        if (dt < 1e-9 * o_.time_step) {
+          result.status = Status::Error("flattening simulator: time step underflow");
+          return result;
+        }
+      }
+      // Once stable again, let the step grow back towards the initial one.
+      if (++good_steps > 50 && dt < o_.time_step) {
+        dt = std::min(o_.time_step, dt * 2);
+        good_steps = 0;
+      }
+      bool on_plane = true;
+      double moved = 0;
+      for (int p = 0; p < n_; ++p) {
+        on_plane &= x_[p][2] < o_.plane_epsilon_mm;
+        moved = std::max(moved, cv::norm(x_[p] - x0[p]));
+      }
+      const double mean_force = internal / std::max(1, n_);
+      const bool steady = last_force >= 0 && std::fabs(mean_force - last_force) < o_.force_tolerance &&
+                          moved < o_.settle_tolerance_mm;
+      last_force = mean_force;
+      if (on_plane && steady) {
+        ++step;
+        break;
+      }
+    }
+    if (o_.record_every > 0) Record(&result);
+    result.flat.assign(mesh_.kind.size(), cv::Point2d(0, 0));
+    for (int p = 0; p < n_; ++p) result.flat[idx_.node[p]] = cv::Point2d(x_[p][0], x_[p][1]);
+    AlignToOriginal(mesh_, idx_, &result.flat);
+    result.iterations = step;
+    result.status = step >= o_.max_steps
+                        ? Status::Error("flattening simulator: no steady state after " +
+                                        std::to_string(o_.max_steps) + " steps")
+                        : Status::Ok();
+    return result;
+  }
+
+ private:
+  struct S {
+    int a, b;
+    double rest;
+  };
+
+  // Accelerations (unit mass) at a state; returns sum |F_int| over particles.
+  double Forces(const std::vector<cv::Vec3d>& x, const std::vector<cv::Vec3d>& v,
+                std::vector<cv::Vec3d>* acc) {
+    acc->assign(n_, cv::Vec3d(0, 0, 0));
+    for (const S& s : springs_) {
+      const cv::Vec3d d = x[s.a] - x[s.b];
+      const double len = std::max(cv::norm(d), 1e-12);
+      const cv::Vec3d u = d / len;
+      const double mag = o_.stiffness * (len - s.rest) + o_.spring_damping * (v[s.a] - v[s.b]).dot(u);
+      (*acc)[s.a] -= mag * u;  // A stretched spring pulls the pair together.
+      (*acc)[s.b] += mag * u;
+    }
+    double internal = 0;
+    for (int p = 0; p < n_; ++p) {
+      internal += cv::norm((*acc)[p]);
+      cv::Vec3d& a = (*acc)[p];
+      a[2] -= o_.gravity;
+      a -= o_.drag * v[p];
+      // In contact the plane carries any downward force (no penetration by pushing).
+      if (x[p][2] < o_.plane_epsilon_mm && a[2] < 0) a[2] = 0;
+    }
+    return internal;
+  }
+
+  // Collision response at the plane: v_new = v_t - k_r v_n for particles moving into it.
+  void Collide(std::vector<cv::Vec3d>* v, const std::vector<cv::Vec3d>& x) {
+    for (int p = 0; p < n_; ++p) {
+      if (x[p][2] < o_.plane_epsilon_mm && (*v)[p][2] < 0) (*v)[p][2] *= -o_.restitution;
+    }
+  }
+
+  double EulerStep(double dt) {
+    Collide(&v_, x_);
+    const double internal = Forces(x_, v_, &a1_);
+    for (int p = 0; p < n_; ++p) {
+      v_[p] += dt * a1_[p];  // Velocity first, then position from the new velocity.
+      x_[p] += dt * v_[p];
+    }
+    return internal;
+  }
+
+  double RungeKuttaStep(double dt) {
+    Collide(&v_, x_);
+    const std::vector<cv::Vec3d> x = x_, v = v_;
+    std::vector<cv::Vec3d> xs(n_), vs(n_);
+    const double internal = Forces(x, v, &a1_);
+    for (int p = 0; p < n_; ++p) {
+      xs[p] = x[p] + 0.5 * dt * v[p];
+      vs[p] = v[p] + 0.5 * dt * a1_[p];
+    }
+    Forces(xs, vs, &a2_);
+    std::vector<cv::Vec3d> v2 = vs;
+    for (int p = 0; p < n_; ++p) {
+      xs[p] = x[p] + 0.5 * dt * v2[p];
+      vs[p] = v[p] + 0.5 * dt * a2_[p];
+    }
+    Forces(xs, vs, &a3_);
+    std::vector<cv::Vec3d> v3 = vs;
+    for (int p = 0; p < n_; ++p) {
+      xs[p] = x[p] + dt * v3[p];
+      vs[p] = v[p] + dt * a3_[p];
+    }
+    Forces(xs, vs, &a4_);
+    for (int p = 0; p < n_; ++p) {
+      x_[p] = x[p] + dt / 6.0 * (v[p] + 2.0 * v2[p] + 2.0 * v3[p] + vs[p]);
+      v_[p] = v[p] + dt / 6.0 * (a1_[p] + 2.0 * a2_[p] + 2.0 * a3_[p] + a4_[p]);
+    }
+    return internal;
+  }
+
+  void Record(FlattenResult* result) {
+    std::vector<cv::Vec3d> frame(mesh_.kind.size(), cv::Vec3d(0, 0, 0));
+    for (int p = 0; p < n_; ++p) frame[idx_.node[p]] = x_[p];
+    result->trajectory.push_back(std::move(frame));
+  }
+
+  const Mesh& mesh_;
+  const FlattenOptions& o_;
+  Indexing idx_;
+  int n_;
+  std::vector<S> springs_;
+  std::vector<cv::Vec3d> x_, v_, a1_, a2_, a3_, a4_;
+};
+
+}  // namespace
+
+const char* ToString(FlattenSolver solver) {
+  switch (solver) {
+    case FlattenSolver::kGaussNewton:
+      return "gauss-newton";
+    case FlattenSolver::kEuler:
+      return "euler";
+    case FlattenSolver::kRungeKutta4:
+      return "rk4";
+  }
+  return "?";
+}
+
+bool ParseFlattenSolver(const std::string& text, FlattenSolver* solver) {
+  for (FlattenSolver s : {FlattenSolver::kGaussNewton, FlattenSolver::kEuler, FlattenSolver::kRungeKutta4}) {
+    if (text == ToString(s)) {
+      *solver = s;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool FlattenOptions::Check(std::string* why) const {
+  if (max_iterations < 1 || !(tolerance_mm > 0)) {
+    *why = "max_iterations must be >= 1 and tolerance_mm > 0";
+    return false;
+  }
+  if (!(stiffness > 0) || spring_damping < 0 || gravity < 0 || drag < 0 || !(time_step > 0) ||
+      restitution < 0 || restitution > 1 || max_steps < 1 || record_every < 0) {
+    *why = "simulator constants out of range (stiffness > 0, damping/gravity/drag >= 0, "
+           "time_step > 0, restitution in [0, 1])";
+    return false;
+  }
+  return true;
+}
+
+void MeasureStrain(const Mesh& mesh, const std::vector<cv::Point2d>& flat, FlattenResult* result) {
+  double sum = 0, worst = 0;
+  for (const Spring& s : mesh.springs) {
+    const double e = std::fabs(cv::norm(flat[s.a] - flat[s.b]) / s.rest_mm - 1.0);
+    sum += e;
+    worst = std::max(worst, e);
+  }
+  result->mean_strain = mesh.springs.empty() ? 0 : sum / mesh.springs.size();
+  result->max_strain = worst;
+  // A fold flips a quad's orientation relative to how the camera saw it.
+  int folded = 0;
+  for (const cv::Vec4i& q : mesh.quads) {
+    auto area = [](cv::Point2d a, cv::Point2d b, cv::Point2d c) {
+      return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+    };
+    // Every corner's triangle keeps its orientation unless the quad folded or twisted. The
+    // camera image's y points along -world y: a preserved orientation has the opposite sign.
+    bool flipped = false;
+    for (int c = 0; c < 4; ++c) {
+      const int a = q[c], b = q[(c + 1) % 4], d = q[(c + 3) % 4];
+      const double before = area(mesh.pixel[a], mesh.pixel[b], mesh.pixel[d]);
+      const double after = area(flat[a], flat[b], flat[d]);
+      flipped |= (before > 0) == (after > 0);
+    }
+    folded += flipped;
+  }
+  result->folded_quads = folded;
+}
+
+FlattenResult Flatten(const Mesh& mesh, const FlattenOptions& options) {
+  FlattenResult result;
+  std::string why;
+  if (!options.Check(&why)) {
+    result.status = Status::Error("flatten options: " + why);
+    return result;
+  }
+  if (!mesh.status.ok()) {
+    result.status = Status::Error("cannot flatten: " + mesh.status.message());
+    return result;
+  }
+  result = options.solver == FlattenSolver::kGaussNewton ? GaussNewton(mesh, options)
+                                                         : Simulator(mesh, options).Run();
+  if (!result.status.ok()) return result;
+  for (const cv::Point2d& p : result.flat) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) {
+      result.status = Status::Error("flattening diverged (non-finite positions)");
+      return result;
+    }
+  }
+  MeasureStrain(mesh, result.flat, &result);
+  return result;
+}
+
+}  // namespace vellum

@@ -1,0 +1,287 @@
+#include "core/mesh/mesh.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Dense>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace vellum {
+namespace {
+
+// Fits x, y, z of the points around a node as functions of the pixel offset (quadratic where
+// there are enough points, else linear) and returns their value at the node. The fit removes
+// noise and, being of second order, does not flatten the page's curvature.
+bool FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
+             int min_points, cv::Vec3d* out) {
+  const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
+  const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
+  const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
+  const int v1 = std::min(points.rows - 1, static_cast<int>(std::ceil(at.y)) + hv);
+  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 3> atb = Eigen::Matrix<double, 6, 3>::Zero();
+  int count = 0;
+  for (int v = v0; v <= v1; ++v) {
+    const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+    const uint8_t* m = mask.ptr<uint8_t>(v);
+    for (int u = u0; u <= u1; ++u) {
+      if (!m[u] || !std::isfinite(row[u][2])) continue;
+      const double du = (u - at.x) / hu, dv = (v - at.y) / hv;
+      Eigen::Matrix<double, 6, 1> b;
+      b << 1, du, dv, du * du, du * dv, dv * dv;
+      ata.selfadjointView<Eigen::Lower>().rankUpdate(b);
+      atb += b * Eigen::RowVector3d(row[u][0], row[u][1], row[u][2]);
+      ++count;
+    }
+  }
+  if (count < min_points) return false;
+  ata.triangularView<Eigen::Upper>() = ata.transpose();
+  // Points on one side only (a node at the page's edge): a quadratic would extrapolate
+  // wildly, a plane does not.
+  const double offset = std::hypot(ata(1, 0), ata(2, 0)) / count;
+  const bool one_sided = offset > 0.25;
+  for (int terms : {6, 3}) {
+    if (terms == 6 && (count < 2 * min_points || one_sided)) continue;
+    const Eigen::MatrixXd a = ata.topLeftCorner(terms, terms);
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(a);
+    if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-9)) continue;
+    const Eigen::MatrixXd c = ldlt.solve(atb.topRows(terms));
+    *out = cv::Vec3d(c(0, 0), c(0, 1), c(0, 2));
+    return std::isfinite((*out)[0]) && std::isfinite((*out)[1]) && std::isfinite((*out)[2]);
+  }
+  return false;
+}
+
+}  // namespace
+
+bool MeshOptions::Check(std::string* why) const {
+  if (grid.width < 2 || grid.height < 2 || grid.width > 1000 || grid.height > 1000) {
+    *why = "the grid must have 2 to 1000 nodes each way";
+    return false;
+  }
+  if (min_points < 3 || !(fit_window > 0) || skirt_rings < 0 || skirt_rings > 5) {
+    *why = "min_points must be >= 3, fit_window > 0, skirt_rings in [0, 5]";
+    return false;
+  }
+  return true;
+}
+
+cv::Mat SegmentPage(const cv::Mat& texture, double fraction) {
+  cv::Mat gray = texture;
+  if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+  if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 255.0 / 65535.0);
+  cv::Mat smooth;
+  cv::GaussianBlur(gray, smooth, cv::Size(5, 5), 0);
+  // The bright level: 98th percentile of the histogram.
+  int hist[256] = {0};
+  for (int v = 0; v < smooth.rows; ++v) {
+    const uint8_t* r = smooth.ptr<uint8_t>(v);
+    for (int u = 0; u < smooth.cols; ++u) ++hist[r[u]];
+  }
+  const long target = static_cast<long>(0.98 * smooth.total());
+  long acc = 0;
+  int bright = 255;
+  for (int i = 0; i < 256; ++i) {
+    acc += hist[i];
+    if (acc >= target) {
+      bright = i;
+      break;
+    }
+  }
+  cv::Mat mask = smooth > fraction * bright;
+  cv::morphologyEx(mask, mask, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_RECT, {3, 3}));
+  // Bridge what ink splits (text lines, checkerboard squares meeting at corners).
+  const int k = std::max(3, (std::min(mask.cols, mask.rows) / 100) | 1);
+  cv::morphologyEx(mask, mask, cv::MORPH_CLOSE, cv::getStructuringElement(cv::MORPH_ELLIPSE, {k, k}));
+  // Largest region, holes (ink inside the page) filled.
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  cv::Mat page = cv::Mat::zeros(mask.size(), CV_8U);
+  if (contours.empty()) return page;
+  size_t best = 0;
+  for (size_t k = 1; k < contours.size(); ++k) {
+    if (cv::contourArea(contours[k]) > cv::contourArea(contours[best])) best = k;
+  }
+  cv::drawContours(page, contours, static_cast<int>(best), cv::Scalar(255), cv::FILLED);
+  return page;
+}
+
+Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
+               const std::function<cv::Point2d(const cv::Vec3d&)>& project) {
+  Mesh mesh;
+  std::string why;
+  if (!options.Check(&why)) {
+    mesh.status = Status::Error("mesh options: " + why);
+    return mesh;
+  }
+  if (points.type() != CV_32FC3 || page_mask.type() != CV_8U || points.size() != page_mask.size()) {
+    mesh.status = Status::Error("mesh input: the point map must be CV_32FC3 and the page mask "
+                                "CV_8U of the same size");
+    return mesh;
+  }
+  const cv::Rect box = cv::boundingRect(page_mask);
+  if (box.width < 2 || box.height < 2) {
+    mesh.status = Status::Error("no page found in the texture image (empty page mask)");
+    return mesh;
+  }
+  const int g = options.grid.width, h = options.grid.height;
+  mesh.cols = g;
+  mesh.rows = h;
+  const int n = g * h;
+  mesh.kind.assign(n, NodeKind::kOff);
+  mesh.point.assign(n, cv::Vec3d(0, 0, 0));
+  mesh.pixel.assign(n, cv::Point2d(0, 0));
+  const double step_u = (box.width - 1.0) / (g - 1), step_v = (box.height - 1.0) / (h - 1);
+  const int hu = std::max(2, static_cast<int>(std::lround(options.fit_window * step_u)));
+  const int hv = std::max(2, static_cast<int>(std::lround(options.fit_window * step_v)));
+  std::vector<cv::Point2d> grid_px(n);
+  std::vector<uint8_t> on_page(n, 0);
+  for (int j = 0; j < h; ++j) {
+    for (int i = 0; i < g; ++i) {
+      const cv::Point2d p(box.x + i * step_u, box.y + j * step_v);
+      grid_px[mesh.Index(i, j)] = p;
+      on_page[mesh.Index(i, j)] = page_mask.at<uint8_t>(cvRound(p.y), cvRound(p.x)) != 0;
+    }
+  }
+  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
+    for (int k = range.start; k < range.end; ++k) {
+      if (!on_page[k]) continue;
+      cv::Vec3d x;
+      if (FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x)) {
+        mesh.point[k] = x;
+        mesh.kind[k] = NodeKind::kMeasured;
+      } else {
+        mesh.kind[k] = NodeKind::kFilled;  // A hole: interpolated below.
+      }
+    }
+  });
+  mesh.measured = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
+  if (mesh.measured == 0) {
+    mesh.status = Status::Error("no valid 3D points on the page: nothing to flatten");
+    return mesh;
+  }
+  // Holes: harmonic interpolation (Jacobi) from the measured nodes around them.
+  std::vector<int> holes;
+  for (int k = 0; k < n; ++k) {
+    if (mesh.kind[k] == NodeKind::kFilled) holes.push_back(k);
+  }
+  std::vector<uint8_t> known(n, 0);
+  for (int k = 0; k < n; ++k) known[k] = mesh.kind[k] == NodeKind::kMeasured;
+  const int di[4] = {1, -1, 0, 0}, dj[4] = {0, 0, 1, -1};
+  // Seed holes outward from known nodes so every hole starts from a sensible value.
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (int k : holes) {
+      if (known[k]) continue;
+      const int i = k % g, j = k / g;
+      cv::Vec3d sum(0, 0, 0);
+      int c = 0;
+      for (int d = 0; d < 4; ++d) {
+        const int ii = i + di[d], jj = j + dj[d];
+        if (ii < 0 || jj < 0 || ii >= g || jj >= h || !known[mesh.Index(ii, jj)]) continue;
+        sum += mesh.point[mesh.Index(ii, jj)];
+        ++c;
+      }
+      if (c > 0) {
+        mesh.point[k] = sum / c;
+        known[k] = 2;
+        changed = true;
+      }
+    }
+  }
+  for (int it = 0; it < 2000 && !holes.empty(); ++it) {
+    double worst = 0;
+    for (int k : holes) {
+      if (!known[k]) continue;
+      const int i = k % g, j = k / g;
+      cv::Vec3d sum(0, 0, 0);
+      int c = 0;
+      for (int d = 0; d < 4; ++d) {
+        const int ii = i + di[d], jj = j + dj[d];
+        if (ii < 0 || jj < 0 || ii >= g || jj >= h || !known[mesh.Index(ii, jj)]) continue;
+        sum += mesh.point[mesh.Index(ii, jj)];
+        ++c;
+      }
+      const cv::Vec3d next = sum / c;
+      worst = std::max(worst, cv::norm(next - mesh.point[k]));
+      mesh.point[k] = next;
+    }
+    if (worst < 1e-6) break;
+  }
+  for (int k : holes) {
+    if (!known[k]) mesh.kind[k] = NodeKind::kOff;  // Unreachable from any measured node.
+  }
+  // Skirt: rings of nodes beyond the page edge, on the page surface extended linearly, so
+  // the quads that hold the page's edge exist. They never take a position from the table.
+  for (int ring = 0; ring < options.skirt_rings; ++ring) {
+    std::vector<std::pair<int, cv::Vec3d>> added;
+    for (int j = 0; j < h; ++j) {
+      for (int i = 0; i < g; ++i) {
+        const int k = mesh.Index(i, j);
+        if (mesh.Active(k)) continue;
+        cv::Vec3d sum(0, 0, 0);
+        int c = 0;
+        for (int dj2 = -1; dj2 <= 1; ++dj2) {
+          for (int di2 = -1; di2 <= 1; ++di2) {
+            if (!di2 && !dj2) continue;
+            const int i1 = i + di2, j1 = j + dj2, i2 = i + 2 * di2, j2 = j + 2 * dj2;
+            if (i2 < 0 || j2 < 0 || i2 >= g || j2 >= h) continue;
+            if (!mesh.Active(mesh.Index(i1, j1)) || !mesh.Active(mesh.Index(i2, j2))) continue;
+            sum += 2.0 * mesh.point[mesh.Index(i1, j1)] - mesh.point[mesh.Index(i2, j2)];
+            ++c;
+          }
+        }
+        if (c > 0) added.emplace_back(k, sum / c);
+      }
+    }
+    for (const auto& [k, p] : added) {
+      mesh.kind[k] = NodeKind::kSkirt;
+      mesh.point[k] = p;
+    }
+  }
+  mesh.filled = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kFilled));
+  mesh.skirt = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kSkirt));
+  for (int k = 0; k < n; ++k) {
+    if (mesh.Active(k)) mesh.pixel[k] = project(mesh.point[k]);
+  }
+  auto add = [&](int i0, int j0, int i1, int j1, SpringKind kind) {
+    if (i0 < 0 || j0 < 0 || i0 >= g || j0 >= h || i1 < 0 || j1 < 0 || i1 >= g || j1 >= h) return;
+    const int a = mesh.Index(i0, j0), b = mesh.Index(i1, j1);
+    if (!mesh.Active(a) || !mesh.Active(b)) return;
+    mesh.springs.push_back({a, b, cv::norm(mesh.point[a] - mesh.point[b]), kind});
+  };
+  for (int j = 0; j < h; ++j) {
+    for (int i = 0; i < g; ++i) {
+      add(i, j, i + 1, j, SpringKind::kStructural);
+      add(i, j, i, j + 1, SpringKind::kStructural);
+      add(i, j, i + 1, j + 1, SpringKind::kShear);
+      add(i + 1, j, i, j + 1, SpringKind::kShear);
+      if (options.bend_springs) {
+        add(i, j, i + 2, j, SpringKind::kBend);
+        add(i, j, i, j + 2, SpringKind::kBend);
+      }
+      if (i + 1 < g && j + 1 < h) {
+        const cv::Vec4i q(mesh.Index(i, j), mesh.Index(i + 1, j), mesh.Index(i + 1, j + 1),
+                          mesh.Index(i, j + 1));
+        if (mesh.Active(q[0]) && mesh.Active(q[1]) && mesh.Active(q[2]) && mesh.Active(q[3])) {
+          mesh.quads.push_back(q);
+        }
+      }
+    }
+  }
+  for (const Spring& s : mesh.springs) {
+    if (!(s.rest_mm > 1e-9)) {
+      mesh.status = Status::Error("two sheet nodes coincide (degenerate surface data)");
+      return mesh;
+    }
+  }
+  if (mesh.quads.empty()) {
+    mesh.status = Status::Error("the page yields no complete grid cell: too few valid points");
+    return mesh;
+  }
+  mesh.status = Status::Ok();
+  return mesh;
+}
+
+}  // namespace vellum
