@@ -77,4 +77,54 @@ Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points) {
   return Status::Ok();
 }
 
+Status WriteQuadMeshPly(const std::string& path, const std::vector<cv::Vec3f>& vertices,
+                        const std::vector<cv::Vec4i>& quads, const std::string& comment) {
+  std::ofstream f(path, std::ios::binary);
+  if (!f) return Status::Error(path + ": cannot open for writing");
+  f << "ply\nformat binary_little_endian 1.0\ncomment " << comment << "\n"
+    << "element vertex " << vertices.size() << "\n"
+    << "property float x\nproperty float y\nproperty float z\n"
+    << "element face " << quads.size() << "\n"
+    << "property list uchar int vertex_indices\nend_header\n";
+  f.write(reinterpret_cast<const char*>(vertices.data()),
+          static_cast<std::streamsize>(vertices.size() * sizeof(cv::Vec3f)));
+  for (const cv::Vec4i& q : quads) {
+    const uint8_t four = 4;
+    f.write(reinterpret_cast<const char*>(&four), 1);
+    f.write(reinterpret_cast<const char*>(q.val), 4 * sizeof(int));
+  }
+  if (!f) return Status::Error(path + ": write failed (disk full?)");
+  return Status::Ok();
+}
+
+Status ReadQuadMeshPly(const std::string& path, std::vector<cv::Vec3f>* vertices,
+                       std::vector<cv::Vec4i>* quads) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return Status::Error(path + ": cannot open");
+  std::string line;
+  long nv = -1, nf = -1;
+  while (std::getline(f, line) && line != "end_header") {
+    std::istringstream is(line);
+    std::string word, name;
+    is >> word;
+    if (word == "element") {
+      long count;
+      is >> name >> count;
+      (name == "vertex" ? nv : nf) = count;
+    }
+  }
+  if (nv < 0 || nf < 0) return Status::Error(path + ": expected vertex and face elements");
+  vertices->resize(static_cast<size_t>(nv));
+  f.read(reinterpret_cast<char*>(vertices->data()), static_cast<std::streamsize>(nv * sizeof(cv::Vec3f)));
+  quads->resize(static_cast<size_t>(nf));
+  for (long k = 0; k < nf; ++k) {
+    uint8_t count = 0;
+    f.read(reinterpret_cast<char*>(&count), 1);
+    if (count != 4) return Status::Error(path + ": face " + std::to_string(k) + " is not a quad");
+    f.read(reinterpret_cast<char*>((*quads)[k].val), 4 * sizeof(int));
+  }
+  if (!f) return Status::Error(path + ": truncated");
+  return Status::Ok();
+}
+
 }  // namespace vellum

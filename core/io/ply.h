@@ -18,4 +18,11 @@ struct PlyPoint {
 Status WritePointsPly(const std::string& path, const cv::Mat& points);
 Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points);
 
+// A quad mesh: vertices x y z (float, mm) and faces as lists of 4 vertex indices; binary
+// little endian. mesh.ply and flat.ply share the vertex order.
+Status WriteQuadMeshPly(const std::string& path, const std::vector<cv::Vec3f>& vertices,
+                        const std::vector<cv::Vec4i>& quads, const std::string& comment);
+Status ReadQuadMeshPly(const std::string& path, std::vector<cv::Vec3f>* vertices,
+                       std::vector<cv::Vec4i>* quads);
+
 }  // namespace vellum

@@ -1,0 +1,213 @@
+#include "core/restore/restore.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <opencv2/core/utility.hpp>
+
+namespace vellum {
+namespace {
+
+constexpr int kBandRows = 32;  // Output rows per parallel band.
+
+// One destination triangle with the affine map from destination to source pixels.
+struct Triangle {
+  cv::Point2d d[3];  // Destination (output) pixels.
+  cv::Matx23d source_from_dest;
+  int samples = 1;   // Supersampling per pixel side (footprint of one output pixel).
+};
+
+template <typename T, int C>
+void Sample(const cv::Mat& src, double x, double y, double* out) {
+  // Bilinear, clamped to the image; pixel centres at integers.
+  x = std::clamp(x, 0.0, src.cols - 1.0);
+  y = std::clamp(y, 0.0, src.rows - 1.0);
+  const int x0 = std::min(static_cast<int>(x), src.cols - 2 < 0 ? 0 : src.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), src.rows - 2 < 0 ? 0 : src.rows - 2);
+  const int x1 = std::min(x0 + 1, src.cols - 1), y1 = std::min(y0 + 1, src.rows - 1);
+  const double fx = x - x0, fy = y - y0;
+  const T* r0 = src.ptr<T>(y0);
+  const T* r1 = src.ptr<T>(y1);
+  for (int c = 0; c < C; ++c) {
+    out[c] += (1 - fy) * ((1 - fx) * r0[x0 * C + c] + fx * r0[x1 * C + c]) +
+              fy * ((1 - fx) * r1[x0 * C + c] + fx * r1[x1 * C + c]);
+  }
+}
+
+template <typename T, int C>
+void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst) {
+  const int bands = (dst->rows + kBandRows - 1) / kBandRows;
+  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
+    for (int band = range.start; band < range.end; ++band) {
+      const int y_lo = band * kBandRows, y_hi = std::min(dst->rows, y_lo + kBandRows);
+      // Triangles in a fixed order, each pixel from the last triangle covering it: the result
+      // does not depend on the threads.
+      for (const Triangle& t : tris) {
+        const double min_y = std::min({t.d[0].y, t.d[1].y, t.d[2].y});
+        const double max_y = std::max({t.d[0].y, t.d[1].y, t.d[2].y});
+        const int ya = std::max(y_lo, static_cast<int>(std::ceil(min_y)));
+        const int yb = std::min(y_hi - 1, static_cast<int>(std::floor(max_y)));
+        if (ya > yb) continue;
+        const double min_x = std::min({t.d[0].x, t.d[1].x, t.d[2].x});
+        const double max_x = std::max({t.d[0].x, t.d[1].x, t.d[2].x});
+        const int xa = std::max(0, static_cast<int>(std::ceil(min_x)));
+        const int xb = std::min(dst->cols - 1, static_cast<int>(std::floor(max_x)));
+        const cv::Point2d &a = t.d[0], &b = t.d[1], &c = t.d[2];
+        const double area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+        if (std::fabs(area) < 1e-12) continue;
+        const cv::Matx23d& m = t.source_from_dest;
+        const int n = t.samples;
+        for (int y = ya; y <= yb; ++y) {
+          T* row = dst->ptr<T>(y);
+          for (int x = xa; x <= xb; ++x) {
+            const double w0 = ((b.x - x) * (c.y - y) - (b.y - y) * (c.x - x)) / area;
+            const double w1 = ((c.x - x) * (a.y - y) - (c.y - y) * (a.x - x)) / area;
+            if (w0 < -1e-9 || w1 < -1e-9 || 1.0 - w0 - w1 < -1e-9) continue;
+            double acc[C] = {0};
+            for (int sy = 0; sy < n; ++sy) {
+              for (int sx = 0; sx < n; ++sx) {
+                const double px = x + (sx + 0.5) / n - 0.5, py = y + (sy + 0.5) / n - 0.5;
+                Sample<T, C>(src, m(0, 0) * px + m(0, 1) * py + m(0, 2),
+                             m(1, 0) * px + m(1, 1) * py + m(1, 2), acc);
+              }
+            }
+            for (int ch = 0; ch < C; ++ch) row[x * C + ch] = cv::saturate_cast<T>(acc[ch] / (n * n));
+          }
+        }
+      }
+    }
+  }, bands);
+}
+
+}  // namespace
+
+const char* ToString(RestoreView view) {
+  return view == RestoreView::kOrthographic ? "orthographic" : "camera";
+}
+
+bool ParseRestoreView(const std::string& text, RestoreView* view) {
+  if (text == "orthographic") {
+    *view = RestoreView::kOrthographic;
+  } else if (text == "camera") {
+    *view = RestoreView::kCamera;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+bool RestoreOptions::Check(std::string* why) const {
+  if (dpi < 0 || dpi > 4800 || margin_mm < 0 || max_supersampling < 1 || max_supersampling > 32) {
+    *why = "dpi must lie in [0, 4800] (0: native), margin_mm >= 0, max_supersampling in [1, 32]";
+    return false;
+  }
+  return true;
+}
+
+double NativeDpi(const CameraModel& camera) {
+  const cv::Point2d c(camera.matrix(0, 2), camera.matrix(1, 2));
+  const cv::Vec3d o = camera.Center();
+  auto on_table = [&](cv::Point2d p) {
+    const cv::Vec3d d = camera.RayDirection(p);
+    return o - (o[2] / d[2]) * d;
+  };
+  const double mm_per_px = 0.5 * (cv::norm(on_table(c + cv::Point2d(1, 0)) - on_table(c - cv::Point2d(1, 0))));
+  return std::max(1.0, std::round(25.4 / mm_per_px));
+}
+
+RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                      const CameraModel& camera, const RestoreOptions& options) {
+  RestoreResult result;
+  std::string why;
+  if (!options.Check(&why)) {
+    result.status = Status::Error("restore options: " + why);
+    return result;
+  }
+  if (texture.empty() || (texture.depth() != CV_8U && texture.depth() != CV_16U) ||
+      (texture.channels() != 1 && texture.channels() != 3)) {
+    result.status = Status::Error("the texture must be an 8 or 16 bit gray or colour image");
+    return result;
+  }
+  if (!mesh.status.ok() || mesh.quads.empty() || flat.size() != mesh.kind.size()) {
+    result.status = Status::Error("restore needs a built mesh and its flattened positions");
+    return result;
+  }
+  result.view = options.view;
+  // Destination pixel of every node.
+  std::vector<cv::Point2d> dest(flat.size());
+  cv::Size size;
+  if (options.view == RestoreView::kOrthographic) {
+    result.dpi = options.dpi > 0 ? options.dpi : NativeDpi(camera);
+    const double s = result.dpi / 25.4;  // Pixels per mm.
+    double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
+    for (size_t k = 0; k < flat.size(); ++k) {
+      if (!mesh.Active(static_cast<int>(k))) continue;
+      x0 = std::min(x0, flat[k].x);
+      x1 = std::max(x1, flat[k].x);
+      y0 = std::min(y0, flat[k].y);
+      y1 = std::max(y1, flat[k].y);
+    }
+    // Columns along +x, rows along -y: the camera's view from above, never mirrored.
+    const double m = options.margin_mm;
+    result.pixel_from_flat = cv::Matx23d(s, 0, s * (m - x0), 0, -s, s * (y1 + m));
+    size = cv::Size(static_cast<int>(std::ceil(s * (x1 - x0 + 2 * m))) + 1,
+                    static_cast<int>(std::ceil(s * (y1 - y0 + 2 * m))) + 1);
+    if (static_cast<double>(size.width) * size.height > 400e6) {
+      result.status = Status::Error("the restored image would exceed 400 megapixels at " +
+                                    std::to_string(result.dpi) + " dpi");
+      return result;
+    }
+    for (size_t k = 0; k < flat.size(); ++k) {
+      const cv::Matx23d& a = result.pixel_from_flat;
+      dest[k] = cv::Point2d(a(0, 0) * flat[k].x + a(0, 1) * flat[k].y + a(0, 2),
+                            a(1, 0) * flat[k].x + a(1, 1) * flat[k].y + a(1, 2));
+    }
+  } else {
+    size = camera.size;
+    for (size_t k = 0; k < flat.size(); ++k) {
+      if (mesh.Active(static_cast<int>(k))) dest[k] = camera.Project(cv::Vec3d(flat[k].x, flat[k].y, 0));
+    }
+  }
+  std::vector<Triangle> tris;
+  tris.reserve(mesh.quads.size() * 2);
+  for (const cv::Vec4i& q : mesh.quads) {
+    for (const cv::Vec3i& t : {cv::Vec3i(q[0], q[1], q[2]), cv::Vec3i(q[0], q[2], q[3])}) {
+      Triangle tri;
+      for (int c = 0; c < 3; ++c) tri.d[c] = dest[t[c]];
+      const cv::Matx22d dm(tri.d[1].x - tri.d[0].x, tri.d[2].x - tri.d[0].x,
+                           tri.d[1].y - tri.d[0].y, tri.d[2].y - tri.d[0].y);
+      const cv::Point2d s0 = mesh.pixel[t[0]], s1 = mesh.pixel[t[1]], s2 = mesh.pixel[t[2]];
+      const cv::Matx22d sm(s1.x - s0.x, s2.x - s0.x, s1.y - s0.y, s2.y - s0.y);
+      if (std::fabs(cv::determinant(dm)) < 1e-12) continue;
+      const cv::Matx22d j = sm * dm.inv();  // Source pixels per destination pixel.
+      const cv::Point2d off = s0 - cv::Point2d(j(0, 0) * tri.d[0].x + j(0, 1) * tri.d[0].y,
+                                               j(1, 0) * tri.d[0].x + j(1, 1) * tri.d[0].y);
+      tri.source_from_dest = cv::Matx23d(j(0, 0), j(0, 1), off.x, j(1, 0), j(1, 1), off.y);
+      // Largest stretch of one output pixel in the source (the Jacobian's spectral norm).
+      const cv::Matx22d jtj = j.t() * j;
+      const double tr = jtj(0, 0) + jtj(1, 1), det = cv::determinant(jtj);
+      const double footprint = std::sqrt(0.5 * (tr + std::sqrt(std::max(0.0, tr * tr - 4 * det))));
+      tri.samples = std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
+      tris.push_back(tri);
+    }
+  }
+  result.image = cv::Mat::zeros(size, texture.type());
+  switch (texture.type()) {
+    case CV_8UC1:
+      Render<uint8_t, 1>(texture, tris, &result.image);
+      break;
+    case CV_8UC3:
+      Render<uint8_t, 3>(texture, tris, &result.image);
+      break;
+    case CV_16UC1:
+      Render<uint16_t, 1>(texture, tris, &result.image);
+      break;
+    case CV_16UC3:
+      Render<uint16_t, 3>(texture, tris, &result.image);
+      break;
+  }
+  result.status = Status::Ok();
+  return result;
+}
+
+}  // namespace vellum

@@ -1,0 +1,51 @@
+// Image-space restoration (Brown & Seales 2004, section 3.10): every quad of the sheet is
+// textured from its camera image m_i to its flattened position, either reprojected through the
+// camera (3.10.1, the page as the camera would see it flat on the table) or orthographically
+// at a chosen dpi (3.10.2, true scale). Sampling is bilinear where the warp magnifies and
+// area-averaged (supersampled) where it shrinks, so stretched regions do not alias.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/common/status.h"
+#include "core/geometry/calibration.h"
+#include "core/mesh/mesh.h"
+
+namespace vellum {
+
+enum class RestoreView { kOrthographic, kCamera };
+
+const char* ToString(RestoreView view);
+bool ParseRestoreView(const std::string& text, RestoreView* view);
+
+struct RestoreOptions {
+  RestoreView view = RestoreView::kOrthographic;
+  double dpi = 0;           // Orthographic resolution, dots per inch; 0 = NativeDpi(camera).
+  double margin_mm = 3.0;   // Orthographic: border around the flattened sheet, mm.
+  int max_supersampling = 8;  // Samples per pixel side where the warp shrinks, at most.
+
+  bool Check(std::string* why) const;
+};
+
+struct RestoreResult {
+  Status status = Status::Error("restoration not run");
+  cv::Mat image;              // Same type as the texture (8 or 16 bit, gray or BGR); 0 outside.
+  RestoreView view = RestoreView::kOrthographic;
+  double dpi = 0;             // Orthographic: the resolution used.
+  cv::Matx23d pixel_from_flat = cv::Matx23d::zeros();  // Orthographic: flat mm -> pixel.
+};
+
+// The camera's sampling of the table plane at the image centre, rounded to a whole dpi (so
+// TIFF resolution tags, which OpenCV writes as integers, state it exactly).
+double NativeDpi(const CameraModel& camera);
+
+// `flat` holds the flattened (x, y) of every node, in mm, aligned to the page's original
+// position (as Flatten returns it).
+RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
+                      const std::vector<cv::Point2d>& flat, const CameraModel& camera,
+                      const RestoreOptions& options = RestoreOptions());
+
+}  // namespace vellum
