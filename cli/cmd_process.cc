@@ -3,7 +3,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -23,7 +22,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string SizeText(cv::Size s) { return std::to_string(s.width) + "x" + std::to_string(s.height); }
+std::string SizeText(cv::Size s) {
+  return std::to_string(s.width) + "x" + std::to_string(s.height);
+}
 
 // Height map as a picture: z mapped to colour over the valid points' range, invalid black.
 cv::Mat DepthPicture(const cv::Mat& points, double* zmin, double* zmax) {
@@ -53,12 +54,14 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
     after.emplace_back(static_cast<float>(flat[k].x), static_cast<float>(flat[k].y), 0.0f);
   }
   std::vector<cv::Vec4i> quads;
-  for (const cv::Vec4i& q : mesh.quads) quads.emplace_back(index[q[0]], index[q[1]], index[q[2]], index[q[3]]);
+  for (const cv::Vec4i& q : mesh.quads)
+    quads.emplace_back(index[q[0]], index[q[1]], index[q[2]], index[q[3]]);
   Status s = WriteQuadMeshPly((fs::path(dir) / "mesh.ply").string(), before, quads,
                               "vellum sheet before flattening: world frame, mm");
   if (!s.ok()) return s;
-  return WriteQuadMeshPly((fs::path(dir) / "flat.ply").string(), after, quads,
-                          "vellum sheet after flattening: page plane, mm (same vertices as mesh.ply)");
+  return WriteQuadMeshPly(
+      (fs::path(dir) / "flat.ply").string(), after, quads,
+      "vellum sheet after flattening: page plane, mm (same vertices as mesh.ply)");
 }
 
 }  // namespace
@@ -107,7 +110,8 @@ int RunProcess(const std::vector<std::string>& args) {
   if (!mesh_options.Check(&why)) throw UsageError("--grid: " + why);
   FlattenOptions flatten_options;
   if (!ParseFlattenSolver(flags.Get("solver"), &flatten_options.solver)) {
-    throw UsageError("--solver must be gauss-newton, euler or rk4, got '" + flags.Get("solver") + "'");
+    throw UsageError("--solver must be gauss-newton, euler or rk4, got '" + flags.Get("solver") +
+                     "'");
   }
   RestoreOptions restore_options;
   if (!ParseRestoreView(flags.Get("view"), &restore_options.view)) {
@@ -143,9 +147,9 @@ int RunProcess(const std::vector<std::string>& args) {
                 calib_path + " calibrates a " + SizeText(calibration.camera.size) + " camera");
   }
   if (scan.sequence.projector_size != calibration.projector.size) {
-    return fail(scan_dir + "/scan.yaml: projector_size is " + SizeText(scan.sequence.projector_size) +
-                " but " + calib_path + " calibrates a " + SizeText(calibration.projector.size) +
-                " projector");
+    return fail(scan_dir + "/scan.yaml: projector_size is " +
+                SizeText(scan.sequence.projector_size) + " but " + calib_path + " calibrates a " +
+                SizeText(calibration.projector.size) + " projector");
   }
   s = MakeDirectories(out);
   if (!s.ok()) return fail(s.message());
@@ -167,9 +171,8 @@ int RunProcess(const std::vector<std::string>& args) {
   lap("write points");
 
   const cv::Mat page = SegmentPage(scan.texture);
-  const Mesh mesh = BuildMesh(map.points, page, mesh_options, [&](const cv::Vec3d& x) {
-    return calibration.camera.Project(x);
-  });
+  const Mesh mesh = BuildMesh(map.points, page, mesh_options,
+                              [&](const cv::Vec3d& x) { return calibration.camera.Project(x); });
   if (!mesh.status.ok()) return fail(scan_dir + ": " + mesh.status.message());
   lap("mesh");
   const FlattenResult flat = Flatten(mesh, flatten_options);
@@ -184,7 +187,8 @@ int RunProcess(const std::vector<std::string>& args) {
   std::vector<int> tiff_params;
   if (restored.view == RestoreView::kOrthographic) {
     const int dpi = static_cast<int>(std::lround(restored.dpi));
-    tiff_params = {cv::IMWRITE_TIFF_RESUNIT, 2, cv::IMWRITE_TIFF_XDPI, dpi, cv::IMWRITE_TIFF_YDPI, dpi};
+    tiff_params = {cv::IMWRITE_TIFF_RESUNIT, 2,  cv::IMWRITE_TIFF_XDPI, dpi,
+                   cv::IMWRITE_TIFF_YDPI,    dpi};
   }
   const std::string tif = (fs::path(out) / "restored.tif").string();
   try {
@@ -284,14 +288,15 @@ int RunProcess(const std::vector<std::string>& args) {
   j.EndArray();
   j.EndObject();
   std::ofstream((fs::path(out) / "report.json").string()) << j.str();
-  std::printf("%d valid points; sheet %s, %s residual strain mean %.2e max %.2e; restored %dx%d"
-              "%s; results in %s\n",
-              map.valid, SizeText(mesh_options.grid).c_str(), ToString(flatten_options.solver),
-              flat.mean_strain, flat.max_strain, restored.image.cols, restored.image.rows,
-              restored.view == RestoreView::kOrthographic
-                  ? (" at " + std::to_string(static_cast<int>(restored.dpi)) + " dpi").c_str()
-                  : " (camera view)",
-              out.c_str());
+  std::printf(
+      "%d valid points; sheet %s, %s residual strain mean %.2e max %.2e; restored %dx%d"
+      "%s; results in %s\n",
+      map.valid, SizeText(mesh_options.grid).c_str(), ToString(flatten_options.solver),
+      flat.mean_strain, flat.max_strain, restored.image.cols, restored.image.rows,
+      restored.view == RestoreView::kOrthographic
+          ? (" at " + std::to_string(static_cast<int>(restored.dpi)) + " dpi").c_str()
+          : " (camera view)",
+      out.c_str());
   return 0;
 }
 

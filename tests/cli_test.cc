@@ -147,6 +147,58 @@ TEST_F(CliTest, RenderAndProcessAreByteForByteRepeatable) {
   EXPECT_EQ(a, FileBytes(fs::path(out2) / "points.ply"));
 }
 
+// XResolution (282) of a little-endian TIFF, as a rational in the first IFD.
+double TiffXResolution(const std::string& bytes) {
+  auto u16 = [&](size_t o) {
+    return static_cast<uint16_t>(uint8_t(bytes[o]) | uint8_t(bytes[o + 1]) << 8);
+  };
+  auto u32 = [&](size_t o) {
+    return static_cast<uint32_t>(u16(o)) | static_cast<uint32_t>(u16(o + 2)) << 16;
+  };
+  if (bytes.size() < 8 || bytes[0] != 'I') return -1;
+  const size_t ifd = u32(4);
+  const int entries = u16(ifd);
+  for (int e = 0; e < entries; ++e) {
+    const size_t at = ifd + 2 + 12 * e;
+    if (u16(at) == 282) {
+      const size_t off = u32(at + 8);
+      return static_cast<double>(u32(off)) / u32(off + 4);
+    }
+  }
+  return -1;
+}
+
+TEST_F(CliTest, ProcessWritesTheSheetAndARestoredPageAtItsDpi) {
+  const std::string out = (root_ / "full").string();
+  const Result r = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " +
+                             Rig() + " --out " + out + " --grid 20x16 --dpi 150");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::vector<cv::Vec3f> before, after;
+  std::vector<cv::Vec4i> q1, q2;
+  ASSERT_TRUE(ReadQuadMeshPly(out + "/mesh.ply", &before, &q1).ok());
+  ASSERT_TRUE(ReadQuadMeshPly(out + "/flat.ply", &after, &q2).ok());
+  EXPECT_EQ(before.size(), after.size());
+  EXPECT_EQ(q1, q2);
+  EXPECT_GT(q1.size(), 100u);
+  for (const cv::Vec3f& v : after) EXPECT_EQ(v[2], 0.0f);
+  EXPECT_NEAR(TiffXResolution(FileBytes(fs::path(out) / "restored.tif")), 150.0, 1e-9);
+  const cv::Mat restored = cv::imread(out + "/restored.tif", cv::IMREAD_UNCHANGED);
+  EXPECT_FALSE(restored.empty());
+  const std::string json = FileBytes(fs::path(out) / "restored.json");
+  EXPECT_NE(json.find("\"dpi\": 150"), std::string::npos) << json;
+  EXPECT_NE(json.find("pixel_from_flat_mm"), std::string::npos) << json;
+  const std::string report = FileBytes(fs::path(out) / "report.json");
+  for (const char* key :
+       {"\"mean_strain\"", "\"max_strain\"", "\"iterations\"", "\"grid\": \"20x16\""}) {
+    EXPECT_NE(report.find(key), std::string::npos) << key;
+  }
+  // Camera view: the camera's image size, no dpi.
+  const Result c = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " +
+                             Rig() + " --out " + out + "_cam --view camera");
+  ASSERT_EQ(c.exit_code, 0) << c.output;
+  EXPECT_EQ(cv::imread(out + "_cam/restored.tif", cv::IMREAD_UNCHANGED).size(), cv::Size(400, 300));
+}
+
 void ExpectCleanError(const Result& r, const std::string& file, const std::string& problem) {
   EXPECT_EQ(r.exit_code, 1) << "expected a clean failure, got: " << r.output;
   EXPECT_NE(r.output.find(file), std::string::npos) << r.output;

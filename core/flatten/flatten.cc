@@ -1,11 +1,10 @@
 #include "core/flatten/flatten.h"
 
+#include <Eigen/Sparse>
+#include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <Eigen/Sparse>
-#include <Eigen/SparseCholesky>
 
 #include "core/common/check.h"
 #include "core/geometry/rigid2d.h"
@@ -185,14 +184,15 @@ class Simulator {
     double zmin = x_.empty() ? 0 : x_[0][2];
     for (const cv::Vec3d& p : x_) zmin = std::min(zmin, p[2]);
     for (cv::Vec3d& p : x_) p[2] -= zmin;
-    for (const Spring& s : mesh.springs) springs_.push_back({idx_.var[s.a], idx_.var[s.b], s.rest_mm});
+    for (const Spring& s : mesh.springs)
+      springs_.push_back({idx_.var[s.a], idx_.var[s.b], s.rest_mm});
   }
 
   FlattenResult Run() {
     FlattenResult result;
     double dt = o_.time_step;
     double last_force = -1;
-    int step = 0, good_steps = 0;
+    int step = 0, good_steps = 0, stalled_steps = 0;
     std::vector<cv::Vec3d> x0, v0;
     for (; step < o_.max_steps; ++step) {
       if (o_.record_every > 0 && step % o_.record_every == 0) Record(&result);
@@ -227,9 +227,26 @@ class Simulator {
         moved = std::max(moved, std::hypot(x_[p][0] - x0[p][0], x_[p][1] - x0[p][1]));
       }
       const double mean_force = internal / std::max(1, n_);
-      const bool steady = last_force >= 0 && std::fabs(mean_force - last_force) < o_.force_tolerance &&
+      const bool steady = last_force >= 0 &&
+                          std::fabs(mean_force - last_force) < o_.force_tolerance &&
                           moved < o_.settle_tolerance_mm;
       last_force = mean_force;
+      // At rest but not flat: part of the sheet is held up (it folded while falling).
+      stalled_steps = (!on_plane && moved < o_.settle_tolerance_mm) ? stalled_steps + 1 : 0;
+      if (stalled_steps > 2000) {
+        double zmax = 0;
+        int up = 0;
+        for (int p = 0; p < n_; ++p) {
+          zmax = std::max(zmax, x_[p][2]);
+          up += x_[p][2] >= o_.plane_epsilon_mm;
+        }
+        result.status = Status::Error(
+            "flattening simulator: came to rest with " + std::to_string(up) + " particles up to " +
+            std::to_string(zmax) +
+            " mm above the plane (the sheet folded while falling); the gauss-newton solver "
+            "does not fold");
+        return result;
+      }
       if (on_plane && steady) {
         ++step;
         break;
@@ -261,7 +278,8 @@ class Simulator {
       const cv::Vec3d d = x[s.a] - x[s.b];
       const double len = std::max(cv::norm(d), 1e-12);
       const cv::Vec3d u = d / len;
-      const double mag = o_.stiffness * (len - s.rest) + o_.spring_damping * (v[s.a] - v[s.b]).dot(u);
+      const double mag =
+          o_.stiffness * (len - s.rest) + o_.spring_damping * (v[s.a] - v[s.b]).dot(u);
       (*acc)[s.a] -= mag * u;  // A stretched spring pulls the pair together.
       (*acc)[s.b] += mag * u;
     }
@@ -280,17 +298,24 @@ class Simulator {
 
   // Collision with the plane (x3 < epsilon): v_new = v_t - k_r v_n for particles moving into
   // it; records which particles are in contact for this step.
-  void Collide(std::vector<cv::Vec3d>* v, const std::vector<cv::Vec3d>& x) {
+  // A bounce slower than gravity gives in one step is a resting contact: the particle stays
+  // on the plane (no endless micro-bounces).
+  void Collide(std::vector<cv::Vec3d>* v, std::vector<cv::Vec3d>* x, double dt) {
     contact_.assign(n_, 0);
     for (int p = 0; p < n_; ++p) {
-      if (x[p][2] >= o_.plane_epsilon_mm) continue;
+      if ((*x)[p][2] >= o_.plane_epsilon_mm) continue;
       contact_[p] = 1;
-      if ((*v)[p][2] < 0) (*v)[p][2] *= -o_.restitution;
+      double& vz = (*v)[p][2];
+      if (vz < 0) vz *= -o_.restitution;
+      if (vz < o_.gravity * dt) {
+        vz = 0;
+        (*x)[p][2] = 0;
+      }
     }
   }
 
   double EulerStep(double dt) {
-    Collide(&v_, x_);
+    Collide(&v_, &x_, dt);
     const double internal = Forces(x_, v_, &a1_);
     for (int p = 0; p < n_; ++p) {
       v_[p] += dt * a1_[p];  // Velocity first, then position from the new velocity.
@@ -300,7 +325,7 @@ class Simulator {
   }
 
   double RungeKuttaStep(double dt) {
-    Collide(&v_, x_);
+    Collide(&v_, &x_, dt);
     const std::vector<cv::Vec3d> x = x_, v = v_;
     std::vector<cv::Vec3d> xs(n_), vs(n_);
     const double internal = Forces(x, v, &a1_);
@@ -358,7 +383,8 @@ const char* ToString(FlattenSolver solver) {
 }
 
 bool ParseFlattenSolver(const std::string& text, FlattenSolver* solver) {
-  for (FlattenSolver s : {FlattenSolver::kGaussNewton, FlattenSolver::kEuler, FlattenSolver::kRungeKutta4}) {
+  for (FlattenSolver s :
+       {FlattenSolver::kGaussNewton, FlattenSolver::kEuler, FlattenSolver::kRungeKutta4}) {
     if (text == ToString(s)) {
       *solver = s;
       return true;
@@ -374,8 +400,9 @@ bool FlattenOptions::Check(std::string* why) const {
   }
   if (!(stiffness > 0) || spring_damping < 0 || gravity < 0 || drag < 0 || !(time_step > 0) ||
       restitution < 0 || restitution > 1 || max_steps < 1 || record_every < 0) {
-    *why = "simulator constants out of range (stiffness > 0, damping/gravity/drag >= 0, "
-           "time_step > 0, restitution in [0, 1])";
+    *why =
+        "simulator constants out of range (stiffness > 0, damping/gravity/drag >= 0, "
+        "time_step > 0, restitution in [0, 1])";
     return false;
   }
   return true;

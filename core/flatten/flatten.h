@@ -9,10 +9,9 @@
 // (fold free, as the paper's 3.8 argues), by damped Gauss-Newton with a sparse Cholesky.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/common/status.h"
 #include "core/mesh/mesh.h"
@@ -28,31 +27,31 @@ struct FlattenOptions {
   FlattenSolver solver = FlattenSolver::kGaussNewton;
   // Gauss-Newton.
   int local_global_iterations = 200;  // Limit of the local/global warm-up iterations.
-  int max_iterations = 100;         // Gauss-Newton iteration limit.
-  double tolerance_mm = 1e-7;       // Stop when no node moves more than this, mm.
+  int max_iterations = 100;           // Gauss-Newton iteration limit.
+  double tolerance_mm = 1e-7;         // Stop when no node moves more than this, mm.
   // Simulator (units: mm, unit mass, time in simulation units).
-  double stiffness = 400.0;         // Spring constant k_s, per unit mass.
-  double spring_damping = 2.0;      // Spring damper k_d.
-  double gravity = 200.0;           // Global downward acceleration, mm / unit^2.
-  double drag = 4.0;                // Viscous drag mu_d (f = -mu_d v).
-  double restitution = 0.1;         // k_r: v_new = v_t - k_r v_n at the plane.
-  double time_step = 0.01;          // Initial time step; halved when a step penetrates.
-  double plane_epsilon_mm = 1e-3;   // A particle with z < epsilon is on the plane.
-  double force_tolerance = 1e-6;    // Steady state: mean |F_int| change per step below this.
+  double stiffness = 400.0;           // Spring constant k_s, per unit mass.
+  double spring_damping = 2.0;        // Spring damper k_d.
+  double gravity = 200.0;             // Global downward acceleration, mm / unit^2.
+  double drag = 4.0;                  // Viscous drag mu_d (f = -mu_d v).
+  double restitution = 0.1;           // k_r: v_new = v_t - k_r v_n at the plane.
+  double time_step = 0.01;            // Initial time step; halved when a step penetrates.
+  double plane_epsilon_mm = 1e-3;     // A particle with z < epsilon is on the plane.
+  double force_tolerance = 1e-6;      // Steady state: mean |F_int| change per step below this.
   double settle_tolerance_mm = 1e-5;  // ... and no particle moving more than this per step.
-  int max_steps = 200000;           // Step limit.
-  int record_every = 0;             // Record positions every k steps (0: no trajectory).
+  int max_steps = 200000;             // Step limit.
+  int record_every = 0;               // Record positions every k steps (0: no trajectory).
 
   bool Check(std::string* why) const;
 };
 
 struct FlattenResult {
   Status status = Status::Error("flattening not run");
-  std::vector<cv::Point2d> flat;   // Flattened (x, y) per node, mm; (0, 0) for inactive nodes.
-  int iterations = 0;              // Gauss-Newton iterations or simulator steps.
-  double mean_strain = 0;          // Mean |length / rest - 1| over springs.
-  double max_strain = 0;           // Max of the same.
-  int folded_quads = 0;            // Quads whose orientation flipped (a fold-over).
+  std::vector<cv::Point2d> flat;  // Flattened (x, y) per node, mm; (0, 0) for inactive nodes.
+  int iterations = 0;             // Gauss-Newton iterations or simulator steps.
+  double mean_strain = 0;         // Mean |length / rest - 1| over springs.
+  double max_strain = 0;          // Max of the same.
+  int folded_quads = 0;           // Quads whose orientation flipped (a fold-over).
   std::vector<std::vector<cv::Vec3d>> trajectory;  // Simulator: recorded positions.
 };
 

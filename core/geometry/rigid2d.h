@@ -1,15 +1,14 @@
 // Least-squares rigid motion in the plane (rotation and translation: no scale, no reflection).
 #pragma once
 
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 namespace vellum {
 
 struct Rigid2D {
-  double angle = 0;           // Rotation, radians.
-  cv::Point2d translation;    // Applied after the rotation.
+  double angle = 0;         // Rotation, radians.
+  cv::Point2d translation;  // Applied after the rotation.
 
   cv::Point2d Apply(const cv::Point2d& p) const {
     const double c = std::cos(angle), s = std::sin(angle);
@@ -18,7 +17,8 @@ struct Rigid2D {
 };
 
 // The rigid motion taking `from` onto `to` (same length, >= 1 point) in least squares.
-inline Rigid2D FitRigid2D(const std::vector<cv::Point2d>& from, const std::vector<cv::Point2d>& to) {
+inline Rigid2D FitRigid2D(const std::vector<cv::Point2d>& from,
+                          const std::vector<cv::Point2d>& to) {
   cv::Point2d cf(0, 0), ct(0, 0);
   for (size_t k = 0; k < from.size(); ++k) {
     cf += from[k];

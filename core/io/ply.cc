@@ -115,7 +115,8 @@ Status ReadQuadMeshPly(const std::string& path, std::vector<cv::Vec3f>* vertices
   }
   if (nv < 0 || nf < 0) return Status::Error(path + ": expected vertex and face elements");
   vertices->resize(static_cast<size_t>(nv));
-  f.read(reinterpret_cast<char*>(vertices->data()), static_cast<std::streamsize>(nv * sizeof(cv::Vec3f)));
+  f.read(reinterpret_cast<char*>(vertices->data()),
+         static_cast<std::streamsize>(nv * sizeof(cv::Vec3f)));
   quads->resize(static_cast<size_t>(nf));
   for (long k = 0; k < nf; ++k) {
     uint8_t count = 0;

@@ -228,10 +228,10 @@ Status ReadScan(const std::string& dir, Scan* scan) {
       errors[k] = ReadImageFile(path, &img);
       if (!errors[k].ok()) continue;
       if (img.size() != expected) {
-        errors[k] = Status::Error(path + ": image is " + std::to_string(img.cols) + "x" +
-                                  std::to_string(img.rows) + " but " + expected_from + " says " +
-                                  std::to_string(expected.width) + "x" +
-                                  std::to_string(expected.height));
+        errors[k] =
+            Status::Error(path + ": image is " + std::to_string(img.cols) + "x" +
+                          std::to_string(img.rows) + " but " + expected_from + " says " +
+                          std::to_string(expected.width) + "x" + std::to_string(expected.height));
         continue;
       }
       if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);

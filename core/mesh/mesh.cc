@@ -1,9 +1,8 @@
 #include "core/mesh/mesh.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-
-#include <Eigen/Dense>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -93,7 +92,8 @@ cv::Mat SegmentPage(const cv::Mat& texture, double fraction) {
   cv::morphologyEx(mask, mask, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_RECT, {3, 3}));
   // Bridge what ink splits (text lines, checkerboard squares meeting at corners).
   const int k = std::max(3, (std::min(mask.cols, mask.rows) / 100) | 1);
-  cv::morphologyEx(mask, mask, cv::MORPH_CLOSE, cv::getStructuringElement(cv::MORPH_ELLIPSE, {k, k}));
+  cv::morphologyEx(mask, mask, cv::MORPH_CLOSE,
+                   cv::getStructuringElement(cv::MORPH_ELLIPSE, {k, k}));
   // Largest region, holes (ink inside the page) filled.
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
@@ -116,8 +116,9 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     return mesh;
   }
   if (points.type() != CV_32FC3 || page_mask.type() != CV_8U || points.size() != page_mask.size()) {
-    mesh.status = Status::Error("mesh input: the point map must be CV_32FC3 and the page mask "
-                                "CV_8U of the same size");
+    mesh.status = Status::Error(
+        "mesh input: the point map must be CV_32FC3 and the page mask "
+        "CV_8U of the same size");
     return mesh;
   }
   const cv::Rect box = cv::boundingRect(page_mask);
@@ -156,7 +157,8 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
       }
     }
   });
-  mesh.measured = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
+  mesh.measured =
+      static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
   if (mesh.measured == 0) {
     mesh.status = Status::Error("no valid 3D points on the page: nothing to flatten");
     return mesh;

@@ -4,30 +4,29 @@
 #pragma once
 
 #include <functional>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/common/status.h"
 
 namespace vellum {
 
 struct MeshOptions {
-  cv::Size grid{45, 45};       // Nodes across and down (each >= 2, up to 1000).
-  int min_points = 12;         // Valid page points a node's local fit needs.
-  double fit_window = 0.6;     // Node fit window half-size, in grid cells (>= 2 px).
-  int skirt_rings = 1;         // Rings of extrapolated nodes around the page (covers its edge).
-  bool bend_springs = false;   // Also springs two nodes apart (bending resistance).
+  cv::Size grid{45, 45};      // Nodes across and down (each >= 2, up to 1000).
+  int min_points = 12;        // Valid page points a node's local fit needs.
+  double fit_window = 0.6;    // Node fit window half-size, in grid cells (>= 2 px).
+  int skirt_rings = 1;        // Rings of extrapolated nodes around the page (covers its edge).
+  bool bend_springs = false;  // Also springs two nodes apart (bending resistance).
 
   bool Check(std::string* why) const;
 };
 
 enum class NodeKind : uint8_t {
-  kOff = 0,     // Not part of the sheet.
-  kMeasured,    // Fitted from the page's points around it.
-  kFilled,      // A page node in a hole of the data (ink, shadow): interpolated.
-  kSkirt,       // Just outside the page: the page surface extrapolated, so edge quads exist.
+  kOff = 0,   // Not part of the sheet.
+  kMeasured,  // Fitted from the page's points around it.
+  kFilled,    // A page node in a hole of the data (ink, shadow): interpolated.
+  kSkirt,     // Just outside the page: the page surface extrapolated, so edge quads exist.
 };
 
 enum class SpringKind : uint8_t { kStructural, kShear, kBend };
@@ -40,12 +39,12 @@ struct Spring {
 
 struct Mesh {
   Status status = Status::Error("mesh not built");
-  int cols = 0, rows = 0;                 // Grid size; node (i, j) has index j * cols + i.
-  std::vector<NodeKind> kind;             // Per node.
-  std::vector<cv::Point2d> pixel;         // Camera pixel of the node (its point's projection).
-  std::vector<cv::Vec3d> point;           // 3D position, world frame, mm.
-  std::vector<Spring> springs;            // Between active nodes.
-  std::vector<cv::Vec4i> quads;           // Active quads, node indices (i,j) (i+1,j) (i+1,j+1) (i,j+1).
+  int cols = 0, rows = 0;          // Grid size; node (i, j) has index j * cols + i.
+  std::vector<NodeKind> kind;      // Per node.
+  std::vector<cv::Point2d> pixel;  // Camera pixel of the node (its point's projection).
+  std::vector<cv::Vec3d> point;    // 3D position, world frame, mm.
+  std::vector<Spring> springs;     // Between active nodes.
+  std::vector<cv::Vec4i> quads;    // Active quads, node indices (i,j) (i+1,j) (i+1,j+1) (i,j+1).
   int measured = 0, filled = 0, skirt = 0;
 
   int Index(int i, int j) const { return j * cols + i; }

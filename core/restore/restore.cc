@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-
 #include <opencv2/core/utility.hpp>
 
 namespace vellum {
@@ -14,7 +13,7 @@ constexpr int kBandRows = 32;  // Output rows per parallel band.
 struct Triangle {
   cv::Point2d d[3];  // Destination (output) pixels.
   cv::Matx23d source_from_dest;
-  int samples = 1;   // Supersampling per pixel side (footprint of one output pixel).
+  int samples = 1;  // Supersampling per pixel side (footprint of one output pixel).
 };
 
 template <typename T, int C>
@@ -37,46 +36,50 @@ void Sample(const cv::Mat& src, double x, double y, double* out) {
 template <typename T, int C>
 void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst) {
   const int bands = (dst->rows + kBandRows - 1) / kBandRows;
-  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
-    for (int band = range.start; band < range.end; ++band) {
-      const int y_lo = band * kBandRows, y_hi = std::min(dst->rows, y_lo + kBandRows);
-      // Triangles in a fixed order, each pixel from the last triangle covering it: the result
-      // does not depend on the threads.
-      for (const Triangle& t : tris) {
-        const double min_y = std::min({t.d[0].y, t.d[1].y, t.d[2].y});
-        const double max_y = std::max({t.d[0].y, t.d[1].y, t.d[2].y});
-        const int ya = std::max(y_lo, static_cast<int>(std::ceil(min_y)));
-        const int yb = std::min(y_hi - 1, static_cast<int>(std::floor(max_y)));
-        if (ya > yb) continue;
-        const double min_x = std::min({t.d[0].x, t.d[1].x, t.d[2].x});
-        const double max_x = std::max({t.d[0].x, t.d[1].x, t.d[2].x});
-        const int xa = std::max(0, static_cast<int>(std::ceil(min_x)));
-        const int xb = std::min(dst->cols - 1, static_cast<int>(std::floor(max_x)));
-        const cv::Point2d &a = t.d[0], &b = t.d[1], &c = t.d[2];
-        const double area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-        if (std::fabs(area) < 1e-12) continue;
-        const cv::Matx23d& m = t.source_from_dest;
-        const int n = t.samples;
-        for (int y = ya; y <= yb; ++y) {
-          T* row = dst->ptr<T>(y);
-          for (int x = xa; x <= xb; ++x) {
-            const double w0 = ((b.x - x) * (c.y - y) - (b.y - y) * (c.x - x)) / area;
-            const double w1 = ((c.x - x) * (a.y - y) - (c.y - y) * (a.x - x)) / area;
-            if (w0 < -1e-9 || w1 < -1e-9 || 1.0 - w0 - w1 < -1e-9) continue;
-            double acc[C] = {0};
-            for (int sy = 0; sy < n; ++sy) {
-              for (int sx = 0; sx < n; ++sx) {
-                const double px = x + (sx + 0.5) / n - 0.5, py = y + (sy + 0.5) / n - 0.5;
-                Sample<T, C>(src, m(0, 0) * px + m(0, 1) * py + m(0, 2),
-                             m(1, 0) * px + m(1, 1) * py + m(1, 2), acc);
+  cv::parallel_for_(
+      cv::Range(0, bands),
+      [&](const cv::Range& range) {
+        for (int band = range.start; band < range.end; ++band) {
+          const int y_lo = band * kBandRows, y_hi = std::min(dst->rows, y_lo + kBandRows);
+          // Triangles in a fixed order, each pixel from the last triangle covering it: the result
+          // does not depend on the threads.
+          for (const Triangle& t : tris) {
+            const double min_y = std::min({t.d[0].y, t.d[1].y, t.d[2].y});
+            const double max_y = std::max({t.d[0].y, t.d[1].y, t.d[2].y});
+            const int ya = std::max(y_lo, static_cast<int>(std::ceil(min_y)));
+            const int yb = std::min(y_hi - 1, static_cast<int>(std::floor(max_y)));
+            if (ya > yb) continue;
+            const double min_x = std::min({t.d[0].x, t.d[1].x, t.d[2].x});
+            const double max_x = std::max({t.d[0].x, t.d[1].x, t.d[2].x});
+            const int xa = std::max(0, static_cast<int>(std::ceil(min_x)));
+            const int xb = std::min(dst->cols - 1, static_cast<int>(std::floor(max_x)));
+            const cv::Point2d &a = t.d[0], &b = t.d[1], &c = t.d[2];
+            const double area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+            if (std::fabs(area) < 1e-12) continue;
+            const cv::Matx23d& m = t.source_from_dest;
+            const int n = t.samples;
+            for (int y = ya; y <= yb; ++y) {
+              T* row = dst->ptr<T>(y);
+              for (int x = xa; x <= xb; ++x) {
+                const double w0 = ((b.x - x) * (c.y - y) - (b.y - y) * (c.x - x)) / area;
+                const double w1 = ((c.x - x) * (a.y - y) - (c.y - y) * (a.x - x)) / area;
+                if (w0 < -1e-9 || w1 < -1e-9 || 1.0 - w0 - w1 < -1e-9) continue;
+                double acc[C] = {0};
+                for (int sy = 0; sy < n; ++sy) {
+                  for (int sx = 0; sx < n; ++sx) {
+                    const double px = x + (sx + 0.5) / n - 0.5, py = y + (sy + 0.5) / n - 0.5;
+                    Sample<T, C>(src, m(0, 0) * px + m(0, 1) * py + m(0, 2),
+                                 m(1, 0) * px + m(1, 1) * py + m(1, 2), acc);
+                  }
+                }
+                for (int ch = 0; ch < C; ++ch)
+                  row[x * C + ch] = cv::saturate_cast<T>(acc[ch] / (n * n));
               }
             }
-            for (int ch = 0; ch < C; ++ch) row[x * C + ch] = cv::saturate_cast<T>(acc[ch] / (n * n));
           }
         }
-      }
-    }
-  }, bands);
+      },
+      bands);
 }
 
 }  // namespace
@@ -111,12 +114,14 @@ double NativeDpi(const CameraModel& camera) {
     const cv::Vec3d d = camera.RayDirection(p);
     return o - (o[2] / d[2]) * d;
   };
-  const double mm_per_px = 0.5 * (cv::norm(on_table(c + cv::Point2d(1, 0)) - on_table(c - cv::Point2d(1, 0))));
+  const double mm_per_px =
+      0.5 * (cv::norm(on_table(c + cv::Point2d(1, 0)) - on_table(c - cv::Point2d(1, 0))));
   return std::max(1.0, std::round(25.4 / mm_per_px));
 }
 
-RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                      const CameraModel& camera, const RestoreOptions& options) {
+RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
+                      const std::vector<cv::Point2d>& flat, const CameraModel& camera,
+                      const RestoreOptions& options) {
   RestoreResult result;
   std::string why;
   if (!options.Check(&why)) {
@@ -165,7 +170,8 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh, const std::vecto
   } else {
     size = camera.size;
     for (size_t k = 0; k < flat.size(); ++k) {
-      if (mesh.Active(static_cast<int>(k))) dest[k] = camera.Project(cv::Vec3d(flat[k].x, flat[k].y, 0));
+      if (mesh.Active(static_cast<int>(k)))
+        dest[k] = camera.Project(cv::Vec3d(flat[k].x, flat[k].y, 0));
     }
   }
   std::vector<Triangle> tris;
@@ -187,7 +193,8 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh, const std::vecto
       const cv::Matx22d jtj = j.t() * j;
       const double tr = jtj(0, 0) + jtj(1, 1), det = cv::determinant(jtj);
       const double footprint = std::sqrt(0.5 * (tr + std::sqrt(std::max(0.0, tr * tr - 4 * det))));
-      tri.samples = std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
+      tri.samples =
+          std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
       tris.push_back(tri);
     }
   }

@@ -5,10 +5,9 @@
 // area-averaged (supersampled) where it shrinks, so stretched regions do not alias.
 #pragma once
 
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
-
-#include <opencv2/core.hpp>
 
 #include "core/common/status.h"
 #include "core/geometry/calibration.h"
@@ -23,8 +22,8 @@ bool ParseRestoreView(const std::string& text, RestoreView* view);
 
 struct RestoreOptions {
   RestoreView view = RestoreView::kOrthographic;
-  double dpi = 0;           // Orthographic resolution, dots per inch; 0 = NativeDpi(camera).
-  double margin_mm = 3.0;   // Orthographic: border around the flattened sheet, mm.
+  double dpi = 0;             // Orthographic resolution, dots per inch; 0 = NativeDpi(camera).
+  double margin_mm = 3.0;     // Orthographic: border around the flattened sheet, mm.
   int max_supersampling = 8;  // Samples per pixel side where the warp shrinks, at most.
 
   bool Check(std::string* why) const;
@@ -32,9 +31,9 @@ struct RestoreOptions {
 
 struct RestoreResult {
   Status status = Status::Error("restoration not run");
-  cv::Mat image;              // Same type as the texture (8 or 16 bit, gray or BGR); 0 outside.
+  cv::Mat image;  // Same type as the texture (8 or 16 bit, gray or BGR); 0 outside.
   RestoreView view = RestoreView::kOrthographic;
-  double dpi = 0;             // Orthographic: the resolution used.
+  double dpi = 0;                                      // Orthographic: the resolution used.
   cv::Matx23d pixel_from_flat = cv::Matx23d::zeros();  // Orthographic: flat mm -> pixel.
 };
 

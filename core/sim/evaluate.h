@@ -22,10 +22,10 @@ struct PointErrorStats {
 PointErrorStats ComparePoints(const GroundTruth& truth, const cv::Mat& points);
 
 struct FlatErrorStats {
-  int nodes = 0;                 // Sheet nodes on the page (measured or filled) compared.
-  double rms_mm = 0, max_mm = 0; // Flat node vs true page coordinate, after a rigid fit.
-  double mean_edge_error = 0;    // Mean |flat edge / true geodesic length - 1| over springs.
-  bool mirrored = false;         // A reflection fits better than the rigid motion.
+  int nodes = 0;                  // Sheet nodes on the page (measured or filled) compared.
+  double rms_mm = 0, max_mm = 0;  // Flat node vs true page coordinate, after a rigid fit.
+  double mean_edge_error = 0;     // Mean |flat edge / true geodesic length - 1| over springs.
+  bool mirrored = false;          // A reflection fits better than the rigid motion.
 };
 
 // Compares a flattened sheet with the true flat page: each page node's true page coordinate

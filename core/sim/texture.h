@@ -14,12 +14,12 @@ bool ParseTextureKind(const std::string& text, TextureKind* kind);
 
 struct TextureOptions {
   TextureKind kind = TextureKind::kCheckerboard;
-  double paper_albedo = 0.85;             // Reflectance of bare paper, 0..1.
-  double ink_albedo = 0.08;               // Reflectance of ink, 0..1.
-  double square_mm = 10.0;                // kCheckerboard: square side, mm.
+  double paper_albedo = 0.85;  // Reflectance of bare paper, 0..1.
+  double ink_albedo = 0.08;    // Reflectance of ink, 0..1.
+  double square_mm = 10.0;     // kCheckerboard: square side, mm.
   double margin_mm = 10.0;     // kCheckerboard: bare paper around the board, mm.
-  uint64_t seed = 1;                      // kText: seed of the generated text.
-  cv::Mat image;  // kImage: 8-bit gray or BGR image covering the whole page.
+  uint64_t seed = 1;           // kText: seed of the generated text.
+  cv::Mat image;               // kImage: 8-bit gray or BGR image covering the whole page.
 };
 
 class PageTexture {
