@@ -194,7 +194,7 @@ TEST_F(CliTest, ProcessWritesTheSheetAndARestoredPageAtItsDpi) {
   }
   // Camera view: the camera's image size, no dpi.
   const Result c = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " +
-                             Rig() + " --out " + out + "_cam --view camera");
+                             Rig() + " --out " + out + "_cam --view camera --solver euler");
   ASSERT_EQ(c.exit_code, 0) << c.output;
   EXPECT_EQ(cv::imread(out + "_cam/restored.tif", cv::IMREAD_UNCHANGED).size(), cv::Size(400, 300));
 }

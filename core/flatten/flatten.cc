@@ -92,7 +92,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       for (const Spring& s : mesh.springs) {
         const int a = idx.var[s.a], b = idx.var[s.b];
         const double dx = px[a] - px[b], dy = py[a] - py[b];
-        const double len = std::max(std::hypot(dx, dy), 1e-12);
+        const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
         const double fx = s.rest_mm * dx / len, fy = s.rest_mm * dy / len;
         bx[a] += fx;
         bx[b] -= fx;
@@ -158,7 +158,10 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     e = e_next;
     lambda = std::max(1e-9, lambda * 0.1);
     double step = 0;
-    for (int v = 0; v < n; ++v) step = std::max(step, std::hypot(delta[2 * v], delta[2 * v + 1]));
+    for (int v = 0; v < n; ++v) {
+      step = std::max(step, delta[2 * v] * delta[2 * v] + delta[2 * v + 1] * delta[2 * v + 1]);
+    }
+    step = std::sqrt(step);
     if (step < options.tolerance_mm) {
       ++it;
       break;
@@ -224,8 +227,10 @@ class Simulator {
       for (int p = 0; p < n_; ++p) {
         on_plane &= x_[p][2] < o_.plane_epsilon_mm;
         // In-plane motion: contact chatter in z (restitution bounces) is not "moving".
-        moved = std::max(moved, std::hypot(x_[p][0] - x0[p][0], x_[p][1] - x0[p][1]));
+        const double mx = x_[p][0] - x0[p][0], my = x_[p][1] - x0[p][1];
+        moved = std::max(moved, mx * mx + my * my);  // Squared; root taken once below.
       }
+      moved = std::sqrt(moved);
       const double mean_force = internal / std::max(1, n_);
       const bool steady = last_force >= 0 &&
                           std::fabs(mean_force - last_force) < o_.force_tolerance &&
@@ -274,14 +279,27 @@ class Simulator {
   double Forces(const std::vector<cv::Vec3d>& x, const std::vector<cv::Vec3d>& v,
                 std::vector<cv::Vec3d>* acc) {
     acc->assign(n_, cv::Vec3d(0, 0, 0));
+    // The hot loop of the simulator: plain doubles, one square root per spring.
+    const double ks = o_.stiffness, kd = o_.spring_damping;
+    const double* xp = x[0].val;
+    const double* vp = v[0].val;
+    double* ap = (*acc)[0].val;
     for (const S& s : springs_) {
-      const cv::Vec3d d = x[s.a] - x[s.b];
-      const double len = std::max(cv::norm(d), 1e-12);
-      const cv::Vec3d u = d / len;
-      const double mag =
-          o_.stiffness * (len - s.rest) + o_.spring_damping * (v[s.a] - v[s.b]).dot(u);
-      (*acc)[s.a] -= mag * u;  // A stretched spring pulls the pair together.
-      (*acc)[s.b] += mag * u;
+      const int a = 3 * s.a, b = 3 * s.b;
+      const double dx = xp[a] - xp[b], dy = xp[a + 1] - xp[b + 1], dz = xp[a + 2] - xp[b + 2];
+      const double len = std::max(std::sqrt(dx * dx + dy * dy + dz * dz), 1e-12);
+      const double inv = 1.0 / len;
+      const double ux = dx * inv, uy = dy * inv, uz = dz * inv;
+      const double closing =
+          (vp[a] - vp[b]) * ux + (vp[a + 1] - vp[b + 1]) * uy + (vp[a + 2] - vp[b + 2]) * uz;
+      const double mag = ks * (len - s.rest) + kd * closing;
+      // A stretched spring pulls the pair together.
+      ap[a] -= mag * ux;
+      ap[a + 1] -= mag * uy;
+      ap[a + 2] -= mag * uz;
+      ap[b] += mag * ux;
+      ap[b + 1] += mag * uy;
+      ap[b + 2] += mag * uz;
     }
     double internal = 0;
     for (int p = 0; p < n_; ++p) {

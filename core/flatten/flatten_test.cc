@@ -73,12 +73,12 @@ TEST(Flatten, GaussNewtonUnrollsACurl) {
   EXPECT_LE(r.iterations, 20);
 }
 
-// The paper's simulator, with either integrator, reaches the state the fast solver reaches.
-// (A curl of 38 degrees at this coarse 7 mm spacing; a steeper, coarser curl can fold under
-// the simulator's fall, which the fast solver, starting from the height map, never does.)
+// The paper's simulator, with either integrator, reaches the state the fast solver reaches
+// (here a 57 degree curl on a coarse 7 mm grid; at 72 degrees this coarse sheet folds while
+// falling, as the paper warns a mass-spring sheet can, and the simulator then says so).
 TEST(Flatten, SimulatorAgreesWithGaussNewton) {
   std::vector<cv::Point2d> truth;
-  const Mesh m = CurledSheet(15, 12, 75.0, &truth);
+  const Mesh m = CurledSheet(15, 12, 50.0, &truth);
   const FlattenResult gn = Flatten(m);
   for (FlattenSolver solver : {FlattenSolver::kEuler, FlattenSolver::kRungeKutta4}) {
     FlattenOptions o;
@@ -93,7 +93,7 @@ TEST(Flatten, SimulatorAgreesWithGaussNewton) {
     double z_first = 0, z_last = 0;
     for (const cv::Vec3d& p : sim.trajectory.front()) z_first = std::max(z_first, p[2]);
     for (const cv::Vec3d& p : sim.trajectory.back()) z_last = std::max(z_last, p[2]);
-    EXPECT_GT(z_first, 10.0);
+    EXPECT_GT(z_first, 20.0);
     EXPECT_LT(z_last, o.plane_epsilon_mm);
   }
 }
