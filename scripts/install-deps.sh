@@ -8,6 +8,7 @@ packages=(
   liblcm-dev liblcm-bin liblcm-java
   libv4l-dev libsdl2-dev
   googletest libgtest-dev libgmock-dev libbenchmark-dev
+  libcgal-dev
 )
 missing=()
 for p in "${packages[@]}"; do

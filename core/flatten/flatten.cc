@@ -110,20 +110,57 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       e_prev = e_now;
     }
   }
-  // J^T J has a fixed pattern: analyse it once, factor it per iteration. A tiny diagonal
+  // J^T J has a fixed pattern: build it and analyse it once; each iteration only refills its
+  // values (through precomputed slots, lower triangle) and refactors. A tiny diagonal
   // (Levenberg) term removes the rigid-motion null space without moving the minimum.
-  std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(mesh.springs.size() * 16 + 2 * n);
   Eigen::SparseMatrix<double> jtj(2 * n, 2 * n);
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
-  bool analysed = false;
+  std::vector<int> slots(mesh.springs.size() * 16, -1), diagonal(2 * n);
+  {
+    std::vector<Eigen::Triplet<double>> pattern;
+    pattern.reserve(mesh.springs.size() * 10 + 2 * n);
+    for (const Spring& s : mesh.springs) {
+      const int a = idx.var[s.a], b = idx.var[s.b];
+      const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
+      for (int p = 0; p < 4; ++p) {
+        for (int q = 0; q < 4; ++q) {
+          if (col[p] >= col[q]) pattern.emplace_back(col[p], col[q], 1.0);
+        }
+      }
+    }
+    for (int v = 0; v < 2 * n; ++v) pattern.emplace_back(v, v, 1.0);
+    jtj.setFromTriplets(pattern.begin(), pattern.end());
+    jtj.makeCompressed();
+    for (size_t k = 0; k < mesh.springs.size(); ++k) {
+      const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
+      const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
+      for (int p = 0; p < 4; ++p) {
+        for (int q = 0; q < 4; ++q) {
+          if (col[p] >= col[q]) {
+            slots[16 * k + 4 * p + q] =
+                static_cast<int>(&jtj.coeffRef(col[p], col[q]) - jtj.valuePtr());
+          }
+        }
+      }
+    }
+    for (int v = 0; v < 2 * n; ++v)
+      diagonal[v] = static_cast<int>(&jtj.coeffRef(v, v) - jtj.valuePtr());
+  }
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> solver;
+  solver.analyzePattern(jtj);
+  // Gauss-Newton with the factorisation reused while it keeps converging fast (a chord
+  // method): near the solution J barely changes, a refactorisation costs 10-20 solves.
   double lambda = 1e-6;
   double e = energy(x);
   int it = 0;
+  bool refactor = true, fresh = false;
+  double last_step = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd g(2 * n);
   for (; it < options.max_iterations; ++it) {
-    triplets.clear();
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(2 * n);
-    for (const Spring& s : mesh.springs) {
+    g.setZero();
+    double* values = jtj.valuePtr();
+    if (refactor) std::fill(values, values + jtj.nonZeros(), 0.0);
+    for (size_t k = 0; k < mesh.springs.size(); ++k) {
+      const Spring& s = mesh.springs[k];
       const int a = idx.var[s.a], b = idx.var[s.b];
       const double dx = x[2 * a] - x[2 * b], dy = x[2 * a + 1] - x[2 * b + 1];
       const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
@@ -132,31 +169,35 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
       for (int p = 0; p < 4; ++p) {
         g[col[p]] += jv[p] * r;
-        for (int q = 0; q < 4; ++q) triplets.emplace_back(col[p], col[q], jv[p] * jv[q]);
+        if (!refactor) continue;
+        for (int q = 0; q < 4; ++q) {
+          const int slot = slots[16 * k + 4 * p + q];
+          if (slot >= 0) values[slot] += jv[p] * jv[q];
+        }
       }
     }
-    for (int v = 0; v < 2 * n; ++v) triplets.emplace_back(v, v, lambda);
-    jtj.setFromTriplets(triplets.begin(), triplets.end());
-    if (!analysed) {
-      solver.analyzePattern(jtj);
-      analysed = true;
-    }
-    solver.factorize(jtj);
-    if (solver.info() != Eigen::Success) {
-      result.status = Status::Error("flattening: the sheet's normal equations are singular");
-      return result;
+    if (refactor) {
+      for (int v = 0; v < 2 * n; ++v) values[diagonal[v]] += lambda;
+      solver.factorize(jtj);
+      if (solver.info() != Eigen::Success) {
+        result.status = Status::Error("flattening: the sheet's normal equations are singular");
+        return result;
+      }
+      refactor = false;
+      fresh = true;
     }
     const Eigen::VectorXd delta = -solver.solve(g);
     const Eigen::VectorXd next = x + delta;
     const double e_next = energy(next);
     if (!(e_next <= e) && e > 1e-24) {
-      lambda *= 10;  // Levenberg: a smaller step.
+      // No descent: refactor at the current point, more damped if the factor was fresh.
+      if (fresh) lambda *= 10;
       if (lambda > 1e6) break;
+      refactor = true;
       continue;
     }
     x = next;
     e = e_next;
-    lambda = std::max(1e-9, lambda * 0.1);
     double step = 0;
     for (int v = 0; v < n; ++v) {
       step = std::max(step, delta[2 * v] * delta[2 * v] + delta[2 * v + 1] * delta[2 * v + 1]);
@@ -166,6 +207,13 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       ++it;
       break;
     }
+    // Slow contraction: the factor is stale; refactor (and relax the damping).
+    if (step > 0.25 * last_step) {
+      refactor = true;
+      lambda = std::max(1e-9, lambda * 0.1);
+    }
+    fresh = false;
+    last_step = step;
   }
   result.flat.assign(mesh.kind.size(), cv::Point2d(0, 0));
   for (int v = 0; v < n; ++v) result.flat[idx.node[v]] = cv::Point2d(x[2 * v], x[2 * v + 1]);

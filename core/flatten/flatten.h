@@ -26,9 +26,9 @@ bool ParseFlattenSolver(const std::string& text, FlattenSolver* solver);
 struct FlattenOptions {
   FlattenSolver solver = FlattenSolver::kGaussNewton;
   // Gauss-Newton.
-  int local_global_iterations = 200;  // Limit of the local/global warm-up iterations.
-  int max_iterations = 100;           // Gauss-Newton iteration limit.
-  double tolerance_mm = 1e-7;         // Stop when no node moves more than this, mm.
+  int local_global_iterations = 20;  // Limit of the local/global warm-up iterations.
+  int max_iterations = 100;          // Gauss-Newton iteration limit.
+  double tolerance_mm = 1e-7;        // Stop when no node moves more than this, mm.
   // Simulator (units: mm, unit mass, time in simulation units). Gravity must be strong enough
   // to crush the small tents a falling curl can form (at 200 a 67 degree curl could stall);
   // drag keeps the fall at ~100 mm per unit, 0.5 mm per step.

@@ -134,8 +134,9 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
   mesh.point.assign(n, cv::Vec3d(0, 0, 0));
   mesh.pixel.assign(n, cv::Point2d(0, 0));
   const double step_u = (box.width - 1.0) / (g - 1), step_v = (box.height - 1.0) / (h - 1);
-  const int hu = std::max(2, static_cast<int>(std::lround(options.fit_window * step_u)));
-  const int hv = std::max(2, static_cast<int>(std::lround(options.fit_window * step_v)));
+  // Windows never shrink below 13 x 13 pixels, so fine grids keep smooth, well-averaged nodes.
+  const int hu = std::max(6, static_cast<int>(std::lround(options.fit_window * step_u)));
+  const int hv = std::max(6, static_cast<int>(std::lround(options.fit_window * step_v)));
   std::vector<cv::Point2d> grid_px(n);
   std::vector<uint8_t> on_page(n, 0);
   for (int j = 0; j < h; ++j) {

@@ -1,0 +1,163 @@
+// Flattening and restoration of one measured page (default rig, curled checkerboard page,
+// 45 x 45 sheet), beside CGAL's ARAP parameterisation of the same sheet (the peer) in one run.
+//
+//   ./build/bench/flatten_bench
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <map>
+#include <memory>
+
+#include "core/decode/decode.h"
+#include "core/flatten/flatten.h"
+#include "core/geometry/triangulate.h"
+#include "core/restore/restore.h"
+#include "core/sim/evaluate.h"
+
+#ifdef VELLUM_WITH_CGAL
+#include <CGAL/Polygon_mesh_processing/measure.h>
+#include <CGAL/Simple_cartesian.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_parameterization/ARAP_parameterizer_3.h>
+#include <CGAL/Surface_mesh_parameterization/parameterize.h>
+#endif
+
+namespace vellum {
+namespace {
+
+struct Fixture {
+  Fixture() {
+    PageOptions page;
+    page.shape = PageShape::kCurl;
+    gantry = std::make_unique<VirtualGantry>(DefaultRig(), page, TextureOptions());
+    const PatternSequence seq = MakePatternSequence(PatternOptions());
+    const std::vector<cv::Mat> frames = RenderSequence(*gantry, seq, 5);
+    texture = gantry->RenderTexture(5);
+    const Triangulator tri(gantry->rig());
+    const PointMap map = tri.Triangulate(Decode(seq, frames));
+    mesh = BuildMesh(map.points, SegmentPage(texture), MeshOptions(),
+                     [&](const cv::Vec3d& x) { return gantry->rig().camera.Project(x); });
+    flat = Flatten(mesh);
+  }
+  std::unique_ptr<VirtualGantry> gantry;
+  cv::Mat texture;
+  Mesh mesh;
+  FlattenResult flat;
+};
+
+Fixture& Shared() {
+  static Fixture f;
+  return f;
+}
+
+void Record(benchmark::State& state, const std::vector<cv::Point2d>& flat) {
+  const FlatErrorStats s = CompareFlat(Shared().gantry->truth(), Shared().mesh, flat);
+  state.counters["rms_mm"] = s.rms_mm;
+  state.counters["edge_err_pct"] = 100 * s.mean_edge_error;
+}
+
+void BM_Vellum_GaussNewton_45x45(benchmark::State& state) {
+  Fixture& f = Shared();
+  FlattenResult r;
+  for (auto _ : state) r = Flatten(f.mesh);
+  Record(state, r.flat);
+  state.counters["iterations"] = r.iterations;
+}
+
+void BM_Vellum_Simulator_45x45(benchmark::State& state) {
+  Fixture& f = Shared();
+  FlattenOptions o;
+  o.solver = state.range(0) == 0 ? FlattenSolver::kEuler : FlattenSolver::kRungeKutta4;
+  FlattenResult r;
+  for (auto _ : state) r = Flatten(f.mesh, o);
+  Record(state, r.flat);
+  state.counters["steps"] = r.iterations;
+  state.SetLabel(ToString(o.solver));
+}
+
+void BM_Vellum_Restore_200dpi(benchmark::State& state) {
+  Fixture& f = Shared();
+  RestoreOptions o;
+  o.dpi = 200;
+  RestoreResult r;
+  for (auto _ : state) r = Restore(f.texture, f.mesh, f.flat.flat, f.gantry->rig().camera, o);
+  state.counters["megapixels"] = r.image.total() / 1e6;
+}
+
+#ifdef VELLUM_WITH_CGAL
+// CGAL's ARAP parameterisation of the same sheet (its quads split into triangles), the
+// texture-mapping peer: time, and the same accuracy measures on its (u, v) as flat mm.
+void BM_CGAL_ARAP_45x45(benchmark::State& state) {
+  using K = CGAL::Simple_cartesian<double>;
+  using SM = CGAL::Surface_mesh<K::Point_3>;
+  namespace SMP = CGAL::Surface_mesh_parameterization;
+  Fixture& f = Shared();
+  SM sm;
+  std::vector<SM::Vertex_index> vid(f.mesh.kind.size());
+  for (size_t k = 0; k < f.mesh.kind.size(); ++k) {
+    if (!f.mesh.Active(static_cast<int>(k))) continue;
+    const cv::Vec3d& p = f.mesh.point[k];
+    vid[k] = sm.add_vertex(K::Point_3(p[0], p[1], p[2]));
+  }
+  for (const cv::Vec4i& q : f.mesh.quads) {
+    // Counter-clockwise seen from above (image order is clockwise from above).
+    sm.add_face(vid[q[0]], vid[q[3]], vid[q[2]]);
+    sm.add_face(vid[q[0]], vid[q[2]], vid[q[1]]);
+  }
+  const auto border = CGAL::Polygon_mesh_processing::longest_border(sm).first;
+  std::vector<cv::Point2d> flat(f.mesh.kind.size(), cv::Point2d(0, 0));
+  for (auto _ : state) {
+    auto uv = sm.add_property_map<SM::Vertex_index, K::Point_2>("h:uv").first;
+    const SMP::Error_code err = SMP::parameterize(sm, SMP::ARAP_parameterizer_3<SM>(), border, uv);
+    if (err != SMP::OK) state.SkipWithError("CGAL parameterisation failed");
+    for (size_t k = 0; k < f.mesh.kind.size(); ++k) {
+      if (f.mesh.Active(static_cast<int>(k))) flat[k] = cv::Point2d(uv[vid[k]].x(), uv[vid[k]].y());
+    }
+    sm.remove_property_map(uv);
+  }
+  Record(state, flat);
+}
+BENCHMARK(BM_CGAL_ARAP_45x45)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+#endif
+
+BENCHMARK(BM_Vellum_GaussNewton_45x45)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_Simulator_45x45)
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+BENCHMARK(BM_Vellum_Restore_200dpi)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& r : runs) times_[r.benchmark_name()] = r.GetAdjustedRealTime();
+    ConsoleReporter::ReportRuns(runs);
+  }
+  std::map<std::string, double> times_;
+};
+
+}  // namespace
+}  // namespace vellum
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  vellum::RatioReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  auto find = [&](const std::string& prefix) {
+    for (const auto& [name, t] : reporter.times_) {
+      if (name.rfind(prefix, 0) == 0) return t;
+    }
+    return 0.0;
+  };
+  const double ours = find("BM_Vellum_GaussNewton_45x45"), cgal = find("BM_CGAL_ARAP_45x45");
+  if (ours > 0 && cgal > 0) {
+    std::printf(
+        "vellum gauss-newton %.2f ms vs CGAL ARAP %.2f ms on the same 45x45 sheet: "
+        "CGAL / vellum = %.1fx\n",
+        ours, cgal, cgal / ours);
+  }
+  benchmark::Shutdown();
+  return 0;
+}
