@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job on its embedded default: installs, builds, renders a scan of a curled
-# checkerboard page with the virtual gantry, and processes it into a point cloud.
+# checkerboard page with the virtual gantry, and processes it into the restored flat page.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
@@ -9,4 +9,4 @@ out=${VELLUM_DEMO_OUT:-out/demo}
 ./build/cli/vellum render --page curl --texture checkerboard --out "$out/scan"
 ./build/cli/vellum process --scan "$out/scan" --calibration "$out/scan/calibration.yaml" \
   --out "$out/result"
-echo "demo: scan in $out/scan, results (points.ply, depth.png, report.json) in $out/result"
+echo "demo: scan in $out/scan; restored page $out/result/restored.tif (and points.ply, depth.png, mesh.ply, flat.ply, restored.json, report.json)"
