@@ -9,11 +9,15 @@
 namespace vellum {
 namespace {
 
+enum class Fit { kOk, kHole, kEdge };
+
 // Fits x, y, z of the points around a node as functions of the pixel offset (quadratic where
 // there are enough points, else linear) and returns their value at the node. The fit removes
-// noise and, being of second order, does not flatten the page's curvature.
-bool FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
-             int min_points, cv::Vec3d* out) {
+// noise and, being of second order, does not flatten the page's curvature. A node with data
+// on one side only and none at its own pixel lies beyond the data's edge (kEdge): a fit there
+// would extrapolate, so it is left to the skirt.
+Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
+            int min_points, cv::Vec3d* out) {
   const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
   const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
   const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
@@ -34,12 +38,22 @@ bool FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu,
       ++count;
     }
   }
-  if (count < min_points) return false;
+  if (count < min_points) return Fit::kHole;
   ata.triangularView<Eigen::Upper>() = ata.transpose();
   // Points on one side only (a node at the page's edge): a quadratic would extrapolate
   // wildly, a plane does not.
   const double offset = std::hypot(ata(1, 0), ata(2, 0)) / count;
   const bool one_sided = offset > 0.25;
+  if (one_sided) {
+    bool own = false;
+    const int cu = cvRound(at.x), cv0 = cvRound(at.y);
+    for (int v = std::max(0, cv0 - 1); v <= std::min(points.rows - 1, cv0 + 1) && !own; ++v) {
+      for (int u = std::max(0, cu - 1); u <= std::min(points.cols - 1, cu + 1); ++u) {
+        if (mask.at<uint8_t>(v, u) && std::isfinite(points.at<cv::Vec3f>(v, u)[2])) own = true;
+      }
+    }
+    if (!own) return Fit::kEdge;
+  }
   for (int terms : {6, 3}) {
     if (terms == 6 && (count < 2 * min_points || one_sided)) continue;
     const Eigen::MatrixXd a = ata.topLeftCorner(terms, terms);
@@ -47,9 +61,11 @@ bool FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu,
     if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-9)) continue;
     const Eigen::MatrixXd c = ldlt.solve(atb.topRows(terms));
     *out = cv::Vec3d(c(0, 0), c(0, 1), c(0, 2));
-    return std::isfinite((*out)[0]) && std::isfinite((*out)[1]) && std::isfinite((*out)[2]);
+    const bool finite =
+        std::isfinite((*out)[0]) && std::isfinite((*out)[1]) && std::isfinite((*out)[2]);
+    return finite ? Fit::kOk : Fit::kHole;
   }
-  return false;
+  return Fit::kHole;
 }
 
 }  // namespace
@@ -150,12 +166,13 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     for (int k = range.start; k < range.end; ++k) {
       if (!on_page[k]) continue;
       cv::Vec3d x;
-      if (FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x)) {
+      const Fit fit = FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x);
+      if (fit == Fit::kOk) {
         mesh.point[k] = x;
         mesh.kind[k] = NodeKind::kMeasured;
-      } else {
+      } else if (fit == Fit::kHole) {
         mesh.kind[k] = NodeKind::kFilled;  // A hole: interpolated below.
-      }
+      }  // kEdge stays off; the skirt extrapolates it from the page.
     }
   });
   mesh.measured =
