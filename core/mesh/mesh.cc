@@ -11,61 +11,89 @@ namespace {
 
 enum class Fit { kOk, kHole, kEdge };
 
+struct Sample {
+  double du, dv;  // Pixel offset from the node, in window half-sizes.
+  cv::Vec3d x;    // The measured point, mm.
+};
+
+// Least squares of x, y, z as polynomials in (du, dv) with `terms` coefficients (6: quadratic,
+// 3: linear) over the samples with keep[i]; the value at the node, or false if ill-posed.
+bool Polyfit(const std::vector<Sample>& samples, const std::vector<uint8_t>& keep, int terms,
+             Eigen::Matrix<double, 6, 3>* coef) {
+  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 3> atb = Eigen::Matrix<double, 6, 3>::Zero();
+  for (size_t i = 0; i < samples.size(); ++i) {
+    if (!keep[i]) continue;
+    const Sample& s = samples[i];
+    Eigen::Matrix<double, 6, 1> b;
+    b << 1, s.du, s.dv, s.du * s.du, s.du * s.dv, s.dv * s.dv;
+    ata.selfadjointView<Eigen::Lower>().rankUpdate(b);
+    atb += b * Eigen::RowVector3d(s.x[0], s.x[1], s.x[2]);
+  }
+  ata.triangularView<Eigen::Upper>() = ata.transpose();
+  const Eigen::MatrixXd a = ata.topLeftCorner(terms, terms);
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(a);
+  if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-9)) return false;
+  coef->setZero();
+  coef->topRows(terms) = ldlt.solve(atb.topRows(terms));
+  return coef->allFinite();
+}
+
+cv::Vec3d Evaluate(const Eigen::Matrix<double, 6, 3>& c, double du, double dv) {
+  Eigen::Matrix<double, 6, 1> b;
+  b << 1, du, dv, du * du, du * dv, dv * dv;
+  const Eigen::RowVector3d r = b.transpose() * c;
+  return {r[0], r[1], r[2]};
+}
+
 // Fits x, y, z of the points around a node as functions of the pixel offset (quadratic where
-// there are enough points, else linear) and returns their value at the node. The fit removes
-// noise and, being of second order, does not flatten the page's curvature. A node with data
-// on one side only and none at its own pixel lies beyond the data's edge (kEdge): a fit there
-// would extrapolate, so it is left to the skirt.
+// there are enough points around it, else linear) and returns their value at the node. The
+// fit removes noise and, being of second order, does not flatten the page's curvature. It is
+// robust: points far from a first fit (mixed pixels at the page's edge, stray decodes) are
+// dropped before the second. A node with data on one side only and none at its own pixel lies
+// beyond the data's edge (kEdge): a fit there would extrapolate, so it is left to the skirt.
 Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
             int min_points, cv::Vec3d* out) {
   const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
   const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
   const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
   const int v1 = std::min(points.rows - 1, static_cast<int>(std::ceil(at.y)) + hv);
-  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
-  Eigen::Matrix<double, 6, 3> atb = Eigen::Matrix<double, 6, 3>::Zero();
-  int count = 0;
+  std::vector<Sample> samples;
+  double su = 0, sv = 0;
+  bool own = false;
   for (int v = v0; v <= v1; ++v) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
     const uint8_t* m = mask.ptr<uint8_t>(v);
     for (int u = u0; u <= u1; ++u) {
       if (!m[u] || !std::isfinite(row[u][2])) continue;
-      const double du = (u - at.x) / hu, dv = (v - at.y) / hv;
-      Eigen::Matrix<double, 6, 1> b;
-      b << 1, du, dv, du * du, du * dv, dv * dv;
-      ata.selfadjointView<Eigen::Lower>().rankUpdate(b);
-      atb += b * Eigen::RowVector3d(row[u][0], row[u][1], row[u][2]);
-      ++count;
+      samples.push_back({(u - at.x) / hu, (v - at.y) / hv, cv::Vec3d(row[u])});
+      su += samples.back().du;
+      sv += samples.back().dv;
+      own = own || (std::fabs(u - at.x) <= 1.5 && std::fabs(v - at.y) <= 1.5);
     }
   }
+  const int count = static_cast<int>(samples.size());
   if (count < min_points) return Fit::kHole;
-  ata.triangularView<Eigen::Upper>() = ata.transpose();
   // Points on one side only (a node at the page's edge): a quadratic would extrapolate
   // wildly, a plane does not.
-  const double offset = std::hypot(ata(1, 0), ata(2, 0)) / count;
-  const bool one_sided = offset > 0.25;
-  if (one_sided) {
-    bool own = false;
-    const int cu = cvRound(at.x), cv0 = cvRound(at.y);
-    for (int v = std::max(0, cv0 - 1); v <= std::min(points.rows - 1, cv0 + 1) && !own; ++v) {
-      for (int u = std::max(0, cu - 1); u <= std::min(points.cols - 1, cu + 1); ++u) {
-        if (mask.at<uint8_t>(v, u) && std::isfinite(points.at<cv::Vec3f>(v, u)[2])) own = true;
-      }
-    }
-    if (!own) return Fit::kEdge;
+  const bool one_sided = std::hypot(su, sv) / count > 0.25;
+  if (one_sided && !own) return Fit::kEdge;
+  const int terms = (count >= 2 * min_points && !one_sided) ? 6 : 3;
+  std::vector<uint8_t> keep(samples.size(), 1);
+  Eigen::Matrix<double, 6, 3> c;
+  if (!Polyfit(samples, keep, terms, &c)) return Fit::kHole;
+  std::vector<double> residual(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) {
+    residual[i] = cv::norm(Evaluate(c, samples[i].du, samples[i].dv) - samples[i].x);
   }
-  for (int terms : {6, 3}) {
-    if (terms == 6 && (count < 2 * min_points || one_sided)) continue;
-    const Eigen::MatrixXd a = ata.topLeftCorner(terms, terms);
-    const Eigen::LDLT<Eigen::MatrixXd> ldlt(a);
-    if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-9)) continue;
-    const Eigen::MatrixXd c = ldlt.solve(atb.topRows(terms));
-    *out = cv::Vec3d(c(0, 0), c(0, 1), c(0, 2));
-    const bool finite =
-        std::isfinite((*out)[0]) && std::isfinite((*out)[1]) && std::isfinite((*out)[2]);
-    return finite ? Fit::kOk : Fit::kHole;
-  }
-  return Fit::kHole;
+  std::vector<double> sorted = residual;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double cut = std::max(0.2, 4.0 * sorted[sorted.size() / 2]);  // mm
+  int kept = 0;
+  for (size_t i = 0; i < samples.size(); ++i) kept += keep[i] = residual[i] <= cut;
+  if (kept < min_points || !Polyfit(samples, keep, terms, &c)) return Fit::kHole;
+  *out = Evaluate(c, 0, 0);
+  return Fit::kOk;
 }
 
 }  // namespace
