@@ -35,13 +35,17 @@ struct Fixture {
     texture = gantry->RenderTexture(5);
     const Triangulator tri(gantry->rig());
     const PointMap map = tri.Triangulate(Decode(seq, frames));
-    mesh = BuildMesh(map.points, SegmentPage(texture), MeshOptions(),
-                     [&](const cv::Vec3d& x) { return gantry->rig().camera.Project(x); });
+    const cv::Mat page_mask = SegmentPage(texture);
+    auto project = [&](const cv::Vec3d& x) { return gantry->rig().camera.Project(x); };
+    mesh = BuildMesh(map.points, page_mask, MeshOptions(), project);
+    MeshOptions fine;
+    fine.grid = {200, 150};
+    fine_mesh = BuildMesh(map.points, page_mask, fine, project);
     flat = Flatten(mesh);
   }
   std::unique_ptr<VirtualGantry> gantry;
   cv::Mat texture;
-  Mesh mesh;
+  Mesh mesh, fine_mesh;
   FlattenResult flat;
 };
 
@@ -62,6 +66,16 @@ void BM_Vellum_GaussNewton_45x45(benchmark::State& state) {
   for (auto _ : state) r = Flatten(f.mesh);
   Record(state, r.flat);
   state.counters["iterations"] = r.iterations;
+}
+
+void BM_Vellum_GaussNewton_200x150(benchmark::State& state) {
+  Fixture& f = Shared();
+  FlattenResult r;
+  for (auto _ : state) r = Flatten(f.fine_mesh);
+  const FlatErrorStats s = CompareFlat(f.gantry->truth(), f.fine_mesh, r.flat);
+  state.counters["rms_mm"] = s.rms_mm;
+  state.counters["iterations"] = r.iterations;
+  state.counters["folds"] = r.folded_quads;
 }
 
 void BM_Vellum_Simulator_45x45(benchmark::State& state) {
@@ -121,6 +135,10 @@ BENCHMARK(BM_CGAL_ARAP_45x45)->Unit(benchmark::kMillisecond)->UseRealTime()->Min
 #endif
 
 BENCHMARK(BM_Vellum_GaussNewton_45x45)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_GaussNewton_200x150)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
 BENCHMARK(BM_Vellum_Simulator_45x45)
     ->Arg(0)
     ->Arg(1)

@@ -208,7 +208,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       break;
     }
     // Slow contraction: the factor is stale; refactor (and relax the damping).
-    if (step > 0.25 * last_step) {
+    if (step > 0.5 * last_step) {
       refactor = true;
       lambda = std::max(1e-9, lambda * 0.1);
     }
