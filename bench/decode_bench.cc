@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/structured_light.hpp>
 
+#include "bench/ratio_reporter.h"
 #include "core/decode/decode.h"
 #include "core/geometry/triangulate.h"
 #include "core/sim/evaluate.h"
@@ -154,16 +155,6 @@ BENCHMARK(BM_OpenCV_GrayCodeDecode)
     ->UseRealTime()
     ->MinTime(2.0);
 
-// Collects each run's real time so the ratios can be printed after the table.
-class RatioReporter : public benchmark::ConsoleReporter {
- public:
-  void ReportRuns(const std::vector<Run>& runs) override {
-    for (const Run& r : runs) times_[r.benchmark_name()] = r.GetAdjustedRealTime();
-    ConsoleReporter::ReportRuns(runs);
-  }
-  std::map<std::string, double> times_;
-};
-
 }  // namespace
 }  // namespace vellum
 
@@ -172,15 +163,10 @@ int main(int argc, char** argv) {
   std::printf("threads: %d (cv::getNumThreads)\n", cv::getNumThreads());
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  auto find = [&](const std::string& prefix) {
-    for (const auto& [name, t] : reporter.times_) {
-      if (name.rfind(prefix, 0) == 0) return t;
-    }
-    return 0.0;
-  };
-  const double ours = find("BM_Vellum_DecodeTriangulate");
+  const double ours = reporter.Time("BM_Vellum_DecodeTriangulate");
   for (int threads : {1, 2}) {
-    const double opencv = find("BM_OpenCV_GrayCodeDecode/" + std::to_string(threads) + "/");
+    const double opencv =
+        reporter.Time("BM_OpenCV_GrayCodeDecode/" + std::to_string(threads) + "/");
     if (ours > 0 && opencv > 0) {
       std::printf(
           "vellum decode+triangulate %.1f ms vs OpenCV GrayCodePattern decode alone on %d "

@@ -8,6 +8,7 @@
 #include <map>
 #include <memory>
 
+#include "bench/ratio_reporter.h"
 #include "core/decode/decode.h"
 #include "core/flatten/flatten.h"
 #include "core/geometry/triangulate.h"
@@ -147,15 +148,6 @@ BENCHMARK(BM_Vellum_Simulator_45x45)
     ->Iterations(3);
 BENCHMARK(BM_Vellum_Restore_200dpi)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
 
-class RatioReporter : public benchmark::ConsoleReporter {
- public:
-  void ReportRuns(const std::vector<Run>& runs) override {
-    for (const Run& r : runs) times_[r.benchmark_name()] = r.GetAdjustedRealTime();
-    ConsoleReporter::ReportRuns(runs);
-  }
-  std::map<std::string, double> times_;
-};
-
 }  // namespace
 }  // namespace vellum
 
@@ -163,13 +155,8 @@ int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  auto find = [&](const std::string& prefix) {
-    for (const auto& [name, t] : reporter.times_) {
-      if (name.rfind(prefix, 0) == 0) return t;
-    }
-    return 0.0;
-  };
-  const double ours = find("BM_Vellum_GaussNewton_45x45"), cgal = find("BM_CGAL_ARAP_45x45");
+  const double ours = reporter.Time("BM_Vellum_GaussNewton_45x45"),
+               cgal = reporter.Time("BM_CGAL_ARAP_45x45");
   if (ours > 0 && cgal > 0) {
     std::printf(
         "vellum gauss-newton %.2f ms vs CGAL ARAP %.2f ms on the same 45x45 sheet: "

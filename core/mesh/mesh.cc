@@ -216,23 +216,29 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
   }
   std::vector<uint8_t> known(n, 0);
   for (int k = 0; k < n; ++k) known[k] = mesh.kind[k] == NodeKind::kMeasured;
-  const int di[4] = {1, -1, 0, 0}, dj[4] = {0, 0, 1, -1};
+  // Mean of a node's known 4-neighbours; `count` gets how many there are.
+  auto neighbour_mean = [&](int k, int* count) {
+    const int di[4] = {1, -1, 0, 0}, dj[4] = {0, 0, 1, -1};
+    const int i = k % g, j = k / g;
+    cv::Vec3d sum(0, 0, 0);
+    *count = 0;
+    for (int d = 0; d < 4; ++d) {
+      const int ii = i + di[d], jj = j + dj[d];
+      if (ii < 0 || jj < 0 || ii >= g || jj >= h || !known[mesh.Index(ii, jj)]) continue;
+      sum += mesh.point[mesh.Index(ii, jj)];
+      ++*count;
+    }
+    return *count > 0 ? sum / *count : sum;
+  };
   // Seed holes outward from known nodes so every hole starts from a sensible value.
   for (bool changed = true; changed;) {
     changed = false;
     for (int k : holes) {
       if (known[k]) continue;
-      const int i = k % g, j = k / g;
-      cv::Vec3d sum(0, 0, 0);
       int c = 0;
-      for (int d = 0; d < 4; ++d) {
-        const int ii = i + di[d], jj = j + dj[d];
-        if (ii < 0 || jj < 0 || ii >= g || jj >= h || !known[mesh.Index(ii, jj)]) continue;
-        sum += mesh.point[mesh.Index(ii, jj)];
-        ++c;
-      }
+      const cv::Vec3d mean = neighbour_mean(k, &c);
       if (c > 0) {
-        mesh.point[k] = sum / c;
+        mesh.point[k] = mean;
         known[k] = 2;
         changed = true;
       }
@@ -242,16 +248,8 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     double worst = 0;
     for (int k : holes) {
       if (!known[k]) continue;
-      const int i = k % g, j = k / g;
-      cv::Vec3d sum(0, 0, 0);
       int c = 0;
-      for (int d = 0; d < 4; ++d) {
-        const int ii = i + di[d], jj = j + dj[d];
-        if (ii < 0 || jj < 0 || ii >= g || jj >= h || !known[mesh.Index(ii, jj)]) continue;
-        sum += mesh.point[mesh.Index(ii, jj)];
-        ++c;
-      }
-      const cv::Vec3d next = sum / c;
+      const cv::Vec3d next = neighbour_mean(k, &c);
       worst = std::max(worst, cv::norm(next - mesh.point[k]));
       mesh.point[k] = next;
     }
