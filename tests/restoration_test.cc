@@ -137,6 +137,33 @@ INSTANTIATE_TEST_SUITE_P(Pages, FlattenSolvers,
                                            PageShape::kCone, PageShape::kBump),
                          [](const auto& info) { return std::string(ToString(info.param)); });
 
+// Gray and colour, 8 and 16 bits: the same warp, the texture's type kept, values preserved
+// (a 16-bit colour restoration scaled back down matches the 8-bit gray one within rounding).
+TEST(Restore, KeepsTheTexturesTypeForGrayColourAnd16Bit) {
+  const Pipeline p = RunPipeline(PageShape::kCurl);
+  cv::Mat colour16;
+  cv::cvtColor(p.texture, colour16, cv::COLOR_GRAY2BGR);
+  colour16.convertTo(colour16, CV_16UC3, 257.0);
+  const RestoreResult r16 = Restore(colour16, p.mesh, p.flat.flat, p.gantry->rig().camera);
+  ASSERT_TRUE(r16.status.ok()) << r16.status.message();
+  EXPECT_EQ(r16.image.type(), CV_16UC3);
+  ASSERT_EQ(r16.image.size(), p.restored.image.size());
+  cv::Mat back;
+  cv::cvtColor(r16.image, back, cv::COLOR_BGR2GRAY);
+  back.convertTo(back, CV_8U, 1.0 / 257.0);
+  EXPECT_LE(cv::norm(back, p.restored.image, cv::NORM_INF), 1.0);
+  // Camera view: the camera's frame size.
+  RestoreOptions camera_view;
+  camera_view.view = RestoreView::kCamera;
+  const RestoreResult rc =
+      Restore(p.texture, p.mesh, p.flat.flat, p.gantry->rig().camera, camera_view);
+  ASSERT_TRUE(rc.status.ok());
+  EXPECT_EQ(rc.image.size(), p.gantry->rig().camera.size);
+  // A texture that is not an image type we restore gives an error, not a crash.
+  EXPECT_FALSE(
+      Restore(cv::Mat(10, 10, CV_32F), p.mesh, p.flat.flat, p.gantry->rig().camera).status.ok());
+}
+
 // Board corners of a restored checkerboard page, ordered top row first, left to right.
 std::vector<cv::Point2f> Corners(const cv::Mat& image, cv::Size inner) {
   std::vector<cv::Point2f> corners;
