@@ -80,30 +80,29 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       result.status = Status::Error("flattening: the sheet's Laplacian is singular");
       return result;
     }
-    Eigen::VectorXd bx(n), by(n), px(n), py(n);
+    // Both coordinates share the Laplacian: one two-column solve per iteration.
+    Eigen::MatrixXd rhs(n, 2), pos(n, 2);
     for (int v = 0; v < n; ++v) {
-      px[v] = x[2 * v];
-      py[v] = x[2 * v + 1];
+      pos(v, 0) = x[2 * v];
+      pos(v, 1) = x[2 * v + 1];
     }
     double e_prev = std::numeric_limits<double>::infinity();
     for (int k = 0; k < options.local_global_iterations; ++k) {
-      bx = prox * px;
-      by = prox * py;
+      rhs = prox * pos;
       for (const Spring& s : mesh.springs) {
         const int a = idx.var[s.a], b = idx.var[s.b];
-        const double dx = px[a] - px[b], dy = py[a] - py[b];
+        const double dx = pos(a, 0) - pos(b, 0), dy = pos(a, 1) - pos(b, 1);
         const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
         const double fx = s.rest_mm * dx / len, fy = s.rest_mm * dy / len;
-        bx[a] += fx;
-        bx[b] -= fx;
-        by[a] += fy;
-        by[b] -= fy;
+        rhs(a, 0) += fx;
+        rhs(b, 0) -= fx;
+        rhs(a, 1) += fy;
+        rhs(b, 1) -= fy;
       }
-      px = lap_solver.solve(bx);
-      py = lap_solver.solve(by);
+      pos = lap_solver.solve(rhs);
       for (int v = 0; v < n; ++v) {
-        x[2 * v] = px[v];
-        x[2 * v + 1] = py[v];
+        x[2 * v] = pos(v, 0);
+        x[2 * v + 1] = pos(v, 1);
       }
       const double e_now = energy(x);
       if (e_prev - e_now < 1e-3 * e_now) break;  // Slowing down: hand over to Gauss-Newton.
