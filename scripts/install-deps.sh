@@ -8,7 +8,7 @@ packages=(
   liblcm-dev liblcm-bin liblcm-java
   libv4l-dev libsdl2-dev
   googletest libgtest-dev libgmock-dev libbenchmark-dev
-  libcgal-dev
+  libcgal-dev clang-format
 )
 missing=()
 for p in "${packages[@]}"; do
