@@ -23,11 +23,10 @@ namespace {
 // One rendered scan shared by every benchmark.
 struct Fixture {
   Fixture() {
-    PageOptions page;
-    page.shape = PageShape::kCurl;
-    gantry = std::make_unique<VirtualGantry>(DefaultRig(), page, TextureOptions());
-    sequence = MakePatternSequence(PatternOptions());
-    frames = RenderSequence(*gantry, sequence, 21);
+    SimulatedScan scan = SimulateScan(DefaultRig(), PageShape::kCurl, 21);
+    gantry = std::move(scan.gantry);
+    sequence = scan.sequence;
+    frames = std::move(scan.frames);
     triangulator = std::make_unique<Triangulator>(gantry->rig());
     cv::structured_light::GrayCodePattern::Params params;
     params.width = sequence.projector_size.width;

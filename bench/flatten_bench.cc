@@ -28,14 +28,11 @@ namespace {
 
 struct Fixture {
   Fixture() {
-    PageOptions page;
-    page.shape = PageShape::kCurl;
-    gantry = std::make_unique<VirtualGantry>(DefaultRig(), page, TextureOptions());
-    const PatternSequence seq = MakePatternSequence(PatternOptions());
-    const std::vector<cv::Mat> frames = RenderSequence(*gantry, seq, 5);
-    texture = gantry->RenderTexture(5);
+    SimulatedScan scan = SimulateScan(DefaultRig(), PageShape::kCurl, 5);
+    gantry = std::move(scan.gantry);
+    texture = scan.texture;
     const Triangulator tri(gantry->rig());
-    const PointMap map = tri.Triangulate(Decode(seq, frames));
+    const PointMap map = tri.Triangulate(Decode(scan.sequence, scan.frames));
     const cv::Mat page_mask = SegmentPage(texture);
     auto project = [&](const cv::Vec3d& x) { return gantry->rig().camera.Project(x); };
     mesh = BuildMesh(map.points, page_mask, MeshOptions(), project);

@@ -26,12 +26,11 @@ struct Measured {
 };
 
 Measured Measure(const Calibration& rig, PageShape shape, uint64_t seed) {
-  PageOptions page;
-  page.shape = shape;
-  TextureOptions texture;  // Checkerboard: half the page is dark ink.
-  const VirtualGantry gantry(rig, page, texture);
-  const PatternSequence seq = MakePatternSequence(PatternOptions{rig.projector.size});
-  const std::vector<cv::Mat> frames = RenderSequence(gantry, seq, seed);
+  // Checkerboard texture: 41% of the page is dark ink.
+  const SimulatedScan scan = SimulateScan(rig, shape, seed);
+  const PatternSequence& seq = scan.sequence;
+  const std::vector<cv::Mat>& frames = scan.frames;
+  const VirtualGantry& gantry = *scan.gantry;
   const Triangulator tri(rig);
   Measured m;
   m.period_px = seq.PhasePeriod(Axis::kColumn);

@@ -35,14 +35,11 @@ struct Pipeline {
 Pipeline RunPipeline(PageShape shape, FlattenSolver solver = FlattenSolver::kGaussNewton,
                      uint64_t seed = 31, cv::Size grid = cv::Size(45, 45)) {
   Pipeline p;
-  PageOptions page;
-  page.shape = shape;
-  p.gantry = std::make_unique<VirtualGantry>(DefaultRig(), page, TextureOptions());
-  const PatternSequence seq = MakePatternSequence(PatternOptions());
-  const std::vector<cv::Mat> frames = RenderSequence(*p.gantry, seq, seed);
-  p.texture = p.gantry->RenderTexture(seed);
+  SimulatedScan scan = SimulateScan(DefaultRig(), shape, seed);
+  p.gantry = std::move(scan.gantry);
+  p.texture = scan.texture;
   const Triangulator tri(p.gantry->rig());
-  const PointMap map = tri.Triangulate(Decode(seq, frames));
+  const PointMap map = tri.Triangulate(Decode(scan.sequence, scan.frames));
   const CameraModel& cam = p.gantry->rig().camera;
   MeshOptions mo;
   mo.grid = grid;

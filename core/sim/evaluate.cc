@@ -106,4 +106,16 @@ std::vector<cv::Mat> RenderSequence(const VirtualGantry& gantry, const PatternSe
   return frames;
 }
 
+SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t seed,
+                           const TextureOptions& texture) {
+  SimulatedScan scan;
+  PageOptions page;
+  page.shape = shape;
+  scan.gantry = std::make_unique<VirtualGantry>(rig, page, texture);
+  scan.sequence = MakePatternSequence(PatternOptions{rig.projector.size});
+  scan.frames = RenderSequence(*scan.gantry, scan.sequence, seed);
+  scan.texture = scan.gantry->RenderTexture(seed);
+  return scan;
+}
+
 }  // namespace vellum

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -36,5 +37,16 @@ FlatErrorStats CompareFlat(const GroundTruth& truth, const Mesh& mesh,
 // Renders one camera frame per pattern of the sequence; frame k uses noise seed seed + k + 1.
 std::vector<cv::Mat> RenderSequence(const VirtualGantry& gantry, const PatternSequence& sequence,
                                     uint64_t seed);
+
+// A whole simulated scan: the gantry (with its truth), the default pattern sequence for the
+// rig's projector, the frames and the texture frame, all from one seed.
+struct SimulatedScan {
+  std::unique_ptr<VirtualGantry> gantry;
+  PatternSequence sequence;
+  std::vector<cv::Mat> frames;
+  cv::Mat texture;
+};
+SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t seed,
+                           const TextureOptions& texture = TextureOptions());
 
 }  // namespace vellum
