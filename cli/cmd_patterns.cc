@@ -2,29 +2,13 @@
 
 #include "cli/commands.h"
 #include "cli/flags.h"
+#include "cli/options.h"
 #include "core/io/scan_io.h"
 #include "core/patterns/patterns.h"
 
 namespace vellum {
 
 // The pattern flags shared by `patterns` and `render`.
-std::vector<Flags::Spec> PatternFlagSpecs() {
-  return {
-      {"phase-steps", "N", "phase shifts per axis; 0 = Gray code only", "8"},
-      {"period", "PX", "sinusoid period, projector pixels", "16"},
-  };
-}
-
-PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
-  PatternOptions o;
-  o.projector_size = projector;
-  o.phase_steps = flags.GetInt("phase-steps", 0, 64);
-  o.phase_period_px = flags.GetInt("period", 4, 4096);
-  std::string why;
-  if (!o.Check(&why)) throw UsageError(why);
-  return o;
-}
-
 int RunPatterns(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = {
       {"projector", "WIDTHxHEIGHT", "projector image size, any size", "1024x768"},

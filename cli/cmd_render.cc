@@ -4,6 +4,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "cli/commands.h"
+#include "cli/options.h"
 #include "core/io/calibration_io.h"
 #include "core/io/scan_io.h"
 #include "core/sim/evaluate.h"

@@ -5,16 +5,15 @@
 #include <vector>
 
 #include "cli/flags.h"
-#include "core/patterns/patterns.h"
 
 namespace vellum {
-
-// Pattern flags shared by `patterns` and `render`.
-std::vector<Flags::Spec> PatternFlagSpecs();
-PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector);
 
 int RunPatterns(const std::vector<std::string>& args);
 int RunRender(const std::vector<std::string>& args);
 int RunProcess(const std::vector<std::string>& args);
+int RunScan(const std::vector<std::string>& args);
+int RunWatch(const std::vector<std::string>& args);
+int RunExport(const std::vector<std::string>& args);
+int RunImport(const std::vector<std::string>& args);
 
 }  // namespace vellum

@@ -1,6 +1,7 @@
 #include "cli/flags.h"
 
 #include <cstdio>
+#include <opencv2/core/persistence.hpp>
 #include <sstream>
 
 namespace vellum {
@@ -34,7 +35,43 @@ bool Flags::Parse(const std::vector<std::string>& args) {
     }
     values_[bare] = value;
   }
+  if (Has("config") && !Get("config").empty()) LoadConfig(Get("config"));
   return true;
+}
+
+void Flags::LoadConfig(const std::string& path) {
+  cv::FileStorage fs;
+  try {
+    if (!fs.open(path, cv::FileStorage::READ)) throw UsageError(path + ": cannot open config file");
+  } catch (const cv::Exception&) {
+    throw UsageError(path + ": not a valid YAML config file");
+  }
+  const cv::FileNode root = fs.root();
+  if (!root.isMap()) throw UsageError(path + ": config must be a map of flag: value");
+  for (const cv::FileNode& n : root) {
+    const std::string key = n.name();
+    const Spec* spec = nullptr;
+    for (const Spec& s : specs_) {
+      if (s.name == key) spec = &s;
+    }
+    if (!spec || key == "config") {
+      throw UsageError(path + ": unknown key '" + key + "' (keys are the flags of " + command_ +
+                       " --help)");
+    }
+    std::string value;
+    if (n.isString()) {
+      value = static_cast<std::string>(n);
+    } else if (n.isInt()) {
+      value = std::to_string(static_cast<int>(n));
+    } else if (n.isReal()) {
+      char buf[64];
+      std::snprintf(buf, sizeof(buf), "%.17g", static_cast<double>(n));
+      value = buf;
+    } else {
+      throw UsageError(path + ": key '" + key + "' must be a single value");
+    }
+    if (!values_.count(key)) values_[key] = value;  // The command line wins.
+  }
 }
 
 std::string Flags::Help() const {

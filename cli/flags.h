@@ -22,6 +22,8 @@ class Flags {
   Flags(std::string command, std::string summary, std::vector<Spec> specs);
 
   // Parses args; returns false when --help was asked (the help is then printed to stdout).
+  // When a flag named "config" is given, its file (YAML, flag: value) supplies the flags the
+  // command line leaves out; an unknown key or a malformed file throws UsageError.
   bool Parse(const std::vector<std::string>& args);
   std::string Help() const;
 
@@ -33,8 +35,10 @@ class Flags {
   bool GetBool(const std::string& name) const;
   cv::Size GetSize(const std::string& name) const;  // WIDTHxHEIGHT
   std::string Require(const std::string& name) const;
+  const std::string& command() const { return command_; }
 
  private:
+  void LoadConfig(const std::string& path);
   std::string command_, summary_;
   std::vector<Spec> specs_;
   std::map<std::string, std::string> values_;

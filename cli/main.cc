@@ -17,7 +17,11 @@ constexpr char kUsage[] =
     "commands:\n"
     "  patterns   write the projector pattern images and scan.yaml of a scan\n"
     "  render     render a scan of a warped page with the virtual gantry\n"
-    "  process    decode and triangulate a scan directory into a point cloud\n"
+    "  process    process a scan directory into the restored page (and 3D products)\n"
+    "  scan       ask the station for a scan and follow it to the restored page\n"
+    "  watch      follow the station's bus until scans are restored\n"
+    "  export     write a recorded scan log as a scan directory (vellum export LOG DIR)\n"
+    "  import     write a scan directory as a scan log (vellum import DIR LOG)\n"
     "\n"
     "Run 'vellum COMMAND --help' for a command's flags.\n";
 
@@ -36,6 +40,10 @@ int main(int argc, char** argv) {
     if (command == "patterns") return vellum::RunPatterns(args);
     if (command == "render") return vellum::RunRender(args);
     if (command == "process") return vellum::RunProcess(args);
+    if (command == "scan") return vellum::RunScan(args);
+    if (command == "watch") return vellum::RunWatch(args);
+    if (command == "export") return vellum::RunExport(args);
+    if (command == "import") return vellum::RunImport(args);
     std::fprintf(stderr, "vellum: unknown command '%s'\n\n%s", command.c_str(), kUsage);
     return 2;
   } catch (const vellum::UsageError& e) {

@@ -151,6 +151,72 @@ cv::Mat SegmentPage(const cv::Mat& texture, double fraction) {
   return page;
 }
 
+void ConnectSheet(bool bend_springs, const std::function<cv::Point2d(const cv::Vec3d&)>& project,
+                  Mesh* out) {
+  Mesh& mesh = *out;
+  const int g = mesh.cols, h = mesh.rows, n = g * h;
+  mesh.springs.clear();
+  mesh.quads.clear();
+  if (g < 2 || h < 2 || mesh.kind.size() != static_cast<size_t>(n) ||
+      mesh.point.size() != static_cast<size_t>(n)) {
+    mesh.status = Status::Error("sheet of " + std::to_string(g) + "x" + std::to_string(h) +
+                                " nodes has " + std::to_string(mesh.kind.size()) + " kinds and " +
+                                std::to_string(mesh.point.size()) + " points");
+    return;
+  }
+  for (int k = 0; k < n; ++k) {
+    if (mesh.Active(k) && !(std::isfinite(mesh.point[k][0]) && std::isfinite(mesh.point[k][1]) &&
+                            std::isfinite(mesh.point[k][2]))) {
+      mesh.status = Status::Error("sheet node " + std::to_string(k) + " is not a finite point");
+      return;
+    }
+  }
+  mesh.pixel.assign(n, cv::Point2d(0, 0));
+  mesh.measured =
+      static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
+  mesh.filled = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kFilled));
+  mesh.skirt = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kSkirt));
+  for (int k = 0; k < n; ++k) {
+    if (mesh.Active(k)) mesh.pixel[k] = project(mesh.point[k]);
+  }
+  auto add = [&](int i0, int j0, int i1, int j1, SpringKind kind) {
+    if (i0 < 0 || j0 < 0 || i0 >= g || j0 >= h || i1 < 0 || j1 < 0 || i1 >= g || j1 >= h) return;
+    const int a = mesh.Index(i0, j0), b = mesh.Index(i1, j1);
+    if (!mesh.Active(a) || !mesh.Active(b)) return;
+    mesh.springs.push_back({a, b, cv::norm(mesh.point[a] - mesh.point[b]), kind});
+  };
+  for (int j = 0; j < h; ++j) {
+    for (int i = 0; i < g; ++i) {
+      add(i, j, i + 1, j, SpringKind::kStructural);
+      add(i, j, i, j + 1, SpringKind::kStructural);
+      add(i, j, i + 1, j + 1, SpringKind::kShear);
+      add(i + 1, j, i, j + 1, SpringKind::kShear);
+      if (bend_springs) {
+        add(i, j, i + 2, j, SpringKind::kBend);
+        add(i, j, i, j + 2, SpringKind::kBend);
+      }
+      if (i + 1 < g && j + 1 < h) {
+        const cv::Vec4i q(mesh.Index(i, j), mesh.Index(i + 1, j), mesh.Index(i + 1, j + 1),
+                          mesh.Index(i, j + 1));
+        if (mesh.Active(q[0]) && mesh.Active(q[1]) && mesh.Active(q[2]) && mesh.Active(q[3])) {
+          mesh.quads.push_back(q);
+        }
+      }
+    }
+  }
+  for (const Spring& s : mesh.springs) {
+    if (!(s.rest_mm > 1e-9)) {
+      mesh.status = Status::Error("two sheet nodes coincide (degenerate surface data)");
+      return;
+    }
+  }
+  if (mesh.quads.empty()) {
+    mesh.status = Status::Error("the page yields no complete grid cell: too few valid points");
+    return;
+  }
+  mesh.status = Status::Ok();
+}
+
 Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
                const std::function<cv::Point2d(const cv::Vec3d&)>& project) {
   Mesh mesh;
@@ -286,47 +352,7 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
       mesh.point[k] = p;
     }
   }
-  mesh.filled = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kFilled));
-  mesh.skirt = static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kSkirt));
-  for (int k = 0; k < n; ++k) {
-    if (mesh.Active(k)) mesh.pixel[k] = project(mesh.point[k]);
-  }
-  auto add = [&](int i0, int j0, int i1, int j1, SpringKind kind) {
-    if (i0 < 0 || j0 < 0 || i0 >= g || j0 >= h || i1 < 0 || j1 < 0 || i1 >= g || j1 >= h) return;
-    const int a = mesh.Index(i0, j0), b = mesh.Index(i1, j1);
-    if (!mesh.Active(a) || !mesh.Active(b)) return;
-    mesh.springs.push_back({a, b, cv::norm(mesh.point[a] - mesh.point[b]), kind});
-  };
-  for (int j = 0; j < h; ++j) {
-    for (int i = 0; i < g; ++i) {
-      add(i, j, i + 1, j, SpringKind::kStructural);
-      add(i, j, i, j + 1, SpringKind::kStructural);
-      add(i, j, i + 1, j + 1, SpringKind::kShear);
-      add(i + 1, j, i, j + 1, SpringKind::kShear);
-      if (options.bend_springs) {
-        add(i, j, i + 2, j, SpringKind::kBend);
-        add(i, j, i, j + 2, SpringKind::kBend);
-      }
-      if (i + 1 < g && j + 1 < h) {
-        const cv::Vec4i q(mesh.Index(i, j), mesh.Index(i + 1, j), mesh.Index(i + 1, j + 1),
-                          mesh.Index(i, j + 1));
-        if (mesh.Active(q[0]) && mesh.Active(q[1]) && mesh.Active(q[2]) && mesh.Active(q[3])) {
-          mesh.quads.push_back(q);
-        }
-      }
-    }
-  }
-  for (const Spring& s : mesh.springs) {
-    if (!(s.rest_mm > 1e-9)) {
-      mesh.status = Status::Error("two sheet nodes coincide (degenerate surface data)");
-      return mesh;
-    }
-  }
-  if (mesh.quads.empty()) {
-    mesh.status = Status::Error("the page yields no complete grid cell: too few valid points");
-    return mesh;
-  }
-  mesh.status = Status::Ok();
+  ConnectSheet(options.bend_springs, project, &mesh);
   return mesh;
 }
 

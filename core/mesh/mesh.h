@@ -60,4 +60,11 @@ cv::Mat SegmentPage(const cv::Mat& texture, double fraction = 0.6);
 Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
                const std::function<cv::Point2d(const cv::Vec3d&)>& project);
 
+// The sheet's topology from its nodes: given cols, rows, kind and point, sets pixel (the
+// projection of each active node), the node counts, the springs (rest lengths from the 3D
+// distances) and the quads, and the status. BuildMesh ends with it; a receiver of a sheet
+// sent as nodes (the station's FLAT_MESH) rebuilds the same sheet with it.
+void ConnectSheet(bool bend_springs, const std::function<cv::Point2d(const cv::Vec3d&)>& project,
+                  Mesh* mesh);
+
 }  // namespace vellum

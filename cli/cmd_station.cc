@@ -1,0 +1,273 @@
+// The station from the command line: `scan` (ask for a scan and follow it to the restored
+// page), `watch` (follow the bus until scans are restored), `export` and `import` (recorded
+// scan log <-> scan directory).
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <map>
+
+#include "cli/commands.h"
+#include "core/io/calibration_io.h"
+#include "daemons/common/messages.h"
+#include "daemons/common/node.h"
+#include "daemons/common/scan_store.h"
+#include "vellum/pattern_shown_t.hpp"
+#include "vellum/restored_t.hpp"
+#include "vellum/scan_request_t.hpp"
+#include "vellum/status_t.hpp"
+
+namespace vellum {
+namespace {
+
+using station::Node;
+namespace channel = station::channel;
+
+// Follows the bus: progress from PATTERN_SHOWN and the status heartbeats, errors of the
+// daemons, and RESTORED. Prints one updating line on a terminal, plain lines otherwise.
+class Follower {
+ public:
+  Follower(Node* node, int64_t scan_id) : node_(node), scan_id_(scan_id), tty_(isatty(2)) {
+    node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
+      if (scan_id_ && m.scan_id != scan_id_) return;
+      Progress("projector: pattern " + std::to_string(m.pattern_index + 1) + " of " +
+               std::to_string(m.pattern_count));
+    });
+    for (const char* process : {"vellum-projector", "vellum-camera", "vellum-decoder",
+                                "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+      node->Subscribe<status_t>(station::StatusChannel(process),
+                                [this](const status_t& m) { OnStatus(m); });
+    }
+    node->Subscribe<restored_t>(channel::kRestored, [this](const restored_t& m) {
+      if (scan_id_ && m.scan_id != scan_id_) return;
+      EndLine();
+      std::printf("scan %lld restored: %dx%d%s -> %s\n", static_cast<long long>(m.scan_id), m.width,
+                  m.height,
+                  m.view == "orthographic"
+                      ? (" at " + std::to_string(static_cast<int>(m.dpi)) + " dpi").c_str()
+                      : " (camera view)",
+                  m.results.c_str());
+      std::fflush(stdout);
+      ++restored_;
+      results_ = m.results;
+    });
+  }
+
+  int restored() const { return restored_; }
+  const std::string& failure() const { return failure_; }
+  const std::string& results() const { return results_; }
+
+  void EndLine() {
+    if (tty_ && !line_.empty()) std::fputc('\n', stderr);
+    line_.clear();
+  }
+
+ private:
+  void Progress(const std::string& text) {
+    if (text == line_) return;
+    if (tty_) {
+      std::fprintf(stderr, "\r\033[K%s", text.c_str());
+    } else {
+      std::fprintf(stderr, "%s\n", text.c_str());
+    }
+    line_ = text;
+  }
+
+  void OnStatus(const status_t& m) {
+    int64_t& seen = errors_[m.process];
+    if (!first_seen_.count(m.process)) {
+      first_seen_[m.process] = true;
+      seen = m.errors;  // Errors from before we started are not ours.
+    }
+    if (m.errors > seen) {
+      seen = m.errors;
+      if (!scan_id_ || m.last_error_scan_id == scan_id_ || m.last_error_scan_id == 0) {
+        EndLine();
+        std::fprintf(stderr, "%s: %s\n", m.process.c_str(), m.last_error.c_str());
+        if (!scan_id_ || m.last_error_scan_id == scan_id_)
+          failure_ = m.process + ": " + m.last_error;
+      }
+    }
+    if ((m.state == "busy" || m.state == "recording") && (!scan_id_ || m.scan_id == scan_id_)) {
+      Progress(m.process.substr(7) + ": " + m.detail);
+    }
+  }
+
+  Node* node_;
+  int64_t scan_id_;
+  bool tty_;
+  std::string line_, failure_, results_;
+  int restored_ = 0;
+  std::map<std::string, int64_t> errors_;
+  std::map<std::string, bool> first_seen_;
+};
+
+// Handles the bus until `done` or the timeout; returns false on timeout.
+bool Follow(Node& node, double timeout_s, const std::function<bool()>& done) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > end || node.Stopping()) return false;
+    node.lcm().handleTimeout(100);
+  }
+  return true;
+}
+
+std::vector<Flags::Spec> BusSpecs() { return {{"url", "URL", "LCM bus", station::kDefaultUrl}}; }
+
+// Splits arguments into positional ones and flags (with their values).
+void SplitPositional(const std::vector<std::string>& args, std::vector<std::string>* positional,
+                     std::vector<std::string>* flags) {
+  for (size_t i = 0; i < args.size(); ++i) {
+    if (args[i].rfind("--", 0) == 0) {
+      flags->push_back(args[i]);
+      if (args[i].find('=') == std::string::npos && args[i] != "--help" && i + 1 < args.size()) {
+        flags->push_back(args[++i]);
+      }
+    } else {
+      positional->push_back(args[i]);
+    }
+  }
+}
+
+}  // namespace
+
+int RunScan(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = BusSpecs();
+  specs.push_back({"label", "TEXT", "a note for the scan (shelfmark, folio)", ""});
+  specs.push_back({"timeout", "S", "give up after this long", "600"});
+  Flags flags("vellum scan",
+              "Asks the station for one scan (SCAN_REQUEST), shows its progress and prints\n"
+              "where the results are once the page is restored. Exit status 1 when a daemon\n"
+              "reports the scan failed or nothing happens before the timeout.",
+              specs);
+  if (!flags.Parse(args)) return 0;
+  const double timeout = flags.GetDouble("timeout", 1, 86400);
+  Node node("vellum-scan", flags.Get("url"));
+  scan_request_t request{};
+  request.scan_id = station::NowUtime();
+  request.label = flags.Get("label");
+  Follower follower(&node, request.scan_id);
+  node.Publish(channel::kScanRequest, &request);
+  std::fprintf(stderr, "scan %lld requested\n", static_cast<long long>(request.scan_id));
+  const bool finished =
+      Follow(node, timeout, [&] { return follower.restored() > 0 || !follower.failure().empty(); });
+  follower.EndLine();
+  if (!follower.failure().empty()) {
+    std::fprintf(stderr, "vellum scan: scan %lld failed: %s\n",
+                 static_cast<long long>(request.scan_id), follower.failure().c_str());
+    return 1;
+  }
+  if (!finished) {
+    std::fprintf(stderr,
+                 "vellum scan: no restored page within %.0f s (are the daemons running on %s?)\n",
+                 timeout, flags.Get("url").c_str());
+    return 1;
+  }
+  return 0;
+}
+
+int RunWatch(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = BusSpecs();
+  specs.push_back({"count", "N", "exit after this many restored scans (0: never)", "1"});
+  specs.push_back({"timeout", "S", "give up after this long", "600"});
+  Flags flags("vellum watch",
+              "Follows the station's bus: daemon progress and errors, and each restored scan\n"
+              "with its results folder. Exit status 1 on a daemon error or a timeout.",
+              specs);
+  if (!flags.Parse(args)) return 0;
+  const int count = flags.GetInt("count", 0, 1 << 30);
+  Node node("vellum-watch", flags.Get("url"));
+  Follower follower(&node, 0);
+  const bool finished = Follow(node, flags.GetDouble("timeout", 1, 1e9), [&] {
+    return (count > 0 && follower.restored() >= count) || !follower.failure().empty();
+  });
+  follower.EndLine();
+  if (!follower.failure().empty()) return 1;
+  if (!finished && count > 0) {
+    std::fprintf(stderr, "vellum watch: %d of %d scans restored before the timeout\n",
+                 follower.restored(), count);
+    return 1;
+  }
+  return 0;
+}
+
+int RunExport(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = {
+      {"scan-id", "ID", "the scan to export when the log holds several", "0"}};
+  Flags flags("vellum export",
+              "usage: vellum export LOG DIR\n"
+              "Writes the scan recorded in an LCM log (CAPTURE, CALIBRATION) as a scan directory\n"
+              "(scan.yaml, texture.png, frame_NNN.png, and calibration.yaml when the log has one).",
+              specs);
+  std::vector<std::string> positional, rest;
+  SplitPositional(args, &positional, &rest);
+  if (!flags.Parse(rest)) return 0;
+  if (positional.size() != 2) throw UsageError("expected LOG DIR (see vellum export --help)");
+  Scan scan;
+  bool has_calibration = false;
+  calibration_t calibration;
+  int64_t id = 0;
+  Status s = station::ReadScanLog(positional[0],
+                                  static_cast<int64_t>(flags.GetDouble("scan-id", 0, 9.2e18)),
+                                  &scan, &has_calibration, &calibration, &id);
+  if (s.ok()) s = WriteScan(positional[1], scan);
+  if (s.ok() && has_calibration) {
+    Calibration c;
+    s = station::FromMessage(calibration, &c);
+    if (s.ok()) {
+      s = WriteCalibration((std::filesystem::path(positional[1]) / "calibration.yaml").string(), c);
+    }
+  }
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum export: %s\n", s.message().c_str());
+    return 1;
+  }
+  std::printf("scan %lld: %zu frames%s -> %s\n", static_cast<long long>(id), scan.frames.size(),
+              has_calibration ? " and calibration.yaml" : "", positional[1].c_str());
+  return 0;
+}
+
+int RunImport(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = {
+      {"scan-id", "ID", "scan id of the log's messages (0: the current time)", "0"},
+      {"calibration", "FILE", "calibration to include (default: DIR/calibration.yaml if any)", ""}};
+  Flags flags("vellum import",
+              "usage: vellum import DIR LOG\n"
+              "Writes a scan directory as an LCM log as the station records it: CALIBRATION,\n"
+              "then the texture and every frame on CAPTURE. lcm-logplayer of it drives the\n"
+              "processing daemons.",
+              specs);
+  std::vector<std::string> positional, rest;
+  SplitPositional(args, &positional, &rest);
+  if (!flags.Parse(rest)) return 0;
+  if (positional.size() != 2) throw UsageError("expected DIR LOG (see vellum import --help)");
+  Scan scan;
+  Status s = ReadScan(positional[0], &scan);
+  calibration_t calibration{};
+  bool has_calibration = false;
+  std::string calib_path = flags.Get("calibration");
+  const std::string beside = (std::filesystem::path(positional[0]) / "calibration.yaml").string();
+  if (calib_path.empty() && std::filesystem::exists(beside)) calib_path = beside;
+  if (s.ok() && !calib_path.empty()) {
+    Calibration c;
+    s = ReadCalibration(calib_path, &c);
+    station::ToMessage(c, &calibration);
+    calibration.source = calib_path;
+    has_calibration = true;
+  }
+  int64_t id = static_cast<int64_t>(flags.GetDouble("scan-id", 0, 9.2e18));
+  if (id <= 0) id = station::NowUtime();
+  if (s.ok()) {
+    s = station::WriteScanLog(positional[1], scan, id, has_calibration ? &calibration : nullptr);
+  }
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum import: %s\n", s.message().c_str());
+    return 1;
+  }
+  std::printf("scan %lld: %zu frames%s -> %s\n", static_cast<long long>(id), scan.frames.size(),
+              has_calibration ? " and the calibration" : "", positional[1].c_str());
+  return 0;
+}
+
+}  // namespace vellum

@@ -1,0 +1,99 @@
+#include "cli/options.h"
+
+namespace vellum {
+
+std::vector<Flags::Spec> Join(std::vector<Flags::Spec> a, const std::vector<Flags::Spec>& b) {
+  a.insert(a.end(), b.begin(), b.end());
+  return a;
+}
+
+std::vector<Flags::Spec> PatternFlagSpecs() {
+  return {
+      {"phase-steps", "N", "phase shifts per axis; 0 = Gray code only", "8"},
+      {"period", "PX", "sinusoid period, projector pixels", "16"},
+  };
+}
+
+PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
+  PatternOptions o;
+  o.projector_size = projector;
+  o.phase_steps = flags.GetInt("phase-steps", 0, 64);
+  o.phase_period_px = flags.GetInt("period", 4, 4096);
+  std::string why;
+  if (!o.Check(&why)) throw UsageError(why);
+  return o;
+}
+
+std::vector<Flags::Spec> DecodeFlagSpecs() {
+  return {
+      {"decoder", "NAME", "phase (Gray code + phase shift) or gray (Gray code only)", "phase"},
+      {"smooth-radius", "PX", "local fit radius, camera pixels (0..8); 0 = per-pixel decode", "3"},
+  };
+}
+
+std::vector<Flags::Spec> TriangulateFlagSpecs() {
+  return {
+      {"max-epipolar", "PX", "reject points farther from their epipolar line, projector px", "1.5"},
+  };
+}
+
+std::vector<Flags::Spec> FlattenFlagSpecs() {
+  return {
+      {"grid", "GxH", "flattening grid, nodes across x down", "45x45"},
+      {"solver", "NAME", "gauss-newton (fast), euler or rk4 (the paper's simulator)",
+       "gauss-newton"},
+  };
+}
+
+std::vector<Flags::Spec> RestoreFlagSpecs() {
+  return {
+      {"view", "NAME", "orthographic (true scale) or camera (as the camera would see it)",
+       "orthographic"},
+      {"dpi", "N", "orthographic resolution; 0 = the camera's sampling on the table", "0"},
+  };
+}
+
+DecodeOptions DecodeOptionsFromFlags(const Flags& flags) {
+  DecodeOptions options;
+  const std::string decoder = flags.Get("decoder");
+  if (decoder != "phase" && decoder != "gray") {
+    throw UsageError("--decoder must be phase or gray, got '" + decoder + "'");
+  }
+  options.use_phase = decoder == "phase";
+  options.smooth_radius_px = flags.GetInt("smooth-radius", 0, 8);
+  return options;
+}
+
+TriangulateOptions TriangulateOptionsFromFlags(const Flags& flags) {
+  TriangulateOptions options;
+  options.max_epipolar_error_px = flags.GetDouble("max-epipolar", 0.01, 100);
+  return options;
+}
+
+MeshOptions MeshOptionsFromFlags(const Flags& flags) {
+  MeshOptions options;
+  options.grid = flags.GetSize("grid");
+  std::string why;
+  if (!options.Check(&why)) throw UsageError("--grid: " + why);
+  return options;
+}
+
+FlattenOptions FlattenOptionsFromFlags(const Flags& flags) {
+  FlattenOptions options;
+  if (!ParseFlattenSolver(flags.Get("solver"), &options.solver)) {
+    throw UsageError("--solver must be gauss-newton, euler or rk4, got '" + flags.Get("solver") +
+                     "'");
+  }
+  return options;
+}
+
+RestoreOptions RestoreOptionsFromFlags(const Flags& flags) {
+  RestoreOptions options;
+  if (!ParseRestoreView(flags.Get("view"), &options.view)) {
+    throw UsageError("--view must be orthographic or camera, got '" + flags.Get("view") + "'");
+  }
+  options.dpi = flags.GetDouble("dpi", 0, 4800);
+  return options;
+}
+
+}  // namespace vellum

@@ -1,0 +1,151 @@
+// vellum-camera: on each PATTERN_SHOWN, captures the first frame whose exposure starts after
+// it and publishes CAPTURE (the frame, the pattern, the scan). Backends: v4l2 (libv4l2) and
+// sim (the virtual gantry renders what the camera would see under the pattern shown).
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "cli/options.h"
+#include "core/io/calibration_io.h"
+#include "core/sim/gantry.h"
+#include "daemons/camera/v4l2_camera.h"
+#include "daemons/common/daemon.h"
+#include "daemons/common/messages.h"
+#include "vellum/capture_t.hpp"
+#include "vellum/pattern_shown_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+class CameraNode {
+ public:
+  CameraNode(Node* node, const Flags& flags) : node_(node) {
+    const std::string backend = flags.Get("backend");
+    if (backend == "sim") {
+      Calibration rig = DefaultRig();
+      if (!flags.Get("rig").empty()) {
+        const Status s = ReadCalibration(flags.Get("rig"), &rig);
+        if (!s.ok()) throw UsageError(s.message());
+      }
+      PageOptions page;
+      if (!ParsePageShape(flags.Get("page"), &page.shape)) {
+        throw UsageError("--page must be flat, curl, fold, cone or bump, got '" +
+                         flags.Get("page") + "'");
+      }
+      const cv::Size page_size = flags.GetSize("page-size");
+      page.size_mm = cv::Size2d(page_size.width, page_size.height);
+      TextureOptions texture;
+      const std::string tex = flags.Get("texture");
+      if (!ParseTextureKind(tex, &texture.kind) || texture.kind == TextureKind::kImage) {
+        texture.kind = TextureKind::kImage;
+        texture.image = cv::imread(tex, cv::IMREAD_COLOR);
+        if (texture.image.empty()) {
+          throw UsageError("--texture " + tex + ": not a readable image (nor a texture name)");
+        }
+      }
+      LightOptions light;
+      light.noise_dn = flags.GetDouble("noise", 0, 100);
+      seed_ = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
+      texture.seed = seed_;
+      node->Log("sim: tracing a " + std::string(ToString(page.shape)) + " page for a " +
+                SizeText(rig.camera.size) + " camera");
+      gantry_ = std::make_unique<VirtualGantry>(rig, page, texture, light);
+    } else if (backend == "v4l2") {
+      V4l2Options o;
+      o.device = flags.Get("device");
+      o.size = flags.GetSize("size");
+      o.exposure = flags.GetInt("exposure", -1, 1 << 24);
+      o.gain = flags.GetInt("gain", -1, 1 << 16);
+      v4l2_ = std::make_unique<V4l2Camera>();
+      const Status s = v4l2_->Open(o);
+      if (!s.ok()) throw std::runtime_error(s.message());
+    } else {
+      throw UsageError("--backend must be sim or v4l2, got '" + backend + "'");
+    }
+    node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
+      node_->Post([this, m] { OnShown(m); });
+    });
+  }
+
+ private:
+  void OnShown(const pattern_shown_t& m) {
+    const std::string where =
+        "scan " + std::to_string(m.scan_id) + ", pattern " + std::to_string(m.pattern_index);
+    PatternSpec spec;
+    Status s = FromMessage(m.pattern, &spec);
+    if (!s.ok()) return node_->Error(where + ": PATTERN_SHOWN: " + s.message(), m.scan_id);
+    const cv::Size projector(m.projector_width, m.projector_height);
+    node_->SetState(
+        "capturing", m.scan_id,
+        "pattern " + std::to_string(m.pattern_index) + " of " + std::to_string(m.pattern_count));
+    cv::Mat image;
+    int64_t exposure = 0;
+    if (gantry_) {
+      if (projector != gantry_->rig().projector.size) {
+        return node_->Error(where + ": the projector shows " + SizeText(projector) +
+                                " images but the sim rig's projector is " +
+                                SizeText(gantry_->rig().projector.size),
+                            m.scan_id);
+      }
+      exposure = std::max(NowUtime(), m.utime + 1);
+      const uint64_t seed = seed_ * 1000003ULL + static_cast<uint64_t>(m.pattern_index + 1);
+      image = m.pattern_index < 0 ? gantry_->RenderTexture(seed)
+                                  : gantry_->RenderFrame(RenderPattern(spec, projector), seed);
+    } else {
+      s = v4l2_->Capture(m.utime, &image, &exposure);
+      if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
+      if (m.pattern_index >= 0) cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
+    }
+    capture_t c{};
+    c.scan_id = m.scan_id;
+    c.pattern_index = m.pattern_index;
+    c.pattern_count = m.pattern_count;
+    c.projector_width = m.projector_width;
+    c.projector_height = m.projector_height;
+    c.pattern = m.pattern;
+    c.shown_utime = m.utime;
+    ToMessage(image, &c.image);
+    c.image.utime = exposure;
+    c.image.scan_id = m.scan_id;
+    c.image.pattern_index = m.pattern_index;
+    c.image.pattern_count = m.pattern_count;
+    c.image.seq = node_->Counter("frames captured");
+    node_->Publish(channel::kCapture, &c);
+    node_->Count("frames captured");
+    if (m.pattern_index + 1 == m.pattern_count) node_->SetState("idle", m.scan_id, "scan captured");
+  }
+
+  Node* node_;
+  std::unique_ptr<VirtualGantry> gantry_;
+  uint64_t seed_ = 1;
+  std::unique_ptr<V4l2Camera> v4l2_;
+};
+
+}  // namespace
+}  // namespace vellum::station
+
+int main(int argc, char** argv) {
+  using namespace vellum;
+  using namespace vellum::station;
+  const std::vector<Flags::Spec> own = {
+      {"backend", "NAME", "v4l2 (a real camera) or sim (the virtual gantry)", "sim"},
+      {"device", "PATH", "v4l2: the camera device", "/dev/video0"},
+      {"size", "WxH", "v4l2: frame size", "1600x1200"},
+      {"exposure", "N", "v4l2: manual exposure, 100 us units; -1 = camera's setting", "-1"},
+      {"gain", "N", "v4l2: gain; -1 = camera's setting", "-1"},
+      {"rig", "FILE", "sim: the rig's calibration (default: the built-in default rig)", ""},
+      {"page", "SHAPE", "sim: flat, curl, fold, cone or bump", "curl"},
+      {"texture", "KIND|FILE", "sim: checkerboard, text, plain, or an image of the page",
+       "checkerboard"},
+      {"page-size", "WxH", "sim: page size, mm", "190x240"},
+      {"noise", "DN", "sim: camera noise sigma, DN", "1.5"},
+      {"seed", "N", "sim: noise seed", "1"},
+  };
+  return DaemonMain(argc, argv, "vellum-camera",
+                    "Captures a frame for each PATTERN_SHOWN (the first whose exposure starts\n"
+                    "after it) and publishes CAPTURE: the texture in colour, patterns in gray.",
+                    Join(DaemonFlagSpecs(false), own), [](const Flags& flags, Node& node) {
+                      CameraNode camera(&node, flags);
+                      return node.Run();
+                    });
+}

@@ -1,0 +1,265 @@
+#include "daemons/common/scan_store.h"
+
+#include <filesystem>
+
+#include "core/io/calibration_io.h"
+#include "daemons/common/messages.h"
+#include "daemons/common/node.h"
+
+namespace vellum::station {
+namespace fs = std::filesystem;
+
+ScanFolder ScanFolder::For(const std::string& data_dir, int64_t scan_id) {
+  return {(fs::path(data_dir) / ("scan-" + std::to_string(scan_id))).string()};
+}
+std::string ScanFolder::raw() const { return (fs::path(root) / "raw").string(); }
+std::string ScanFolder::results() const { return (fs::path(root) / "results").string(); }
+std::string ScanFolder::log() const { return (fs::path(raw()) / "captures.lcmlog").string(); }
+std::string ScanFolder::calibration() const {
+  return (fs::path(raw()) / "calibration.yaml").string();
+}
+
+Status CaptureSet::Add(const capture_t& c) {
+  const std::string where =
+      "scan " + std::to_string(c.scan_id) + ", pattern " + std::to_string(c.pattern_index);
+  if (c.pattern_count <= 0 || c.pattern_count > 1000) {
+    return Status::Error(where + ": pattern_count " + std::to_string(c.pattern_count) +
+                         " is not valid");
+  }
+  if (c.pattern_index < -1 || c.pattern_index >= c.pattern_count) {
+    return Status::Error(where + ": pattern_index outside -1.." +
+                         std::to_string(c.pattern_count - 1));
+  }
+  cv::Mat image;
+  Status s = FromMessage(c.image, &image);
+  if (!s.ok()) return Status::Error(where + ": " + s.message());
+  PatternSpec spec;
+  s = FromMessage(c.pattern, &spec);
+  if (!s.ok()) return Status::Error(where + ": " + s.message());
+  const cv::Size projector(c.projector_width, c.projector_height);
+  if (!Started()) {
+    if (projector.width <= 0 || projector.height <= 0) {
+      return Status::Error(where + ": bad projector size");
+    }
+    scan_id_ = c.scan_id;
+    count_ = c.pattern_count;
+    projector_ = projector;
+    camera_ = image.size();
+    frames_.assign(count_, cv::Mat());
+    specs_.assign(count_, PatternSpec());
+    have_.assign(count_ + 1, false);
+  } else if (c.scan_id != scan_id_ || c.pattern_count != count_ || projector != projector_) {
+    return Status::Error(where + ": does not match the scan's " + std::to_string(count_) +
+                         " patterns for a " + SizeText(projector_) + " projector");
+  }
+  if (image.size() != camera_) {
+    return Status::Error(where + ": image is " + SizeText(image.size()) + ", the scan's are " +
+                         SizeText(camera_));
+  }
+  if (have_[c.pattern_index + 1]) return Status::Error(where + ": captured twice");
+  if (c.pattern_index == -1) {
+    texture_ = image;
+  } else {
+    if (image.channels() != 1) {
+      return Status::Error(where + ": pattern frames must be gray (GREY)");
+    }
+    frames_[c.pattern_index] = image;
+    specs_[c.pattern_index] = spec;
+  }
+  have_[c.pattern_index + 1] = true;
+  ++received_;
+  return Status::Ok();
+}
+
+bool CaptureSet::Complete() const { return Started() && received_ == count_ + 1; }
+
+std::string CaptureSet::Missing() const {
+  std::string list;
+  int n = 0;
+  for (int k = 0; k <= count_; ++k) {
+    if (have_[k]) continue;
+    if (n < 8) list += (n ? ", " : "") + (k == 0 ? std::string("texture") : std::to_string(k - 1));
+    ++n;
+  }
+  if (n > 8) list += ", ...";
+  return std::to_string(n) + " of " + std::to_string(count_ + 1) + " captures missing (" + list +
+         ")";
+}
+
+Scan CaptureSet::ToScan() const {
+  Scan scan;
+  scan.sequence.projector_size = projector_;
+  scan.sequence.patterns = specs_;
+  scan.camera_size = camera_;
+  scan.texture = texture_;
+  scan.frames = frames_;
+  return scan;
+}
+
+Status ScanRecorder::Open(const ScanFolder& folder) {
+  Close();
+  folder_ = folder;
+  Status s = MakeDirectories(folder.raw());
+  if (!s.ok()) return s;
+  auto log = std::make_unique<lcm::LogFile>(folder.log(), "w");
+  if (!log->good()) return Status::Error(folder.log() + ": cannot create the scan's log");
+  log_ = std::move(log);
+  return Status::Ok();
+}
+
+void ScanRecorder::Close() { log_.reset(); }
+
+Status ScanRecorder::Log(const std::string& channel, int64_t utime,
+                         const std::vector<uint8_t>& bytes) {
+  if (!log_) return Status::Error("no scan log open");
+  lcm::LogEvent event;
+  event.eventnum = 0;
+  event.timestamp = utime;
+  event.channel = channel;
+  event.datalen = static_cast<int32_t>(bytes.size());
+  event.data = const_cast<uint8_t*>(bytes.data());
+  if (log_->writeEvent(&event) != 0) {
+    return Status::Error(folder_.log() + ": cannot write (disk full?)");
+  }
+  // Flushed per capture: what was captured is on disk before the next pattern is shown.
+  if (fflush(log_->getFilePtr()) != 0) {
+    return Status::Error(folder_.log() + ": cannot write (disk full?)");
+  }
+  return Status::Ok();
+}
+
+template <class Msg>
+static std::vector<uint8_t> Encode(const Msg& msg) {
+  std::vector<uint8_t> bytes(msg.getEncodedSize());
+  msg.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  return bytes;
+}
+
+Status ScanRecorder::Write(const capture_t& capture, const cv::Mat& image) {
+  Status s = Log(channel::kCapture, capture.utime, Encode(capture));
+  if (!s.ok()) return s;
+  const std::string name =
+      capture.pattern_index < 0 ? "texture.png" : FrameName(capture.pattern_index);
+  return WriteImage((fs::path(folder_.raw()) / name).string(), image);
+}
+
+Status ScanRecorder::Write(const calibration_t& calibration) {
+  Status s = Log(channel::kCalibration, calibration.utime, Encode(calibration));
+  if (!s.ok()) return s;
+  Calibration c;
+  s = FromMessage(calibration, &c);
+  if (!s.ok()) return s;
+  return WriteCalibration(folder_.calibration(), c);
+}
+
+Status ScanRecorder::Finish(const Scan& scan) {
+  Status s = WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size);
+  Close();
+  return s;
+}
+
+capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime) {
+  capture_t c;
+  c.utime = utime;
+  c.seq = 0;
+  c.scan_id = scan_id;
+  c.pattern_index = pattern_index;
+  c.pattern_count = static_cast<int32_t>(scan.sequence.patterns.size());
+  c.projector_width = scan.sequence.projector_size.width;
+  c.projector_height = scan.sequence.projector_size.height;
+  PatternSpec black;
+  black.kind = PatternKind::kBlack;
+  c.pattern = ToMessage(pattern_index < 0 ? black : scan.sequence.patterns[pattern_index]);
+  c.shown_utime = utime - 1000;
+  ToMessage(pattern_index < 0 ? scan.texture : scan.frames[pattern_index], &c.image);
+  c.image.utime = utime - 500;
+  c.image.seq = 0;
+  c.image.scan_id = scan_id;
+  c.image.pattern_index = pattern_index;
+  c.image.pattern_count = c.pattern_count;
+  return c;
+}
+
+Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_id,
+                    const calibration_t* calibration, int64_t interval_us) {
+  lcm::LogFile log(log_path, "w");
+  if (!log.good()) return Status::Error(log_path + ": cannot create");
+  int64_t utime = NowUtime();
+  int64_t seq = 0;
+  auto write = [&](const std::string& channel, const std::vector<uint8_t>& bytes) {
+    lcm::LogEvent event;
+    event.eventnum = 0;
+    event.timestamp = utime;
+    event.channel = channel;
+    event.datalen = static_cast<int32_t>(bytes.size());
+    event.data = const_cast<uint8_t*>(bytes.data());
+    return log.writeEvent(&event) == 0;
+  };
+  if (calibration) {
+    calibration_t c = *calibration;
+    c.utime = utime;
+    c.seq = 0;
+    c.scan_id = scan_id;
+    if (!write(channel::kCalibration, Encode(c))) return Status::Error(log_path + ": write failed");
+  }
+  for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
+    utime += interval_us;
+    capture_t c = MakeCapture(scan, scan_id, k, utime);
+    c.seq = seq++;
+    if (!write(channel::kCapture, Encode(c))) return Status::Error(log_path + ": write failed");
+  }
+  return Status::Ok();
+}
+
+Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, bool* has_calibration,
+                   calibration_t* calibration, int64_t* found_scan_id) {
+  if (!fs::exists(log_path)) return Status::Error(log_path + ": file is missing");
+  lcm::LogFile log(log_path, "r");
+  if (!log.good()) return Status::Error(log_path + ": cannot open as an LCM log");
+  CaptureSet set;
+  *has_calibration = false;
+  int64_t other = 0;
+  int events = 0;
+  for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+    ++events;
+    if (e->channel == channel::kCapture) {
+      capture_t c;
+      if (c.decode(e->data, 0, e->datalen) < 0) {
+        return Status::Error(log_path + ": event " + std::to_string(e->eventnum) +
+                             " on CAPTURE does not decode as vellum.capture_t");
+      }
+      if (scan_id == 0 && set.Started() && c.scan_id != set.scan_id()) other = c.scan_id;
+      if (scan_id != 0 && c.scan_id != scan_id) continue;
+      if (scan_id == 0 && set.Started() && c.scan_id != set.scan_id()) continue;
+      Status s = set.Add(c);
+      if (!s.ok()) return Status::Error(log_path + ": " + s.message());
+    } else if (e->channel == channel::kCalibration) {
+      calibration_t c;
+      if (c.decode(e->data, 0, e->datalen) < 0) {
+        return Status::Error(log_path + ": event " + std::to_string(e->eventnum) +
+                             " on CALIBRATION does not decode as vellum.calibration_t");
+      }
+      if (scan_id != 0 && c.scan_id != scan_id) continue;
+      *calibration = c;
+      *has_calibration = true;
+    }
+  }
+  if (events == 0) return Status::Error(log_path + ": no events (not an LCM log, or empty)");
+  if (other != 0) {
+    return Status::Error(log_path + ": holds more than one scan (" + std::to_string(set.scan_id()) +
+                         ", " + std::to_string(other) + ", ...); pick one with --scan-id");
+  }
+  if (!set.Started()) {
+    return Status::Error(log_path + ": no CAPTURE of scan " +
+                         (scan_id ? std::to_string(scan_id) : std::string("(any)")));
+  }
+  if (!set.Complete()) {
+    return Status::Error(log_path + ": scan " + std::to_string(set.scan_id()) +
+                         " is incomplete: " + set.Missing());
+  }
+  *scan = set.ToScan();
+  *found_scan_id = set.scan_id();
+  return Status::Ok();
+}
+
+}  // namespace vellum::station

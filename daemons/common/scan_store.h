@@ -1,0 +1,88 @@
+// A scan's captures on their way to disk: the set of CAPTURE messages of one scan (checked
+// for consistency, with the missing ones named), the scan's folder (raw captures as an LCM log
+// and as the scan directory of DESIGN.md, written as they arrive, before any processing), and
+// the conversions between a recorded log and a scan directory (`vellum export` / `import`).
+#pragma once
+
+#include <cstdint>
+#include <lcm/lcm-cpp.hpp>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/io/scan_io.h"
+#include "vellum/calibration_t.hpp"
+#include "vellum/capture_t.hpp"
+
+namespace vellum::station {
+
+// <data>/scan-<id>/raw (the scan directory, captures.lcmlog, calibration.yaml) and
+// <data>/scan-<id>/results (what `vellum process` writes).
+struct ScanFolder {
+  std::string root;
+  static ScanFolder For(const std::string& data_dir, int64_t scan_id);
+  std::string raw() const;
+  std::string results() const;
+  std::string log() const;          // raw/captures.lcmlog
+  std::string calibration() const;  // raw/calibration.yaml
+};
+
+// The captures of one scan, as they arrive.
+class CaptureSet {
+ public:
+  // Checks the capture against the scan (ids, counts, projector size, image size) and keeps
+  // its image. Errors name the scan and pattern.
+  Status Add(const capture_t& capture);
+  bool Started() const { return count_ >= 0; }
+  bool Complete() const;
+  int64_t scan_id() const { return scan_id_; }
+  int Received() const { return received_; }
+  int Expected() const { return count_ + 1; }  // Texture + patterns.
+  // "texture, frames 3, 7 of 54 missing".
+  std::string Missing() const;
+  // The whole scan (only when Complete()).
+  Scan ToScan() const;
+
+ private:
+  int64_t scan_id_ = 0;
+  int count_ = -1, received_ = 0;
+  cv::Size projector_, camera_;
+  cv::Mat texture_;
+  std::vector<cv::Mat> frames_;
+  std::vector<PatternSpec> specs_;
+  std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
+};
+
+// Writes a scan's raw captures as they arrive: each CAPTURE (and the CALIBRATION) goes to
+// raw/captures.lcmlog and, decoded, to raw/texture.png, raw/frame_NNN.png (and
+// raw/calibration.yaml); Finish writes raw/scan.yaml.
+class ScanRecorder {
+ public:
+  Status Open(const ScanFolder& folder);
+  bool IsOpen() const { return log_ != nullptr; }
+  Status Write(const capture_t& capture, const cv::Mat& image);
+  Status Write(const calibration_t& calibration);
+  Status Finish(const Scan& scan);
+  void Close();
+
+ private:
+  Status Log(const std::string& channel, int64_t utime, const std::vector<uint8_t>& bytes);
+  ScanFolder folder_;
+  std::unique_ptr<lcm::LogFile> log_;
+};
+
+// Reads a recorded log: the captures of its scan (`scan_id` 0: the log must hold exactly one
+// scan) and its calibration, if any. Errors name the log and what is missing.
+Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, bool* has_calibration,
+                   calibration_t* calibration, int64_t* found_scan_id);
+// Writes a scan directory as a log a station would have recorded: CALIBRATION (if given), then
+// the texture and every frame on CAPTURE, `interval_us` apart.
+Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_id,
+                    const calibration_t* calibration, int64_t interval_us = 20000);
+
+// The capture message of one image of a scan (pattern_index -1: the texture).
+capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime);
+
+}  // namespace vellum::station

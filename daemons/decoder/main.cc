@@ -1,0 +1,177 @@
+// vellum-decoder: records each scan's captures to disk as they arrive (raw/captures.lcmlog and
+// the scan directory), and once a scan is complete decodes it and publishes CORRESPONDENCE.
+#include <atomic>
+#include <chrono>
+#include <memory>
+
+#include "cli/options.h"
+#include "daemons/common/daemon.h"
+#include "daemons/common/messages.h"
+#include "daemons/common/scan_store.h"
+
+namespace vellum::station {
+namespace {
+
+class DecoderNode {
+ public:
+  DecoderNode(Node* node, const Flags& flags)
+      : node_(node),
+        data_(flags.Get("data")),
+        decoder_(DecodeOptionsFromFlags(flags)),
+        timeout_s_(flags.GetDouble("scan-timeout", 1, 3600)) {
+    node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
+      auto copy = std::make_shared<capture_t>(msg);
+      last_capture_ = std::chrono::steady_clock::now();
+      node_->Post([this, copy] { OnCapture(*copy); });
+    });
+    node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
+      auto copy = std::make_shared<calibration_t>(msg);
+      node_->Post([this, copy] { OnCalibration(*copy); });
+    });
+  }
+
+  // On the LCM thread: an incomplete scan with no capture for a while is given up.
+  void Tick() {
+    if (!waiting_ || std::chrono::steady_clock::now() - last_capture_ <
+                         std::chrono::duration<double>(timeout_s_)) {
+      return;
+    }
+    waiting_ = false;
+    node_->Post([this] {
+      if (set_.Started() && !set_.Complete()) Abandon("no capture for " + Seconds() + " s");
+    });
+  }
+
+ private:
+  std::string Seconds() const { return std::to_string(static_cast<int>(timeout_s_)); }
+
+  void Abandon(const std::string& why) {
+    node_->Error("scan " + std::to_string(set_.scan_id()) + " failed: " + why + "; " +
+                     set_.Missing() + "; the captures received are kept in " +
+                     ScanFolder::For(data_, set_.scan_id()).raw(),
+                 set_.scan_id());
+    node_->Count("scans failed");
+    recorder_.Close();
+    set_ = CaptureSet();
+    recording_ = 0;
+    node_->SetState("idle");
+  }
+
+  // Opens the scan's folder on its first message.
+  bool Begin(int64_t scan_id) {
+    if (recording_ == scan_id && !set_.Complete()) return true;
+    if (recording_ == scan_id)
+      node_->Log("scan " + std::to_string(scan_id) + " again: recording anew");
+    if (set_.Started() && !set_.Complete()) {
+      Abandon("scan " + std::to_string(scan_id) + " started before it was complete");
+    }
+    set_ = CaptureSet();
+    recording_ = scan_id;
+    const Status s = recorder_.Open(ScanFolder::For(data_, scan_id));
+    if (!s.ok()) {
+      node_->Error("scan " + std::to_string(scan_id) + ": cannot record: " + s.message(), scan_id);
+      return false;
+    }
+    node_->Log("scan " + std::to_string(scan_id) + ": recording to " +
+               ScanFolder::For(data_, scan_id).raw());
+    return true;
+  }
+
+  void OnCalibration(const calibration_t& msg) {
+    if (!Begin(msg.scan_id)) return;
+    const Status s = recorder_.Write(msg);
+    if (!s.ok()) node_->Error("scan " + std::to_string(msg.scan_id) + ": " + s.message());
+  }
+
+  void OnCapture(const capture_t& msg) {
+    if (!Begin(msg.scan_id)) return;
+    Status s = set_.Add(msg);
+    if (!s.ok()) {
+      node_->Error(s.message(), msg.scan_id);
+      return;
+    }
+    cv::Mat image;
+    FromMessage(msg.image, &image);  // Checked by Add.
+    if (recorder_.IsOpen()) s = recorder_.Write(msg, image);
+    if (!s.ok()) {
+      node_->Error("scan " + std::to_string(msg.scan_id) + ": recording failed: " + s.message(),
+                   msg.scan_id);
+      recorder_.Close();
+      set_ = CaptureSet();
+      recording_ = 0;
+      node_->Count("scans failed");
+      return;
+    }
+    waiting_ = true;
+    node_->SetState(
+        "recording", msg.scan_id,
+        "capture " + std::to_string(set_.Received()) + " of " + std::to_string(set_.Expected()));
+    if (set_.Complete()) Process();
+  }
+
+  void Process() {
+    waiting_ = false;
+    const int64_t id = set_.scan_id();
+    const Scan scan = set_.ToScan();
+    Status s = recorder_.Finish(scan);
+    if (!s.ok()) {
+      node_->Error("scan " + std::to_string(id) + ": " + s.message(), id);
+      return;
+    }
+    node_->Count("scans recorded");
+    node_->SetState("busy", id, "decoding");
+    const int64_t start = NowUtime();
+    decoder_.Decode(scan.sequence, scan.frames, &decoded_);
+    if (!decoded_.status.ok()) {
+      node_->Error("scan " + std::to_string(id) + ": " + decoded_.status.message(), id);
+      node_->SetState("idle");
+      return;
+    }
+    scan_stats_t stats{};
+    AddDecodeStats(decoded_.stats, SecondsSince(start), &stats);
+    stats.camera_width = scan.camera_size.width;
+    stats.camera_height = scan.camera_size.height;
+    stats.projector_width = scan.sequence.projector_size.width;
+    stats.projector_height = scan.sequence.projector_size.height;
+    stats.patterns = static_cast<int32_t>(scan.sequence.patterns.size());
+    for (correspondence_t& m : ToMessages(id, decoded_, scan.sequence.projector_size, stats)) {
+      node_->Publish(channel::kCorrespondence, &m);
+    }
+    node_->Count("scans decoded");
+    node_->Log("scan " + std::to_string(id) + ": decoded " + std::to_string(decoded_.stats.valid) +
+               " pixels in " + std::to_string(stats.decode_s) + " s");
+    node_->SetState("idle");
+  }
+
+  Node* node_;
+  std::string data_;
+  Decoder decoder_;
+  double timeout_s_;
+  // Worker thread only:
+  CaptureSet set_;
+  int64_t recording_ = 0;  // The scan whose folder is open.
+  ScanRecorder recorder_;
+  DecodeResult decoded_;
+  // LCM thread only:
+  std::chrono::steady_clock::time_point last_capture_;
+  std::atomic<bool> waiting_{false};  // A scan is being captured (set by the worker).
+};
+
+}  // namespace
+}  // namespace vellum::station
+
+int main(int argc, char** argv) {
+  using namespace vellum;
+  using namespace vellum::station;
+  std::vector<Flags::Spec> specs = Join(DaemonFlagSpecs(true), DecodeFlagSpecs());
+  specs.push_back({"scan-timeout", "S", "give up an incomplete scan after this long", "30"});
+  return DaemonMain(
+      argc, argv, "vellum-decoder",
+      "Records every scan's CAPTURE messages to <data>/scan-<id>/raw (captures.lcmlog, the scan\n"
+      "directory of DESIGN.md, calibration.yaml) as they arrive, then decodes the complete\n"
+      "scan and publishes CORRESPONDENCE (in row chunks).",
+      specs, [](const Flags& flags, Node& node) {
+        DecoderNode decoder(&node, flags);
+        return node.Run([&] { decoder.Tick(); });
+      });
+}

@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Runs a command inside a private network namespace whose only interface is loopback, set up
+# for LCM's udpm multicast (lo up, multicast on, a 224.0.0.0/4 route on lo): bus traffic can
+# never leave this machine. As root it uses `unshare -n`; otherwise a user namespace as well.
+set -euo pipefail
+if [ "${VELLUM_IN_NETNS:-}" != 1 ]; then
+  flags=(-n)
+  [ "$(id -u)" -eq 0 ] || flags=(-r -n)
+  exec env VELLUM_IN_NETNS=1 unshare "${flags[@]}" "$0" "$@"
+fi
+ip link set lo up
+ip link set lo multicast on
+ip route add 224.0.0.0/4 dev lo
+exec "$@"
