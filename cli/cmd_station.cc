@@ -195,8 +195,7 @@ int RunWatch(const std::vector<std::string>& args) {
 int RunExport(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = {
       {"scan-id", "ID", "the scan to export when the log holds several", "0"}};
-  Flags flags("vellum export",
-              "usage: vellum export LOG DIR\n"
+  Flags flags("vellum export LOG DIR",
               "Writes the scan recorded in an LCM log (CAPTURE, CALIBRATION) as a scan directory\n"
               "(scan.yaml, texture.png, frame_NNN.png, and calibration.yaml when the log has one).",
               specs);
@@ -232,8 +231,7 @@ int RunImport(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = {
       {"scan-id", "ID", "scan id of the log's messages (0: the current time)", "0"},
       {"calibration", "FILE", "calibration to include (default: DIR/calibration.yaml if any)", ""}};
-  Flags flags("vellum import",
-              "usage: vellum import DIR LOG\n"
+  Flags flags("vellum import DIR LOG",
               "Writes a scan directory as an LCM log as the station records it: CALIBRATION,\n"
               "then the texture and every frame on CAPTURE. lcm-logplayer of it drives the\n"
               "processing daemons.",

@@ -9,6 +9,7 @@ packages=(
   libv4l-dev libsdl2-dev
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   libcgal-dev clang-format
+  default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux
 )
 missing=()
 for p in "${packages[@]}"; do

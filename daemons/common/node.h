@@ -39,8 +39,9 @@ inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper
 // The status channel of a process: "vellum-camera" -> "STATUS_CAMERA".
 std::string StatusChannel(const std::string& process);
 
-// The default bus: multicast on this host only (ttl=0), with a 2 MB receive buffer.
-inline constexpr char kDefaultUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=2097152";
+// The default bus: multicast on this host only (ttl=0), with a 4 MB receive buffer (the kernel
+// caps it at net.core.rmem_max: systemd/60-vellum.conf raises that).
+inline constexpr char kDefaultUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
 
 class Node {
  public:
@@ -62,7 +63,7 @@ class Node {
       Msg msg;
       if (msg.decode(buffer->data, 0, buffer->data_size) < 0) {
         Error(channel + ": a message of " + std::to_string(buffer->data_size) +
-              " bytes does not decode as " + Msg::getTypeName() +
+              " bytes does not decode as vellum." + Msg::getTypeName() +
               " (corrupt, truncated or of another type); dropped");
         return;
       }

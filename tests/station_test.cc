@@ -1,0 +1,304 @@
+// The station as operators run it: real daemon processes on a real LCM udpm bus (inside this
+// test's private network namespace), the virtual gantry as camera and SDL2's offscreen/dummy
+// video driver for the projector. Checks the scan handshake, recording, playback of a recorded
+// log, and that a scan through the daemons gives exactly what `vellum process` gives.
+#include <gtest/gtest.h>
+
+#include <memory>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
+#include <tuple>
+
+#include "tests/station_harness.h"
+#include "vellum/capture_t.hpp"
+#include "vellum/correspondence_t.hpp"
+#include "vellum/restored_t.hpp"
+#include "vellum/status_t.hpp"
+
+namespace vellum {
+namespace {
+
+using testing::HandleUntil;
+using testing::Listener;
+using testing::Process;
+using testing::ReadText;
+namespace fs = std::filesystem;
+
+const std::string kBuild = VELLUM_BUILD_DIR;
+const std::string kSource = VELLUM_SOURCE_DIR;
+const std::string kRig = kSource + "/config/small_rig.yaml";
+const std::string kLog = kBuild + "/tests/data/curl_scan.lcmlog";
+
+std::string Daemon(const std::string& name) { return kBuild + "/daemons/" + name; }
+std::string Tool() { return kBuild + "/cli/vellum"; }
+
+class StationTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = (fs::temp_directory_path() /
+            ("vellum_station_" + std::string(info->name()) + "_" + std::to_string(getpid())))
+               .string();
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    // Each test its own port (and the namespace its own loopback).
+    static int next_port = 7900;
+    url_ = testing::TestUrl(next_port++);
+    lcm_ = std::make_unique<lcm::LCM>(url_);
+    ASSERT_TRUE(lcm_->good()) << "LCM cannot open " << url_ << " (run inside scripts/netns-run.sh)";
+  }
+  void TearDown() override {
+    for (auto& p : processes_) {
+      const int code = p->Stop();
+      EXPECT_EQ(code, 0) << p->name() << " did not stop cleanly on SIGTERM:\n" << p->Output();
+    }
+    processes_.clear();
+    if (!HasFailure()) fs::remove_all(dir_);
+  }
+
+  Process* Start(const std::string& binary, std::vector<std::string> args,
+                 const std::vector<std::string>& env = {}) {
+    args.insert(args.begin(), binary);
+    args.push_back("--url");
+    args.push_back(url_);
+    const std::string log = dir_ + "/" + fs::path(binary).filename().string() + "_" +
+                            std::to_string(processes_.size()) + ".log";
+    processes_.push_back(std::make_unique<Process>(args, log, env));
+    return processes_.back().get();
+  }
+  void StartProcessing() {
+    for (const char* name :
+         {"vellum-decoder", "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+      Start(Daemon(name), {"--data", dir_ + "/scans"});
+    }
+  }
+  // Runs a tool to completion; returns its exit code and output.
+  int RunTool(std::vector<std::string> args, std::string* output, double timeout_s = 300) {
+    args.insert(args.begin(), Tool());
+    Process p(args, dir_ + "/tool.log");
+    const int code = p.Wait(timeout_s);
+    *output = p.Output();
+    return code;
+  }
+  // Every daemon has published a heartbeat (it is subscribed and running).
+  void WaitForHeartbeats(const std::vector<std::string>& channels) {
+    std::set<std::string> seen;
+    std::vector<std::unique_ptr<Listener<status_t>>> listeners;
+    for (const std::string& c : channels) {
+      listeners.push_back(std::make_unique<Listener<status_t>>(
+          *lcm_, c, [&seen, c](const status_t&) { seen.insert(c); }));
+    }
+    ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return seen.size() == channels.size(); }))
+        << "only " << seen.size() << " of " << channels.size() << " daemons sent a heartbeat";
+  }
+  // The same scan through `vellum process`: the products must be identical.
+  void ExpectSameAsProcess(const std::string& scan_dir, const std::string& results) {
+    std::string out;
+    ASSERT_EQ(RunTool({"process", "--scan", scan_dir, "--calibration",
+                       scan_dir + "/calibration.yaml", "--out", dir_ + "/process"},
+                      &out),
+              0)
+        << out;
+    for (const char* file :
+         {"restored.tif", "flat.ply", "mesh.ply", "points.ply", "restored.json", "depth.png"}) {
+      EXPECT_EQ(ReadText(results + "/" + file), ReadText(dir_ + "/process/" + file))
+          << file << " differs between the daemons and vellum process";
+    }
+    const cv::Mat a = cv::imread(results + "/restored.tif", cv::IMREAD_UNCHANGED);
+    const cv::Mat b = cv::imread(dir_ + "/process/restored.tif", cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(a.empty());
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
+  }
+
+  std::string dir_, url_;
+  std::unique_ptr<lcm::LCM> lcm_;
+  std::vector<std::unique_ptr<Process>> processes_;
+};
+
+const std::vector<std::string> kProcessingStatus = {"STATUS_DECODER", "STATUS_TRIANGULATOR",
+                                                    "STATUS_FLATTENER", "STATUS_RESTORER"};
+
+TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) {
+  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--flip", "horizontal"},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+
+  std::string out;
+  ASSERT_EQ(RunTool({"scan", "--url", url_, "--label", "test leaf", "--timeout", "300"}, &out), 0)
+      << out;
+  // "scan N restored: WxH at D dpi -> DIR/scans/scan-N/results"
+  const size_t arrow = out.find("-> ");
+  ASSERT_NE(arrow, std::string::npos) << out;
+  std::string results = out.substr(arrow + 3);
+  results = results.substr(0, results.find('\n'));
+  ASSERT_TRUE(fs::exists(results + "/restored.tif")) << out;
+  const std::string raw = fs::path(results).parent_path().string() + "/raw";
+
+  // Nothing lost: the texture, all 54 frames, the scan's log and its calibration are on disk.
+  EXPECT_TRUE(fs::exists(raw + "/texture.png"));
+  EXPECT_TRUE(fs::exists(raw + "/frame_000.png"));
+  EXPECT_TRUE(fs::exists(raw + "/frame_053.png"));
+  EXPECT_TRUE(fs::exists(raw + "/scan.yaml"));
+  EXPECT_TRUE(fs::exists(raw + "/calibration.yaml"));
+  lcm::LogFile log(raw + "/captures.lcmlog", "r");
+  ASSERT_TRUE(log.good());
+  int captures = 0, calibrations = 0;
+  for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+    captures += e->channel == "CAPTURE";
+    calibrations += e->channel == "CALIBRATION";
+  }
+  EXPECT_EQ(captures, 55);
+  EXPECT_EQ(calibrations, 1);
+
+  ExpectSameAsProcess(raw, results);
+}
+
+TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
+  ASSERT_TRUE(fs::exists(kLog)) << kLog << " (made from tests/data at build time)";
+  StartProcessing();
+  WaitForHeartbeats(kProcessingStatus);
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, kLog}, dir_ + "/player.log");
+  ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] { return !restored.empty(); }))
+      << "no RESTORED; player: " << player.Output();
+  EXPECT_EQ(player.Wait(60), 0) << player.Output();
+  const restored_t& r = restored[0];
+  EXPECT_EQ(r.view, "orthographic");
+  EXPECT_GT(r.dpi, 30);
+  EXPECT_GT(r.preview.width, 100);
+  EXPECT_LE(static_cast<size_t>(r.preview.size), size_t{3} << 20);
+
+  // The same scan exported from the log and processed by `vellum process`.
+  std::string out;
+  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
+  ExpectSameAsProcess(dir_ + "/exported", r.results);
+  EXPECT_TRUE(fs::exists(fs::path(r.results).parent_path() / "raw" / "captures.lcmlog"));
+}
+
+TEST_F(StationTest, WithoutACameraTheScanFailsWithAClearStatusAndTheStationStaysReady) {
+  Process* projector =
+      Start(Daemon("vellum-projector"),
+            {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", "1"},
+            {"SDL_VIDEODRIVER=dummy"});
+  WaitForHeartbeats({"STATUS_PROJECTOR"});
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    std::string out;
+    EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "60"}, &out), 1) << out;
+    EXPECT_NE(out.find("no CAPTURE of the texture within 1000 ms"), std::string::npos) << out;
+    EXPECT_NE(out.find("failed"), std::string::npos) << out;
+  }
+  EXPECT_TRUE(projector->running());
+}
+
+TEST_F(StationTest, CorruptAndWrongTypeMessagesAreReportedAndTheDaemonKeepsRunning) {
+  Process* decoder = Start(Daemon("vellum-decoder"), {"--data", dir_ + "/scans"});
+  WaitForHeartbeats({"STATUS_DECODER"});
+  std::vector<status_t> statuses;
+  Listener<status_t> on_status(*lcm_, "STATUS_DECODER",
+                               [&](const status_t& m) { statuses.push_back(m); });
+  auto wait_error = [&](const std::string& text) {
+    return HandleUntil(*lcm_, 10, [&] {
+      return !statuses.empty() && statuses.back().last_error.find(text) != std::string::npos;
+    });
+  };
+  // Garbage bytes.
+  const std::vector<uint8_t> junk(1000, 0x5a);
+  lcm_->publish("CAPTURE", junk.data(), static_cast<unsigned>(junk.size()));
+  EXPECT_TRUE(wait_error("1000 bytes does not decode as vellum.capture_t"))
+      << (statuses.empty() ? "" : statuses.back().last_error);
+  // A message of another type.
+  status_t other{};
+  other.process = "impostor";
+  lcm_->publish("CAPTURE", &other);
+  EXPECT_TRUE(wait_error("does not decode as vellum.capture_t"));
+  // A well-formed capture with an image whose data is too short.
+  capture_t c{};
+  c.scan_id = 42;
+  c.pattern_index = 0;
+  c.pattern_count = 4;
+  c.projector_width = 512;
+  c.projector_height = 384;
+  c.pattern.kind = pattern_spec_t::KIND_WHITE;
+  c.image.width = 640;
+  c.image.height = 480;
+  c.image.row_stride = 640;
+  c.image.pixelformat = image_t::PIXEL_FORMAT_GRAY;
+  c.image.size = 1000;
+  c.image.data.assign(1000, 0);
+  lcm_->publish("CAPTURE", &c);
+  EXPECT_TRUE(wait_error("image data is 1000 bytes; 640x480 needs 307200"))
+      << (statuses.empty() ? "" : statuses.back().last_error);
+  EXPECT_TRUE(decoder->running());
+}
+
+TEST_F(StationTest, LostChunksAndSequenceGapsAreReportedNotSilentlyUsed) {
+  Process* triangulator =
+      Start(Daemon("vellum-triangulator"), {"--data", dir_ + "/scans", "--calibration", kRig});
+  WaitForHeartbeats({"STATUS_TRIANGULATOR"});
+  std::vector<status_t> statuses;
+  Listener<status_t> on_status(*lcm_, "STATUS_TRIANGULATOR",
+                               [&](const status_t& m) { statuses.push_back(m); });
+  auto chunk = [](int64_t scan, int index, int64_t seq) {
+    correspondence_t m{};
+    m.seq = seq;
+    m.scan_id = scan;
+    m.chunk_index = index;
+    m.chunk_count = 3;
+    m.width = 640;
+    m.height = 480;
+    m.row_begin = 160 * index;
+    m.row_count = 160;
+    m.projector_width = 512;
+    m.projector_height = 384;
+    m.has_columns = m.has_rows = true;
+    m.n = 160 * 640;
+    m.projector_x.assign(m.n, 100.0f);
+    m.projector_y.assign(m.n, 100.0f);
+    m.valid.assign(m.n, 255);
+    return m;
+  };
+  // Scan 1: chunks 0 and 2 (chunk 1 lost, and with it seq 1), then scan 2 begins.
+  for (auto [scan, index, seq] : {std::tuple{1, 0, 0}, {1, 2, 2}, {2, 0, 3}}) {
+    correspondence_t m = chunk(scan, index, seq);
+    lcm_->publish("CORRESPONDENCE", &m);
+  }
+  auto has_error = [&](const std::string& text) {
+    for (const status_t& s : statuses) {
+      if (s.last_error.find(text) != std::string::npos) return true;
+    }
+    return false;
+  };
+  EXPECT_TRUE(HandleUntil(*lcm_, 10, [&] {
+    return has_error("1 message(s) lost on the bus") &&
+           has_error("scan 1: CORRESPONDENCE incomplete (chunk 1 of 3 missing)");
+  })) << (statuses.empty() ? "no status" : statuses.back().last_error);
+  EXPECT_FALSE(fs::exists(dir_ + "/scans/scan-1/results/points.ply"));
+  EXPECT_TRUE(triangulator->running());
+}
+
+TEST_F(StationTest, EveryDaemonHasHelpAndRejectsABadConfigFile) {
+  std::ofstream(dir_ + "/bad.yaml") << "%YAML:1.0\n---\nno-such-flag: 3\n";
+  for (const char* name : {"vellum-camera", "vellum-projector", "vellum-decoder",
+                           "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+    Process help({Daemon(name), "--help"}, dir_ + "/help.log");
+    EXPECT_EQ(help.Wait(30), 0) << name;
+    EXPECT_NE(help.Output().find("--url"), std::string::npos) << name;
+    Process bad({Daemon(name), "--config", dir_ + "/bad.yaml"}, dir_ + "/bad.log");
+    EXPECT_EQ(bad.Wait(30), 2) << name;
+    EXPECT_NE(bad.Output().find("unknown key 'no-such-flag'"), std::string::npos)
+        << name << ": " << bad.Output();
+  }
+}
+
+}  // namespace
+}  // namespace vellum
