@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
-# The main job on its embedded default: installs, builds, renders a scan of a curled
-# checkerboard page with the virtual gantry, and processes it into the restored flat page.
+# The main job on its embedded default: installs, builds, then plays the recorded scan in
+# tests/data (a curled checkerboard leaf, recorded from the virtual gantry through the real
+# camera and projector daemons) through the real processing daemons on a private LCM bus,
+# and writes the restored page.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 bash scripts/build.sh
-out=${VELLUM_DEMO_OUT:-out/demo}
-./build/cli/vellum render --page curl --texture checkerboard --out "$out/scan"
-./build/cli/vellum process --scan "$out/scan" --calibration "$out/scan/calibration.yaml" \
-  --out "$out/result"
-echo "demo: scan in $out/scan; restored page $out/result/restored.tif (and points.ply, depth.png, mesh.ply, flat.ply, restored.json, report.json)"
+out=$(realpath -m "${VELLUM_DEMO_OUT:-out/demo}")
+rm -rf "$out"
+scripts/netns-run.sh scripts/playback.sh build/tests/data/curl_scan.lcmlog "$out"
+results=$(ls -d "$out"/scan-*/results)
+echo "demo: restored page $results/restored.tif (and restored.json, report.json, points.ply," \
+  "depth.png, mesh.ply, flat.ply); raw captures in ${results%/results}/raw; daemon logs in $out"

@@ -130,6 +130,9 @@ TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) {
   all.push_back("STATUS_CAMERA");
   all.push_back("STATUS_PROJECTOR");
   WaitForHeartbeats(all);
+  // The whole bus recorded, to check below that every message decodes as lcm-spy decodes it.
+  Process logger({"/usr/bin/lcm-logger", "--lcm-url=" + url_, "-f", dir_ + "/bus.lcmlog"},
+                 dir_ + "/logger.log");
 
   std::string out;
   ASSERT_EQ(RunTool({"scan", "--url", url_, "--label", "test leaf", "--timeout", "300"}, &out), 0)
@@ -159,6 +162,23 @@ TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) {
   EXPECT_EQ(calibrations, 1);
 
   ExpectSameAsProcess(raw, results);
+
+#ifdef VELLUM_SPY_CLASSPATH
+  EXPECT_EQ(logger.Stop(), 0);
+  Process spy(
+      {"/usr/bin/java", "-cp", VELLUM_SPY_CLASSPATH, "SpyDecodeCheck", dir_ + "/bus.lcmlog"},
+      dir_ + "/spy.log");
+  EXPECT_EQ(spy.Wait(120), 0) << spy.Output();
+  const std::string decoded = spy.Output();
+  for (const char* line :
+       {"CALIBRATION vellum.calibration_t", "CAPTURE vellum.capture_t",
+        "CORRESPONDENCE vellum.correspondence_t", "FLAT_MESH vellum.mesh_t",
+        "PATTERN_SHOWN vellum.pattern_shown_t", "POINT_CLOUD vellum.point_cloud_t",
+        "RESTORED vellum.restored_t", "SCAN_REQUEST vellum.scan_request_t",
+        "STATUS_CAMERA vellum.status_t", "STATUS_RESTORER vellum.status_t"}) {
+    EXPECT_NE(decoded.find(line), std::string::npos) << line << " not decoded:\n" << decoded;
+  }
+#endif
 }
 
 TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# The install step puts everything in place: `cmake --install` into a scratch prefix, then
+# every binary answers --help, the units point at installed binaries and pass
+# `systemd-analyze verify` (when systemd is on the machine), the sysctl file raises rmem_max.
+set -euo pipefail
+build=$1
+prefix=$(mktemp -d)
+trap 'rm -rf "$prefix"' EXIT
+cmake --install "$build" --prefix "$prefix" >/dev/null
+for b in vellum vellum-camera vellum-projector vellum-decoder vellum-triangulator \
+         vellum-flattener vellum-restorer vellum-spy; do
+  test -x "$prefix/bin/$b" || { echo "missing bin/$b"; exit 1; }
+  "$prefix/bin/$b" --help >/dev/null || { echo "bin/$b --help failed"; exit 1; }
+done
+units="$prefix/lib/systemd/system"
+for u in vellum.target vellum-camera@.service vellum-projector@.service vellum-decoder.service \
+         vellum-triangulator.service vellum-flattener.service vellum-restorer.service; do
+  test -f "$units/$u" || { echo "missing unit $u"; exit 1; }
+done
+for u in "$units"/*.service; do
+  grep -q '^Type=notify' "$u" && grep -q '^WatchdogSec=' "$u" && grep -q '^Restart=on-failure' "$u" \
+    && grep -q '^PartOf=vellum.target' "$u" || { echo "$u: not notify/watchdog/restart/PartOf"; exit 1; }
+done
+grep -q 'net.core.rmem_max' "$prefix/lib/sysctl.d/60-vellum.conf"
+test -f "$prefix/share/vellum/vellum_lcmtypes.jar"
+test -f "$prefix/share/vellum/config/vellum-decoder.yaml"
+if command -v systemd-analyze >/dev/null; then
+  sed -i "s|/usr/local/bin|$prefix/bin|" "$units"/*.service
+  (cd "$units" && systemd-analyze verify --man=no ./vellum.target ./vellum-decoder.service \
+    ./vellum-triangulator.service ./vellum-flattener.service ./vellum-restorer.service \
+    ./vellum-camera@video0.service ./vellum-projector@0.service)
+fi
+echo "install test: ok ($prefix)"
