@@ -157,6 +157,14 @@ TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) {
   for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
     captures += e->channel == "CAPTURE";
     calibrations += e->channel == "CALIBRATION";
+    if (e->channel != "CAPTURE") continue;
+    // The handshake: each frame's exposure starts after its pattern was shown, and the
+    // captures come in pattern order, texture first.
+    capture_t c;
+    ASSERT_GE(c.decode(e->data, 0, e->datalen), 0);
+    EXPECT_GT(c.image.utime, c.shown_utime) << "pattern " << c.pattern_index;
+    EXPECT_EQ(c.pattern_index, captures - 2);
+    EXPECT_EQ(c.image.pattern_index, c.pattern_index);
   }
   EXPECT_EQ(captures, 55);
   EXPECT_EQ(calibrations, 1);

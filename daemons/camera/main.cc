@@ -54,6 +54,11 @@ class CameraNode {
       V4l2Options o;
       o.device = flags.Get("device");
       o.size = flags.GetSize("size");
+      const std::string format = flags.Get("format");
+      if (format != "BGR3" && format != "GREY") {
+        throw UsageError("--format must be BGR3 or GREY, got '" + format + "'");
+      }
+      o.gray = format == "GREY";
       o.exposure = flags.GetInt("exposure", -1, 1 << 24);
       o.gain = flags.GetInt("gain", -1, 1 << 16);
       v4l2_ = std::make_unique<V4l2Camera>();
@@ -94,7 +99,9 @@ class CameraNode {
     } else {
       s = v4l2_->Capture(m.utime, &image, &exposure);
       if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
-      if (m.pattern_index >= 0) cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
+      if (m.pattern_index >= 0 && image.channels() == 3) {
+        cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
+      }
     }
     capture_t c{};
     c.scan_id = m.scan_id;
@@ -131,6 +138,7 @@ int main(int argc, char** argv) {
       {"backend", "NAME", "v4l2 (a real camera) or sim (the virtual gantry)", "sim"},
       {"device", "PATH", "v4l2: the camera device", "/dev/video0"},
       {"size", "WxH", "v4l2: frame size", "1600x1200"},
+      {"format", "FOURCC", "v4l2: BGR3 (colour texture) or GREY (monochrome camera)", "BGR3"},
       {"exposure", "N", "v4l2: manual exposure, 100 us units; -1 = camera's setting", "-1"},
       {"gain", "N", "v4l2: gain; -1 = camera's setting", "-1"},
       {"rig", "FILE", "sim: the rig's calibration (default: the built-in default rig)", ""},

@@ -50,14 +50,18 @@ Status V4l2Camera::Open(const V4l2Options& o) {
   fmt.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
   fmt.fmt.pix.width = o.size.width;
   fmt.fmt.pix.height = o.size.height;
-  fmt.fmt.pix.pixelformat = V4L2_PIX_FMT_BGR24;
+  const uint32_t want = o.gray ? V4L2_PIX_FMT_GREY : V4L2_PIX_FMT_BGR24;
+  const char* want_name = o.gray ? "GREY" : "BGR24";
+  channels_ = o.gray ? 1 : 3;
+  fmt.fmt.pix.pixelformat = want;
   fmt.fmt.pix.field = V4L2_FIELD_NONE;
   if (Ioctl(fd_, VIDIOC_S_FMT, &fmt) < 0) {
     return Status::Error(dev + ": cannot set " + std::to_string(o.size.width) + "x" +
-                         std::to_string(o.size.height) + " BGR24: " + std::strerror(errno));
+                         std::to_string(o.size.height) + " " + want_name + ": " +
+                         std::strerror(errno));
   }
-  if (fmt.fmt.pix.pixelformat != V4L2_PIX_FMT_BGR24) {
-    return Status::Error(dev + ": libv4l2 cannot convert this camera's format to BGR24");
+  if (fmt.fmt.pix.pixelformat != want) {
+    return Status::Error(dev + ": libv4l2 cannot convert this camera's format to " + want_name);
   }
   size_ = cv::Size(static_cast<int>(fmt.fmt.pix.width), static_cast<int>(fmt.fmt.pix.height));
   if (size_ != o.size) {
@@ -117,7 +121,7 @@ Status V4l2Camera::Open(const V4l2Options& o) {
   return Status::Ok();
 }
 
-Status V4l2Camera::Capture(int64_t after_utime, cv::Mat* bgr, int64_t* exposure_utime) {
+Status V4l2Camera::Capture(int64_t after_utime, cv::Mat* image, int64_t* exposure_utime) {
   if (fd_ < 0) return Status::Error("camera not open");
   // Buffer timestamps are CLOCK_MONOTONIC: move the deadline onto that clock.
   const int64_t offset = ClockUs(CLOCK_REALTIME) - ClockUs(CLOCK_MONOTONIC);
@@ -141,9 +145,10 @@ Status V4l2Camera::Capture(int64_t after_utime, cv::Mat* bgr, int64_t* exposure_
     if ((buf.flags & V4L2_BUF_FLAG_TSTAMP_SRC_MASK) == V4L2_BUF_FLAG_TSTAMP_SRC_EOF) {
       start -= frame_period_us_;  // Stamped at the end of the frame: back to its start.
     }
-    const bool good = start >= after_mono && buf.bytesused >= size_.area() * 3u;
+    const bool good =
+        start >= after_mono && buf.bytesused >= static_cast<uint32_t>(size_.area() * channels_);
     if (good) {
-      cv::Mat(size_, CV_8UC3, buffers_[buf.index].start).copyTo(*bgr);
+      cv::Mat(size_, CV_8UC(channels_), buffers_[buf.index].start).copyTo(*image);
       *exposure_utime = start + offset;
     }
     if (Ioctl(fd_, VIDIOC_QBUF, &buf) < 0) return Status::Error("camera: VIDIOC_QBUF");

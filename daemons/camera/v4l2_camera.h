@@ -1,6 +1,6 @@
 // A V4L2 camera through libv4l2 (which converts the driver's formats, e.g. YUYV or MJPEG, to
-// the BGR24 we ask for): mmap streaming, manual exposure and gain, and the frame whose exposure
-// starts after a given time.
+// the BGR24 or GREY we ask for): mmap streaming, manual exposure and gain, and the frame whose
+// exposure starts after a given time.
 #pragma once
 
 #include <cstdint>
@@ -15,6 +15,7 @@ namespace vellum::station {
 struct V4l2Options {
   std::string device = "/dev/video0";
   cv::Size size{1600, 1200};
+  bool gray = false;  // Ask for GREY (monochrome cameras) instead of BGR24.
   int exposure = -1;  // V4L2_CID_EXPOSURE_ABSOLUTE, 100 us units; -1 = leave as is.
   int gain = -1;      // V4L2_CID_GAIN; -1 = leave as is.
 };
@@ -25,15 +26,15 @@ class V4l2Camera {
   Status Open(const V4l2Options& options);
   cv::Size size() const { return size_; }
   // The first frame whose exposure starts at or after `after_utime` (microseconds since the
-  // epoch), as 8-bit BGR; sets its exposure start.
-  Status Capture(int64_t after_utime, cv::Mat* bgr, int64_t* exposure_utime);
+  // epoch), as 8-bit BGR (or gray); sets its exposure start.
+  Status Capture(int64_t after_utime, cv::Mat* image, int64_t* exposure_utime);
 
  private:
   void Close();
   int fd_ = -1;
   cv::Size size_;
   int64_t frame_period_us_ = 0;
-  bool timestamp_at_end_ = false;
+  int channels_ = 3;
   struct Buffer {
     void* start = nullptr;
     size_t length = 0;
