@@ -42,9 +42,9 @@ class StationTest : public ::testing::Test {
                .string();
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    // Each test its own port (and the namespace its own loopback).
-    static int next_port = 7900;
-    url_ = testing::TestUrl(next_port++);
+    // Each test its own port (and each its own network namespace, so its own loopback).
+    const std::string name = info->name();
+    url_ = testing::TestUrl(7900 + static_cast<int>(std::hash<std::string>()(name) % 1000));
     lcm_ = std::make_unique<lcm::LCM>(url_);
     ASSERT_TRUE(lcm_->good()) << "LCM cannot open " << url_ << " (run inside scripts/netns-run.sh)";
   }
