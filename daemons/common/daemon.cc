@@ -1,5 +1,7 @@
 #include "daemons/common/daemon.h"
 
+#include <chrono>
+#include <memory>
 #include <opencv2/core/utility.hpp>
 
 #include "core/io/calibration_io.h"
@@ -114,6 +116,16 @@ Status TextureBook::Get(int64_t scan_id, cv::Mat* texture) const {
   }
   *texture = it->second;
   return Status::Ok();
+}
+
+std::function<void()> EverySecond(std::function<void()> f) {
+  auto last = std::make_shared<std::chrono::steady_clock::time_point>();
+  return [f = std::move(f), last] {
+    const auto now = std::chrono::steady_clock::now();
+    if (now - *last < std::chrono::seconds(1)) return;
+    *last = now;
+    f();
+  };
 }
 
 double SecondsSince(int64_t start_utime) { return (NowUtime() - start_utime) * 1e-6; }

@@ -53,6 +53,9 @@ class TextureBook {
   std::map<int64_t, cv::Mat> by_scan_;
 };
 
+// Wraps f so that calling it often (Node::Run's tick) runs it at most once a second.
+std::function<void()> EverySecond(std::function<void()> f);
+
 // Seconds since `start`.
 double SecondsSince(int64_t start_utime);
 

@@ -200,9 +200,15 @@ Status ChunkSet::Add(int64_t scan_id, int index, int count) {
                          std::to_string(count_) + " chunks");
   }
   if (have_[index]) return Status::Error("chunk " + std::to_string(index) + " came twice");
+  last_add_ = std::chrono::steady_clock::now();
   have_[index] = true;
   ++received_;
   return Status::Ok();
+}
+
+bool ChunkSet::Stale(double seconds) const {
+  return Started() && !Complete() &&
+         std::chrono::steady_clock::now() - last_add_ > std::chrono::duration<double>(seconds);
 }
 
 std::string ChunkSet::Missing() const {

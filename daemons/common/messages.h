@@ -3,6 +3,7 @@
 // returns a Status naming what was wrong. Large products travel in row chunks.
 #pragma once
 
+#include <chrono>
 #include <opencv2/core.hpp>
 #include <string>
 #include <utility>
@@ -51,6 +52,8 @@ class ChunkSet {
   // Starts on the first chunk; later chunks must agree on the count. Duplicates are errors.
   Status Add(int64_t scan_id, int index, int count);
   bool Started() const { return count_ > 0; }
+  // Started, incomplete, and no chunk for longer than `seconds`.
+  bool Stale(double seconds) const;
   bool Complete() const { return Started() && received_ == count_; }
   int64_t scan_id() const { return scan_id_; }
   // "chunks 3, 5 of 12 missing".
@@ -61,6 +64,7 @@ class ChunkSet {
   int64_t scan_id_ = 0;
   int count_ = 0, received_ = 0;
   std::vector<bool> have_;
+  std::chrono::steady_clock::time_point last_add_;
 };
 
 // Decoded correspondences: chunks of rows, and their reassembly.

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -79,6 +80,20 @@ class Node {
     msg->seq = NextSeq(channel);
     if (msg->utime == 0) msg->utime = NowUtime();
     if (lcm_.publish(channel, msg) != 0) Error(channel + ": publish failed");
+  }
+
+  // Publishes the chunks of one product paced at about `bytes_per_second`: a burst of many
+  // megabytes overflows the receivers' socket buffers, and udpm loses a whole message with
+  // any of its fragments.
+  template <class Msg>
+  void PublishChunks(const std::string& channel, std::vector<Msg>* chunks,
+                     double bytes_per_second = 100e6) {
+    for (Msg& m : *chunks) {
+      const auto start = std::chrono::steady_clock::now();
+      Publish(channel, &m);
+      std::this_thread::sleep_until(
+          start + std::chrono::duration<double>(m.getEncodedSize() / bytes_per_second));
+    }
   }
 
   // Status: the state ("idle", "busy", "scanning", ...), the scan and a line for the operator.

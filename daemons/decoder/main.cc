@@ -134,9 +134,9 @@ class DecoderNode {
     stats.projector_width = scan.sequence.projector_size.width;
     stats.projector_height = scan.sequence.projector_size.height;
     stats.patterns = static_cast<int32_t>(scan.sequence.patterns.size());
-    for (correspondence_t& m : ToMessages(id, decoded_, scan.sequence.projector_size, stats)) {
-      node_->Publish(channel::kCorrespondence, &m);
-    }
+    std::vector<correspondence_t> chunks =
+        ToMessages(id, decoded_, scan.sequence.projector_size, stats);
+    node_->PublishChunks(channel::kCorrespondence, &chunks);
     node_->Count("scans decoded");
     node_->Log("scan " + std::to_string(id) + ": decoded " + std::to_string(decoded_.stats.valid) +
                " pixels in " + std::to_string(stats.decode_s) + " s");

@@ -11,6 +11,8 @@
 namespace vellum::station {
 namespace {
 
+constexpr double kChunkTimeoutS = 10;  // A product's chunks come within milliseconds.
+
 class FlattenerNode {
  public:
   FlattenerNode(Node* node, const Flags& flags)
@@ -23,6 +25,21 @@ class FlattenerNode {
     node->Subscribe<point_cloud_t>(channel::kPointCloud, [this](const point_cloud_t& msg) {
       auto copy = std::make_shared<point_cloud_t>(msg);
       node_->Post([this, copy] { OnChunk(*copy); });
+    });
+  }
+
+ public:
+  // On the LCM thread, about once a second: a product whose chunks stopped coming is given up.
+  void Tick() {
+    node_->Post([this] {
+      if (!chunks_.Stale(kChunkTimeoutS)) return;
+      node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": POINT_CLOUD incomplete (" +
+                       chunks_.Missing() + ") after " + std::to_string(int(kChunkTimeoutS)) +
+                       " s; dropped",
+                   chunks_.scan_id());
+      chunks_.Reset();
+      points_.release();
+      node_->SetState("idle");
     });
   }
 
@@ -94,9 +111,9 @@ class FlattenerNode {
     header.springs = static_cast<int32_t>(mesh.springs.size());
     header.quads = static_cast<int32_t>(mesh.quads.size());
     header.stats = stats_;
-    for (mesh_t& m : ToMessages(id, mesh, mesh_options_.bend_springs, flat.flat, header)) {
-      node_->Publish(channel::kFlatMesh, &m);
-    }
+    std::vector<mesh_t> chunks =
+        ToMessages(id, mesh, mesh_options_.bend_springs, flat.flat, header);
+    node_->PublishChunks(channel::kFlatMesh, &chunks);
     node_->Count("scans flattened");
     node_->Log("scan " + std::to_string(id) + ": flattened " + SizeText(mesh_options_.grid) +
                " in " + std::to_string(stats_.flatten_s) + " s, strain mean " +
@@ -131,6 +148,6 @@ int main(int argc, char** argv) {
                     "<data>/scan-<id>/results and publishes FLAT_MESH.",
                     specs, [](const Flags& flags, Node& node) {
                       FlattenerNode flattener(&node, flags);
-                      return node.Run();
+                      return node.Run(EverySecond([&] { flattener.Tick(); }));
                     });
 }

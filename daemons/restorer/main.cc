@@ -13,6 +13,8 @@
 namespace vellum::station {
 namespace {
 
+constexpr double kChunkTimeoutS = 10;  // A product's chunks come within milliseconds.
+
 constexpr double kPreviewPixels = 1 << 20;
 
 class RestorerNode {
@@ -26,6 +28,22 @@ class RestorerNode {
     node->Subscribe<mesh_t>(channel::kFlatMesh, [this](const mesh_t& msg) {
       auto copy = std::make_shared<mesh_t>(msg);
       node_->Post([this, copy] { OnChunk(*copy); });
+    });
+  }
+
+ public:
+  // On the LCM thread, about once a second: a product whose chunks stopped coming is given up.
+  void Tick() {
+    node_->Post([this] {
+      if (!chunks_.Stale(kChunkTimeoutS)) return;
+      node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": FLAT_MESH incomplete (" +
+                       chunks_.Missing() + ") after " + std::to_string(int(kChunkTimeoutS)) +
+                       " s; dropped",
+                   chunks_.scan_id());
+      chunks_.Reset();
+      mesh_ = Mesh();
+      flat_.clear();
+      node_->SetState("idle");
     });
   }
 
@@ -156,6 +174,6 @@ int main(int argc, char** argv) {
                     "RESTORED (the results folder and a preview of at most 1 Mpixel).",
                     specs, [](const Flags& flags, Node& node) {
                       RestorerNode restorer(&node, flags);
-                      return node.Run();
+                      return node.Run(EverySecond([&] { restorer.Tick(); }));
                     });
 }

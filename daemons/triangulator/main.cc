@@ -11,6 +11,8 @@
 namespace vellum::station {
 namespace {
 
+constexpr double kChunkTimeoutS = 10;  // A product's chunks come within milliseconds.
+
 class TriangulatorNode {
  public:
   TriangulatorNode(Node* node, const Flags& flags)
@@ -23,6 +25,21 @@ class TriangulatorNode {
                                         auto copy = std::make_shared<correspondence_t>(msg);
                                         node_->Post([this, copy] { OnChunk(*copy); });
                                       });
+  }
+
+ public:
+  // On the LCM thread, about once a second: a product whose chunks stopped coming is given up.
+  void Tick() {
+    node_->Post([this] {
+      if (!chunks_.Stale(kChunkTimeoutS)) return;
+      node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": CORRESPONDENCE incomplete (" +
+                       chunks_.Missing() + ") after " + std::to_string(int(kChunkTimeoutS)) +
+                       " s; dropped",
+                   chunks_.scan_id());
+      chunks_.Reset();
+      decoded_ = DecodeResult();
+      node_->SetState("idle");
+    });
   }
 
  private:
@@ -82,9 +99,8 @@ class TriangulatorNode {
     if (s.ok()) s = WritePointProducts(folder.results(), map_.points, &zmin, &zmax);
     if (!s.ok()) node_->Error("scan " + std::to_string(id) + ": " + s.message(), id);
     AddPointStats(map_, seconds, zmin, zmax, &stats_);
-    for (point_cloud_t& m : ToMessages(id, map_.points, stats_)) {
-      node_->Publish(channel::kPointCloud, &m);
-    }
+    std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, stats_);
+    node_->PublishChunks(channel::kPointCloud, &chunks);
     node_->Count("scans triangulated");
     node_->Log("scan " + std::to_string(id) + ": " + std::to_string(map_.valid) + " points in " +
                std::to_string(seconds) + " s");
@@ -127,6 +143,6 @@ int main(int argc, char** argv) {
                     "POINT_CLOUD (in row chunks).",
                     specs, [](const Flags& flags, Node& node) {
                       TriangulatorNode triangulator(&node, flags);
-                      return node.Run();
+                      return node.Run(EverySecond([&] { triangulator.Tick(); }));
                     });
 }
