@@ -8,6 +8,7 @@
 #include "core/flatten/flatten.h"
 #include "core/geometry/triangulate.h"
 #include "core/io/calibration_io.h"
+#include "core/io/html_report.h"
 #include "core/io/products.h"
 #include "core/io/scan_io.h"
 #include "core/mesh/mesh.h"
@@ -154,6 +155,17 @@ int RunProcess(const std::vector<std::string>& args) {
   report.max_strain = flat.max_strain;
   report.folded_quads = flat.folded_quads;
   s = WriteReport(out, report);
+  if (!s.ok()) return fail(s.message());
+  HtmlReportInput html;
+  html.title = scan_dir;
+  html.figures = &report;
+  html.texture = scan.texture;
+  html.points = map.points;
+  html.mesh = &mesh;
+  html.flat = &flat.flat;
+  html.restored = &restored;
+  html.camera = calibration.camera;
+  s = WriteHtmlReport(out, html);
   if (!s.ok()) return fail(s.message());
   std::printf(
       "%d valid points; sheet %s, %s residual strain mean %.2e max %.2e; restored %dx%d"

@@ -10,6 +10,7 @@ packages=(
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   libcgal-dev clang-format
   default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux
+  chromium xvfb
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -106,6 +106,12 @@ class StationTest : public ::testing::Test {
       EXPECT_EQ(ReadText(results + "/" + file), ReadText(dir_ + "/process/" + file))
           << file << " differs between the daemons and vellum process";
     }
+    // The restorer's report has every picture, the depth map from the bus's POINT_CLOUD too.
+    for (const char* picture :
+         {"texture.png", "valid.png", "depth.png", "grid.png", "strain.png", "before_after.png"}) {
+      EXPECT_TRUE(fs::exists(results + "/report/" + picture)) << picture;
+    }
+    EXPECT_TRUE(fs::exists(results + "/report.html"));
     const cv::Mat a = cv::imread(results + "/restored.tif", cv::IMREAD_UNCHANGED);
     const cv::Mat b = cv::imread(dir_ + "/process/restored.tif", cv::IMREAD_UNCHANGED);
     ASSERT_FALSE(a.empty());

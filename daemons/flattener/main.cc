@@ -4,14 +4,13 @@
 
 #include "cli/options.h"
 #include "core/io/scan_io.h"
+#include "daemons/common/assembler.h"
 #include "daemons/common/daemon.h"
 #include "daemons/common/messages.h"
 #include "daemons/common/scan_store.h"
 
 namespace vellum::station {
 namespace {
-
-constexpr double kChunkTimeoutS = 10;  // A product's chunks come within milliseconds.
 
 class FlattenerNode {
  public:
@@ -21,51 +20,19 @@ class FlattenerNode {
         mesh_options_(MeshOptionsFromFlags(flags)),
         flatten_options_(FlattenOptionsFromFlags(flags)),
         calibrations_(node, flags.Get("calibration")),
-        textures_(node) {
-    node->Subscribe<point_cloud_t>(channel::kPointCloud, [this](const point_cloud_t& msg) {
-      auto copy = std::make_shared<point_cloud_t>(msg);
-      node_->Post([this, copy] { OnChunk(*copy); });
-    });
-  }
+        textures_(node),
+        assembler_(
+            node, channel::kPointCloud,
+            [](const point_cloud_t& m, cv::Mat* points) { return AddChunk(m, points); },
+            [this](int64_t id, cv::Mat* points, const point_cloud_t& last) {
+              points_ = *points;
+              stats_ = last.stats;
+              Process(id);
+            }) {}
 
- public:
-  // On the LCM thread, about once a second: a product whose chunks stopped coming is given up.
-  void Tick() {
-    node_->Post([this] {
-      if (!chunks_.Stale(kChunkTimeoutS)) return;
-      node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": POINT_CLOUD incomplete (" +
-                       chunks_.Missing() + ") after " + std::to_string(int(kChunkTimeoutS)) +
-                       " s; dropped",
-                   chunks_.scan_id());
-      chunks_.Reset();
-      points_.release();
-      node_->SetState("idle");
-    });
-  }
+  void Tick() { assembler_.Tick(); }
 
  private:
-  void OnChunk(const point_cloud_t& msg) {
-    if (chunks_.Started() && (chunks_.scan_id() != msg.scan_id || chunks_.Complete())) {
-      if (!chunks_.Complete()) {
-        node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": POINT_CLOUD incomplete (" +
-                         chunks_.Missing() + ") when scan " + std::to_string(msg.scan_id) +
-                         " began; dropped",
-                     chunks_.scan_id());
-      }
-      chunks_.Reset();
-      points_.release();
-    }
-    Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count);
-    if (s.ok()) s = AddChunk(msg, &points_);
-    if (!s.ok()) {
-      node_->Error("scan " + std::to_string(msg.scan_id) + ": POINT_CLOUD: " + s.message(),
-                   msg.scan_id);
-      return;
-    }
-    stats_ = msg.stats;
-    if (chunks_.Complete()) Process(msg.scan_id);
-  }
-
   void Fail(int64_t id, const std::string& message) {
     node_->Error("scan " + std::to_string(id) + ": " + message, id);
     node_->SetState("idle");
@@ -127,8 +94,8 @@ class FlattenerNode {
   FlattenOptions flatten_options_;
   CalibrationBook calibrations_;
   TextureBook textures_;
+  Assembler<point_cloud_t, cv::Mat> assembler_;
   // Worker thread only:
-  ChunkSet chunks_;
   cv::Mat points_;
   scan_stats_t stats_{};
 };

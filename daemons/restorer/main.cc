@@ -4,7 +4,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "cli/options.h"
+#include "core/io/html_report.h"
 #include "core/io/scan_io.h"
+#include "daemons/common/assembler.h"
 #include "daemons/common/daemon.h"
 #include "daemons/common/messages.h"
 #include "daemons/common/scan_store.h"
@@ -13,9 +15,13 @@
 namespace vellum::station {
 namespace {
 
-constexpr double kChunkTimeoutS = 10;  // A product's chunks come within milliseconds.
-
 constexpr double kPreviewPixels = 1 << 20;
+
+// The flattened sheet under reassembly.
+struct Sheet {
+  Mesh mesh;
+  std::vector<cv::Point2d> flat;
+};
 
 class RestorerNode {
  public:
@@ -24,53 +30,30 @@ class RestorerNode {
         data_(flags.Get("data")),
         options_(RestoreOptionsFromFlags(flags)),
         calibrations_(node, flags.Get("calibration")),
-        textures_(node) {
-    node->Subscribe<mesh_t>(channel::kFlatMesh, [this](const mesh_t& msg) {
-      auto copy = std::make_shared<mesh_t>(msg);
-      node_->Post([this, copy] { OnChunk(*copy); });
-    });
-  }
+        textures_(node),
+        sheets_(
+            node, channel::kFlatMesh,
+            [](const mesh_t& m, Sheet* sheet) { return AddChunk(m, &sheet->mesh, &sheet->flat); },
+            [this](int64_t id, Sheet* sheet, const mesh_t& last) {
+              mesh_ = std::move(sheet->mesh);
+              flat_ = std::move(sheet->flat);
+              header_ = last;
+              Process(id);
+            }),
+        clouds_(
+            node, channel::kPointCloud,
+            [](const point_cloud_t& m, cv::Mat* points) { return AddChunk(m, points); },
+            [this](int64_t id, cv::Mat* points, const point_cloud_t&) {
+              points_id_ = id;  // For the report's depth map and valid-pixel mask.
+              points_ = *points;
+            }) {}
 
- public:
-  // On the LCM thread, about once a second: a product whose chunks stopped coming is given up.
   void Tick() {
-    node_->Post([this] {
-      if (!chunks_.Stale(kChunkTimeoutS)) return;
-      node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": FLAT_MESH incomplete (" +
-                       chunks_.Missing() + ") after " + std::to_string(int(kChunkTimeoutS)) +
-                       " s; dropped",
-                   chunks_.scan_id());
-      chunks_.Reset();
-      mesh_ = Mesh();
-      flat_.clear();
-      node_->SetState("idle");
-    });
+    sheets_.Tick();
+    clouds_.Tick();
   }
 
  private:
-  void OnChunk(const mesh_t& msg) {
-    if (chunks_.Started() && (chunks_.scan_id() != msg.scan_id || chunks_.Complete())) {
-      if (!chunks_.Complete()) {
-        node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": FLAT_MESH incomplete (" +
-                         chunks_.Missing() + ") when scan " + std::to_string(msg.scan_id) +
-                         " began; dropped",
-                     chunks_.scan_id());
-      }
-      chunks_.Reset();
-      mesh_ = Mesh();
-      flat_.clear();
-    }
-    Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count);
-    if (s.ok()) s = AddChunk(msg, &mesh_, &flat_);
-    if (!s.ok()) {
-      node_->Error("scan " + std::to_string(msg.scan_id) + ": FLAT_MESH: " + s.message(),
-                   msg.scan_id);
-      return;
-    }
-    header_ = msg;
-    if (chunks_.Complete()) Process(msg.scan_id);
-  }
-
   void Fail(int64_t id, const std::string& message) {
     node_->Error("scan " + std::to_string(id) + ": " + message, id);
     node_->SetState("idle");
@@ -97,7 +80,20 @@ class RestorerNode {
     const ScanFolder folder = ScanFolder::For(data_, id);
     s = MakeDirectories(folder.results());
     if (s.ok()) s = WriteRestored(folder.results(), restored);
-    if (s.ok()) s = WriteReport(folder.results(), Report(id, stats, restored));
+    const ProcessReport report = Report(id, stats, restored);
+    if (s.ok()) s = WriteReport(folder.results(), report);
+    if (s.ok()) {
+      HtmlReportInput html;
+      html.title = "scan " + std::to_string(id);
+      html.figures = &report;
+      html.texture = texture;
+      if (points_id_ == id) html.points = points_;
+      html.mesh = &mesh_;
+      html.flat = &flat_;
+      html.restored = &restored;
+      html.camera = calibration.camera;
+      s = WriteHtmlReport(folder.results(), html);
+    }
     if (!s.ok()) return Fail(id, s.message());
 
     restored_t out{};
@@ -152,8 +148,11 @@ class RestorerNode {
   RestoreOptions options_;
   CalibrationBook calibrations_;
   TextureBook textures_;
+  Assembler<mesh_t, Sheet> sheets_;
+  Assembler<point_cloud_t, cv::Mat> clouds_;
   // Worker thread only:
-  ChunkSet chunks_;
+  int64_t points_id_ = 0;
+  cv::Mat points_;
   Mesh mesh_;
   std::vector<cv::Point2d> flat_;
   mesh_t header_;

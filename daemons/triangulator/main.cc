@@ -4,6 +4,7 @@
 
 #include "cli/options.h"
 #include "core/io/scan_io.h"
+#include "daemons/common/assembler.h"
 #include "daemons/common/daemon.h"
 #include "daemons/common/messages.h"
 #include "daemons/common/scan_store.h"
@@ -11,7 +12,11 @@
 namespace vellum::station {
 namespace {
 
-constexpr double kChunkTimeoutS = 10;  // A product's chunks come within milliseconds.
+// The correspondence map under reassembly.
+struct Correspondence {
+  DecodeResult decoded;
+  cv::Size projector;
+};
 
 class TriangulatorNode {
  public:
@@ -19,52 +24,22 @@ class TriangulatorNode {
       : node_(node),
         data_(flags.Get("data")),
         options_(TriangulateOptionsFromFlags(flags)),
-        calibrations_(node, flags.Get("calibration")) {
-    node->Subscribe<correspondence_t>(channel::kCorrespondence,
-                                      [this](const correspondence_t& msg) {
-                                        auto copy = std::make_shared<correspondence_t>(msg);
-                                        node_->Post([this, copy] { OnChunk(*copy); });
-                                      });
-  }
+        calibrations_(node, flags.Get("calibration")),
+        assembler_(
+            node, channel::kCorrespondence,
+            [](const correspondence_t& m, Correspondence* c) {
+              return AddChunk(m, &c->decoded, &c->projector);
+            },
+            [this](int64_t id, Correspondence* c, const correspondence_t& last) {
+              decoded_ = std::move(c->decoded);
+              projector_ = c->projector;
+              stats_ = last.stats;
+              Process(id);
+            }) {}
 
- public:
-  // On the LCM thread, about once a second: a product whose chunks stopped coming is given up.
-  void Tick() {
-    node_->Post([this] {
-      if (!chunks_.Stale(kChunkTimeoutS)) return;
-      node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": CORRESPONDENCE incomplete (" +
-                       chunks_.Missing() + ") after " + std::to_string(int(kChunkTimeoutS)) +
-                       " s; dropped",
-                   chunks_.scan_id());
-      chunks_.Reset();
-      decoded_ = DecodeResult();
-      node_->SetState("idle");
-    });
-  }
+  void Tick() { assembler_.Tick(); }
 
  private:
-  void OnChunk(const correspondence_t& msg) {
-    if (chunks_.Started() && (chunks_.scan_id() != msg.scan_id || chunks_.Complete())) {
-      if (!chunks_.Complete()) {
-        node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": CORRESPONDENCE incomplete (" +
-                         chunks_.Missing() + ") when scan " + std::to_string(msg.scan_id) +
-                         " began; dropped",
-                     chunks_.scan_id());
-      }
-      chunks_.Reset();
-      decoded_ = DecodeResult();
-    }
-    Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count);
-    if (s.ok()) s = AddChunk(msg, &decoded_, &projector_);
-    if (!s.ok()) {
-      node_->Error("scan " + std::to_string(msg.scan_id) + ": CORRESPONDENCE: " + s.message(),
-                   msg.scan_id);
-      return;
-    }
-    stats_ = msg.stats;  // Every chunk carries the scan's figures so far.
-    if (chunks_.Complete()) Process(msg.scan_id);
-  }
-
   void Process(int64_t id) {
     node_->SetState("busy", id, "triangulating");
     Calibration calibration;
@@ -119,8 +94,8 @@ class TriangulatorNode {
   std::string data_;
   TriangulateOptions options_;
   CalibrationBook calibrations_;
+  Assembler<correspondence_t, Correspondence> assembler_;
   // Worker thread only:
-  ChunkSet chunks_;
   DecodeResult decoded_;
   cv::Size projector_;
   scan_stats_t stats_{};

@@ -1,0 +1,175 @@
+#include "core/report/pictures.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <opencv2/imgproc.hpp>
+
+namespace vellum {
+namespace {
+
+cv::Mat To8BitBgr(const cv::Mat& image) {
+  cv::Mat out = image;
+  if (out.depth() != CV_8U) out.convertTo(out, CV_8U, 1.0 / 257);
+  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
+  return out;
+}
+
+// A vertical colour bar of `height` pixels for [lo, hi], labelled at its ends and middle.
+cv::Mat ColourBar(int height, double lo, double hi, const char* format) {
+  const int bar_w = 24, width = 110;
+  cv::Mat bar(height, width, CV_8UC3, cv::Scalar::all(255));
+  cv::Mat ramp(height, 1, CV_8U);
+  for (int y = 0; y < height; ++y)
+    ramp.at<uint8_t>(y) =
+        cv::saturate_cast<uint8_t>(255.0 * (height - 1 - y) / std::max(1, height - 1));
+  cv::Mat colours;
+  cv::applyColorMap(ramp, colours, cv::COLORMAP_TURBO);
+  cv::resize(colours, colours, cv::Size(bar_w, height), 0, 0, cv::INTER_NEAREST);
+  colours.copyTo(bar(cv::Rect(6, 0, bar_w, height)));
+  for (double f : {0.0, 0.5, 1.0}) {
+    char text[48];
+    std::snprintf(text, sizeof(text), format, lo + f * (hi - lo));
+    const int y = static_cast<int>(std::lround((1 - f) * (height - 1)));
+    cv::putText(bar, text, cv::Point(bar_w + 10, std::clamp(y + 5, 12, height - 4)),
+                cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar::all(0), 1, cv::LINE_AA);
+  }
+  return bar;
+}
+
+cv::Mat WithBar(const cv::Mat& picture, double lo, double hi, const char* format) {
+  cv::Mat out;
+  cv::hconcat(picture, ColourBar(picture.rows, lo, hi, format), out);
+  return out;
+}
+
+}  // namespace
+
+cv::Mat ValidMask(const cv::Mat& points) {
+  std::vector<cv::Mat> planes;
+  cv::split(points, planes);
+  return planes[2] == planes[2];
+}
+
+cv::Mat DepthWithColourBar(const cv::Mat& points, double* z_min_mm, double* z_max_mm) {
+  std::vector<cv::Mat> planes;
+  cv::split(points, planes);
+  const cv::Mat valid = planes[2] == planes[2];
+  *z_min_mm = 0;
+  *z_max_mm = 1;
+  if (cv::countNonZero(valid) > 0)
+    cv::minMaxLoc(planes[2], z_min_mm, z_max_mm, nullptr, nullptr, valid);
+  const double range = std::max(*z_max_mm - *z_min_mm, 1e-3);
+  cv::Mat z8, colour;
+  planes[2].convertTo(z8, CV_8U, 255.0 / range, -*z_min_mm * 255.0 / range);
+  cv::applyColorMap(z8, colour, cv::COLORMAP_TURBO);
+  colour.setTo(cv::Scalar::all(0), ~valid);
+  return WithBar(colour, *z_min_mm, *z_min_mm + range, "%.1f mm");
+}
+
+std::function<cv::Point2d(const cv::Point2d&)> RestoredPixel(const RestoreResult& restored,
+                                                             const CameraModel& camera) {
+  if (restored.view == RestoreView::kOrthographic) {
+    const cv::Matx23d a = restored.pixel_from_flat;
+    return [a](const cv::Point2d& p) {
+      return cv::Point2d(a(0, 0) * p.x + a(0, 1) * p.y + a(0, 2),
+                         a(1, 0) * p.x + a(1, 1) * p.y + a(1, 2));
+    };
+  }
+  return [camera](const cv::Point2d& p) { return camera.Project(cv::Vec3d(p.x, p.y, 0)); };
+}
+
+cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                      const RestoreResult& restored, const CameraModel& camera) {
+  const auto to_pixel = RestoredPixel(restored, camera);
+  // Strain per node pair, then per quad (the springs among its corners).
+  std::vector<double> sum(mesh.quads.size(), 0.0);
+  std::vector<int> count(mesh.quads.size(), 0);
+  auto strain = [&](int a, int b) {
+    const double rest = cv::norm(mesh.point[a] - mesh.point[b]);
+    return std::fabs(cv::norm(flat[a] - flat[b]) / std::max(rest, 1e-12) - 1.0);
+  };
+  double max_strain = 0;
+  for (size_t q = 0; q < mesh.quads.size(); ++q) {
+    const cv::Vec4i& c = mesh.quads[q];
+    for (auto [i, j] : {std::pair{0, 1}, {1, 2}, {2, 3}, {3, 0}, {0, 2}, {1, 3}}) {
+      sum[q] += strain(c[i], c[j]);
+      ++count[q];
+    }
+    max_strain = std::max(max_strain, sum[q] / count[q]);
+  }
+  max_strain = std::max(max_strain, 1e-6);
+  cv::Mat picture(restored.image.size(), CV_8UC3, cv::Scalar::all(255));
+  cv::Mat level(1, 1, CV_8U), colour;
+  for (size_t q = 0; q < mesh.quads.size(); ++q) {
+    std::vector<cv::Point> corners;
+    for (int k = 0; k < 4; ++k) {
+      const cv::Point2d p = to_pixel(flat[mesh.quads[q][k]]);
+      corners.emplace_back(cvRound(p.x), cvRound(p.y));
+    }
+    level.at<uint8_t>(0) = cv::saturate_cast<uint8_t>(255.0 * sum[q] / count[q] / max_strain);
+    cv::applyColorMap(level, colour, cv::COLORMAP_TURBO);
+    const cv::Vec3b c = colour.at<cv::Vec3b>(0);
+    cv::fillConvexPoly(picture, corners, cv::Scalar(c[0], c[1], c[2]), cv::LINE_AA);
+  }
+  return WithBar(picture, 0, max_strain, "%.1e");
+}
+
+cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                     const RestoreResult& restored, const CameraModel& camera, int step) {
+  const auto to_pixel = RestoredPixel(restored, camera);
+  cv::Mat picture = To8BitBgr(restored.image).clone();
+  const int thickness = std::max(1, picture.cols / 600);
+  auto line = [&](int a, int b) {
+    if (!mesh.Active(a) || !mesh.Active(b)) return;
+    const cv::Point2d p = to_pixel(flat[a]), q = to_pixel(flat[b]);
+    cv::line(picture, cv::Point(cvRound(p.x), cvRound(p.y)), cv::Point(cvRound(q.x), cvRound(q.y)),
+             cv::Scalar(40, 200, 40), thickness, cv::LINE_AA);
+  };
+  for (int j = 0; j < mesh.rows; ++j) {
+    for (int i = 0; i < mesh.cols; ++i) {
+      if (j % step == 0 && i + 1 < mesh.cols) line(mesh.Index(i, j), mesh.Index(i + 1, j));
+      if (i % step == 0 && j + 1 < mesh.rows) line(mesh.Index(i, j), mesh.Index(i, j + 1));
+    }
+  }
+  return picture;
+}
+
+cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                    const RestoreResult& restored, const CameraModel& camera, double size_mm) {
+  // The active node nearest the sheet's centre.
+  int centre = -1;
+  double best = 1e300;
+  for (int k = 0; k < static_cast<int>(mesh.kind.size()); ++k) {
+    if (!mesh.Active(k)) continue;
+    const double d =
+        std::hypot(k % mesh.cols - 0.5 * (mesh.cols - 1), k / mesh.cols - 0.5 * (mesh.rows - 1));
+    if (d < best) best = d, centre = k;
+  }
+  cv::Mat before = To8BitBgr(texture), after = To8BitBgr(restored.image);
+  if (centre < 0) return before;
+  const auto to_pixel = RestoredPixel(restored, camera);
+  // Window sizes in pixels from the local scale of each image (pixels per mm).
+  const int right = centre % mesh.cols + 1 < mesh.cols ? centre + 1 : centre - 1;
+  const double mm = std::max(cv::norm(mesh.point[centre] - mesh.point[right]), 1e-6);
+  const double before_scale = cv::norm(mesh.pixel[centre] - mesh.pixel[right]) / mm;
+  const double after_scale = cv::norm(to_pixel(flat[centre]) - to_pixel(flat[right])) / mm;
+  auto crop = [&](const cv::Mat& image, cv::Point2d c, double scale) {
+    const int half = std::max(8, static_cast<int>(std::lround(0.5 * size_mm * scale)));
+    cv::Rect r(cvRound(c.x) - half, cvRound(c.y) - half, 2 * half, 2 * half);
+    r &= cv::Rect(0, 0, image.cols, image.rows);
+    cv::Mat out;
+    cv::resize(image(r), out, cv::Size(320, std::max(1, 320 * r.height / std::max(1, r.width))), 0,
+               0, cv::INTER_AREA);
+    return out;
+  };
+  cv::Mat a = crop(before, mesh.pixel[centre], before_scale);
+  cv::Mat b = crop(after, to_pixel(flat[centre]), after_scale);
+  const int h = std::max(a.rows, b.rows);
+  cv::Mat out(h, a.cols + b.cols + 8, CV_8UC3, cv::Scalar::all(255));
+  a.copyTo(out(cv::Rect(0, 0, a.cols, a.rows)));
+  b.copyTo(out(cv::Rect(a.cols + 8, 0, b.cols, b.rows)));
+  return out;
+}
+
+}  // namespace vellum

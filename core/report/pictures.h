@@ -1,0 +1,42 @@
+// Pictures for the operator's per-scan report (pure image making, no I/O): the depth map with
+// a colour bar in mm, the valid-pixel mask, the flattening strain per quad, the flattened grid
+// over the restored page, and matching before/after crops.
+#pragma once
+
+#include <functional>
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "core/geometry/calibration.h"
+#include "core/mesh/mesh.h"
+#include "core/restore/restore.h"
+
+namespace vellum {
+
+// Height (z) of the valid points of a point map (CV_32FC3, NaN where invalid) in colour, with a
+// colour bar labelled in mm on the right; sets the range.
+cv::Mat DepthWithColourBar(const cv::Mat& points, double* z_min_mm, double* z_max_mm);
+
+// 255 where the point map is valid, 0 elsewhere (CV_8U).
+cv::Mat ValidMask(const cv::Mat& points);
+
+// Where a flat-page point (mm) lands in the restored image: the orthographic map, or the
+// camera's projection of (x, y, 0) in camera view.
+std::function<cv::Point2d(const cv::Point2d&)> RestoredPixel(const RestoreResult& restored,
+                                                             const CameraModel& camera);
+
+// Each quad of the flattened sheet coloured by its residual strain (mean relative length error
+// of its springs), on the restored image's frame, with a colour bar (0 .. the max strain).
+cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                      const RestoreResult& restored, const CameraModel& camera);
+
+// The flattened grid drawn over the restored page (every `step`-th grid line).
+cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                     const RestoreResult& restored, const CameraModel& camera, int step = 4);
+
+// The same part of the page before (texture) and after (restored), side by side: a window of
+// `size_mm` around the sheet's central node.
+cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                    const RestoreResult& restored, const CameraModel& camera, double size_mm = 50);
+
+}  // namespace vellum

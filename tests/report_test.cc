@@ -1,0 +1,66 @@
+// The per-scan report as the operator opens it: `vellum process` of the recorded scan writes
+// report.html; headless Chromium (Debian's chromium) loads it from disk with no network and
+// every picture must load.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <regex>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string RunCommand(const std::string& command, int* status) {
+  std::string out;
+  FILE* p = popen((command + " 2>&1").c_str(), "r");
+  char buf[4096];
+  while (p && fgets(buf, sizeof(buf), p)) out += buf;
+  *status = p ? pclose(p) : -1;
+  return out;
+}
+
+TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_report_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const std::string tool = VELLUM_BIN;
+  int status = 0;
+  std::string out =
+      RunCommand(tool + " export " + VELLUM_LOG + " " + (dir / "scan").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  out = RunCommand(tool + " process --scan " + (dir / "scan").string() + " --calibration " +
+                       (dir / "scan" / "calibration.yaml").string() + " --out " +
+                       (dir / "result").string(),
+                   &status);
+  ASSERT_EQ(status, 0) << out;
+  const fs::path html = dir / "result" / "report.html";
+  ASSERT_TRUE(fs::exists(html));
+  for (const char* picture :
+       {"texture.png", "valid.png", "depth.png", "grid.png", "strain.png", "before_after.png"}) {
+    const cv::Mat image = cv::imread((dir / "result" / "report" / picture).string());
+    EXPECT_FALSE(image.empty()) << picture;
+    EXPECT_GT(image.cols, 100) << picture;
+  }
+  // The page counts the images that loaded into <body data-images="loaded/total">.
+  out = RunCommand(
+      "timeout 120 chromium --headless --no-sandbox --disable-gpu --virtual-time-budget=5000 "
+      "--dump-dom file://" +
+          html.string(),
+      &status);
+  ASSERT_EQ(status, 0) << out;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(out, m, std::regex("data-images=\"(\\d+)/(\\d+)\""))) << out;
+  EXPECT_EQ(m[1], m[2]) << "only " << m[1] << " of " << m[2] << " pictures loaded";
+  EXPECT_EQ(m[2], "6");
+  // Nothing in it reaches for the network.
+  std::ifstream in(html);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(text.find("http://"), std::string::npos);
+  EXPECT_EQ(text.find("https://"), std::string::npos);
+  fs::remove_all(dir);
+}
+
+}  // namespace
