@@ -4,6 +4,7 @@
 
 #include "cli/commands.h"
 #include "cli/options.h"
+#include "cli/progress.h"
 #include "core/decode/decode.h"
 #include "core/flatten/flatten.h"
 #include "core/geometry/triangulate.h"
@@ -46,7 +47,9 @@ int RunProcess(const std::vector<std::string>& args) {
   const FlattenOptions flatten_options = FlattenOptionsFromFlags(flags);
   const RestoreOptions restore_options = RestoreOptionsFromFlags(flags);
 
-  auto fail = [](const std::string& message) {
+  Progress* shown = nullptr;  // Cleared before an error is printed.
+  auto fail = [&shown](const std::string& message) {
+    if (shown) shown->Clear();
     std::fprintf(stderr, "vellum process: %s\n", message.c_str());
     return 1;
   };
@@ -56,12 +59,33 @@ int RunProcess(const std::vector<std::string>& args) {
   };
   std::vector<Stage> stages;
   auto clock = std::chrono::steady_clock::now();
+  // Typical share of the whole run done after each stage (the simulators take longer).
+  const bool slow = flatten_options.solver != FlattenSolver::kGaussNewton;
+  const std::vector<std::pair<std::string, double>> plan = {
+      {"read", 0.35},        {"decode", 0.5},     {"triangulate", 0.6},
+      {"write points", 0.7}, {"mesh", 0.75},      {"flatten", slow ? 0.95 : 0.8},
+      {"restore", 0.97},     {"write sheet", 1.0}};
+  Progress progress;
+  auto next_stage = [&](const std::string& done) {
+    for (size_t k = 0; k + 1 < plan.size(); ++k) {
+      if (plan[k].first == done) return plan[k + 1].first;
+    }
+    return std::string("report");
+  };
+  auto share = [&](const std::string& name) {
+    for (const auto& [stage, f] : plan) {
+      if (stage == name) return f;
+    }
+    return 1.0;
+  };
   auto lap = [&](const std::string& name) {
     const auto now = std::chrono::steady_clock::now();
     stages.push_back({name, std::chrono::duration<double>(now - clock).count()});
     clock = now;
-    std::fprintf(stderr, "process: %-12s %7.3f s\n", name.c_str(), stages.back().seconds);
+    progress.Update(next_stage(name), share(name));
   };
+  shown = &progress;
+  progress.Update("read", 0);
 
   Calibration calibration;
   Status s = ReadCalibration(calib_path, &calibration);
@@ -167,6 +191,7 @@ int RunProcess(const std::vector<std::string>& args) {
   html.camera = calibration.camera;
   s = WriteHtmlReport(out, html);
   if (!s.ok()) return fail(s.message());
+  progress.Clear();
   std::printf(
       "%d valid points; sheet %s, %s residual strain mean %.2e max %.2e; restored %dx%d"
       "%s; results in %s\n",

@@ -9,6 +9,7 @@
 #include <map>
 
 #include "cli/commands.h"
+#include "cli/progress.h"
 #include "core/io/calibration_io.h"
 #include "daemons/common/messages.h"
 #include "daemons/common/node.h"
@@ -28,11 +29,15 @@ namespace channel = station::channel;
 // daemons, and RESTORED. Prints one updating line on a terminal, plain lines otherwise.
 class Follower {
  public:
-  Follower(Node* node, int64_t scan_id) : node_(node), scan_id_(scan_id), tty_(isatty(2)) {
+  Follower(Node* node, int64_t scan_id) : node_(node), scan_id_(scan_id) {
     node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
       if (scan_id_ && m.scan_id != scan_id_) return;
-      Progress("projector: pattern " + std::to_string(m.pattern_index + 1) + " of " +
-               std::to_string(m.pattern_count));
+      // Capturing is about 70% of a scan's time on the default rig.
+      progress_.Update(m.pattern_index < 0
+                           ? std::string("capturing the texture")
+                           : "capturing pattern " + std::to_string(m.pattern_index + 1) + " of " +
+                                 std::to_string(m.pattern_count),
+                       0.7 * (m.pattern_index + 1) / std::max(1, m.pattern_count + 1));
     });
     for (const char* process : {"vellum-projector", "vellum-camera", "vellum-decoder",
                                 "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
@@ -58,22 +63,9 @@ class Follower {
   const std::string& failure() const { return failure_; }
   const std::string& results() const { return results_; }
 
-  void EndLine() {
-    if (tty_ && !line_.empty()) std::fputc('\n', stderr);
-    line_.clear();
-  }
+  void EndLine() { progress_.Clear(); }
 
  private:
-  void Progress(const std::string& text) {
-    if (text == line_) return;
-    if (tty_) {
-      std::fprintf(stderr, "\r\033[K%s", text.c_str());
-    } else {
-      std::fprintf(stderr, "%s\n", text.c_str());
-    }
-    line_ = text;
-  }
-
   void OnStatus(const status_t& m) {
     int64_t& seen = errors_[m.process];
     if (!first_seen_.count(m.process)) {
@@ -89,15 +81,20 @@ class Follower {
           failure_ = m.process + ": " + m.last_error;
       }
     }
-    if ((m.state == "busy" || m.state == "recording") && (!scan_id_ || m.scan_id == scan_id_)) {
-      Progress(m.process.substr(7) + ": " + m.detail);
+    if (m.state == "busy" && (!scan_id_ || m.scan_id == scan_id_)) {
+      // The processing stages after capture, in order.
+      double fraction = 0.72;
+      if (m.process == "vellum-triangulator") fraction = 0.78;
+      if (m.process == "vellum-flattener") fraction = 0.84;
+      if (m.process == "vellum-restorer") fraction = 0.95;
+      progress_.Update(m.process.substr(7) + ": " + m.detail, fraction);
     }
   }
 
   Node* node_;
   int64_t scan_id_;
-  bool tty_;
-  std::string line_, failure_, results_;
+  Progress progress_;
+  std::string failure_, results_;
   int restored_ = 0;
   std::map<std::string, int64_t> errors_;
   std::map<std::string, bool> first_seen_;
@@ -149,7 +146,8 @@ int RunScan(const std::vector<std::string>& args) {
   request.label = flags.Get("label");
   Follower follower(&node, request.scan_id);
   node.Publish(channel::kScanRequest, &request);
-  std::fprintf(stderr, "scan %lld requested\n", static_cast<long long>(request.scan_id));
+  if (isatty(2))
+    std::fprintf(stderr, "scan %lld requested\n", static_cast<long long>(request.scan_id));
   const bool finished =
       Follow(node, timeout, [&] { return follower.restored() > 0 || !follower.failure().empty(); });
   follower.EndLine();
