@@ -8,7 +8,7 @@ prefix=$(mktemp -d)
 trap 'rm -rf "$prefix"' EXIT
 cmake --install "$build" --prefix "$prefix" >/dev/null
 for b in vellum vellum-camera vellum-projector vellum-decoder vellum-triangulator \
-         vellum-flattener vellum-restorer vellum-spy; do
+         vellum-flattener vellum-restorer vellum-viewer vellum-spy; do
   test -x "$prefix/bin/$b" || { echo "missing bin/$b"; exit 1; }
   "$prefix/bin/$b" --help >/dev/null || { echo "bin/$b --help failed"; exit 1; }
 done

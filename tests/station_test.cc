@@ -5,13 +5,16 @@
 #include <gtest/gtest.h>
 
 #include <memory>
+#include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <set>
 #include <tuple>
 
 #include "core/io/scan_io.h"
 #include "tests/station_harness.h"
+#include "tests/xwd.h"
 #include "vellum/capture_t.hpp"
 #include "vellum/correspondence_t.hpp"
 #include "vellum/restored_t.hpp"
@@ -332,10 +335,63 @@ TEST_F(StationTest, LostChunksAndSequenceGapsAreReportedNotSilentlyUsed) {
   EXPECT_TRUE(triangulator->running());
 }
 
+// The operator's window under Xvfb with the whole station: after a scan, a screenshot of the
+// X server (Xvfb keeps its screen as an XWD file) shows the restored page, where OpenCV finds
+// the leaf's whole checkerboard (16 x 21 inner corners), and the camera's live preview.
+TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
+  const std::string display = ":" + std::to_string(200 + std::hash<std::string>()(dir_) % 300);
+  fs::create_directories(dir_ + "/fb");
+  Process xvfb({"/usr/bin/Xvfb", display, "-screen", "0", "1280x720x24", "-fbdir", dir_ + "/fb",
+                "-nolisten", "tcp"},
+               dir_ + "/xvfb.log");
+  const std::string screen = dir_ + "/fb/Xvfb_screen0";
+  for (int k = 0; k < 100 && !fs::exists(screen); ++k) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(fs::exists(screen)) << xvfb.Output();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  Process* viewer =
+      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
+  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-projector"), {"--calibration", kRig, "--fullscreen", "false"},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_VIEWER");
+  all.push_back("STATUS_CAMERA");
+  WaitForHeartbeats(all);
+  std::string out;
+  ASSERT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 0) << out;
+  // The viewer redraws ten times a second.
+  cv::Mat shot;
+  bool found = false;
+  std::vector<cv::Point2f> corners;
+  for (int attempt = 0; attempt < 30 && !found; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    shot = testing::ReadXwd(screen);
+    ASSERT_FALSE(shot.empty()) << "cannot read the Xvfb screen " << screen;
+    cv::Mat gray;
+    cv::cvtColor(shot(cv::Rect(shot.cols * 2 / 3, 0, shot.cols - shot.cols * 2 / 3, shot.rows)),
+                 gray, cv::COLOR_BGR2GRAY);
+    found = cv::findChessboardCorners(gray, cv::Size(16, 21), corners);
+  }
+  cv::imwrite(dir_ + "/screenshot.png", shot);
+  EXPECT_TRUE(found) << "no 16x21 checkerboard in the restored-page region; see "
+                     << dir_ + "/screenshot.png";
+  // The live preview (top left) is not blank: the camera's view of the page.
+  cv::Mat preview;
+  cv::cvtColor(shot(cv::Rect(20, 70, shot.cols / 3 - 40, 250)), preview, cv::COLOR_BGR2GRAY);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(preview, mean, stddev);
+  EXPECT_GT(stddev[0], 20) << "the camera preview looks empty";
+  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();  // Before its X server goes.
+}
+
 TEST_F(StationTest, EveryDaemonHasHelpAndRejectsABadConfigFile) {
   std::ofstream(dir_ + "/bad.yaml") << "%YAML:1.0\n---\nno-such-flag: 3\n";
-  for (const char* name : {"vellum-camera", "vellum-projector", "vellum-decoder",
-                           "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+  for (const char* name :
+       {"vellum-camera", "vellum-projector", "vellum-decoder", "vellum-triangulator",
+        "vellum-flattener", "vellum-restorer", "vellum-viewer"}) {
     Process help({Daemon(name), "--help"}, dir_ + "/help.log");
     EXPECT_EQ(help.Wait(30), 0) << name;
     EXPECT_NE(help.Output().find("--url"), std::string::npos) << name;

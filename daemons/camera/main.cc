@@ -1,6 +1,7 @@
 // vellum-camera: on each PATTERN_SHOWN, captures the first frame whose exposure starts after
 // it and publishes CAPTURE (the frame, the pattern, the scan). Backends: v4l2 (libv4l2) and
 // sim (the virtual gantry renders what the camera would see under the pattern shown).
+#include <chrono>
 #include <memory>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -68,11 +69,48 @@ class CameraNode {
       throw UsageError("--backend must be sim or v4l2, got '" + backend + "'");
     }
     node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
+      busy_until_ = std::chrono::steady_clock::now() + std::chrono::seconds(2);
       node_->Post([this, m] { OnShown(m); });
+    });
+    preview_period_ = std::chrono::duration<double>(1.0 / flags.GetDouble("preview-hz", 0.1, 30));
+  }
+
+  // On the LCM thread: a live preview while no scan is running.
+  void Tick() {
+    const auto now = std::chrono::steady_clock::now();
+    if (now < busy_until_ || now < next_preview_ || node_->Pending() > 0) return;
+    next_preview_ = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                              preview_period_);
+    node_->Post([this] {
+      cv::Mat image;
+      int64_t exposure = NowUtime();
+      if (gantry_) {
+        if (sim_preview_.empty()) sim_preview_ = gantry_->RenderTexture(seed_);
+        image = sim_preview_;
+      } else if (!v4l2_->Capture(NowUtime(), &image, &exposure).ok()) {
+        return;
+      }
+      PublishPreview(image, exposure, 0, -1, 0);
     });
   }
 
  private:
+  // A copy at most 640 pixels wide on PREVIEW, so that viewers never pull full frames.
+  void PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index, int count) {
+    cv::Mat small = image;
+    if (image.cols > 640) {
+      const double s = 640.0 / image.cols;
+      cv::resize(image, small, cv::Size(), s, s, cv::INTER_AREA);
+    }
+    image_t p{};
+    ToMessage(small, &p);
+    p.utime = utime;
+    p.scan_id = scan_id;
+    p.pattern_index = index;
+    p.pattern_count = count;
+    node_->Publish(channel::kPreview, &p);
+  }
+
   void OnShown(const pattern_shown_t& m) {
     const std::string where =
         "scan " + std::to_string(m.scan_id) + ", pattern " + std::to_string(m.pattern_index);
@@ -119,6 +157,7 @@ class CameraNode {
     c.image.seq = node_->Counter("frames captured");
     node_->Publish(channel::kCapture, &c);
     node_->Count("frames captured");
+    PublishPreview(image, exposure, m.scan_id, m.pattern_index, m.pattern_count);
     if (m.pattern_index + 1 == m.pattern_count) node_->SetState("idle", m.scan_id, "scan captured");
   }
 
@@ -126,6 +165,10 @@ class CameraNode {
   std::unique_ptr<VirtualGantry> gantry_;
   uint64_t seed_ = 1;
   std::unique_ptr<V4l2Camera> v4l2_;
+  cv::Mat sim_preview_;  // Worker thread only.
+  // LCM thread only:
+  std::chrono::steady_clock::time_point busy_until_, next_preview_;
+  std::chrono::duration<double> preview_period_{0.5};
 };
 
 }  // namespace
@@ -148,12 +191,13 @@ int main(int argc, char** argv) {
       {"page-size", "WxH", "sim: page size, mm", "190x240"},
       {"noise", "DN", "sim: camera noise sigma, DN", "1.5"},
       {"seed", "N", "sim: noise seed", "1"},
+      {"preview-hz", "HZ", "live preview rate on PREVIEW while idle", "2"},
   };
   return DaemonMain(argc, argv, "vellum-camera",
                     "Captures a frame for each PATTERN_SHOWN (the first whose exposure starts\n"
                     "after it) and publishes CAPTURE: the texture in colour, patterns in gray.",
                     Join(DaemonFlagSpecs(false), own), [](const Flags& flags, Node& node) {
                       CameraNode camera(&node, flags);
-                      return node.Run();
+                      return node.Run([&] { camera.Tick(); });
                     });
 }
