@@ -11,5 +11,5 @@ out=$(realpath -m "${VELLUM_DEMO_OUT:-out/demo}")
 rm -rf "$out"
 scripts/netns-run.sh scripts/playback.sh build/tests/data/curl_scan.lcmlog "$out"
 results=$(ls -d "$out"/scan-*/results)
-echo "demo: restored page $results/restored.tif (and restored.json, report.json, points.ply," \
+echo "demo: restored page $results/restored.tif; report $results/report.html (and restored.json, report.json, points.ply," \
   "depth.png, mesh.ply, flat.ply); raw captures in ${results%/results}/raw; daemon logs in $out"
