@@ -79,8 +79,8 @@ class CameraNode {
   void Tick() {
     const auto now = std::chrono::steady_clock::now();
     if (now < busy_until_ || now < next_preview_ || node_->Pending() > 0) return;
-    next_preview_ = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                              preview_period_);
+    next_preview_ =
+        now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(preview_period_);
     node_->Post([this] {
       cv::Mat image;
       int64_t exposure = NowUtime();

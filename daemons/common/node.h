@@ -34,7 +34,7 @@ inline constexpr char kCorrespondence[] = "CORRESPONDENCE";
 inline constexpr char kPointCloud[] = "POINT_CLOUD";
 inline constexpr char kFlatMesh[] = "FLAT_MESH";
 inline constexpr char kRestored[] = "RESTORED";
-inline constexpr char kPreview[] = "PREVIEW";  // Camera preview, at most 640 px wide.
+inline constexpr char kPreview[] = "PREVIEW";       // Camera preview, at most 640 px wide.
 inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper case
 }  // namespace channel
 
