@@ -88,6 +88,13 @@ class Process {
     }
     return code;
   }
+  // SIGKILL: a crash, no chance to clean up; returns once it is gone.
+  void Kill() {
+    if (running()) kill(pid_, SIGKILL);
+    Wait(10);
+    killed_ = true;
+  }
+  bool killed() const { return killed_; }
   std::string Output() const { return ReadText(log_); }
   const std::string& name() const { return argv_[0]; }
 
@@ -95,7 +102,7 @@ class Process {
   std::vector<std::string> argv_;
   std::string log_;
   pid_t pid_ = -1;
-  bool done_ = false;
+  bool done_ = false, killed_ = false;
   int status_ = 0;
 };
 

@@ -54,6 +54,7 @@ class StationTest : public ::testing::Test {
   }
   void TearDown() override {
     for (auto& p : processes_) {
+      if (p->killed()) continue;
       const int code = p->Stop();
       EXPECT_EQ(code, 0) << p->name() << " did not stop cleanly on SIGTERM:\n" << p->Output();
     }
@@ -385,6 +386,62 @@ TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
   cv::meanStdDev(preview, mean, stddev);
   EXPECT_GT(stddev[0], 20) << "the camera preview looks empty";
   EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();  // Before its X server goes.
+}
+
+// The recorder crashes in the middle of a scan and systemd starts it again. What the decoder
+// had received is on disk (each capture is appended to the scan's log the moment it arrives;
+// the new decoder continues that log, never truncates it, and takes its captures up). A
+// capture still in flight at the crash is lost with the process: then the scan fails with a
+// status naming it; else the scan is processed. Either way the station takes the next scan.
+TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGoesOn) {
+  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  // 300 ms per pattern: time for a restart between two captures.
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--settle-ms", "300"},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  Process* decoder = processes_[2].get();
+  ASSERT_NE(decoder->name().find("vellum-decoder"), std::string::npos);
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  int captured = 0;
+  int64_t scan_id = 0;
+  Listener<capture_t> on_capture(*lcm_, "CAPTURE", [&](const capture_t& c) {
+    ++captured;
+    scan_id = c.scan_id;
+  });
+  Process scan({Tool(), "scan", "--url", url_, "--timeout", "300"}, dir_ + "/scan.log");
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return captured >= 12; }));
+  decoder->Kill();
+  Process* restarted =
+      Start(Daemon("vellum-decoder"), {"--data", dir_ + "/scans", "--scan-timeout", "3"});
+  const int code = scan.Wait(300);
+  const std::string out = scan.Output();
+  EXPECT_NE(restarted->Output().find("captures already there"), std::string::npos)
+      << restarted->Output();
+  // Every capture the first decoder logged plus every one after the restart is in the log.
+  const std::string raw = dir_ + "/scans/scan-" + std::to_string(scan_id) + "/raw";
+  lcm::LogFile log(raw + "/captures.lcmlog", "r");
+  ASSERT_TRUE(log.good());
+  std::set<int> patterns;
+  for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+    capture_t c;
+    if (e->channel == "CAPTURE" && c.decode(e->data, 0, e->datalen) >= 0) {
+      patterns.insert(c.pattern_index);
+    }
+  }
+  EXPECT_GE(patterns.size(), 53u) << "more than the captures in flight were lost";
+  if (code == 0) {
+    EXPECT_EQ(patterns.size(), 55u);
+  } else {
+    EXPECT_NE(out.find("captures missing"), std::string::npos) << out;
+    EXPECT_NE(out.find("kept in " + raw), std::string::npos) << out;
+  }
+  // The station goes on: the next scan is whole and processed.
+  std::string next;
+  EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &next), 0) << next;
 }
 
 TEST_F(StationTest, EveryDaemonHasHelpAndRejectsABadConfigFile) {

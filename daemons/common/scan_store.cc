@@ -96,66 +96,90 @@ Scan CaptureSet::ToScan() const {
   return scan;
 }
 
-Status ScanRecorder::Open(const ScanFolder& folder) {
-  Close();
-  folder_ = folder;
-  Status s = MakeDirectories(folder.raw());
-  if (!s.ok()) return s;
-  auto log = std::make_unique<lcm::LogFile>(folder.log(), "w");
-  if (!log->good()) return Status::Error(folder.log() + ": cannot create the scan's log");
-  log_ = std::move(log);
-  return Status::Ok();
-}
-
-void ScanRecorder::Close() { log_.reset(); }
-
-Status ScanRecorder::Log(const std::string& channel, int64_t utime,
-                         const std::vector<uint8_t>& bytes) {
-  if (!log_) return Status::Error("no scan log open");
+Status CaptureLog::Append(const ScanFolder& folder, int64_t scan_id, const std::string& channel,
+                          int64_t utime, const std::vector<uint8_t>& bytes) {
+  if (!log_ || scan_id != scan_id_) {
+    Close();
+    Status s = MakeDirectories(folder.raw());
+    if (!s.ok()) return s;
+    path_ = folder.log();
+    auto log = std::make_unique<lcm::LogFile>(path_, "a");
+    if (!log->good()) return Status::Error(path_ + ": cannot open the scan's log");
+    log_ = std::move(log);
+    scan_id_ = scan_id;
+  }
   lcm::LogEvent event;
   event.eventnum = 0;
   event.timestamp = utime;
   event.channel = channel;
   event.datalen = static_cast<int32_t>(bytes.size());
   event.data = const_cast<uint8_t*>(bytes.data());
-  if (log_->writeEvent(&event) != 0) {
-    return Status::Error(folder_.log() + ": cannot write (disk full?)");
-  }
-  // Flushed per capture: what was captured is on disk before the next pattern is shown.
-  if (fflush(log_->getFilePtr()) != 0) {
-    return Status::Error(folder_.log() + ": cannot write (disk full?)");
+  if (log_->writeEvent(&event) != 0 || fflush(log_->getFilePtr()) != 0) {
+    Close();  // Reopened (appending) for the next message.
+    return Status::Error(path_ + ": cannot write (disk full?)");
   }
   return Status::Ok();
 }
 
-template <class Msg>
-static std::vector<uint8_t> Encode(const Msg& msg) {
-  std::vector<uint8_t> bytes(msg.getEncodedSize());
-  msg.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
-  return bytes;
+void CaptureLog::Close() {
+  log_.reset();
+  scan_id_ = 0;
+}
+
+static std::string ImageName(int pattern_index) {
+  return pattern_index < 0 ? "texture.png" : FrameName(pattern_index);
+}
+
+Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed,
+                          int* count) {
+  folder_ = folder;
+  *count = 0;
+  Status s = MakeDirectories(folder.raw());
+  if (!s.ok()) return s;
+  if (!fs::exists(folder.log())) return Status::Ok();
+  CaptureSet earlier;
+  std::vector<capture_t> taken;
+  {
+    lcm::LogFile old(folder.log(), "r");
+    for (const lcm::LogEvent* e = old.good() ? old.readNextEvent() : nullptr; e;
+         e = old.readNextEvent()) {
+      capture_t c;
+      if (e->channel != channel::kCapture || c.decode(e->data, 0, e->datalen) < 0 ||
+          c.scan_id != scan_id || earlier.Has(c.pattern_index)) {
+        continue;
+      }
+      if (earlier.Add(c).ok()) taken.push_back(std::move(c));
+    }
+  }
+  // A complete scan in the log was processed before: this is the scan again (a replay).
+  if (earlier.Complete()) return Status::Ok();
+  for (const capture_t& c : taken) {
+    const std::string path = (fs::path(folder.raw()) / ImageName(c.pattern_index)).string();
+    if (fs::exists(path)) continue;
+    cv::Mat image;
+    if (FromMessage(c.image, &image).ok()) {
+      s = WriteImage(path, image);
+      if (!s.ok()) return s;
+    }
+  }
+  *resumed = earlier;
+  *count = static_cast<int>(taken.size());
+  return Status::Ok();
 }
 
 Status ScanRecorder::Write(const capture_t& capture, const cv::Mat& image) {
-  Status s = Log(channel::kCapture, capture.utime, Encode(capture));
-  if (!s.ok()) return s;
-  const std::string name =
-      capture.pattern_index < 0 ? "texture.png" : FrameName(capture.pattern_index);
-  return WriteImage((fs::path(folder_.raw()) / name).string(), image);
+  return WriteImage((fs::path(folder_.raw()) / ImageName(capture.pattern_index)).string(), image);
 }
 
 Status ScanRecorder::Write(const calibration_t& calibration) {
-  Status s = Log(channel::kCalibration, calibration.utime, Encode(calibration));
-  if (!s.ok()) return s;
   Calibration c;
-  s = FromMessage(calibration, &c);
+  Status s = FromMessage(calibration, &c);
   if (!s.ok()) return s;
   return WriteCalibration(folder_.calibration(), c);
 }
 
 Status ScanRecorder::Finish(const Scan& scan) {
-  Status s = WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size);
-  Close();
-  return s;
+  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size);
 }
 
 capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime) {
@@ -231,6 +255,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
       if (scan_id == 0 && set.Started() && c.scan_id != set.scan_id()) other = c.scan_id;
       if (scan_id != 0 && c.scan_id != scan_id) continue;
       if (scan_id == 0 && set.Started() && c.scan_id != set.scan_id()) continue;
+      if (set.Has(c.pattern_index)) continue;  // A replay appended to the same log.
       Status s = set.Add(c);
       if (!s.ok()) return Status::Error(log_path + ": " + s.message());
     } else if (e->channel == channel::kCalibration) {

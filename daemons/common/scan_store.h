@@ -40,6 +40,10 @@ class CaptureSet {
   int64_t scan_id() const { return scan_id_; }
   int Received() const { return received_; }
   int Expected() const { return count_ + 1; }  // Texture + patterns.
+  // Whether the capture of pattern_index (-1: texture) is in.
+  bool Has(int pattern_index) const {
+    return Started() && pattern_index >= -1 && pattern_index < count_ && have_[pattern_index + 1];
+  }
   // "texture, frames 3, 7 of 54 missing".
   std::string Missing() const;
   // The whole scan (only when Complete()).
@@ -55,23 +59,44 @@ class CaptureSet {
   std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
 };
 
-// Writes a scan's raw captures as they arrive: each CAPTURE (and the CALIBRATION) goes to
-// raw/captures.lcmlog and, decoded, to raw/texture.png, raw/frame_NNN.png (and
-// raw/calibration.yaml); Finish writes raw/scan.yaml.
-class ScanRecorder {
+// The scan's log, raw/captures.lcmlog, written on the LCM thread the moment a message
+// arrives (an append and a flush: a crash of the process loses nothing it has received).
+// Logs are only ever appended to, never truncated.
+class CaptureLog {
  public:
-  Status Open(const ScanFolder& folder);
-  bool IsOpen() const { return log_ != nullptr; }
-  Status Write(const capture_t& capture, const cv::Mat& image);
-  Status Write(const calibration_t& calibration);
-  Status Finish(const Scan& scan);
+  Status Append(const ScanFolder& folder, int64_t scan_id, const std::string& channel,
+                int64_t utime, const std::vector<uint8_t>& bytes);
   void Close();
 
  private:
-  Status Log(const std::string& channel, int64_t utime, const std::vector<uint8_t>& bytes);
-  ScanFolder folder_;
+  int64_t scan_id_ = 0;
+  std::string path_;
   std::unique_ptr<lcm::LogFile> log_;
 };
+
+// The rest of a scan's folder, on the worker thread: each capture as raw/texture.png or
+// raw/frame_NNN.png, raw/calibration.yaml, and raw/scan.yaml once complete.
+class ScanRecorder {
+ public:
+  // Opens the scan's folder. When its log already holds captures of this scan that were not
+  // processed (the decoder restarted in the middle of the scan), they are taken up: added to
+  // *resumed (*count of them), their images written if missing.
+  Status Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed, int* count);
+  Status Write(const capture_t& capture, const cv::Mat& image);
+  Status Write(const calibration_t& calibration);
+  Status Finish(const Scan& scan);
+
+ private:
+  ScanFolder folder_;
+};
+
+// The encoded bytes of a message (what the bus and the logs carry).
+template <class Msg>
+std::vector<uint8_t> Encode(const Msg& msg) {
+  std::vector<uint8_t> bytes(msg.getEncodedSize());
+  msg.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  return bytes;
+}
 
 // Reads a recorded log: the captures of its scan (`scan_id` 0: the log must hold exactly one
 // scan) and its calibration, if any. Errors name the log and what is missing.

@@ -19,12 +19,16 @@ class DecoderNode {
         data_(flags.Get("data")),
         decoder_(DecodeOptionsFromFlags(flags)),
         timeout_s_(flags.GetDouble("scan-timeout", 1, 3600)) {
+    // Each message goes to the scan's log at once, on the LCM thread (an append and a flush),
+    // so that a crash loses nothing received; the rest is done on the worker.
     node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
+      Log(channel::kCapture, msg.scan_id, msg.utime, Encode(msg));
       auto copy = std::make_shared<capture_t>(msg);
       last_capture_ = std::chrono::steady_clock::now();
       node_->Post([this, copy] { OnCapture(*copy); });
     });
     node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
+      Log(channel::kCalibration, msg.scan_id, msg.utime, Encode(msg));
       auto copy = std::make_shared<calibration_t>(msg);
       node_->Post([this, copy] { OnCalibration(*copy); });
     });
@@ -43,6 +47,18 @@ class DecoderNode {
   }
 
  private:
+  void Log(const char* channel, int64_t scan_id, int64_t utime, const std::vector<uint8_t>& bytes) {
+    if (scan_id <= 0) {
+      node_->Error(std::string(channel) + ": scan_id " + std::to_string(scan_id) + " refused");
+      return;
+    }
+    const Status s = log_.Append(ScanFolder::For(data_, scan_id), scan_id, channel, utime, bytes);
+    if (!s.ok()) {
+      node_->Error("scan " + std::to_string(scan_id) + ": recording failed: " + s.message(),
+                   scan_id);
+    }
+  }
+
   std::string Seconds() const { return std::to_string(static_cast<int>(timeout_s_)); }
 
   void Abandon(const std::string& why) {
@@ -51,7 +67,6 @@ class DecoderNode {
                      ScanFolder::For(data_, set_.scan_id()).raw(),
                  set_.scan_id());
     node_->Count("scans failed");
-    recorder_.Close();
     set_ = CaptureSet();
     recording_ = 0;
     node_->SetState("idle");
@@ -67,13 +82,16 @@ class DecoderNode {
     }
     set_ = CaptureSet();
     recording_ = scan_id;
-    const Status s = recorder_.Open(ScanFolder::For(data_, scan_id));
+    int resumed = 0;
+    const Status s = recorder_.Open(ScanFolder::For(data_, scan_id), scan_id, &set_, &resumed);
     if (!s.ok()) {
       node_->Error("scan " + std::to_string(scan_id) + ": cannot record: " + s.message(), scan_id);
       return false;
     }
-    node_->Log("scan " + std::to_string(scan_id) + ": recording to " +
-               ScanFolder::For(data_, scan_id).raw());
+    node_->Log(
+        "scan " + std::to_string(scan_id) + ": recording to " +
+        ScanFolder::For(data_, scan_id).raw() +
+        (resumed ? " (continuing: " + std::to_string(resumed) + " captures already there)" : ""));
     return true;
   }
 
@@ -85,6 +103,7 @@ class DecoderNode {
 
   void OnCapture(const capture_t& msg) {
     if (!Begin(msg.scan_id)) return;
+    if (set_.Has(msg.pattern_index)) return;  // Taken up from the log after a restart.
     Status s = set_.Add(msg);
     if (!s.ok()) {
       node_->Error(s.message(), msg.scan_id);
@@ -92,14 +111,14 @@ class DecoderNode {
     }
     cv::Mat image;
     FromMessage(msg.image, &image);  // Checked by Add.
-    if (recorder_.IsOpen()) s = recorder_.Write(msg, image);
+    s = recorder_.Write(msg, image);
     if (!s.ok()) {
-      node_->Error("scan " + std::to_string(msg.scan_id) + ": recording failed: " + s.message(),
+      node_->Error("scan " + std::to_string(msg.scan_id) + " failed: recording: " + s.message(),
                    msg.scan_id);
-      recorder_.Close();
       set_ = CaptureSet();
       recording_ = 0;
       node_->Count("scans failed");
+      node_->SetState("idle");
       return;
     }
     waiting_ = true;
@@ -151,6 +170,8 @@ class DecoderNode {
   CaptureSet set_;
   int64_t recording_ = 0;  // The scan whose folder is open.
   ScanRecorder recorder_;
+  // LCM thread only:
+  CaptureLog log_;
   DecodeResult decoded_;
   // LCM thread only:
   std::chrono::steady_clock::time_point last_capture_;

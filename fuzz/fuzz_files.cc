@@ -1,0 +1,56 @@
+// libFuzzer: the files outside tools write. The first byte picks the reader: scan.yaml of a
+// scan directory, a calibration YAML, points.ply, or a quad-mesh PLY. The input is written to
+// a scratch file and read back; bad files must give an error Status, never a crash.
+#include <unistd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "core/io/calibration_io.h"
+#include "core/io/ply.h"
+#include "core/io/scan_io.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace vellum;
+  namespace fs = std::filesystem;
+  if (size < 1 || size > (1u << 20)) return 0;
+  static const fs::path dir =
+      fs::temp_directory_path() / ("vellum_fuzz_files_" + std::to_string(getpid()));
+  static const bool made = fs::create_directories(dir) || fs::exists(dir);
+  (void)made;
+  const uint8_t kind = data[0] % 4;
+  const char* names[] = {"scan.yaml", "calibration.yaml", "points.ply", "mesh.ply"};
+  const fs::path path = dir / names[kind];
+  {
+    std::ofstream out(path, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(data + 1), static_cast<std::streamsize>(size - 1));
+  }
+  switch (kind) {
+    case 0: {
+      PatternSequence sequence;
+      cv::Size camera;
+      (void)ReadScanYaml(dir.string(), &sequence, &camera);
+      break;
+    }
+    case 1: {
+      Calibration c;
+      (void)ReadCalibration(path.string(), &c);
+      break;
+    }
+    case 2: {
+      std::vector<PlyPoint> points;
+      (void)ReadPointsPly(path.string(), &points);
+      break;
+    }
+    case 3: {
+      std::vector<cv::Vec3f> vertices;
+      std::vector<cv::Vec4i> quads;
+      (void)ReadQuadMeshPly(path.string(), &vertices, &quads);
+      break;
+    }
+  }
+  return 0;
+}

@@ -1,0 +1,83 @@
+// libFuzzer: bytes from the bus into the core. The first byte picks a message type; the rest
+// is decoded as that type (LCM checks the fingerprint and lengths) and, when it decodes, goes
+// through the station's readers exactly as a daemon would take it: image conversion, capture
+// sets, chunk reassembly of correspondences, point clouds and flat meshes (and the sheet
+// rebuilt from the nodes), calibration. Nothing may crash, hang or read out of bounds.
+#include <cstddef>
+#include <cstdint>
+
+#include "core/sim/gantry.h"
+#include "daemons/common/messages.h"
+#include "daemons/common/scan_store.h"
+
+namespace vellum::station {
+namespace {
+
+template <class Msg>
+bool Decode(const uint8_t* data, size_t size, Msg* msg) {
+  return size < (64u << 20) && msg->decode(data, 0, static_cast<int>(size)) >= 0;
+}
+
+}  // namespace
+}  // namespace vellum::station
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace vellum;
+  using namespace vellum::station;
+  if (size < 1) return 0;
+  const uint8_t kind = data[0] % 6;
+  ++data;
+  --size;
+  switch (kind) {
+    case 0: {
+      image_t m;
+      cv::Mat image;
+      if (Decode(data, size, &m)) (void)FromMessage(m, &image);
+      break;
+    }
+    case 1: {
+      capture_t m;
+      if (!Decode(data, size, &m)) break;
+      CaptureSet set;
+      if (set.Add(m).ok() && set.Complete()) (void)set.ToScan();
+      break;
+    }
+    case 2: {
+      correspondence_t m;
+      if (!Decode(data, size, &m)) break;
+      DecodeResult decoded;
+      cv::Size projector;
+      ChunkSet chunks;
+      if (chunks.Add(m.scan_id, m.chunk_index, m.chunk_count).ok()) {
+        (void)AddChunk(m, &decoded, &projector);
+      }
+      break;
+    }
+    case 3: {
+      point_cloud_t m;
+      if (!Decode(data, size, &m)) break;
+      cv::Mat points;
+      (void)AddChunk(m, &points);
+      break;
+    }
+    case 4: {
+      mesh_t m;
+      if (!Decode(data, size, &m)) break;
+      Mesh mesh;
+      std::vector<cv::Point2d> flat;
+      if (AddChunk(m, &mesh, &flat).ok() && m.chunk_count == 1) {
+        static const Calibration rig = DefaultRig();
+        ConnectSheet(
+            m.bend_springs, [](const cv::Vec3d& x) { return rig.camera.Project(x); }, &mesh);
+      }
+      break;
+    }
+    case 5: {
+      calibration_t m;
+      Calibration c;
+      if (Decode(data, size, &m)) (void)FromMessage(m, &c);
+      break;
+    }
+  }
+  return 0;
+}
