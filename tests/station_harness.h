@@ -97,6 +97,7 @@ class Process {
   bool killed() const { return killed_; }
   std::string Output() const { return ReadText(log_); }
   const std::string& name() const { return argv_[0]; }
+  pid_t pid() const { return pid_; }
 
  private:
   std::vector<std::string> argv_;

@@ -4,6 +4,7 @@
 // log, and that a scan through the daemons gives exactly what `vellum process` gives.
 #include <gtest/gtest.h>
 
+#include <map>
 #include <memory>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
@@ -442,6 +443,51 @@ TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGo
   // The station goes on: the next scan is whole and processed.
   std::string next;
   EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &next), 0) << next;
+}
+
+// Peak resident memory of a process (VmHWM), MB; 0 if it is gone.
+double PeakRssMb(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  }
+  return 0;
+}
+
+// Scans back to back through the playback path (VELLUM_LOAD_SCANS of them, default 50): every
+// one restored, each daemon's peak memory bounded (reported), and a clean exit (under the
+// sanitizer build, LeakSanitizer fails the exit on a leak).
+TEST_F(StationTest, ScansBackToBackKeepMemoryBounded) {
+  const char* env = std::getenv("VELLUM_LOAD_SCANS");
+  const int scans = env ? std::atoi(env) : 50;
+  std::string out;
+  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/scan"}, &out), 0) << out;
+  StartProcessing();
+  WaitForHeartbeats(kProcessingStatus);
+  std::set<int64_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.insert(m.scan_id); });
+  std::map<std::string, std::vector<double>> rss;
+  for (int k = 1; k <= scans; ++k) {
+    const std::string log = dir_ + "/scan.lcmlog";
+    ASSERT_EQ(RunTool({"import", dir_ + "/scan", log, "--scan-id", std::to_string(k)}, &out), 0)
+        << out;
+    Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, log}, dir_ + "/player.log");
+    ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] { return restored.count(k) > 0; }))
+        << "scan " << k << " not restored";
+    player.Wait(30);
+    fs::remove_all(dir_ + "/scans/scan-" + std::to_string(k));  // Keep the disk in check.
+    for (auto& p : processes_) rss[p->name()].push_back(PeakRssMb(p->pid()));
+  }
+  for (const auto& [name, series] : rss) {
+    // Peak after the first scans against the peak at the end: no growth scan after scan.
+    const double early = series[std::min<size_t>(series.size() - 1, 4)], last = series.back();
+    std::printf("load: %s peak RSS %.0f MB after scan %d, %.0f MB after scan %d\n",
+                fs::path(name).filename().c_str(), early, std::min(5, scans), last, scans);
+    EXPECT_LT(last, early * 1.25 + 20) << name << " grows with the number of scans";
+  }
+  EXPECT_EQ(static_cast<int>(restored.size()), scans);
 }
 
 TEST_F(StationTest, EveryDaemonHasHelpAndRejectsABadConfigFile) {
