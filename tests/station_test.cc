@@ -14,6 +14,7 @@
 #include <tuple>
 
 #include "core/io/scan_io.h"
+#include "daemons/common/scan_store.h"
 #include "tests/station_harness.h"
 #include "tests/xwd.h"
 #include "vellum/capture_t.hpp"
@@ -443,6 +444,65 @@ TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGo
   // The station goes on: the next scan is whole and processed.
   std::string next;
   EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &next), 0) << next;
+}
+
+// The disk fills up while a scan is recorded: the scan fails with a status that says so, the
+// decoder keeps running, and the scan recorded before it is intact on disk.
+TEST_F(StationTest, DiskFullWhileRecordingFailsTheScanAndKeepsEarlierScans) {
+  const std::string small = dir_ + "/small";
+  fs::create_directories(small);
+  // About one and a half scans of this rig (17 MB of log and 10 MB of images each).
+  if (std::system(("mount -t tmpfs -o size=40m tmpfs " + small).c_str()) != 0) {
+    GTEST_SKIP() << "cannot mount a tmpfs here (needs the mount namespace of netns-run.sh)";
+  }
+  std::string out;
+  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/scan"}, &out), 0) << out;
+  Process* decoder = Start(Daemon("vellum-decoder"), {"--data", small});
+  WaitForHeartbeats({"STATUS_DECODER"});
+  std::vector<status_t> statuses;
+  Listener<status_t> on_status(*lcm_, "STATUS_DECODER",
+                               [&](const status_t& m) { statuses.push_back(m); });
+  auto counter = [&](const std::string& name) -> int64_t {
+    if (statuses.empty()) return 0;
+    const status_t& s = statuses.back();
+    for (int k = 0; k < s.ncounters; ++k) {
+      if (s.counter_names[k] == name) return s.counter_values[k];
+    }
+    return 0;
+  };
+  for (int id = 1; id <= 2; ++id) {
+    const std::string log = dir_ + "/scan" + std::to_string(id) + ".lcmlog";
+    ASSERT_EQ(RunTool({"import", dir_ + "/scan", log, "--scan-id", std::to_string(id)}, &out), 0)
+        << out;
+    Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, log}, dir_ + "/player.log");
+    if (id == 1) {
+      ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return counter("scans decoded") >= 1; }));
+    } else {
+      EXPECT_TRUE(HandleUntil(*lcm_, 60, [&] {
+        return !statuses.empty() && statuses.back().last_error_scan_id == 2 &&
+               statuses.back().last_error.find("cannot write") != std::string::npos;
+      })) << (statuses.empty() ? "no status" : statuses.back().last_error);
+    }
+    player.Wait(60);
+  }
+  EXPECT_TRUE(decoder->running());
+  EXPECT_EQ(counter("scans decoded"), 1);
+  // Scan 1 is whole: its log reads back complete and equal to what was played.
+  Scan scan, played;
+  bool has_calibration = false;
+  calibration_t calibration;
+  int64_t id = 0;
+  ASSERT_TRUE(ReadScan(dir_ + "/scan", &played).ok());
+  const Status s = station::ReadScanLog(small + "/scan-1/raw/captures.lcmlog", 1, &scan,
+                                        &has_calibration, &calibration, &id);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(scan.frames.size(), played.frames.size());
+  for (size_t k = 0; k < scan.frames.size(); ++k) {
+    EXPECT_EQ(cv::norm(scan.frames[k], played.frames[k], cv::NORM_INF), 0.0) << k;
+  }
+  Scan from_images;
+  EXPECT_TRUE(ReadScan(small + "/scan-1/raw", &from_images).ok());
+  std::system(("umount " + small).c_str());
 }
 
 // Peak resident memory of a process (VmHWM), MB; 0 if it is gone.
