@@ -8,14 +8,16 @@
 
 #include "core/sim/gantry.h"
 #include "daemons/common/messages.h"
+#include "daemons/common/node.h"
 #include "daemons/common/scan_store.h"
 
 namespace vellum::station {
 namespace {
 
+// As the daemons decode (Node::Subscribe): through SafeDecode.
 template <class Msg>
 bool Decode(const uint8_t* data, size_t size, Msg* msg) {
-  return size < (64u << 20) && msg->decode(data, 0, static_cast<int>(size)) >= 0;
+  return size < (64u << 20) && SafeDecode(data, static_cast<int64_t>(size), msg);
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <exception>
 #include <functional>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
@@ -38,6 +39,19 @@ inline constexpr char kPreview[] = "PREVIEW";       // Camera preview, at most 6
 inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper case
 }  // namespace channel
 
+// Decodes an LCM message from untrusted bytes. lcm-gen 1.3.1's decoders throw
+// std::length_error for a string whose length field is 0 (found by fuzz_messages); that, like
+// any other malformed input, is reported as "does not decode" instead of ending the process.
+template <class Msg>
+bool SafeDecode(const void* data, int64_t size, Msg* msg) {
+  if (size < 0 || size > INT32_MAX) return false;
+  try {
+    return msg->decode(data, 0, static_cast<int>(size)) >= 0;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 // The status channel of a process: "vellum-camera" -> "STATUS_CAMERA".
 std::string StatusChannel(const std::string& process);
 
@@ -63,7 +77,7 @@ class Node {
   void Subscribe(const std::string& channel, std::function<void(const Msg&)> handler) {
     SubscribeRaw(channel, [this, channel, handler](const lcm::ReceiveBuffer* buffer) {
       Msg msg;
-      if (msg.decode(buffer->data, 0, buffer->data_size) < 0) {
+      if (!SafeDecode(buffer->data, buffer->data_size, &msg)) {
         Error(channel + ": a message of " + std::to_string(buffer->data_size) +
               " bytes does not decode as vellum." + Msg::getTypeName() +
               " (corrupt, truncated or of another type); dropped");

@@ -144,7 +144,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
     for (const lcm::LogEvent* e = old.good() ? old.readNextEvent() : nullptr; e;
          e = old.readNextEvent()) {
       capture_t c;
-      if (e->channel != channel::kCapture || c.decode(e->data, 0, e->datalen) < 0 ||
+      if (e->channel != channel::kCapture || !SafeDecode(e->data, e->datalen, &c) ||
           c.scan_id != scan_id || earlier.Has(c.pattern_index)) {
         continue;
       }
@@ -248,7 +248,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
     ++events;
     if (e->channel == channel::kCapture) {
       capture_t c;
-      if (c.decode(e->data, 0, e->datalen) < 0) {
+      if (!SafeDecode(e->data, e->datalen, &c)) {
         return Status::Error(log_path + ": event " + std::to_string(e->eventnum) +
                              " on CAPTURE does not decode as vellum.capture_t");
       }
@@ -260,7 +260,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
       if (!s.ok()) return Status::Error(log_path + ": " + s.message());
     } else if (e->channel == channel::kCalibration) {
       calibration_t c;
-      if (c.decode(e->data, 0, e->datalen) < 0) {
+      if (!SafeDecode(e->data, e->datalen, &c)) {
         return Status::Error(log_path + ": event " + std::to_string(e->eventnum) +
                              " on CALIBRATION does not decode as vellum.calibration_t");
       }

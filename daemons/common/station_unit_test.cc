@@ -247,6 +247,13 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
   node.Subscribe<scan_request_t>("SCAN_REQUEST", [&](const scan_request_t&) { ++received; });
   const std::vector<uint8_t> junk(10, 1);
   node.lcm().publish("SCAN_REQUEST", junk.data(), static_cast<unsigned>(junk.size()));
+  // A string whose length field is 0 makes lcm-gen's decoder throw (found by fuzzing).
+  scan_request_t bad{};
+  bad.label = "x";
+  std::vector<uint8_t> bytes(bad.getEncodedSize());
+  bad.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  std::fill(bytes.begin() + 32, bytes.begin() + 36, 0);  // label's length (after 4 int64s).
+  node.lcm().publish("SCAN_REQUEST", bytes.data(), static_cast<unsigned>(bytes.size()));
   scan_request_t r{};
   for (int64_t seq : {0, 1, 5}) {
     r.seq = seq;
@@ -256,7 +263,7 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
   EXPECT_EQ(received, 3);
   ASSERT_FALSE(statuses.empty());
   EXPECT_EQ(statuses.back().process, "vellum-unit");
-  EXPECT_EQ(statuses.back().errors, 2);
+  EXPECT_EQ(statuses.back().errors, 3);
   EXPECT_NE(statuses.back().last_error.find("3 message(s) lost on the bus (seq 1 then 5)"),
             std::string::npos)
       << statuses.back().last_error;
