@@ -14,6 +14,7 @@
 #include "daemons/common/messages.h"
 #include "daemons/common/node.h"
 #include "daemons/common/scan_store.h"
+#include "vellum/point_cloud_t.hpp"
 #include "vellum/scan_request_t.hpp"
 #include "vellum/status_t.hpp"
 
@@ -89,6 +90,21 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
   bad = chunks[0];
   bad.n -= 1;
   EXPECT_FALSE(AddChunk(bad, &back, &projector).ok());
+}
+
+TEST(Messages, ALengthFieldLargerThanTheMessageIsRefusedBeforeAllocating) {
+  point_cloud_t m{};
+  m.nxyz = 3;
+  m.xyz = {1, 2, 3};
+  std::vector<uint8_t> bytes(m.getEncodedSize());
+  m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  // nxyz sits after the fingerprint, 3 int64 and 6 int32 fields: claim 10^9 floats.
+  const size_t at = 8 + 3 * 8 + 6 * 4;
+  const uint32_t huge = 1000000000u;
+  for (int k = 0; k < 4; ++k) bytes[at + k] = static_cast<uint8_t>(huge >> (24 - 8 * k));
+  point_cloud_t back;
+  EXPECT_FALSE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &back));
+  EXPECT_LT(back.xyz.capacity(), 1000u);  // Refused before sizing the array.
 }
 
 TEST(Messages, ChunkSetNamesMissingAndDuplicateChunks) {
