@@ -50,7 +50,7 @@ Status CheckRows(const std::string& what, int width, int height, int row_begin, 
     return Status::Error(what + ": bad size " + std::to_string(width) + "x" +
                          std::to_string(height));
   }
-  if (row_begin < 0 || row_count <= 0 || row_begin + row_count > height) {
+  if (row_begin < 0 || row_count <= 0 || row_count > height - row_begin) {
     return Status::Error(what + ": rows " + std::to_string(row_begin) + "+" +
                          std::to_string(row_count) + " outside the " + std::to_string(height) +
                          "-row image");
@@ -368,7 +368,7 @@ Status AddChunk(const mesh_t& m, Mesh* mesh, std::vector<cv::Point2d>* flat) {
                        m.chunk_count);
   if (!s.ok()) return s;
   if (m.cols < 2 || m.rows < 2) return Status::Error("FLAT_MESH: a grid needs 2x2 nodes");
-  if (m.npoint != 3 * m.n || m.nflat != 2 * m.n) {
+  if (m.npoint != 3 * static_cast<int64_t>(m.n) || m.nflat != 2 * static_cast<int64_t>(m.n)) {
     return Status::Error("FLAT_MESH: " + std::to_string(m.n) + " nodes need " +
                          std::to_string(3 * m.n) + " point and " + std::to_string(2 * m.n) +
                          " flat values");
