@@ -43,7 +43,7 @@ void Flags::LoadConfig(const std::string& path) {
   cv::FileStorage fs;
   try {
     if (!fs.open(path, cv::FileStorage::READ)) throw UsageError(path + ": cannot open config file");
-  } catch (const cv::Exception&) {
+  } catch (const std::exception&) {
     throw UsageError(path + ": not a valid YAML config file");
   }
   const cv::FileNode root = fs.root();

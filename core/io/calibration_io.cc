@@ -16,7 +16,7 @@ bool ReadMatrix(const cv::FileNode& node, int rows, int cols, bool either_orient
   cv::Mat m;
   try {
     node >> m;
-  } catch (const cv::Exception&) {
+  } catch (const std::exception&) {
     m.release();
   }
   if (m.empty()) {
@@ -111,7 +111,7 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
     if (!fs.open(path, cv::FileStorage::READ)) {
       return Status::Error(path + ": cannot open the calibration file");
     }
-  } catch (const cv::Exception& e) {
+  } catch (const std::exception& e) {
     return Status::Error(path + ": not a valid OpenCV YAML/XML calibration file");
   }
   Status s = ReadDevice(fs, path, "camera_", &calibration->camera);

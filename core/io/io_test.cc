@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
@@ -187,6 +188,33 @@ TEST_F(IoTest, PlyRoundTrip) {
   EXPECT_EQ(r[0].u, 2.0f);
   EXPECT_EQ(r[0].v, 1.0f);
   EXPECT_EQ(r[1].z, 6.0f);
+}
+
+}  // namespace
+}  // namespace vellum
+
+namespace vellum {
+namespace {
+
+// Inputs the fuzzers found that made OpenCV's YAML reader throw std::length_error (not a
+// cv::Exception), which ended the reading process; now they are errors naming the file.
+TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
+  const std::string seed =
+      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-yaml-length-error";
+  std::ifstream in(seed, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(bytes.empty());
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("vellum_io_regress_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "scan.yaml", std::ios::binary) << bytes.substr(1);
+  std::ofstream(dir / "calibration.yaml", std::ios::binary) << bytes.substr(1);
+  PatternSequence sequence;
+  cv::Size camera;
+  EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
+  Calibration calibration;
+  EXPECT_FALSE(ReadCalibration((dir / "calibration.yaml").string(), &calibration).ok());
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

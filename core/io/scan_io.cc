@@ -32,7 +32,7 @@ Status ReadImageFile(const std::string& path, cv::Mat* image) {
   cv::Mat img;
   try {
     img = cv::imread(path, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception&) {
+  } catch (const std::exception&) {
     img.release();
   }
   if (img.empty()) return Status::Error(path + ": not a readable image");
@@ -114,7 +114,7 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
   cv::FileStorage in;
   try {
     if (!in.open(path, cv::FileStorage::READ)) return Status::Error(path + ": cannot open");
-  } catch (const cv::Exception&) {
+  } catch (const std::exception&) {
     return Status::Error(path + ": not valid YAML");
   }
   try {
@@ -188,7 +188,7 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
       sequence->patterns.push_back(spec);
       ++index;
     }
-  } catch (const cv::Exception& e) {
+  } catch (const std::exception& e) {
     return Status::Error(path + ": malformed: " + e.what());
   }
   std::string why;
