@@ -111,12 +111,19 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
     if (!fs.open(path, cv::FileStorage::READ)) {
       return Status::Error(path + ": cannot open the calibration file");
     }
-  } catch (const std::exception& e) {
+  } catch (const std::exception&) {
     return Status::Error(path + ": not a valid OpenCV YAML/XML calibration file");
   }
-  Status s = ReadDevice(fs, path, "camera_", &calibration->camera);
-  if (!s.ok()) return s;
-  s = ReadDevice(fs, path, "projector_", &calibration->projector);
+  if (!fs.root().isMap()) {
+    return Status::Error(path + ": not a calibration (expected a map of keys, see DESIGN.md)");
+  }
+  Status s = Status::Ok();
+  try {
+    s = ReadDevice(fs, path, "camera_", &calibration->camera);
+    if (s.ok()) s = ReadDevice(fs, path, "projector_", &calibration->projector);
+  } catch (const std::exception& e) {
+    s = Status::Error(path + ": malformed: " + e.what());
+  }
   if (!s.ok()) return s;
   std::string why;
   if (!calibration->Check(&why)) return Status::Error(path + ": " + why);
