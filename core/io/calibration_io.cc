@@ -2,6 +2,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/io/yaml_guard.h"
+
 namespace vellum {
 namespace {
 
@@ -11,6 +13,10 @@ bool ReadMatrix(const cv::FileNode& node, int rows, int cols, bool either_orient
                 std::string* why) {
   if (node.empty() || node.isNone()) {
     *why = "is missing";
+    return false;
+  }
+  if (!MatrixNodeAtMost(node, 64)) {
+    *why = "declares a matrix far larger than " + std::to_string(rows) + "x" + std::to_string(cols);
     return false;
   }
   cv::Mat m;

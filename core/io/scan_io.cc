@@ -7,6 +7,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/io/yaml_guard.h"
+
 namespace vellum {
 namespace fs = std::filesystem;
 namespace {
@@ -131,6 +133,9 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
       if (n.isSeq() && n.size() == 2 && n[0].isInt() && n[1].isInt()) {
         *size = cv::Size(static_cast<int>(n[0]), static_cast<int>(n[1]));
       } else {
+        if (!MatrixNodeAtMost(n, 2)) {
+          return Status::Error(path + ": key '" + key + "' must be [ width, height ]");
+        }
         cv::Mat m;
         n >> m;
         if (m.total() != 2) {

@@ -1,0 +1,20 @@
+// A guard for reading matrices from untrusted OpenCV YAML: `node >> mat` allocates whatever
+// rows x cols the file declares (a fuzzed calibration asked for 48 GB), so the declared size is
+// checked first.
+#pragma once
+
+#include <opencv2/core/persistence.hpp>
+
+namespace vellum {
+
+// True unless `node` is an !!opencv-matrix declaring more than max_elements elements (or a
+// negative size).
+inline bool MatrixNodeAtMost(const cv::FileNode& node, double max_elements) {
+  if (!node.isMap()) return true;
+  const cv::FileNode rows = node["rows"], cols = node["cols"];
+  if (!rows.isInt() || !cols.isInt()) return true;  // Not a matrix node: reading will say so.
+  const double r = static_cast<int>(rows), c = static_cast<int>(cols);
+  return r >= 0 && c >= 0 && r * c <= max_elements;
+}
+
+}  // namespace vellum
