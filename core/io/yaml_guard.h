@@ -7,12 +7,12 @@
 
 namespace vellum {
 
-// True unless `node` is an !!opencv-matrix declaring more than max_elements elements (or a
-// negative size).
+// False when `node` is a map (an !!opencv-matrix) that does not declare integer rows and cols
+// within max_elements elements; true otherwise (other nodes: reading will judge them).
 inline bool MatrixNodeAtMost(const cv::FileNode& node, double max_elements) {
   if (!node.isMap()) return true;
   const cv::FileNode rows = node["rows"], cols = node["cols"];
-  if (!rows.isInt() || !cols.isInt()) return true;  // Not a matrix node: reading will say so.
+  if (!rows.isInt() || !cols.isInt()) return false;
   const double r = static_cast<int>(rows), c = static_cast<int>(cols);
   return r >= 0 && c >= 0 && r * c <= max_elements;
 }
