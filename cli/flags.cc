@@ -4,6 +4,8 @@
 #include <opencv2/core/persistence.hpp>
 #include <sstream>
 
+#include "core/io/yaml_guard.h"
+
 namespace vellum {
 
 Flags::Flags(std::string command, std::string summary, std::vector<Spec> specs)
@@ -40,6 +42,8 @@ bool Flags::Parse(const std::vector<std::string>& args) {
 }
 
 void Flags::LoadConfig(const std::string& path) {
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) throw UsageError(path + ": " + problem);
   cv::FileStorage fs;
   try {
     if (!fs.open(path, cv::FileStorage::READ)) throw UsageError(path + ": cannot open config file");

@@ -112,6 +112,8 @@ void WriteDevice(cv::FileStorage& fs, const std::string& prefix, const CameraMod
 }  // namespace
 
 Status ReadCalibration(const std::string& path, Calibration* calibration) {
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
   cv::FileStorage fs;
   try {
     if (!fs.open(path, cv::FileStorage::READ)) {

@@ -113,6 +113,8 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
   const std::string path = (fs::path(dir) / kScanYaml).string();
   if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
   cv::FileStorage in;
   try {
     if (!in.open(path, cv::FileStorage::READ)) return Status::Error(path + ": cannot open");

@@ -3,7 +3,10 @@
 // checked first.
 #pragma once
 
+#include <fstream>
+#include <iterator>
 #include <opencv2/core/persistence.hpp>
+#include <string>
 
 namespace vellum {
 
@@ -15,6 +18,21 @@ inline bool MatrixNodeAtMost(const cv::FileNode& node, double max_elements) {
   if (!rows.isInt() || !cols.isInt()) return false;
   const double r = static_cast<int>(rows), c = static_cast<int>(cols);
   return r >= 0 && c >= 0 && r * c <= max_elements;
+}
+
+// Checks that `path` is a text file of a sane size before OpenCV parses it: OpenCV 4.6's YAML
+// parser loops forever on a file with a NUL byte in it (found by fuzz/fuzz_files), so such a
+// file is refused. Returns "" when fine, else what is wrong.
+inline std::string YamlTextProblem(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return "cannot open";
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  if (size > (16 << 20)) return "too large for a YAML file (" + std::to_string(size) + " bytes)";
+  in.seekg(0);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (text.find('\0') != std::string::npos) return "not a text file (it contains NUL bytes)";
+  return "";
 }
 
 }  // namespace vellum
