@@ -140,7 +140,8 @@ const std::vector<std::string> kProcessingStatus = {"STATUS_DECODER", "STATUS_TR
 void StationTest::RunFullScan(const std::string& rig, int patterns) {
   Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", rig, "--page", "curl"});
   Start(Daemon("vellum-projector"),
-        {"--calibration", rig, "--fullscreen", "false", "--flip", "horizontal"},
+        {"--calibration", rig, "--fullscreen", "false", "--flip", "horizontal", "--capture-timeout",
+         "30"},
         {"SDL_VIDEODRIVER=offscreen"});
   StartProcessing();
   std::vector<std::string> all = kProcessingStatus;

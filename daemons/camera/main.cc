@@ -51,6 +51,9 @@ class CameraNode {
       node->Log("sim: tracing a " + std::string(ToString(page.shape)) + " page for a " +
                 SizeText(rig.camera.size) + " camera");
       gantry_ = std::make_unique<VirtualGantry>(rig, page, texture, light);
+      // The idle preview, rendered once now: at full resolution a render takes a second or
+      // more, which must not sit in the worker's queue when a scan's first pattern comes.
+      sim_preview_ = gantry_->RenderTexture(seed_);
     } else if (backend == "v4l2") {
       V4l2Options o;
       o.device = flags.Get("device");
@@ -85,7 +88,6 @@ class CameraNode {
       cv::Mat image;
       int64_t exposure = NowUtime();
       if (gantry_) {
-        if (sim_preview_.empty()) sim_preview_ = gantry_->RenderTexture(seed_);
         image = sim_preview_;
       } else if (!v4l2_->Capture(NowUtime(), &image, &exposure).ok()) {
         return;
@@ -165,7 +167,7 @@ class CameraNode {
   std::unique_ptr<VirtualGantry> gantry_;
   uint64_t seed_ = 1;
   std::unique_ptr<V4l2Camera> v4l2_;
-  cv::Mat sim_preview_;  // Worker thread only.
+  cv::Mat sim_preview_;  // Set before Run, read-only after.
   // LCM thread only:
   std::chrono::steady_clock::time_point busy_until_, next_preview_;
   std::chrono::duration<double> preview_period_{0.5};
