@@ -61,7 +61,8 @@ class StationTest : public ::testing::Test {
       EXPECT_EQ(code, 0) << p->name() << " did not stop cleanly on SIGTERM:\n" << p->Output();
     }
     processes_.clear();
-    if (!HasFailure()) fs::remove_all(dir_);
+    std::error_code ec;
+    if (!HasFailure()) fs::remove_all(dir_, ec);
   }
 
   Process* Start(const std::string& binary, std::vector<std::string> args,
@@ -503,6 +504,7 @@ TEST_F(StationTest, DiskFullWhileRecordingFailsTheScanAndKeepsEarlierScans) {
   }
   Scan from_images;
   EXPECT_TRUE(ReadScan(small + "/scan-1/raw", &from_images).ok());
+  EXPECT_EQ(decoder->Stop(), 0) << decoder->Output();  // It holds files on the tmpfs.
   std::system(("umount " + small).c_str());
 }
 
@@ -546,7 +548,9 @@ TEST_F(StationTest, ScansBackToBackKeepMemoryBounded) {
     const double early = series[std::min<size_t>(series.size() - 1, 4)], last = series.back();
     std::printf("load: %s peak RSS %.0f MB after scan %d, %.0f MB after scan %d\n",
                 fs::path(name).filename().c_str(), early, std::min(5, scans), last, scans);
+#ifndef __SANITIZE_ADDRESS__  // ASan's quarantine keeps freed memory: RSS says nothing there.
     EXPECT_LT(last, early * 1.25 + 20) << name << " grows with the number of scans";
+#endif
   }
   EXPECT_EQ(static_cast<int>(restored.size()), scans);
 }
