@@ -1,7 +1,6 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <opencv2/imgcodecs.hpp>
 
 #include "cli/commands.h"
 #include "cli/options.h"
@@ -16,17 +15,11 @@ int RunRender(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = {
       {"out", "DIR", "scan directory to write", ""},
       {"calibration", "FILE", "rig calibration YAML (default: the built-in default rig)", ""},
-      {"page", "SHAPE", "flat, curl, fold, cone or bump", "curl"},
-      {"texture", "KIND|FILE", "checkerboard, text, plain, or an image file of the page",
-       "checkerboard"},
-      {"page-size", "WxH", "page size, mm", "190x240"},
-      {"noise", "DN", "camera noise sigma, DN", "1.5"},
       {"ambient", "FRACTION", "ambient light", "0.08"},
       {"defocus", "PX", "projector defocus sigma, projector pixels", "0.7"},
-      {"seed", "N", "noise seed (the same seed gives the same images)", "1"},
       {"truth", "BOOL", "also write truth_points.tiff and truth_page.tiff", "true"},
   };
-  for (const auto& s : PatternFlagSpecs()) specs.push_back(s);
+  specs = Join(Join(specs, SimFlagSpecs()), PatternFlagSpecs());
   Flags flags("vellum render",
               "Renders a scan of a warped page with the virtual gantry: scan.yaml, texture.png,\n"
               "frame_000.png, ..., the rig's calibration.yaml, and the ground truth of every\n"
@@ -43,29 +36,16 @@ int RunRender(const std::vector<std::string>& args) {
     }
   }
   PageOptions page;
-  if (!ParsePageShape(flags.Get("page"), &page.shape)) {
-    throw UsageError("--page must be flat, curl, fold, cone or bump, got '" + flags.Get("page") +
-                     "'");
-  }
-  const cv::Size page_size = flags.GetSize("page-size");
-  page.size_mm = cv::Size2d(page_size.width, page_size.height);
   TextureOptions texture;
-  const std::string tex = flags.Get("texture");
-  if (!ParseTextureKind(tex, &texture.kind) || texture.kind == TextureKind::kImage) {
-    texture.kind = TextureKind::kImage;
-    texture.image = cv::imread(tex, cv::IMREAD_COLOR);
-    if (texture.image.empty()) {
-      std::fprintf(stderr, "vellum render: %s: not a readable image (and not a texture name)\n",
-                   tex.c_str());
-      return 1;
-    }
-  }
   LightOptions light;
-  light.noise_dn = flags.GetDouble("noise", 0, 100);
+  uint64_t seed = 1;
+  const Status sim = SimOptionsFromFlags(flags, &page, &texture, &light, &seed);
+  if (!sim.ok()) {
+    std::fprintf(stderr, "vellum render: %s\n", sim.message().c_str());
+    return 1;
+  }
   light.ambient = flags.GetDouble("ambient", 0, 1);
   light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
-  const uint64_t seed = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
-  texture.seed = seed;
   const PatternSequence seq =
       MakePatternSequence(PatternOptionsFromFlags(flags, rig.projector.size));
 

@@ -1,5 +1,7 @@
 #include "cli/options.h"
 
+#include <opencv2/imgcodecs.hpp>
+
 namespace vellum {
 
 std::vector<Flags::Spec> Join(std::vector<Flags::Spec> a, const std::vector<Flags::Spec>& b) {
@@ -22,6 +24,39 @@ PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
   std::string why;
   if (!o.Check(&why)) throw UsageError(why);
   return o;
+}
+
+std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
+  return {
+      {"page", "SHAPE", prefix + "flat, curl, fold, cone or bump", "curl"},
+      {"texture", "KIND|FILE", prefix + "checkerboard, text, plain, or an image file of the page",
+       "checkerboard"},
+      {"page-size", "WxH", prefix + "page size, mm", "190x240"},
+      {"noise", "DN", prefix + "camera noise sigma, DN", "1.5"},
+      {"seed", "N", prefix + "noise seed (the same seed gives the same images)", "1"},
+  };
+}
+
+Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions* texture,
+                           LightOptions* light, uint64_t* seed) {
+  if (!ParsePageShape(flags.Get("page"), &page->shape)) {
+    throw UsageError("--page must be flat, curl, fold, cone or bump, got '" + flags.Get("page") +
+                     "'");
+  }
+  const cv::Size page_size = flags.GetSize("page-size");
+  page->size_mm = cv::Size2d(page_size.width, page_size.height);
+  light->noise_dn = flags.GetDouble("noise", 0, 100);
+  *seed = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
+  texture->seed = *seed;
+  const std::string tex = flags.Get("texture");
+  if (!ParseTextureKind(tex, &texture->kind) || texture->kind == TextureKind::kImage) {
+    texture->kind = TextureKind::kImage;
+    texture->image = cv::imread(tex, cv::IMREAD_COLOR);
+    if (texture->image.empty()) {
+      return Status::Error(tex + ": not a readable image (and not a texture name)");
+    }
+  }
+  return Status::Ok();
 }
 
 std::vector<Flags::Spec> DecodeFlagSpecs() {

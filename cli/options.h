@@ -13,6 +13,7 @@
 #include "core/mesh/mesh.h"
 #include "core/patterns/patterns.h"
 #include "core/restore/restore.h"
+#include "core/sim/gantry.h"
 
 namespace vellum {
 
@@ -20,6 +21,14 @@ namespace vellum {
 // projector daemon.
 std::vector<Flags::Spec> PatternFlagSpecs();
 PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector);
+
+// The virtual gantry's page and camera flags (--page, --texture, --page-size, --noise, --seed),
+// shared by `vellum render` and the sim camera; `prefix` starts each help line ("sim: ").
+std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix = "");
+// Fills the page, its texture (an image texture is read from disk), the camera noise and the
+// seed (also the texture's). A bad name throws UsageError; an unreadable image is an error.
+Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions* texture,
+                           LightOptions* light, uint64_t* seed);
 
 std::vector<Flags::Spec> DecodeFlagSpecs();       // --decoder, --smooth-radius
 std::vector<Flags::Spec> TriangulateFlagSpecs();  // --max-epipolar

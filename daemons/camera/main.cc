@@ -3,7 +3,6 @@
 // sim (the virtual gantry renders what the camera would see under the pattern shown).
 #include <chrono>
 #include <memory>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "cli/options.h"
@@ -29,25 +28,10 @@ class CameraNode {
         if (!s.ok()) throw UsageError(s.message());
       }
       PageOptions page;
-      if (!ParsePageShape(flags.Get("page"), &page.shape)) {
-        throw UsageError("--page must be flat, curl, fold, cone or bump, got '" +
-                         flags.Get("page") + "'");
-      }
-      const cv::Size page_size = flags.GetSize("page-size");
-      page.size_mm = cv::Size2d(page_size.width, page_size.height);
       TextureOptions texture;
-      const std::string tex = flags.Get("texture");
-      if (!ParseTextureKind(tex, &texture.kind) || texture.kind == TextureKind::kImage) {
-        texture.kind = TextureKind::kImage;
-        texture.image = cv::imread(tex, cv::IMREAD_COLOR);
-        if (texture.image.empty()) {
-          throw UsageError("--texture " + tex + ": not a readable image (nor a texture name)");
-        }
-      }
       LightOptions light;
-      light.noise_dn = flags.GetDouble("noise", 0, 100);
-      seed_ = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
-      texture.seed = seed_;
+      const Status s = SimOptionsFromFlags(flags, &page, &texture, &light, &seed_);
+      if (!s.ok()) throw UsageError("--texture " + s.message());
       node->Log("sim: tracing a " + std::string(ToString(page.shape)) + " page for a " +
                 SizeText(rig.camera.size) + " camera");
       gantry_ = std::make_unique<VirtualGantry>(rig, page, texture, light);
@@ -187,18 +171,13 @@ int main(int argc, char** argv) {
       {"exposure", "N", "v4l2: manual exposure, 100 us units; -1 = camera's setting", "-1"},
       {"gain", "N", "v4l2: gain; -1 = camera's setting", "-1"},
       {"rig", "FILE", "sim: the rig's calibration (default: the built-in default rig)", ""},
-      {"page", "SHAPE", "sim: flat, curl, fold, cone or bump", "curl"},
-      {"texture", "KIND|FILE", "sim: checkerboard, text, plain, or an image of the page",
-       "checkerboard"},
-      {"page-size", "WxH", "sim: page size, mm", "190x240"},
-      {"noise", "DN", "sim: camera noise sigma, DN", "1.5"},
-      {"seed", "N", "sim: noise seed", "1"},
       {"preview-hz", "HZ", "live preview rate on PREVIEW while idle", "2"},
   };
   return DaemonMain(argc, argv, "vellum-camera",
                     "Captures a frame for each PATTERN_SHOWN (the first whose exposure starts\n"
                     "after it) and publishes CAPTURE: the texture in colour, patterns in gray.",
-                    Join(DaemonFlagSpecs(false), own), [](const Flags& flags, Node& node) {
+                    Join(Join(DaemonFlagSpecs(false), own), SimFlagSpecs("sim: ")),
+                    [](const Flags& flags, Node& node) {
                       CameraNode camera(&node, flags);
                       return node.Run([&] { camera.Tick(); });
                     });

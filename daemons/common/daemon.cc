@@ -33,6 +33,11 @@ std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data) {
   return specs;
 }
 
+Flags::Spec FallbackCalibrationSpec() {
+  return {"calibration", "FILE", "calibration used when a scan comes without a CALIBRATION message",
+          ""};
+}
+
 int DaemonMain(int argc, char** argv, const std::string& process, const std::string& summary,
                const std::vector<Flags::Spec>& specs,
                const std::function<int(const Flags&, Node&)>& body) {

@@ -21,6 +21,9 @@ namespace vellum::station {
 // --url, --config, and (with_data) --data.
 std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data);
 
+// --calibration FILE of the processing daemons: used when a scan comes without CALIBRATION.
+Flags::Spec FallbackCalibrationSpec();
+
 // Parses the flags (printing --help), opens the node and calls body; returns the exit status.
 int DaemonMain(int argc, char** argv, const std::string& process, const std::string& summary,
                const std::vector<Flags::Spec>& specs,

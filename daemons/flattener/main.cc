@@ -107,8 +107,7 @@ int main(int argc, char** argv) {
   using namespace vellum;
   using namespace vellum::station;
   std::vector<Flags::Spec> specs = Join(DaemonFlagSpecs(true), FlattenFlagSpecs());
-  specs.push_back({"calibration", "FILE",
-                   "calibration used when a scan comes without a CALIBRATION message", ""});
+  specs.push_back(FallbackCalibrationSpec());
   return DaemonMain(argc, argv, "vellum-flattener",
                     "Builds the mass-spring sheet over each scan's POINT_CLOUD (the page found in\n"
                     "its texture), flattens it, writes mesh.ply and flat.ply to\n"

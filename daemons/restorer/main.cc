@@ -165,8 +165,7 @@ int main(int argc, char** argv) {
   using namespace vellum;
   using namespace vellum::station;
   std::vector<Flags::Spec> specs = Join(DaemonFlagSpecs(true), RestoreFlagSpecs());
-  specs.push_back({"calibration", "FILE",
-                   "calibration used when a scan comes without a CALIBRATION message", ""});
+  specs.push_back(FallbackCalibrationSpec());
   return DaemonMain(argc, argv, "vellum-restorer",
                     "Restores each scan's texture through its FLAT_MESH: writes restored.tif,\n"
                     "restored.json and report.json to <data>/scan-<id>/results and publishes\n"

@@ -110,8 +110,7 @@ int main(int argc, char** argv) {
   using namespace vellum;
   using namespace vellum::station;
   std::vector<Flags::Spec> specs = Join(DaemonFlagSpecs(true), TriangulateFlagSpecs());
-  specs.push_back({"calibration", "FILE",
-                   "calibration used when a scan comes without a CALIBRATION message", ""});
+  specs.push_back(FallbackCalibrationSpec());
   return DaemonMain(argc, argv, "vellum-triangulator",
                     "Triangulates each scan's CORRESPONDENCE with the scan's CALIBRATION, writes\n"
                     "points.ply and depth.png to <data>/scan-<id>/results and publishes\n"
