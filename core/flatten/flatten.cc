@@ -1,29 +1,34 @@
 #include "core/flatten/flatten.h"
 
-#include <Eigen/Sparse>
-#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
 #include "core/common/check.h"
+#include "core/flatten/frontal_cholesky.h"
 #include "core/geometry/rigid2d.h"
 
 namespace vellum {
 namespace {
 
-// Active nodes get consecutive variable indices.
+// Active nodes get consecutive variable indices, in nested-dissection order over the grid;
+// `fronts` is the elimination tree of that order for the solvers' factorisations.
 struct Indexing {
   explicit Indexing(const Mesh& mesh) : var(mesh.kind.size(), -1) {
-    for (size_t k = 0; k < mesh.kind.size(); ++k) {
-      if (mesh.Active(static_cast<int>(k))) {
-        var[k] = static_cast<int>(node.size());
-        node.push_back(static_cast<int>(k));
-      }
+    int span = 1;
+    for (const Spring& s : mesh.springs) {
+      span = std::max({span, std::abs(s.a % mesh.cols - s.b % mesh.cols),
+                       std::abs(s.a / mesh.cols - s.b / mesh.cols)});
     }
+    fronts = DissectGrid(
+        mesh.cols, mesh.rows, span, [&](int k) { return mesh.Active(k); }, &node);
+    for (size_t v = 0; v < node.size(); ++v) var[node[v]] = static_cast<int>(v);
   }
   std::vector<int> var;   // Node -> variable (-1: inactive).
   std::vector<int> node;  // Variable -> node.
+  std::vector<Front> fronts;
 };
 
 // Rotates and translates flat positions onto the nodes' original (x, y) (least squares,
@@ -58,37 +63,57 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     }
     return e;
   };
+  // The sheet's graph as a lower-triangular matrix: the pattern of both systems below, with
+  // the Laplacian's values. Per spring, the storage slots of its off-diagonal entry and of
+  // its two nodes' diagonal entries.
+  const double prox = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
+  Eigen::SparseMatrix<double> graph(n, n);
+  std::vector<std::array<int, 3>> slots(mesh.springs.size());
+  {
+    std::vector<Eigen::Triplet<double>> lt;
+    lt.reserve(3 * mesh.springs.size() + n);
+    for (const Spring& s : mesh.springs) {
+      const int a = idx.var[s.a], b = idx.var[s.b];
+      lt.emplace_back(a, a, 1.0);
+      lt.emplace_back(b, b, 1.0);
+      lt.emplace_back(std::max(a, b), std::min(a, b), -1.0);
+    }
+    for (int v = 0; v < n; ++v) lt.emplace_back(v, v, prox);
+    graph.setFromTriplets(lt.begin(), lt.end());
+    graph.makeCompressed();
+    auto slot = [&](int r, int c) {
+      return static_cast<int>(&graph.coeffRef(r, c) - graph.valuePtr());
+    };
+    for (size_t k = 0; k < mesh.springs.size(); ++k) {
+      const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
+      slots[k] = {slot(std::max(a, b), std::min(a, b)), slot(a, a), slot(b, b)};
+    }
+  }
   // Local/global iterations first (Liu et al. 2013): each projects every spring onto its rest
   // length (local) and solves one fixed, pre-factored Laplacian system (global). The energy
   // falls monotonically, which carries the compressed height map out of the basins where a
   // bare Gauss-Newton from the same start can stall; Gauss-Newton then converges fast.
   {
-    const double prox = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
-    std::vector<Eigen::Triplet<double>> lt;
-    for (const Spring& s : mesh.springs) {
-      const int a = idx.var[s.a], b = idx.var[s.b];
-      lt.emplace_back(a, a, 1.0);
-      lt.emplace_back(b, b, 1.0);
-      lt.emplace_back(a, b, -1.0);
-      lt.emplace_back(b, a, -1.0);
+    FrontalCholesky lap_solver;
+    const Status analysed = lap_solver.Analyze(graph, idx.fronts, 1);
+    if (!analysed.ok()) {
+      result.status = analysed;
+      return result;
     }
-    for (int v = 0; v < n; ++v) lt.emplace_back(v, v, prox);
-    Eigen::SparseMatrix<double> lap(n, n);
-    lap.setFromTriplets(lt.begin(), lt.end());
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> lap_solver(lap);
-    if (lap_solver.info() != Eigen::Success) {
+    if (!lap_solver.Factorize(
+            std::vector<double>(graph.valuePtr(), graph.valuePtr() + graph.nonZeros()))) {
       result.status = Status::Error("flattening: the sheet's Laplacian is singular");
       return result;
     }
     // Both coordinates share the Laplacian: one two-column solve per iteration.
-    Eigen::MatrixXd rhs(n, 2), pos(n, 2);
+    Eigen::MatrixXd pos(n, 2);
     for (int v = 0; v < n; ++v) {
       pos(v, 0) = x[2 * v];
       pos(v, 1) = x[2 * v + 1];
     }
     double e_prev = std::numeric_limits<double>::infinity();
     for (int k = 0; k < options.local_global_iterations; ++k) {
-      rhs = prox * pos;
+      Eigen::MatrixXd rhs = prox * pos;
       for (const Spring& s : mesh.springs) {
         const int a = idx.var[s.a], b = idx.var[s.b];
         const double dx = pos(a, 0) - pos(b, 0), dy = pos(a, 1) - pos(b, 1);
@@ -99,7 +124,8 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
         rhs(a, 1) += fy;
         rhs(b, 1) -= fy;
       }
-      pos = lap_solver.solve(rhs);
+      lap_solver.Solve(&rhs);
+      pos = rhs;
       for (int v = 0; v < n; ++v) {
         x[2 * v] = pos(v, 0);
         x[2 * v + 1] = pos(v, 1);
@@ -109,43 +135,18 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       e_prev = e_now;
     }
   }
-  // J^T J has a fixed pattern: build it and analyse it once; each iteration only refills its
-  // values (through precomputed slots, lower triangle) and refactors. A tiny diagonal
-  // (Levenberg) term removes the rigid-motion null space without moving the minimum.
-  Eigen::SparseMatrix<double> jtj(2 * n, 2 * n);
-  std::vector<int> slots(mesh.springs.size() * 16, -1), diagonal(2 * n);
+  // J^T J has the graph's pattern with a 2 x 2 block per entry: each refactorisation refills
+  // the blocks through the springs' slots. A tiny diagonal (Levenberg) term removes the
+  // rigid-motion null space without moving the minimum.
+  FrontalCholesky solver;
   {
-    std::vector<Eigen::Triplet<double>> pattern;
-    pattern.reserve(mesh.springs.size() * 10 + 2 * n);
-    for (const Spring& s : mesh.springs) {
-      const int a = idx.var[s.a], b = idx.var[s.b];
-      const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
-      for (int p = 0; p < 4; ++p) {
-        for (int q = 0; q < 4; ++q) {
-          if (col[p] >= col[q]) pattern.emplace_back(col[p], col[q], 1.0);
-        }
-      }
+    const Status analysed = solver.Analyze(graph, idx.fronts, 2);
+    if (!analysed.ok()) {
+      result.status = analysed;
+      return result;
     }
-    for (int v = 0; v < 2 * n; ++v) pattern.emplace_back(v, v, 1.0);
-    jtj.setFromTriplets(pattern.begin(), pattern.end());
-    jtj.makeCompressed();
-    for (size_t k = 0; k < mesh.springs.size(); ++k) {
-      const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
-      const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
-      for (int p = 0; p < 4; ++p) {
-        for (int q = 0; q < 4; ++q) {
-          if (col[p] >= col[q]) {
-            slots[16 * k + 4 * p + q] =
-                static_cast<int>(&jtj.coeffRef(col[p], col[q]) - jtj.valuePtr());
-          }
-        }
-      }
-    }
-    for (int v = 0; v < 2 * n; ++v)
-      diagonal[v] = static_cast<int>(&jtj.coeffRef(v, v) - jtj.valuePtr());
   }
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower> solver;
-  solver.analyzePattern(jtj);
+  std::vector<double> blocks(4 * static_cast<size_t>(graph.nonZeros()));
   // Gauss-Newton with the factorisation reused while it keeps converging fast (a chord
   // method): near the solution J barely changes, a refactorisation costs 10-20 solves.
   double lambda = 1e-6;
@@ -153,39 +154,48 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
   int it = 0;
   bool refactor = true, fresh = false;
   double last_step = std::numeric_limits<double>::infinity();
-  Eigen::VectorXd g(2 * n);
+  Eigen::MatrixXd g(2 * n, 1);
   for (; it < options.max_iterations; ++it) {
     g.setZero();
-    double* values = jtj.valuePtr();
-    if (refactor) std::fill(values, values + jtj.nonZeros(), 0.0);
+    if (refactor) std::fill(blocks.begin(), blocks.end(), 0.0);
     for (size_t k = 0; k < mesh.springs.size(); ++k) {
       const Spring& s = mesh.springs[k];
       const int a = idx.var[s.a], b = idx.var[s.b];
       const double dx = x[2 * a] - x[2 * b], dy = x[2 * a + 1] - x[2 * b + 1];
       const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
       const double ux = dx / len, uy = dy / len, r = len - s.rest_mm;
-      const double jv[4] = {ux, uy, -ux, -uy};
-      const int col[4] = {2 * a, 2 * a + 1, 2 * b, 2 * b + 1};
-      for (int p = 0; p < 4; ++p) {
-        g[col[p]] += jv[p] * r;
-        if (!refactor) continue;
-        for (int q = 0; q < 4; ++q) {
-          const int slot = slots[16 * k + 4 * p + q];
-          if (slot >= 0) values[slot] += jv[p] * jv[q];
-        }
+      g(2 * a, 0) += ux * r;
+      g(2 * a + 1, 0) += uy * r;
+      g(2 * b, 0) -= ux * r;
+      g(2 * b + 1, 0) -= uy * r;
+      if (!refactor) continue;
+      // The spring's J^T J: u u^T on both diagonal blocks, -u u^T between them.
+      const double uu[4] = {ux * ux, ux * uy, ux * uy, uy * uy};
+      double* off = &blocks[4 * static_cast<size_t>(slots[k][0])];
+      double* da = &blocks[4 * static_cast<size_t>(slots[k][1])];
+      double* db = &blocks[4 * static_cast<size_t>(slots[k][2])];
+      for (int q = 0; q < 4; ++q) {
+        off[q] -= uu[q];
+        da[q] += uu[q];
+        db[q] += uu[q];
       }
     }
     if (refactor) {
-      for (int v = 0; v < 2 * n; ++v) values[diagonal[v]] += lambda;
-      solver.factorize(jtj);
-      if (solver.info() != Eigen::Success) {
+      for (int v = 0; v < n; ++v) {
+        const int d = 4 * static_cast<int>(&graph.coeffRef(v, v) - graph.valuePtr());
+        blocks[d] += lambda;
+        blocks[d + 3] += lambda;
+      }
+      if (!solver.Factorize(blocks)) {
         result.status = Status::Error("flattening: the sheet's normal equations are singular");
         return result;
       }
       refactor = false;
       fresh = true;
     }
-    const Eigen::VectorXd delta = -solver.solve(g);
+    Eigen::MatrixXd step = g;
+    solver.Solve(&step);
+    const Eigen::VectorXd delta = -step.col(0);
     const Eigen::VectorXd next = x + delta;
     const double e_next = energy(next);
     if (!(e_next <= e) && e > 1e-24) {
@@ -197,22 +207,23 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     }
     x = next;
     e = e_next;
-    double step = 0;
+    double largest = 0;
     for (int v = 0; v < n; ++v) {
-      step = std::max(step, delta[2 * v] * delta[2 * v] + delta[2 * v + 1] * delta[2 * v + 1]);
+      largest =
+          std::max(largest, delta[2 * v] * delta[2 * v] + delta[2 * v + 1] * delta[2 * v + 1]);
     }
-    step = std::sqrt(step);
-    if (step < options.tolerance_mm) {
+    largest = std::sqrt(largest);
+    if (largest < options.tolerance_mm) {
       ++it;
       break;
     }
     // Slow contraction: the factor is stale; refactor (and relax the damping).
-    if (step > 0.5 * last_step) {
+    if (largest > 0.5 * last_step) {
       refactor = true;
       lambda = std::max(1e-9, lambda * 0.1);
     }
     fresh = false;
-    last_step = step;
+    last_step = largest;
   }
   result.flat.assign(mesh.kind.size(), cv::Point2d(0, 0));
   for (int v = 0; v < n; ++v) result.flat[idx.node[v]] = cv::Point2d(x[2 * v], x[2 * v + 1]);
