@@ -89,6 +89,17 @@ TEST(FlattenFine, A200x150SheetMeetsTheSameBar) {
   EXPECT_EQ(p.flat.folded_quads, 0);
 }
 
+TEST(FlattenFine, A300x300SheetMeetsTheSameBar) {
+  const Pipeline p = RunPipeline(PageShape::kCurl, FlattenSolver::kGaussNewton, 31, {300, 300});
+  ASSERT_TRUE(p.flat.status.ok()) << p.flat.status.message();
+  const FlatErrorStats st = CompareFlat(p.gantry->truth(), p.mesh, p.flat.flat);
+  std::printf("[flatten] curl 300x300 nodes %d: RMS %.4f mm, mean edge error %.4f%%, %d folds\n",
+              st.nodes, st.rms_mm, 100 * st.mean_edge_error, p.flat.folded_quads);
+  EXPECT_GT(st.nodes, 60000);
+  EXPECT_LE(st.rms_mm, 0.08);
+  EXPECT_EQ(p.flat.folded_quads, 0);
+}
+
 // Real vellum is not developable: a 3 mm bubble (sigma 25 mm) must flatten without folding,
 // with its residual strain reported, and restore with no fold-over or tear (every quad keeps
 // its orientation, so the warp is one-to-one).
