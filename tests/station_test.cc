@@ -4,6 +4,8 @@
 // log, and that a scan through the daemons gives exactly what `vellum process` gives.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <csignal>
 #include <map>
 #include <memory>
 #include <opencv2/calib3d.hpp>
@@ -446,6 +448,84 @@ TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGo
   // The station goes on: the next scan is whole and processed.
   std::string next;
   EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &next), 0) << next;
+}
+
+// A processing daemon killed while a scan is on its way to it, then restarted (as systemd
+// does): the decoder sees the new pid and sends the scan again from disk, and the scan is
+// restored exactly as `vellum process` restores it. The daemon is frozen (SIGSTOP) before the
+// scan reaches it, so it is killed holding the scan, whatever the machine's speed. Once for the
+// triangulator (the restarted one takes the scan's calibration from disk) and once for the
+// restorer (and the texture).
+TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRestored) {
+  StartProcessing();
+  WaitForHeartbeats(kProcessingStatus);
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  std::map<std::string, status_t> last;
+  std::vector<std::unique_ptr<Listener<status_t>>> listeners;
+  for (const std::string& c : kProcessingStatus) {
+    listeners.push_back(std::make_unique<Listener<status_t>>(
+        *lcm_, c, [&last, c](const status_t& m) { last[c] = m; }));
+  }
+  auto counter = [&](const std::string& channel, const std::string& name) -> int64_t {
+    const status_t& st = last[channel];
+    for (int k = 0; k < st.ncounters; ++k) {
+      if (st.counter_names[k] == name) return st.counter_values[k];
+    }
+    return 0;
+  };
+  std::string out;
+  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
+  const struct {
+    const char* daemon;
+    const char* upstream;  // The stage before it, and its counter of scans done.
+    const char* done;
+  } victims[] = {{"vellum-triangulator", "STATUS_DECODER", "scans decoded"},
+                 {"vellum-restorer", "STATUS_FLATTENER", "scans flattened"}};
+  for (int round = 0; round < 2; ++round) {
+    const auto& victim = victims[round];
+    SCOPED_TRACE(victim.daemon);
+    Process* target = nullptr;
+    for (auto& p : processes_) {
+      if (!p->killed() && p->name().find(victim.daemon) != std::string::npos) target = p.get();
+    }
+    ASSERT_NE(target, nullptr);
+    ASSERT_EQ(kill(target->pid(), SIGSTOP), 0);
+    const int64_t id = 100 + round;
+    const std::string log = dir_ + "/scan" + std::to_string(id) + ".lcmlog";
+    ASSERT_EQ(RunTool({"import", dir_ + "/exported", log, "--scan-id", std::to_string(id)}, &out),
+              0)
+        << out;
+    Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, log}, dir_ + "/player.log");
+    ASSERT_TRUE(
+        HandleUntil(*lcm_, 120, [&] { return counter(victim.upstream, victim.done) >= round + 1; }))
+        << victim.upstream << " never finished the scan";
+    target->Kill();
+    Start(Daemon(victim.daemon), {"--data", dir_ + "/scans"});
+    ASSERT_TRUE(HandleUntil(*lcm_, 120,
+                            [&] {
+                              return std::any_of(
+                                  restored.begin(), restored.end(),
+                                  [&](const restored_t& r) { return r.scan_id == id; });
+                            }))
+        << "scan " << id << " was not restored after the restart";
+    const restored_t& r = *std::find_if(restored.begin(), restored.end(),
+                                        [&](const restored_t& m) { return m.scan_id == id; });
+    ExpectSameAsProcess(dir_ + "/exported", r.results);
+    EXPECT_EQ(counter("STATUS_DECODER", "scans sent again"), round + 1);
+    // Restored: no longer pending, so it is not sent again at the next restart.
+    const std::string pending = dir_ + "/scans/scan-" + std::to_string(id) + "/pending";
+    EXPECT_TRUE(HandleUntil(*lcm_, 10, [&] { return !fs::exists(pending); })) << pending;
+    player.Wait(60);
+  }
+  const std::string decoder_log = processes_[0]->Output();
+  EXPECT_NE(decoder_log.find("vellum-triangulator restarted before the scan was restored"),
+            std::string::npos)
+      << decoder_log;
+  EXPECT_NE(decoder_log.find("vellum-restorer restarted before the scan was restored"),
+            std::string::npos)
+      << decoder_log;
 }
 
 // The disk fills up while a scan is recorded: the scan fails with a status that says so, the

@@ -203,6 +203,10 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
   return Status::Ok();
 }
 
+Status ReadTexture(const std::string& dir, cv::Mat* texture) {
+  return ReadImageFile((fs::path(dir) / kTexture).string(), texture);
+}
+
 Status ReadScan(const std::string& dir, Scan* scan) {
   Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size);
   if (!s.ok()) return s;

@@ -28,6 +28,8 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
 
 // Reads and validates a whole scan directory; errors name the file and the problem.
 Status ReadScan(const std::string& dir, Scan* scan);
+// Reads the scan directory's texture.png alone.
+Status ReadTexture(const std::string& dir, cv::Mat* texture);
 // Writes scan.yaml, texture.png and the frames (creating the directory).
 Status WriteScan(const std::string& dir, const Scan& scan);
 // Writes the projector images pattern_000.png, ... and scan.yaml (no camera size).

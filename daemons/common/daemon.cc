@@ -1,11 +1,14 @@
 #include "daemons/common/daemon.h"
 
 #include <chrono>
+#include <filesystem>
 #include <memory>
 #include <opencv2/core/utility.hpp>
 
 #include "core/io/calibration_io.h"
+#include "core/io/scan_io.h"
 #include "daemons/common/messages.h"
+#include "daemons/common/scan_store.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 
@@ -61,7 +64,9 @@ int DaemonMain(int argc, char** argv, const std::string& process, const std::str
   }
 }
 
-CalibrationBook::CalibrationBook(Node* node, const std::string& fallback_path) : node_(node) {
+CalibrationBook::CalibrationBook(Node* node, const std::string& fallback_path,
+                                 const std::string& data_dir)
+    : node_(node), data_dir_(data_dir) {
   if (!fallback_path.empty()) {
     const Status s = ReadCalibration(fallback_path, &fallback_);
     if (!s.ok()) throw UsageError(s.message());
@@ -88,6 +93,11 @@ Status CalibrationBook::Get(int64_t scan_id, Calibration* calibration) const {
     *calibration = it->second;
     return Status::Ok();
   }
+  const std::string recorded = ScanFolder::For(data_dir_, scan_id).calibration();
+  if (!data_dir_.empty() && std::filesystem::exists(recorded)) {
+    const Status s = ReadCalibration(recorded, calibration);
+    return s.ok() ? s : Status::Error("scan " + std::to_string(scan_id) + ": " + s.message());
+  }
   if (has_fallback_) {
     *calibration = fallback_;
     return Status::Ok();
@@ -96,7 +106,8 @@ Status CalibrationBook::Get(int64_t scan_id, Calibration* calibration) const {
                        ": no CALIBRATION message for it, and no --calibration file configured");
 }
 
-TextureBook::TextureBook(Node* node) : node_(node) {
+TextureBook::TextureBook(Node* node, const std::string& data_dir)
+    : node_(node), data_dir_(data_dir) {
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
     if (msg.pattern_index != -1) return;
     cv::Mat texture;
@@ -116,8 +127,11 @@ Status TextureBook::Get(int64_t scan_id, cv::Mat* texture) const {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = by_scan_.find(scan_id);
   if (it == by_scan_.end()) {
+    const std::string raw = ScanFolder::For(data_dir_, scan_id).raw();
+    if (!data_dir_.empty() && ReadTexture(raw, texture).ok()) return Status::Ok();
     return Status::Error("scan " + std::to_string(scan_id) +
-                         ": its texture (CAPTURE, pattern -1) never arrived");
+                         ": its texture (CAPTURE, pattern -1) never arrived, and " + raw +
+                         " has none");
   }
   *texture = it->second;
   return Status::Ok();

@@ -29,11 +29,13 @@ int DaemonMain(int argc, char** argv, const std::string& process, const std::str
                const std::vector<Flags::Spec>& specs,
                const std::function<int(const Flags&, Node&)>& body);
 
-// The calibration of each scan, from CALIBRATION messages, falling back to a file.
+// The calibration of each scan, from CALIBRATION messages; for a scan whose message this
+// process has not seen (it restarted since), the one the decoder recorded in the scan's folder
+// under `data_dir`; else the fallback file.
 class CalibrationBook {
  public:
   // `fallback_path` may be empty (then a scan without a CALIBRATION message fails).
-  CalibrationBook(Node* node, const std::string& fallback_path);
+  CalibrationBook(Node* node, const std::string& fallback_path, const std::string& data_dir);
   Status Get(int64_t scan_id, Calibration* calibration) const;
 
  private:
@@ -42,18 +44,22 @@ class CalibrationBook {
   std::map<int64_t, Calibration> by_scan_;
   bool has_fallback_ = false;
   Calibration fallback_;
+  std::string data_dir_;
 };
 
-// The texture (CAPTURE with pattern_index -1) of each recent scan.
+// The texture (CAPTURE with pattern_index -1) of each recent scan; for a scan whose texture
+// this process has not seen (it restarted since), the one the decoder recorded under
+// `data_dir`.
 class TextureBook {
  public:
-  explicit TextureBook(Node* node);
+  TextureBook(Node* node, const std::string& data_dir);
   Status Get(int64_t scan_id, cv::Mat* texture) const;
 
  private:
   Node* node_;
   mutable std::mutex mutex_;
   std::map<int64_t, cv::Mat> by_scan_;
+  std::string data_dir_;
 };
 
 // Wraps f so that calling it often (Node::Run's tick) runs it at most once a second.

@@ -1,6 +1,9 @@
 #include "daemons/common/scan_store.h"
 
+#include <algorithm>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 
 #include "core/io/calibration_io.h"
 #include "daemons/common/messages.h"
@@ -17,6 +20,48 @@ std::string ScanFolder::results() const { return (fs::path(root) / "results").st
 std::string ScanFolder::log() const { return (fs::path(raw()) / "captures.lcmlog").string(); }
 std::string ScanFolder::calibration() const {
   return (fs::path(raw()) / "calibration.yaml").string();
+}
+
+std::string ScanFolder::pending() const { return (fs::path(root) / "pending").string(); }
+
+Status MarkPending(const ScanFolder& folder, int attempts) {
+  const std::string tmp = folder.pending() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::trunc);
+    out << attempts << "\n";
+    out.flush();
+    if (!out) return Status::Error("cannot write " + tmp);
+  }
+  std::error_code ec;
+  fs::rename(tmp, folder.pending(), ec);  // Whole or not at all.
+  if (ec) return Status::Error("cannot write " + folder.pending() + ": " + ec.message());
+  return Status::Ok();
+}
+
+int PendingAttempts(const ScanFolder& folder) {
+  std::ifstream in(folder.pending());
+  int attempts = 0;
+  if (!(in >> attempts)) return in.is_open() ? 1 : 0;  // Unreadable: counts as one attempt.
+  return std::max(attempts, 1);
+}
+
+void ClearPending(const ScanFolder& folder) {
+  std::error_code ec;
+  fs::remove(folder.pending(), ec);
+}
+
+std::vector<int64_t> FindPending(const std::string& data_dir) {
+  std::vector<int64_t> ids;
+  std::error_code ec;
+  for (fs::directory_iterator it(data_dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind("scan-", 0) != 0) continue;
+    char* stop = nullptr;
+    const long long id = std::strtoll(name.c_str() + 5, &stop, 10);
+    if (id > 0 && *stop == '\0' && fs::exists(it->path() / "pending")) ids.push_back(id);
+  }
+  std::sort(ids.begin(), ids.end());
+  return ids;
 }
 
 Status CaptureSet::Add(const capture_t& c) {

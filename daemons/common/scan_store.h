@@ -27,7 +27,17 @@ struct ScanFolder {
   std::string results() const;
   std::string log() const;          // raw/captures.lcmlog
   std::string calibration() const;  // raw/calibration.yaml
+  std::string pending() const;      // pending: see MarkPending
 };
+
+// The decoder's ledger of scans complete on disk whose RESTORED has not been seen: the file
+// <data>/scan-<id>/pending, holding how many times the scan has been sent down the pipeline.
+// It outlives any process, so a scan lost downstream (a daemon killed while it had it) is
+// found again and processed anew.
+Status MarkPending(const ScanFolder& folder, int attempts);
+int PendingAttempts(const ScanFolder& folder);  // 0: not pending.
+void ClearPending(const ScanFolder& folder);
+std::vector<int64_t> FindPending(const std::string& data_dir);  // Ascending.
 
 // The captures of one scan, as they arrive.
 class CaptureSet {

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <opencv2/imgproc.hpp>
 #include <thread>
@@ -252,6 +253,29 @@ TEST(ScanStore, ALogAndAScanDirectoryConvertBothWaysLosslessly) {
   EXPECT_FALSE(ReadScanLog((dir / "none.lcmlog").string(), 0, &back, &has_calibration,
                            &calibration_back, &id)
                    .ok());
+  fs::remove_all(dir);
+}
+
+TEST(ScanStore, PendingScansAreFoundWithTheirAttemptsUntilCleared) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_pending_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  EXPECT_TRUE(FindPending(dir.string()).empty());  // No data folder yet: nothing pending.
+  for (int64_t id : {30, 4, 1000}) fs::create_directories(dir / ("scan-" + std::to_string(id)));
+  fs::create_directories(dir / "scan-x12");  // Not a scan folder.
+  std::ofstream(dir / "scan-x12" / "pending") << "1\n";
+  const ScanFolder a = ScanFolder::For(dir.string(), 30), b = ScanFolder::For(dir.string(), 1000);
+  EXPECT_EQ(PendingAttempts(a), 0);
+  ASSERT_TRUE(MarkPending(a, 1).ok());
+  ASSERT_TRUE(MarkPending(b, 1).ok());
+  ASSERT_TRUE(MarkPending(b, 2).ok());
+  EXPECT_EQ(FindPending(dir.string()), (std::vector<int64_t>{30, 1000}));
+  EXPECT_EQ(PendingAttempts(a), 1);
+  EXPECT_EQ(PendingAttempts(b), 2);
+  ClearPending(b);
+  EXPECT_EQ(FindPending(dir.string()), std::vector<int64_t>{30});
+  EXPECT_EQ(PendingAttempts(b), 0);
+  std::ofstream(a.pending()) << "garbage";  // Unreadable: still pending, one attempt made.
+  EXPECT_EQ(PendingAttempts(a), 1);
   fs::remove_all(dir);
 }
 

@@ -1,13 +1,19 @@
 // vellum-decoder: records each scan's captures to disk as they arrive (raw/captures.lcmlog and
 // the scan directory), and once a scan is complete decodes it and publishes CORRESPONDENCE.
+// It sees every scan through to RESTORED: a scan complete on disk stays pending until its
+// RESTORED (or an error about it from a processing daemon) is seen, and when a processing
+// daemon restarts, or the decoder itself, every pending scan is decoded again from disk.
 #include <atomic>
 #include <chrono>
+#include <map>
 #include <memory>
 
 #include "cli/options.h"
 #include "daemons/common/daemon.h"
 #include "daemons/common/messages.h"
 #include "daemons/common/scan_store.h"
+#include "vellum/restored_t.hpp"
+#include "vellum/status_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -32,6 +38,14 @@ class DecoderNode {
       auto copy = std::make_shared<calibration_t>(msg);
       node_->Post([this, copy] { OnCalibration(*copy); });
     });
+    node->Subscribe<restored_t>(channel::kRestored, [this](const restored_t& msg) {
+      const int64_t id = msg.scan_id;
+      node_->Post([this, id] { ClearPending(ScanFolder::For(data_, id)); });
+    });
+    for (const char* process : kDownstream) {
+      node->Subscribe<status_t>(StatusChannel(process),
+                                [this](const status_t& msg) { OnDownstreamStatus(msg); });
+    }
   }
 
   // On the LCM thread: an incomplete scan with no capture for a while is given up.
@@ -56,6 +70,63 @@ class DecoderNode {
     if (!s.ok()) {
       node_->Error("scan " + std::to_string(scan_id) + ": recording failed: " + s.message(),
                    scan_id);
+    }
+  }
+
+  // On the LCM thread. A new pid is a restarted daemon: whatever it held is lost. An error it
+  // reports about a pending scan ends that scan with a status the operator sees.
+  void OnDownstreamStatus(const status_t& msg) {
+    Seen& seen = downstream_[msg.process];
+    if (seen.pid != 0 && msg.pid != seen.pid) {
+      const std::string why = msg.process + " restarted";
+      node_->Post([this, why] { ResendPending(why); });
+    }
+    seen.pid = msg.pid;
+    // Scans left pending by an earlier run (a daemon stopped while a scan was on its way) go
+    // again once every processing daemon is listening.
+    if (!resent_at_start_ && downstream_.size() == std::size(kDownstream)) {
+      resent_at_start_ = true;
+      node_->Post([this] { ResendPending("the station stopped"); });
+    }
+    if (msg.last_error_utime > seen.error_utime && msg.last_error_scan_id > 0 &&
+        seen.error_utime != -1) {
+      const int64_t id = msg.last_error_scan_id;
+      node_->Post([this, id] { ClearPending(ScanFolder::For(data_, id)); });
+    }
+    seen.error_utime = msg.last_error_utime;
+  }
+
+  // Sends every pending scan down the pipeline again, decoded afresh from its folder.
+  void ResendPending(const std::string& why) {
+    for (int64_t id : FindPending(data_)) {
+      if (set_.Started() && set_.scan_id() == id && !set_.Complete()) continue;
+      const ScanFolder folder = ScanFolder::For(data_, id);
+      const int attempts = PendingAttempts(folder);
+      if (attempts >= kMaxAttempts) {
+        ClearPending(folder);
+        node_->Error("scan " + std::to_string(id) + " failed: not restored after " +
+                         std::to_string(attempts) + " attempts (" + why +
+                         " each time); its captures are kept in " + folder.raw() +
+                         " (`vellum process --scan " + folder.raw() + "` restores it by hand)",
+                     id);
+        node_->Count("scans failed");
+        continue;
+      }
+      Scan scan;
+      Status s = ReadScan(folder.raw(), &scan);
+      if (s.ok()) s = MarkPending(folder, attempts + 1);
+      if (!s.ok()) {
+        ClearPending(folder);
+        node_->Error(
+            "scan " + std::to_string(id) + " failed: cannot process it again: " + s.message(), id);
+        node_->Count("scans failed");
+        continue;
+      }
+      node_->Log("scan " + std::to_string(id) + ": " + why + " before the scan was restored; " +
+                 "processing it again from " + folder.raw() + " (attempt " +
+                 std::to_string(attempts + 1) + " of " + std::to_string(kMaxAttempts) + ")");
+      node_->Count("scans sent again");
+      DecodeAndPublish(id, scan);
     }
   }
 
@@ -133,15 +204,21 @@ class DecoderNode {
     const int64_t id = set_.scan_id();
     const Scan scan = set_.ToScan();
     Status s = recorder_.Finish(scan);
+    if (s.ok()) s = MarkPending(ScanFolder::For(data_, id), 1);
     if (!s.ok()) {
       node_->Error("scan " + std::to_string(id) + ": " + s.message(), id);
       return;
     }
     node_->Count("scans recorded");
+    DecodeAndPublish(id, scan);
+  }
+
+  void DecodeAndPublish(int64_t id, const Scan& scan) {
     node_->SetState("busy", id, "decoding");
     const int64_t start = NowUtime();
     decoder_.Decode(scan.sequence, scan.frames, &decoded_);
     if (!decoded_.status.ok()) {
+      ClearPending(ScanFolder::For(data_, id));  // Failed with a status: not sent again.
       node_->Error("scan " + std::to_string(id) + ": " + decoded_.status.message(), id);
       node_->SetState("idle");
       return;
@@ -162,6 +239,15 @@ class DecoderNode {
     node_->SetState("idle");
   }
 
+  // The processing daemons downstream, and the most times a scan is sent to them.
+  static constexpr const char* kDownstream[] = {"vellum-triangulator", "vellum-flattener",
+                                                "vellum-restorer"};
+  static constexpr int kMaxAttempts = 3;
+  struct Seen {
+    int32_t pid = 0;
+    int64_t error_utime = -1;  // -1: no status yet (its old errors are not news).
+  };
+
   Node* node_;
   std::string data_;
   Decoder decoder_;
@@ -175,6 +261,8 @@ class DecoderNode {
   DecodeResult decoded_;
   // LCM thread only:
   std::chrono::steady_clock::time_point last_capture_;
+  std::map<std::string, Seen> downstream_;
+  bool resent_at_start_ = false;
   std::atomic<bool> waiting_{false};  // A scan is being captured (set by the worker).
 };
 

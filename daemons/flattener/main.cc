@@ -19,8 +19,8 @@ class FlattenerNode {
         data_(flags.Get("data")),
         mesh_options_(MeshOptionsFromFlags(flags)),
         flatten_options_(FlattenOptionsFromFlags(flags)),
-        calibrations_(node, flags.Get("calibration")),
-        textures_(node),
+        calibrations_(node, flags.Get("calibration"), flags.Get("data")),
+        textures_(node, flags.Get("data")),
         assembler_(
             node, channel::kPointCloud,
             [](const point_cloud_t& m, cv::Mat* points) { return AddChunk(m, points); },

@@ -29,8 +29,8 @@ class RestorerNode {
       : node_(node),
         data_(flags.Get("data")),
         options_(RestoreOptionsFromFlags(flags)),
-        calibrations_(node, flags.Get("calibration")),
-        textures_(node),
+        calibrations_(node, flags.Get("calibration"), flags.Get("data")),
+        textures_(node, flags.Get("data")),
         sheets_(
             node, channel::kFlatMesh,
             [](const mesh_t& m, Sheet* sheet) { return AddChunk(m, &sheet->mesh, &sheet->flat); },

@@ -24,7 +24,7 @@ class TriangulatorNode {
       : node_(node),
         data_(flags.Get("data")),
         options_(TriangulateOptionsFromFlags(flags)),
-        calibrations_(node, flags.Get("calibration")),
+        calibrations_(node, flags.Get("calibration"), flags.Get("data")),
         assembler_(
             node, channel::kCorrespondence,
             [](const correspondence_t& m, Correspondence* c) {
