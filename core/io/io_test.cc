@@ -217,5 +217,67 @@ TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
   std::filesystem::remove_all(dir);
 }
 
+// Texts on which OpenCV 4.6's YAML parser never returns (found by fuzz/fuzz_files): each is
+// refused, naming the problem, before OpenCV sees it. (A regression shows as a hang, which the
+// test's timeout turns into a failure.)
+TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("vellum_io_hang_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const struct {
+    std::string text, problem;
+  } cases[] = {
+      {std::string("%YAML:1.0\ncamera_size: [ 4, 3 ]\0\n", 33), "NUL"},
+      {"%YAML:1.0\n   rows: 3\n* v-m\n", "indented"},
+      {"%YAML:1.0\na: 1\n...\n-x\n", "\"...\""},
+  };
+  for (const auto& c : cases) {
+    const std::string path = (dir / "calibration.yaml").string();
+    std::ofstream(path, std::ios::binary) << c.text;
+    Calibration calibration;
+    const Status s = ReadCalibration(path, &calibration);
+    EXPECT_FALSE(s.ok());
+    EXPECT_NE(s.message().find(c.problem), std::string::npos) << s.message();
+    std::ofstream(dir / "scan.yaml", std::ios::binary) << c.text;
+    PatternSequence sequence;
+    cv::Size camera;
+    EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
+  }
+  // The header OpenCV writes, comments and blank lines before the first entry are fine.
+  Calibration calibration;
+  ASSERT_TRUE(WriteCalibration((dir / "ok.yaml").string(), DefaultRig()).ok());
+  std::ifstream in(dir / "ok.yaml");
+  const std::string written((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t header = written.find('\n') + 1;  // After "%YAML:1.0".
+  std::ofstream(dir / "commented.yaml") << written.substr(0, header) << "# hand-edited\n\n"
+                                        << written.substr(header);
+  const Status s = ReadCalibration((dir / "commented.yaml").string(), &calibration);
+  EXPECT_TRUE(s.ok()) << s.message();
+  std::filesystem::remove_all(dir);
+}
+
+// A PLY header declaring more data than the file holds is refused before anything is allocated
+// (a fuzzed mesh asked for 10^100 vertices).
+TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
+  const std::string seed =
+      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-ply-huge-vertex-count";
+  std::ifstream in(seed, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(bytes.empty());
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("vellum_ply_" + std::to_string(getpid()) + ".ply"))
+          .string();
+  std::ofstream(path, std::ios::binary) << "ply\nformat binary_little_endian 1.0\n"
+                                        << "element vertex 1000000\nelement face 0\nend_header\n";
+  std::vector<cv::Vec3f> vertices;
+  std::vector<cv::Vec4i> quads;
+  const Status s = ReadQuadMeshPly(path, &vertices, &quads);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("declares 1000000 vertices"), std::string::npos) << s.message();
+  std::ofstream(path, std::ios::binary) << bytes.substr(1);
+  EXPECT_FALSE(ReadQuadMeshPly(path, &vertices, &quads).ok());
+  std::remove(path.c_str());
+}
+
 }  // namespace
 }  // namespace vellum

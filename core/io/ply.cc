@@ -6,6 +6,18 @@
 #include <sstream>
 
 namespace vellum {
+namespace {
+
+// Bytes from the read position to the end of the file (the position is kept).
+uint64_t BytesLeft(std::ifstream& f) {
+  const std::streampos here = f.tellg();
+  f.seekg(0, std::ios::end);
+  const std::streampos end = f.tellg();
+  f.seekg(here);
+  return here < 0 || end < here ? 0 : static_cast<uint64_t>(end - here);
+}
+
+}  // namespace
 
 Status WritePointsPly(const std::string& path, const cv::Mat& points) {
   if (points.type() != CV_32FC3) return Status::Error(path + ": point map must be CV_32FC3");
@@ -67,6 +79,11 @@ Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points) {
   if (count < 0 || props != std::vector<std::string>{"x", "y", "z", "u", "v"}) {
     return Status::Error(path + ": expected vertex properties x y z u v");
   }
+  if (static_cast<uint64_t>(count) > BytesLeft(f) / sizeof(PlyPoint)) {
+    return Status::Error(path + ": truncated: the header declares " + std::to_string(count) +
+                         " vertices, the file holds " +
+                         std::to_string(BytesLeft(f) / sizeof(PlyPoint)));
+  }
   points->resize(static_cast<size_t>(count));
   f.read(reinterpret_cast<char*>(points->data()),
          static_cast<std::streamsize>(count * sizeof(PlyPoint)));
@@ -114,6 +131,15 @@ Status ReadQuadMeshPly(const std::string& path, std::vector<cv::Vec3f>* vertices
     }
   }
   if (nv < 0 || nf < 0) return Status::Error(path + ": expected vertex and face elements");
+  // 12 bytes per vertex, 17 per quad: a header declaring more than the file holds is refused
+  // before anything is allocated.
+  const uint64_t left = BytesLeft(f);
+  if (static_cast<uint64_t>(nv) > left / 12 ||
+      static_cast<uint64_t>(nf) > (left - 12 * static_cast<uint64_t>(nv)) / 17) {
+    return Status::Error(path + ": truncated: the header declares " + std::to_string(nv) +
+                         " vertices and " + std::to_string(nf) + " faces, the file holds " +
+                         std::to_string(left) + " bytes of data");
+  }
   vertices->resize(static_cast<size_t>(nv));
   f.read(reinterpret_cast<char*>(vertices->data()),
          static_cast<std::streamsize>(nv * sizeof(cv::Vec3f)));

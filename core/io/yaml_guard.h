@@ -20,9 +20,10 @@ inline bool MatrixNodeAtMost(const cv::FileNode& node, double max_elements) {
   return r >= 0 && c >= 0 && r * c <= max_elements;
 }
 
-// Checks that `path` is a text file of a sane size before OpenCV parses it: OpenCV 4.6's YAML
-// parser loops forever on a file with a NUL byte in it (found by fuzz/fuzz_files), so such a
-// file is refused. Returns "" when fine, else what is wrong.
+// Checks that `path` is a text file of a sane size, with nothing known to hang OpenCV 4.6's
+// YAML parser, before OpenCV parses it: the parser loops forever on a NUL byte, and on a
+// second document not started by "---" (both found by fuzz/fuzz_files). Returns "" when fine,
+// else what is wrong.
 inline std::string YamlTextProblem(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return "cannot open";
@@ -32,6 +33,24 @@ inline std::string YamlTextProblem(const std::string& path) {
   in.seekg(0);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (text.find('\0') != std::string::npos) return "not a text file (it contains NUL bytes)";
+  // OpenCV 4.6's parser also loops forever when a second YAML document follows the first one
+  // and does not start with "---" (found by fuzz/fuzz_files): the first document must be at
+  // column 0 (so it runs to the end of the file), and "..." (end of document) is refused.
+  bool content = false;
+  for (size_t start = 0; start < text.size();) {
+    size_t end = text.find('\n', start);
+    if (end == std::string::npos) end = text.size();
+    const std::string line = text.substr(start, end - start);
+    const size_t first = line.find_first_not_of(" \r");
+    start = end + 1;
+    if (first == std::string::npos || line[first] == '#') continue;
+    if (line.compare(first, 3, "...") == 0) {
+      return "a \"...\" line (end of a YAML document) is not supported";
+    }
+    if (content || line[first] == '%' || line.compare(first, 3, "---") == 0) continue;
+    if (first != 0) return "the first entry is indented (it must start at column 0)";
+    content = true;
+  }
   return "";
 }
 
