@@ -32,6 +32,10 @@ std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data) {
   if (with_data) {
     specs.push_back(
         {"data", "DIR", "station data folder: <DIR>/scan-<id>/raw and /results", "scans"});
+    specs.push_back({"pace", "MB/S",
+                     "publish chunked products at most this fast: below the slowest link and "
+                     "what every receiver drains (udpm drops a message with any lost fragment)",
+                     "100"});
   }
   return specs;
 }
@@ -54,6 +58,7 @@ int DaemonMain(int argc, char** argv, const std::string& process, const std::str
   cv::setNumThreads(cv::getNumberOfCPUs());
   try {
     Node node(process, flags.Get("url"));
+    if (flags.Has("pace")) node.SetPace(flags.GetDouble("pace", 0.1, 10000) * 1e6);
     return body(flags, node);
   } catch (const UsageError& e) {
     std::fprintf(stderr, "%s: %s\n", process.c_str(), e.what());

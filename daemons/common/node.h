@@ -97,19 +97,19 @@ class Node {
     if (lcm_.publish(channel, msg) != 0) Error(channel + ": publish failed");
   }
 
-  // Publishes the chunks of one product paced at about `bytes_per_second`: a burst of many
+  // Publishes the chunks of one product paced at about SetPace's rate: a burst of many
   // megabytes overflows the receivers' socket buffers, and udpm loses a whole message with
   // any of its fragments.
   template <class Msg>
-  void PublishChunks(const std::string& channel, std::vector<Msg>* chunks,
-                     double bytes_per_second = 100e6) {
+  void PublishChunks(const std::string& channel, std::vector<Msg>* chunks) {
     for (Msg& m : *chunks) {
       const auto start = std::chrono::steady_clock::now();
       Publish(channel, &m);
-      std::this_thread::sleep_until(
-          start + std::chrono::duration<double>(m.getEncodedSize() / bytes_per_second));
+      std::this_thread::sleep_until(start +
+                                    std::chrono::duration<double>(m.getEncodedSize() / pace_));
     }
   }
+  void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
 
   // Status: the state ("idle", "busy", "scanning", ...), the scan and a line for the operator.
   void SetState(const std::string& state, int64_t scan_id = 0, const std::string& detail = "");
@@ -147,6 +147,7 @@ class Node {
   lcm::LCM lcm_;
   std::vector<std::unique_ptr<RawHandler>> handlers_;
   std::atomic<bool> stop_{false};
+  double pace_ = 100e6;  // Bytes per second of chunked products.
 
   mutable std::mutex mutex_;  // Guards everything below.
   std::map<std::string, int64_t> seq_out_, seq_in_;

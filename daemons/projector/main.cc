@@ -12,6 +12,7 @@
 #include "core/io/calibration_io.h"
 #include "daemons/common/daemon.h"
 #include "daemons/common/messages.h"
+#include "daemons/common/sdl_close.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
@@ -46,12 +47,7 @@ class Screen {
                                  size.width, size.height);
     if (!texture_) throw std::runtime_error(std::string("SDL texture: ") + SDL_GetError());
   }
-  ~Screen() {
-    if (texture_) SDL_DestroyTexture(texture_);
-    if (renderer_) SDL_DestroyRenderer(renderer_);
-    if (window_) SDL_DestroyWindow(window_);
-    SDL_Quit();
-  }
+  ~Screen() { CloseSdl(texture_, renderer_, window_); }
 
   // Shows an 8-bit gray image of the projector's size; returns after the next vsync.
   void Show(const cv::Mat& gray) {

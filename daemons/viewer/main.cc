@@ -15,6 +15,7 @@
 #include "cli/options.h"
 #include "daemons/common/daemon.h"
 #include "daemons/common/messages.h"
+#include "daemons/common/sdl_close.h"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/restored_t.hpp"
 #include "vellum/scan_request_t.hpp"
@@ -98,12 +99,7 @@ class Viewer {
     node->Subscribe<restored_t>(channel::kRestored, [this](const restored_t& m) { OnRestored(m); });
   }
 
-  ~Viewer() {
-    if (texture_) SDL_DestroyTexture(texture_);
-    if (renderer_) SDL_DestroyRenderer(renderer_);
-    if (window_) SDL_DestroyWindow(window_);
-    SDL_Quit();
-  }
+  ~Viewer() { CloseSdl(texture_, renderer_, window_); }
 
   void Tick() {
     SDL_Event e;
