@@ -94,6 +94,10 @@ cv::Vec2d Page::Profile(double sigma) const {
 }
 
 cv::Vec3d Page::Point(double s, double t) const {
+  return options_.pose_rotation * ShapePoint(s, t) + options_.pose_translation;
+}
+
+cv::Vec3d Page::ShapePoint(double s, double t) const {
   const PageOptions& o = options_;
   const double w = o.size_mm.width, h = o.size_mm.height;
   const double cx = o.centre_mm[0], cy = o.centre_mm[1];

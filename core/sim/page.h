@@ -33,6 +33,10 @@ struct PageOptions {
   double cone_apex_distance_mm = 250.0;  // kCone: apex distance below the page's t = 0 edge.
   double bump_height_mm = 3.0;           // kBump: peak height, mm.
   double bump_sigma_mm = 25.0;           // kBump: Gaussian sigma, mm.
+  // A rigid motion applied after the shape (a calibration board held in a pose above the
+  // table): world = pose_rotation * shaped point + pose_translation.
+  cv::Matx33d pose_rotation = cv::Matx33d::eye();
+  cv::Vec3d pose_translation{0.0, 0.0, 0.0};
 };
 
 class Page {
@@ -47,6 +51,8 @@ class Page {
   bool Developable() const { return options_.shape != PageShape::kBump; }
 
  private:
+  // The shape's point before the pose.
+  cv::Vec3d ShapePoint(double s, double t) const;
   // Generalised cylinder profile: arc-length sigma across the ridge -> (across, z).
   cv::Vec2d Profile(double sigma) const;
 

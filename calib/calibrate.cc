@@ -1,0 +1,305 @@
+#include "calib/calibrate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace vellum {
+namespace {
+
+std::string Px(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.3f px", v);
+  return buf;
+}
+
+// The board's corners in its own frame, mm, in the detector's row-major order.
+std::vector<cv::Point3f> BoardPoints(const BoardSpec& board) {
+  std::vector<cv::Point3f> points;
+  for (int j = 0; j < board.inner_corners.height; ++j) {
+    for (int i = 0; i < board.inner_corners.width; ++i) {
+      points.emplace_back(static_cast<float>(i * board.square_mm),
+                          static_cast<float>(j * board.square_mm), 0.0f);
+    }
+  }
+  return points;
+}
+
+// Sign of the board's handedness as an image sees it: +1 or -1 (the turn from the board's
+// first row to its first column).
+int Handedness(const std::vector<cv::Point2f>& c, const BoardSpec& board) {
+  const cv::Point2f a = c[0], b = c[board.inner_corners.width - 1],
+                    d = c[static_cast<size_t>(board.inner_corners.height - 1) *
+                          board.inner_corners.width];
+  const double cross = (b.x - a.x) * (d.y - a.y) - (b.y - a.y) * (d.x - a.x);
+  return cross >= 0 ? 1 : -1;
+}
+
+// RMS distance between image points and the board projected through a device's model.
+double ReprojectionRms(const std::vector<cv::Point3f>& object,
+                       const std::vector<cv::Point2f>& image, const cv::Mat& k, const cv::Mat& d,
+                       const cv::Mat& rvec, const cv::Mat& tvec) {
+  std::vector<cv::Point2f> projected;
+  cv::projectPoints(object, rvec, tvec, k, d, projected);
+  double sum = 0;
+  for (size_t i = 0; i < image.size(); ++i) {
+    const cv::Point2f e = projected[i] - image[i];
+    sum += e.dot(e);
+  }
+  return image.empty() ? 0 : std::sqrt(sum / image.size());
+}
+
+CameraModel ToModel(cv::Size size, const cv::Mat& k, const cv::Mat& d, const cv::Matx33d& r,
+                    const cv::Vec3d& t) {
+  CameraModel m;
+  m.size = size;
+  m.matrix = cv::Matx33d(k);
+  for (int i = 0; i < 5; ++i) m.distortion[i] = i < d.total() ? d.at<double>(i) : 0.0;
+  m.rotation = r;
+  m.translation = t;
+  return m;
+}
+
+}  // namespace
+
+BoardView DetectBoard(const Scan& scan, const BoardSpec& board, const std::string& name,
+                      const CalibrateOptions& options) {
+  BoardView view;
+  view.name = name;
+  view.camera_size = scan.texture.size();
+  view.projector_size = scan.sequence.projector_size;
+  const std::string where = name + ": ";
+  cv::Mat gray = scan.texture;
+  if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+  std::vector<cv::Point2f> corners;
+  const bool found = cv::findChessboardCornersSB(gray, board.inner_corners, corners,
+                                                 cv::CALIB_CB_EXHAUSTIVE | cv::CALIB_CB_ACCURACY);
+  if (!found || corners.size() != static_cast<size_t>(board.inner_corners.area())) {
+    view.status = Status::Error(where + "no board of " + std::to_string(board.inner_corners.width) +
+                                "x" + std::to_string(board.inner_corners.height) +
+                                " inner corners found in the texture");
+    return view;
+  }
+  Decoder decoder(options.decode);
+  DecodeResult decoded;
+  decoder.Decode(scan.sequence, scan.frames, &decoded);
+  if (!decoded.status.ok()) {
+    view.status = Status::Error(where + decoded.status.message());
+    return view;
+  }
+  if (!decoded.has_columns || !decoded.has_rows) {
+    view.status = Status::Error(where +
+                                "the pattern sequence must encode projector columns and "
+                                "rows (a projector calibration needs both)");
+    return view;
+  }
+  // The window: about half a square around each corner, from the corners' own spacing.
+  double spacing = 0;
+  for (int j = 0; j < board.inner_corners.height; ++j) {
+    for (int i = 0; i + 1 < board.inner_corners.width; ++i) {
+      const size_t k = static_cast<size_t>(j) * board.inner_corners.width + i;
+      spacing += cv::norm(corners[k + 1] - corners[k]);
+    }
+  }
+  spacing /= (board.inner_corners.width - 1) * board.inner_corners.height;
+  const int half = std::max(3, static_cast<int>(std::lround(options.window_squares * spacing)));
+  int unlit = 0;
+  std::vector<cv::Point2f> projector(corners.size());
+  std::vector<cv::Point2f> from, to;
+  for (size_t k = 0; k < corners.size(); ++k) {
+    from.clear();
+    to.clear();
+    const int cu = static_cast<int>(std::lround(corners[k].x)),
+              cv_ = static_cast<int>(std::lround(corners[k].y));
+    for (int v = std::max(0, cv_ - half); v <= std::min(gray.rows - 1, cv_ + half); ++v) {
+      const float* px = decoded.projector_x.ptr<float>(v);
+      const float* py = decoded.projector_y.ptr<float>(v);
+      for (int u = std::max(0, cu - half); u <= std::min(gray.cols - 1, cu + half); ++u) {
+        if (std::isnan(px[u]) || std::isnan(py[u])) continue;
+        from.emplace_back(static_cast<float>(u), static_cast<float>(v));
+        to.emplace_back(px[u], py[u]);
+      }
+    }
+    if (static_cast<int>(from.size()) < options.min_window_points) {
+      ++unlit;
+      continue;
+    }
+    const cv::Mat h = cv::findHomography(from, to, 0);
+    if (h.empty()) {
+      ++unlit;
+      continue;
+    }
+    std::vector<cv::Point2f> mapped;
+    cv::perspectiveTransform(std::vector<cv::Point2f>{corners[k]}, mapped, h);
+    projector[k] = mapped[0];
+  }
+  if (unlit > 0) {
+    view.status = Status::Error(
+        where + "the projector lights only " + std::to_string(corners.size() - unlit) + " of " +
+        std::to_string(corners.size()) + " board corners (each needs " +
+        std::to_string(options.min_window_points) +
+        " decoded pixels around it): move the board into the projector's light");
+    return view;
+  }
+  view.camera_corners = std::move(corners);
+  view.projector_corners = std::move(projector);
+  view.status = Status::Ok();
+  return view;
+}
+
+CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
+                                     const BoardSpec& board, const CalibrateOptions& options) {
+  CalibrationSolution sol;
+  const std::vector<cv::Point3f> object = BoardPoints(board);
+  std::vector<std::vector<cv::Point3f>> objects;
+  std::vector<std::vector<cv::Point2f>> cam, proj;
+  std::vector<size_t> used;
+  cv::Size camera_size, projector_size;
+  int mirrored = 0;
+  sol.views.resize(views.size());
+  for (size_t i = 0; i < views.size(); ++i) {
+    const BoardView& v = views[i];
+    ViewReport& r = sol.views[i];
+    r.name = v.name;
+    r.status = v.status;
+    if (!v.status.ok()) continue;
+    if (v.camera_corners.size() != object.size() || v.projector_corners.size() != object.size()) {
+      r.status = Status::Error(v.name + ": corners do not match the board size");
+      continue;
+    }
+    if (used.empty()) {
+      camera_size = v.camera_size;
+      projector_size = v.projector_size;
+    } else if (v.camera_size != camera_size || v.projector_size != projector_size) {
+      r.status = Status::Error(v.name + ": camera or projector size differs from the first pose's");
+      continue;
+    }
+    mirrored += Handedness(v.camera_corners, board) != Handedness(v.projector_corners, board);
+    r.corners = static_cast<int>(object.size());
+    objects.push_back(object);
+    cam.push_back(v.camera_corners);
+    proj.push_back(v.projector_corners);
+    used.push_back(i);
+  }
+  std::string reasons;
+  for (const ViewReport& r : sol.views) {
+    if (!r.status.ok()) reasons += "\n  " + r.status.message();
+  }
+  if (static_cast<int>(used.size()) < options.min_views) {
+    sol.status = Status::Error("only " + std::to_string(used.size()) + " usable board poses of " +
+                               std::to_string(views.size()) + " (at least " +
+                               std::to_string(options.min_views) + " are needed)" + reasons);
+    return sol;
+  }
+  const auto table_at = std::find(used.begin(), used.end(), table);
+  if (table >= views.size() || table_at == used.end()) {
+    sol.status = Status::Error(
+        "the table pose is not usable: " +
+        (table < views.size() ? sol.views[table].status.message() : std::string("no such pose")));
+    return sol;
+  }
+  if (2 * mirrored > static_cast<int>(used.size())) {
+    sol.status = Status::Error(
+        "the projector's image reaches the board mirrored (" + std::to_string(mirrored) + " of " +
+        std::to_string(used.size()) +
+        " poses): the projector daemon's --flip does not match the mirror; the calibration "
+        "describes the virtual, unmirrored projector, so fix --flip and capture again");
+    return sol;
+  }
+  const int flags = cv::CALIB_FIX_K3;
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12);
+  cv::Mat kc, dc, kp, dp, std_in, std_ex, errors_c, errors_p;
+  std::vector<cv::Mat> rc, tc, rp, tp;
+  try {
+    sol.camera_rms_px = cv::calibrateCamera(objects, cam, camera_size, kc, dc, rc, tc, std_in,
+                                            std_ex, errors_c, flags, criteria);
+    sol.projector_rms_px = cv::calibrateCamera(objects, proj, projector_size, kp, dp, rp, tp,
+                                               std_in, std_ex, errors_p, flags, criteria);
+    cv::Mat r, t, e, f;
+    sol.stereo_rms_px = cv::stereoCalibrate(objects, cam, proj, kc, dc, kp, dp, camera_size, r, t,
+                                            e, f, cv::CALIB_FIX_INTRINSIC, criteria);
+    // World frame from the table pose: the board's frame turned over (x kept, y and z
+    // reversed) when its z axis points away from the camera, so that +z is up.
+    const size_t ti = static_cast<size_t>(table_at - used.begin());
+    cv::Matx33d rb;
+    cv::Rodrigues(rc[ti], rb);
+    const cv::Vec3d tb(tc[ti]);
+    const cv::Vec3d camera_in_board = -(rb.t() * tb);
+    const cv::Matx33d flip =
+        camera_in_board[2] < 0 ? cv::Matx33d(1, 0, 0, 0, -1, 0, 0, 0, -1) : cv::Matx33d::eye();
+    const cv::Matx33d r_cw = rb * flip;
+    const cv::Matx33d r_pc(r);
+    const cv::Vec3d t_pc(t);
+    sol.calibration.camera = ToModel(camera_size, kc, dc, r_cw, tb);
+    sol.calibration.projector = ToModel(projector_size, kp, dp, r_pc * r_cw, r_pc * tb + t_pc);
+    for (size_t n = 0; n < used.size(); ++n) {
+      ViewReport& rep = sol.views[used[n]];
+      rep.camera_rms_px = ReprojectionRms(object, cam[n], kc, dc, rc[n], tc[n]);
+      rep.projector_rms_px = ReprojectionRms(object, proj[n], kp, dp, rp[n], tp[n]);
+    }
+  } catch (const cv::Exception& e) {
+    sol.status = Status::Error(std::string("calibration failed in OpenCV: ") + e.what());
+    return sol;
+  }
+  std::string why;
+  if (!sol.calibration.Check(&why)) {
+    sol.status = Status::Error("the solved calibration is not valid: " + why);
+    return sol;
+  }
+  sol.views_used = static_cast<int>(used.size());
+  sol.corners_used = static_cast<int>(used.size() * object.size());
+  const double warn = options.warn_reprojection_px;
+  auto check = [&](const std::string& what, double rms) {
+    if (rms > warn)
+      sol.warnings.push_back(what + " reprojection error " + Px(rms) + " (above " + Px(warn) + ")");
+  };
+  check("camera", sol.camera_rms_px);
+  check("projector", sol.projector_rms_px);
+  check("camera-projector stereo", sol.stereo_rms_px);
+  for (size_t n : used) {
+    check(views[n].name + ": camera", sol.views[n].camera_rms_px);
+    check(views[n].name + ": projector", sol.views[n].projector_rms_px);
+  }
+  sol.status = Status::Ok();
+  return sol;
+}
+
+std::string FormatCalibrationReport(const CalibrationSolution& s) {
+  std::string out;
+  char line[512];
+  for (const ViewReport& v : s.views) {
+    if (v.status.ok()) {
+      std::snprintf(line, sizeof(line), "pose %s: %d corners, camera %.3f px, projector %.3f px\n",
+                    v.name.c_str(), v.corners, v.camera_rms_px, v.projector_rms_px);
+    } else {
+      std::snprintf(line, sizeof(line), "pose %s: not used: %s\n", v.name.c_str(),
+                    v.status.message().c_str());
+    }
+    out += line;
+  }
+  if (s.status.ok()) {
+    std::snprintf(line, sizeof(line),
+                  "overall: %d poses, %d corners; reprojection RMS camera %.3f px, projector "
+                  "%.3f px, stereo %.3f px\n",
+                  s.views_used, s.corners_used, s.camera_rms_px, s.projector_rms_px,
+                  s.stereo_rms_px);
+    out += line;
+    const CameraModel& c = s.calibration.camera;
+    const CameraModel& p = s.calibration.projector;
+    std::snprintf(line, sizeof(line),
+                  "camera f = %.2f, %.2f px, centre %.2f, %.2f px, %.1f mm above the table\n"
+                  "projector f = %.2f, %.2f px, centre %.2f, %.2f px, at (%.1f, %.1f, %.1f) mm\n",
+                  c.matrix(0, 0), c.matrix(1, 1), c.matrix(0, 2), c.matrix(1, 2), c.Center()[2],
+                  p.matrix(0, 0), p.matrix(1, 1), p.matrix(0, 2), p.matrix(1, 2), p.Center()[0],
+                  p.Center()[1], p.Center()[2]);
+    out += line;
+  } else {
+    out += "not solved: " + s.status.message() + "\n";
+  }
+  for (const std::string& w : s.warnings) out += "warning: " + w + "\n";
+  return out;
+}
+
+}  // namespace vellum

@@ -1,0 +1,82 @@
+// Calibration of the camera, the projector (as an inverse camera) and the table's world frame
+// from structured-light scans of a checkerboard in several poses (Moreno & Taubin, "Simple,
+// Accurate, and Robust Projector-Camera Calibration", 3DIMPVT 2012).
+//
+// Per pose: the board's inner corners are found in the texture (sub-pixel); each corner's
+// projector coordinate is the image of the camera corner under a homography fitted, by least
+// squares, to the decoded camera -> projector correspondences in a window around it (a local
+// homography, unbiased by the blur of the stripes). Then the camera and the projector are each
+// calibrated as cameras from the same board corners (OpenCV's calibrateCamera), and their
+// relative pose by stereo calibration with both intrinsics fixed. The pose lying flat on the
+// table defines the world frame: z = 0 on the board, +z towards the camera (the paper's 3.2).
+//
+// The calibration describes the virtual, unmirrored projector. A projector whose images reach
+// the board mirrored (the projector daemon's --flip does not match the mirror) sees the board
+// with the opposite handedness from the camera; that is detected and reported, since no
+// camera model can absorb a reflection.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/decode/decode.h"
+#include "core/geometry/calibration.h"
+#include "core/io/scan_io.h"
+
+namespace vellum {
+
+struct BoardSpec {
+  cv::Size inner_corners{16, 21};  // Inner corners across and down (COLSxROWS).
+  double square_mm = 10.0;         // Square side, mm.
+};
+
+struct CalibrateOptions {
+  // Half-size of the local homography's window, in board squares (Moreno & Taubin use about
+  // half a square: the window then holds only the corner's own four squares).
+  double window_squares = 0.5;
+  int min_window_points = 40;         // Decoded pixels a corner's homography needs.
+  int min_views = 4;                  // Usable poses needed to solve.
+  double warn_reprojection_px = 0.5;  // Errors above this are reported as warnings.
+  DecodeOptions decode;
+};
+
+// One board pose: the corners in the camera and the projector, or why the pose is not usable.
+struct BoardView {
+  std::string name;  // The pose's scan directory, for messages.
+  Status status = Status::Error("not detected");
+  cv::Size camera_size, projector_size;
+  std::vector<cv::Point2f> camera_corners;     // Row-major, inner_corners.width per row.
+  std::vector<cv::Point2f> projector_corners;  // Same order.
+};
+
+// Finds the board and each corner's projector coordinate in one pose's scan.
+BoardView DetectBoard(const Scan& scan, const BoardSpec& board, const std::string& name,
+                      const CalibrateOptions& options = CalibrateOptions());
+
+struct ViewReport {
+  std::string name;
+  Status status = Status::Error("not used");  // Ok when the pose was used; else why not.
+  int corners = 0;
+  double camera_rms_px = 0, projector_rms_px = 0;
+};
+
+struct CalibrationSolution {
+  Status status = Status::Error("not solved");
+  Calibration calibration;
+  std::vector<ViewReport> views;  // One per input pose, in input order.
+  int views_used = 0, corners_used = 0;
+  double camera_rms_px = 0, projector_rms_px = 0, stereo_rms_px = 0;
+  std::vector<std::string> warnings;  // Errors above CalibrateOptions::warn_reprojection_px.
+};
+
+// Solves from the detected poses; views[table] is the pose lying flat on the table.
+CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
+                                     const BoardSpec& board,
+                                     const CalibrateOptions& options = CalibrateOptions());
+
+// The solution as text for the operator: per-pose and overall errors, corners used, warnings.
+std::string FormatCalibrationReport(const CalibrationSolution& solution);
+
+}  // namespace vellum

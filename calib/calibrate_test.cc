@@ -1,0 +1,215 @@
+#include "calib/calibrate.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "core/geometry/triangulate.h"
+#include "core/patterns/patterns.h"
+#include "core/sim/evaluate.h"
+#include "core/sim/gantry.h"
+
+namespace vellum {
+namespace {
+
+constexpr double kDeg = M_PI / 180.0;
+
+struct Pose {
+  double rx, ry, rz;  // Degrees, about the board's centre.
+  cv::Vec3d t;        // mm; the board's centre.
+};
+
+cv::Matx33d Rotation(double rx, double ry, double rz) {
+  const double a = rx * kDeg, b = ry * kDeg, c = rz * kDeg;
+  const cv::Matx33d x(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
+  const cv::Matx33d y(std::cos(b), 0, std::sin(b), 0, 1, 0, -std::sin(b), 0, std::cos(b));
+  const cv::Matx33d z(std::cos(c), -std::sin(c), 0, std::sin(c), std::cos(c), 0, 0, 0, 1);
+  return z * y * x;
+}
+
+enum class Projector { kNormal, kMirrored, kOff };
+
+// One board pose scanned on the virtual gantry: the default checkerboard leaf (10 mm squares,
+// 16 x 21 inner corners) held in `pose`.
+Scan RenderPose(const Calibration& rig, const Pose& pose, uint64_t seed,
+                Projector projector = Projector::kNormal) {
+  PageOptions page;
+  page.pose_rotation = Rotation(pose.rx, pose.ry, pose.rz);
+  page.pose_translation = pose.t;
+  const VirtualGantry gantry(rig, page, TextureOptions());
+  Scan scan;
+  scan.sequence = MakePatternSequence(PatternOptions{rig.projector.size});
+  scan.camera_size = rig.camera.size;
+  if (projector == Projector::kNormal) {
+    scan.frames = RenderSequence(gantry, scan.sequence, seed);
+  } else {
+    // A mirror the projector daemon's flip does not undo; or a projector that shows nothing.
+    for (size_t k = 0; k < scan.sequence.patterns.size(); ++k) {
+      cv::Mat image = RenderPattern(scan.sequence.patterns[k], rig.projector.size);
+      if (projector == Projector::kMirrored) cv::flip(image, image, 1);
+      if (projector == Projector::kOff) image.setTo(0);
+      scan.frames.push_back(gantry.RenderFrame(image, seed * 1000 + k));
+    }
+  }
+  scan.texture = gantry.RenderTexture(seed);
+  return scan;
+}
+
+// The table pose, then eight held at 45-75 mm with tilts up to 20 degrees (the board stays in
+// the camera's view and the projector's light).
+const std::vector<Pose> kPoses = {
+    {0, 0, 0, {0, 0, 0}},       {18, 0, 4, {0, 0, 60}},    {-18, 0, -4, {0, 0, 60}},
+    {0, 20, 0, {0, 0, 55}},     {0, -20, 3, {5, 0, 55}},   {12, 14, 6, {-8, 6, 70}},
+    {-12, 14, -6, {8, -6, 70}}, {12, -14, -8, {0, 5, 75}}, {-12, -14, 8, {0, -5, 45}},
+};
+
+struct Solved {
+  std::vector<BoardView> views;
+  CalibrationSolution solution;
+};
+
+const Solved& SolveDefaultRig() {
+  static const Solved solved = [] {
+    Solved s;
+    const Calibration rig = DefaultRig();
+    for (size_t i = 0; i < kPoses.size(); ++i) {
+      s.views.push_back(
+          DetectBoard(RenderPose(rig, kPoses[i], 11 + i), BoardSpec(), "pose" + std::to_string(i)));
+    }
+    s.solution = SolveCalibration(s.views, 0, BoardSpec());
+    std::printf("%s", FormatCalibrationReport(s.solution).c_str());
+    return s;
+  }();
+  return solved;
+}
+
+double AngleDeg(const cv::Matx33d& a, const cv::Matx33d& b) {
+  const cv::Matx33d d = a * b.t();
+  const double c = std::clamp((cv::trace(d) - 1) / 2, -1.0, 1.0);
+  return std::acos(c) / kDeg;
+}
+
+// Nine poses rendered with the default rig's true calibration: the solution's errors and its
+// distance from the truth. The world frame's position and turn within the table plane is the
+// table board's (its first corner), not the rig's, so poses are compared where that gauge does
+// not enter: the projector relative to the camera, and the camera relative to the table plane.
+TEST(Calibrate, RecoversTheVirtualGantrysCalibration) {
+  const Solved& s = SolveDefaultRig();
+  ASSERT_TRUE(s.solution.status.ok()) << s.solution.status.message();
+  EXPECT_EQ(s.solution.views_used, 9);
+  EXPECT_EQ(s.solution.corners_used, 9 * 16 * 21);
+  EXPECT_LE(s.solution.camera_rms_px, 0.2);
+  EXPECT_LE(s.solution.projector_rms_px, 0.3);
+  EXPECT_TRUE(s.solution.warnings.empty());
+  const Calibration truth = DefaultRig();
+  const Calibration& got = s.solution.calibration;
+  for (const auto& [name, t, g] : {std::make_tuple("camera", truth.camera, got.camera),
+                                   std::make_tuple("projector", truth.projector, got.projector)}) {
+    for (int a = 0; a < 2; ++a) {
+      const double rel = std::fabs(g.matrix(a, a) / t.matrix(a, a) - 1);
+      std::printf("[calib] %s f%c %.2f (true %.2f): %.4f%%\n", name, "xy"[a], g.matrix(a, a),
+                  t.matrix(a, a), 100 * rel);
+      EXPECT_LE(rel, 0.003) << name;
+    }
+  }
+  // The projector's pose relative to the camera.
+  const cv::Matx33d rel_true = truth.projector.rotation * truth.camera.rotation.t();
+  const cv::Matx33d rel_got = got.projector.rotation * got.camera.rotation.t();
+  const cv::Vec3d t_true = truth.projector.translation - rel_true * truth.camera.translation;
+  const cv::Vec3d t_got = got.projector.translation - rel_got * got.camera.translation;
+  const double angle = AngleDeg(rel_got, rel_true), offset = cv::norm(t_got - t_true);
+  std::printf("[calib] projector pose vs camera: %.4f deg, %.3f mm\n", angle, offset);
+  EXPECT_LE(angle, 0.1);
+  EXPECT_LE(offset, 0.5);
+  // The camera relative to the table: its height and its tilt from the table's normal.
+  const double height = got.camera.Center()[2] - truth.camera.Center()[2];
+  const cv::Vec3d axis_got(got.camera.rotation(2, 0), got.camera.rotation(2, 1),
+                           got.camera.rotation(2, 2));
+  const cv::Vec3d axis_true(truth.camera.rotation(2, 0), truth.camera.rotation(2, 1),
+                            truth.camera.rotation(2, 2));
+  const double tilt = std::fabs(std::acos(std::clamp(axis_got[2], -1.0, 1.0)) -
+                                std::acos(std::clamp(axis_true[2], -1.0, 1.0))) /
+                      kDeg;
+  std::printf("[calib] camera above the table: height %+.3f mm, tilt %.4f deg\n", height, tilt);
+  EXPECT_LE(std::fabs(height), 0.5);
+  EXPECT_LE(tilt, 0.1);
+}
+
+// A page scanned with the solved calibration is measured about as well as with the true one.
+TEST(Calibrate, APageScannedWithTheSolvedCalibrationMeetsTheBar) {
+  const Solved& s = SolveDefaultRig();
+  ASSERT_TRUE(s.solution.status.ok()) << s.solution.status.message();
+  const Calibration truth = DefaultRig();
+  const Calibration& got = s.solution.calibration;
+  SimulatedScan scan = SimulateScan(truth, PageShape::kCurl, 3);
+  const DecodeResult decoded = Decode(scan.sequence, scan.frames);
+  const PointMap with_truth = Triangulator(truth).Triangulate(decoded);
+  PointMap with_solved = Triangulator(got).Triangulate(decoded);
+  // Into the rig's world frame: the solved world differs from it by a motion within the table
+  // plane (the gauge above), taken from the two camera poses.
+  const cv::Matx33d r = truth.camera.rotation.t() * got.camera.rotation;
+  const cv::Vec3d t =
+      truth.camera.rotation.t() * (got.camera.translation - truth.camera.translation);
+  with_solved.points.forEach<cv::Vec3f>([&](cv::Vec3f& p, const int*) {
+    if (std::isnan(p[0])) return;
+    const cv::Vec3d q = r * cv::Vec3d(p[0], p[1], p[2]) + t;
+    p = cv::Vec3f(static_cast<float>(q[0]), static_cast<float>(q[1]), static_cast<float>(q[2]));
+  });
+  const PointErrorStats a = ComparePoints(scan.gantry->truth(), with_truth.points);
+  const PointErrorStats b = ComparePoints(scan.gantry->truth(), with_solved.points);
+  std::printf(
+      "[calib] curl page, median / RMS error: true calibration %.4f / %.4f mm, solved "
+      "%.4f / %.4f mm\n",
+      a.median_mm, a.rms_mm, b.median_mm, b.rms_mm);
+  EXPECT_LE(b.median_mm, 0.1);
+  EXPECT_GT(b.valid_fraction, 0.99);
+}
+
+TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
+  const Solved& good = SolveDefaultRig();
+  const Calibration rig = DefaultRig();
+  std::vector<BoardView> views = good.views;
+  // The board out of the camera's view, and a pose the projector does not light.
+  views.push_back(DetectBoard(RenderPose(rig, {0, 0, 0, {400, 0, 0}}, 90), BoardSpec(), "away"));
+  views.push_back(
+      DetectBoard(RenderPose(rig, kPoses[1], 91, Projector::kOff), BoardSpec(), "dark"));
+  const CalibrationSolution s = SolveCalibration(views, 0, BoardSpec());
+  ASSERT_TRUE(s.status.ok()) << s.status.message();
+  EXPECT_EQ(s.views_used, 9);
+  EXPECT_NE(s.views[9].status.message().find("away: no board of 16x21 inner corners found"),
+            std::string::npos)
+      << s.views[9].status.message();
+  EXPECT_NE(s.views[10].status.message().find("dark:"), std::string::npos);
+  EXPECT_NE(s.views[10].status.message().find("projector"), std::string::npos)
+      << s.views[10].status.message();
+  const std::string report = FormatCalibrationReport(s);
+  EXPECT_NE(report.find("pose away: not used"), std::string::npos) << report;
+  // Too few poses.
+  const CalibrationSolution few =
+      SolveCalibration({good.views[0], good.views[1], views[9]}, 0, BoardSpec());
+  EXPECT_FALSE(few.status.ok());
+  EXPECT_NE(few.status.message().find("only 2 usable board poses of 3"), std::string::npos)
+      << few.status.message();
+  // The table pose unusable.
+  const CalibrationSolution no_table = SolveCalibration(views, 9, BoardSpec());
+  EXPECT_FALSE(no_table.status.ok());
+  EXPECT_NE(no_table.status.message().find("table pose is not usable"), std::string::npos);
+}
+
+TEST(Calibrate, AMirroredProjectorIsReportedNotAbsorbed) {
+  const Calibration rig = DefaultRig();
+  std::vector<BoardView> views;
+  for (size_t i = 0; i < 5; ++i) {
+    views.push_back(DetectBoard(RenderPose(rig, kPoses[i], 50 + i, Projector::kMirrored),
+                                BoardSpec(), "pose" + std::to_string(i)));
+    ASSERT_TRUE(views.back().status.ok()) << views.back().status.message();
+  }
+  const CalibrationSolution s = SolveCalibration(views, 0, BoardSpec());
+  EXPECT_FALSE(s.status.ok());
+  EXPECT_NE(s.status.message().find("mirrored"), std::string::npos) << s.status.message();
+  EXPECT_NE(s.status.message().find("--flip"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace vellum
