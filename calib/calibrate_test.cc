@@ -20,14 +20,6 @@ struct Pose {
   cv::Vec3d t;        // mm; the board's centre.
 };
 
-cv::Matx33d Rotation(double rx, double ry, double rz) {
-  const double a = rx * kDeg, b = ry * kDeg, c = rz * kDeg;
-  const cv::Matx33d x(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
-  const cv::Matx33d y(std::cos(b), 0, std::sin(b), 0, 1, 0, -std::sin(b), 0, std::cos(b));
-  const cv::Matx33d z(std::cos(c), -std::sin(c), 0, std::sin(c), std::cos(c), 0, 0, 0, 1);
-  return z * y * x;
-}
-
 enum class Projector { kNormal, kMirrored, kOff };
 
 // One board pose scanned on the virtual gantry: the default checkerboard leaf (10 mm squares,
@@ -35,7 +27,7 @@ enum class Projector { kNormal, kMirrored, kOff };
 Scan RenderPose(const Calibration& rig, const Pose& pose, uint64_t seed,
                 Projector projector = Projector::kNormal) {
   PageOptions page;
-  page.pose_rotation = Rotation(pose.rx, pose.ry, pose.rz);
+  page.pose_rotation = PoseRotation(pose.rx, pose.ry, pose.rz);
   page.pose_translation = pose.t;
   const VirtualGantry gantry(rig, page, TextureOptions());
   Scan scan;

@@ -190,6 +190,62 @@ int RunWatch(const std::vector<std::string>& args) {
   return 0;
 }
 
+int RunCalibrateCapture(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = BusSpecs();
+  specs.push_back({"out", "DIR", "where to write the pose's scan directory", ""});
+  specs.push_back({"label", "TEXT", "a note for the scan", "calibration board"});
+  specs.push_back({"timeout", "S", "give up after this long", "120"});
+  Flags flags("vellum calibrate capture",
+              "Records one calibration board pose through the station: asks for a scan and\n"
+              "writes its captures (texture and pattern frames, from the bus) as a scan\n"
+              "directory of DESIGN.md in --out, for `vellum calibrate solve`. Hold the board\n"
+              "still in the projector's light; one pose must lie flat on the table.",
+              specs);
+  if (!flags.Parse(args)) return 0;
+  const std::string out = flags.Require("out");
+  const double timeout = flags.GetDouble("timeout", 1, 86400);
+  Node node("vellum-calibrate", flags.Get("url"));
+  scan_request_t request{};
+  request.scan_id = station::NowUtime();
+  request.label = flags.Get("label");
+  station::CaptureSet set;
+  std::string failure;
+  node.Subscribe<capture_t>(station::channel::kCapture, [&](const capture_t& c) {
+    if (c.scan_id != request.scan_id || set.Has(c.pattern_index)) return;
+    const Status s = set.Add(c);
+    if (!s.ok()) failure = s.message();
+    if (isatty(2)) std::fprintf(stderr, "\rcapture %d of %d ", set.Received(), set.Expected());
+  });
+  // Only the gantry's errors fail a capture (the processing daemons may well fail on a board
+  // held in the air: it is not a page on the table).
+  for (const char* process : {"vellum-projector", "vellum-camera"}) {
+    node.Subscribe<status_t>(station::StatusChannel(process), [&](const status_t& m) {
+      if (m.last_error_scan_id == request.scan_id && !m.last_error.empty()) {
+        failure = m.process + ": " + m.last_error;
+      }
+    });
+  }
+  node.Publish(station::channel::kScanRequest, &request);
+  const bool complete = Follow(node, timeout, [&] { return set.Complete() || !failure.empty(); });
+  if (isatty(2)) std::fputc('\n', stderr);
+  if (!failure.empty() || !complete) {
+    std::fprintf(stderr, "vellum calibrate capture: %s\n",
+                 failure.empty()
+                     ? ("incomplete after " + std::to_string(static_cast<int>(timeout)) +
+                        " s: " + set.Missing())
+                           .c_str()
+                     : failure.c_str());
+    return 1;
+  }
+  const Status s = WriteScan(out, set.ToScan());
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum calibrate capture: %s\n", s.message().c_str());
+    return 1;
+  }
+  std::printf("pose recorded: %d captures -> %s\n", set.Received(), out.c_str());
+  return 0;
+}
+
 int RunExport(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = {
       {"scan-id", "ID", "the scan to export when the log holds several", "0"}};

@@ -15,5 +15,7 @@ int RunScan(const std::vector<std::string>& args);
 int RunWatch(const std::vector<std::string>& args);
 int RunExport(const std::vector<std::string>& args);
 int RunImport(const std::vector<std::string>& args);
+int RunCalibrate(const std::vector<std::string>& args);
+int RunCalibrateCapture(const std::vector<std::string>& args);
 
 }  // namespace vellum

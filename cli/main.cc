@@ -22,6 +22,7 @@ constexpr char kUsage[] =
     "  watch      follow the station's bus until scans are restored\n"
     "  export     write a recorded scan log as a scan directory (vellum export LOG DIR)\n"
     "  import     write a scan directory as a scan log (vellum import DIR LOG)\n"
+    "  calibrate  calibrate camera, projector and table from board poses (capture | solve)\n"
     "\n"
     "Run 'vellum COMMAND --help' for a command's flags.\n";
 
@@ -44,6 +45,7 @@ int main(int argc, char** argv) {
     if (command == "watch") return vellum::RunWatch(args);
     if (command == "export") return vellum::RunExport(args);
     if (command == "import") return vellum::RunImport(args);
+    if (command == "calibrate") return vellum::RunCalibrate(args);
     std::fprintf(stderr, "vellum: unknown command '%s'\n\n%s", command.c_str(), kUsage);
     return 2;
   } catch (const vellum::UsageError& e) {

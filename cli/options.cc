@@ -1,5 +1,7 @@
 #include "cli/options.h"
 
+#include <cmath>
+#include <cstdio>
 #include <opencv2/imgcodecs.hpp>
 
 namespace vellum {
@@ -34,6 +36,10 @@ std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
       {"page-size", "WxH", prefix + "page size, mm", "190x240"},
       {"noise", "DN", prefix + "camera noise sigma, DN", "1.5"},
       {"seed", "N", prefix + "noise seed (the same seed gives the same images)", "1"},
+      {"pose", "RX,RY,RZ,X,Y,Z",
+       prefix + "hold the page in a rigid pose (a calibration board): turned about x, y, z by "
+                "these degrees about its centre, its centre then at X, Y, Z mm",
+       "0,0,0,0,0,0"},
   };
 }
 
@@ -46,6 +52,15 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   const cv::Size page_size = flags.GetSize("page-size");
   page->size_mm = cv::Size2d(page_size.width, page_size.height);
   light->noise_dn = flags.GetDouble("noise", 0, 100);
+  double pose[6];
+  char end = 0;
+  if (std::sscanf(flags.Get("pose").c_str(), "%lf,%lf,%lf,%lf,%lf,%lf%c", &pose[0], &pose[1],
+                  &pose[2], &pose[3], &pose[4], &pose[5], &end) != 6 ||
+      !std::isfinite(pose[0] + pose[1] + pose[2] + pose[3] + pose[4] + pose[5])) {
+    throw UsageError("--pose must be six numbers RX,RY,RZ,X,Y,Z, got '" + flags.Get("pose") + "'");
+  }
+  page->pose_rotation = PoseRotation(pose[0], pose[1], pose[2]);
+  page->pose_translation = cv::Vec3d(pose[3], pose[4], pose[5]);
   *seed = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
   texture->seed = *seed;
   const std::string tex = flags.Get("texture");

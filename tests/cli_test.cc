@@ -250,5 +250,50 @@ TEST_F(CliTest, MissingScanDirectory) {
                    "not a directory");
 }
 
+// Calibration from board poses rendered by `vellum render --pose` (a 640x480 camera and a
+// 512x384 projector: 0.6 mm per camera pixel), solved by `vellum calibrate solve`: the
+// calibration YAML and its report are written and the focal lengths are the rig's; bad poses
+// are named and the rest used; too few poses fail.
+TEST_F(CliTest, CalibrateSolveRecoversTheRigFromRenderedPoses) {
+  Calibration rig = DefaultRig();
+  rig.camera.size = {640, 480};
+  rig.camera.matrix = cv::Matx33d(960, 0, 319.5, 0, 960, 239.5, 0, 0, 1);
+  rig.projector.size = {512, 384};
+  rig.projector.matrix = cv::Matx33d(900, 0, 255.5, 0, 900, 191.5, 0, 0, 1);
+  const std::string rig_file = (root_ / "calib_rig.yaml").string();
+  ASSERT_TRUE(WriteCalibration(rig_file, rig).ok());
+  const char* poses[] = {"0,0,0,0,0,0",    "18,0,4,0,0,60",   "-18,0,-4,0,0,60",  "0,20,0,0,0,55",
+                         "0,-20,3,5,0,55", "12,14,6,-8,6,70", "-12,-14,8,0,-5,45"};
+  std::string dirs;
+  for (int i = 0; i < 7; ++i) {
+    const std::string dir = (root_ / ("pose" + std::to_string(i))).string();
+    const Result r =
+        RunVellum("render --page flat --truth false --calibration " + rig_file + " --seed " +
+                  std::to_string(i + 3) + " --pose " + poses[i] + " --out " + dir);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    if (i > 0) dirs += " " + dir;
+  }
+  const std::string out = (root_ / "solved.yaml").string();
+  const std::string missing = (root_ / "no_such_pose").string();
+  const Result r = RunVellum("calibrate solve --board 16x21 --square 10 --table " +
+                             (root_ / "pose0").string() + " --out " + out + dirs + " " + missing);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("overall: 7 poses, 2352 corners"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("no_such_pose: not used"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(out + ".report.txt"));
+  Calibration solved;
+  ASSERT_TRUE(ReadCalibration(out, &solved).ok());
+  EXPECT_NEAR(solved.camera.matrix(0, 0), 960, 960 * 0.003);
+  EXPECT_NEAR(solved.projector.matrix(0, 0), 900, 900 * 0.003);
+  EXPECT_NEAR(solved.camera.Center()[2], rig.camera.Center()[2], 1.0);
+
+  const Result few = RunVellum("calibrate solve --table " + (root_ / "pose0").string() + " --out " +
+                               out + " " + (root_ / "pose1").string());
+  EXPECT_EQ(few.exit_code, 1) << few.output;
+  EXPECT_NE(few.output.find("only 2 usable board poses"), std::string::npos) << few.output;
+  EXPECT_EQ(RunVellum("calibrate solve --board 2x9 --table x --out y").exit_code, 2);
+  EXPECT_EQ(RunVellum("calibrate").exit_code, 2);
+}
+
 }  // namespace
 }  // namespace vellum

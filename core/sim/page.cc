@@ -93,6 +93,14 @@ cv::Vec2d Page::Profile(double sigma) const {
   return p;
 }
 
+cv::Matx33d PoseRotation(double rx_deg, double ry_deg, double rz_deg) {
+  const double a = rx_deg * kDeg, b = ry_deg * kDeg, c = rz_deg * kDeg;
+  const cv::Matx33d x(1, 0, 0, 0, std::cos(a), -std::sin(a), 0, std::sin(a), std::cos(a));
+  const cv::Matx33d y(std::cos(b), 0, std::sin(b), 0, 1, 0, -std::sin(b), 0, std::cos(b));
+  const cv::Matx33d z(std::cos(c), -std::sin(c), 0, std::sin(c), std::cos(c), 0, 0, 0, 1);
+  return z * y * x;
+}
+
 cv::Vec3d Page::Point(double s, double t) const {
   return options_.pose_rotation * ShapePoint(s, t) + options_.pose_translation;
 }

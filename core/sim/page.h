@@ -39,6 +39,9 @@ struct PageOptions {
   cv::Vec3d pose_translation{0.0, 0.0, 0.0};
 };
 
+// The rotation of a page pose: about x, then y, then z (degrees), R = Rz Ry Rx.
+cv::Matx33d PoseRotation(double rx_deg, double ry_deg, double rz_deg);
+
 class Page {
  public:
   explicit Page(const PageOptions& options);
