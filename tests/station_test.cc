@@ -538,6 +538,29 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
       << decoder_log;
 }
 
+// `vellum calibrate capture` records one board pose through the real camera (sim, the board
+// held tilted above the table) and projector daemons as a scan directory, in which
+// `vellum calibrate solve` finds every corner of the board.
+TEST_F(StationTest, CalibrateCaptureRecordsABoardPoseThroughTheStation) {
+  Start(Daemon("vellum-camera"),
+        {"--backend", "sim", "--rig", kRig, "--page", "flat", "--pose", "18,0,4,0,0,60"});
+  Start(Daemon("vellum-projector"), {"--calibration", kRig, "--fullscreen", "false"},
+        {"SDL_VIDEODRIVER=offscreen"});
+  WaitForHeartbeats({"STATUS_CAMERA", "STATUS_PROJECTOR"});
+  const std::string pose = dir_ + "/pose";
+  std::string out;
+  ASSERT_EQ(RunTool({"calibrate", "capture", "--url", url_, "--out", pose}, &out), 0) << out;
+  Scan scan;
+  const Status s = ReadScan(pose, &scan);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(scan.frames.size(), scan.sequence.patterns.size());
+  EXPECT_EQ(scan.texture.size(), cv::Size(640, 480));
+  // One pose is too few to solve, but its board is found whole and lit.
+  EXPECT_EQ(RunTool({"calibrate", "solve", "--table", pose, "--out", dir_ + "/cal.yaml"}, &out), 1);
+  EXPECT_NE(out.find("336 corners"), std::string::npos) << out;
+  EXPECT_NE(out.find("only 1 usable board poses of 1"), std::string::npos) << out;
+}
+
 // The disk fills up while a scan is recorded: the scan fails with a status that says so, the
 // decoder keeps running, and the scan recorded before it is intact on disk.
 TEST_F(StationTest, DiskFullWhileRecordingFailsTheScanAndKeepsEarlierScans) {
