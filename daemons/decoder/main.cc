@@ -5,6 +5,7 @@
 // daemon restarts, or the decoder itself, every pending scan is decoded again from disk.
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <map>
 #include <memory>
 
@@ -101,12 +102,16 @@ class DecoderNode {
     for (int64_t id : FindPending(data_)) {
       if (set_.Started() && set_.scan_id() == id && !set_.Complete()) continue;
       const ScanFolder folder = ScanFolder::For(data_, id);
+      if (RestoredSinceSent(folder)) {  // Its RESTORED went out while this process was away.
+        ClearPending(folder);
+        continue;
+      }
       const int attempts = PendingAttempts(folder);
       if (attempts >= kMaxAttempts) {
         ClearPending(folder);
         node_->Error("scan " + std::to_string(id) + " failed: not restored after " +
-                         std::to_string(attempts) + " attempts (" + why +
-                         " each time); its captures are kept in " + folder.raw() +
+                         std::to_string(attempts) + " attempts (the last ended when " + why +
+                         "); its captures are kept in " + folder.raw() +
                          " (`vellum process --scan " + folder.raw() + "` restores it by hand)",
                      id);
         node_->Count("scans failed");
@@ -128,6 +133,14 @@ class DecoderNode {
       node_->Count("scans sent again");
       DecodeAndPublish(id, scan);
     }
+  }
+
+  // The restorer wrote the scan's results after the scan was last sent down the pipeline.
+  static bool RestoredSinceSent(const ScanFolder& folder) {
+    std::error_code a, b;
+    const auto sent = std::filesystem::last_write_time(folder.pending(), a);
+    const auto restored = std::filesystem::last_write_time(folder.results() + "/restored.json", b);
+    return !a && !b && restored >= sent;
   }
 
   std::string Seconds() const { return std::to_string(static_cast<int>(timeout_s_)); }
