@@ -56,7 +56,9 @@ CameraModel ToModel(cv::Size size, const cv::Mat& k, const cv::Mat& d, const cv:
   CameraModel m;
   m.size = size;
   m.matrix = cv::Matx33d(k);
-  for (int i = 0; i < 5; ++i) m.distortion[i] = i < d.total() ? d.at<double>(i) : 0.0;
+  for (int i = 0; i < 5; ++i) {
+    m.distortion[i] = static_cast<size_t>(i) < d.total() ? d.at<double>(i) : 0.0;
+  }
   m.rotation = r;
   m.translation = t;
   return m;
@@ -111,12 +113,12 @@ BoardView DetectBoard(const Scan& scan, const BoardSpec& board, const std::strin
   for (size_t k = 0; k < corners.size(); ++k) {
     from.clear();
     to.clear();
-    const int cu = static_cast<int>(std::lround(corners[k].x)),
-              cv_ = static_cast<int>(std::lround(corners[k].y));
-    for (int v = std::max(0, cv_ - half); v <= std::min(gray.rows - 1, cv_ + half); ++v) {
+    const int cx = static_cast<int>(std::lround(corners[k].x)),
+              cy = static_cast<int>(std::lround(corners[k].y));
+    for (int v = std::max(0, cy - half); v <= std::min(gray.rows - 1, cy + half); ++v) {
       const float* px = decoded.projector_x.ptr<float>(v);
       const float* py = decoded.projector_y.ptr<float>(v);
-      for (int u = std::max(0, cu - half); u <= std::min(gray.cols - 1, cu + half); ++u) {
+      for (int u = std::max(0, cx - half); u <= std::min(gray.cols - 1, cx + half); ++u) {
         if (std::isnan(px[u]) || std::isnan(py[u])) continue;
         from.emplace_back(static_cast<float>(u), static_cast<float>(v));
         to.emplace_back(px[u], py[u]);
