@@ -264,6 +264,25 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
     check(views[n].name + ": camera", sol.views[n].camera_rms_px);
     check(views[n].name + ": projector", sol.views[n].projector_rms_px);
   }
+  // Outlier poses: far above the others' errors (a board that moved, or was bent).
+  auto median = [&](double ViewReport::*field) {
+    std::vector<double> v;
+    for (size_t n : used) v.push_back(sol.views[n].*field);
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  const double mc = median(&ViewReport::camera_rms_px), mp = median(&ViewReport::projector_rms_px);
+  for (size_t n : used) {
+    const ViewReport& r = sol.views[n];
+    constexpr double kFloor = 0.2;  // px: below this no pose is worth capturing again.
+    if ((r.camera_rms_px > 3 * mc && r.camera_rms_px > kFloor) ||
+        (r.projector_rms_px > 3 * mp && r.projector_rms_px > kFloor)) {
+      sol.warnings.push_back(views[n].name + ": an outlier (camera " + Px(r.camera_rms_px) +
+                             ", projector " + Px(r.projector_rms_px) + " against medians " +
+                             Px(mc) + ", " + Px(mp) +
+                             "): did the board move or bend? Capture it again or leave it out");
+    }
+  }
   sol.status = Status::Ok();
   return sol;
 }

@@ -68,7 +68,9 @@ struct CalibrationSolution {
   std::vector<ViewReport> views;  // One per input pose, in input order.
   int views_used = 0, corners_used = 0;
   double camera_rms_px = 0, projector_rms_px = 0, stereo_rms_px = 0;
-  std::vector<std::string> warnings;  // Errors above CalibrateOptions::warn_reprojection_px.
+  // Errors above CalibrateOptions::warn_reprojection_px, and outlier poses (errors over three
+  // times the poses' median).
+  std::vector<std::string> warnings;
 };
 
 // Solves from the detected poses; views[table] is the pose lying flat on the table.

@@ -190,6 +190,19 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
       << s.views[5].status.message();
   const std::string report = FormatCalibrationReport(s);
   EXPECT_NE(report.find("pose away: not used"), std::string::npos) << report;
+  EXPECT_TRUE(s.warnings.empty()) << report;
+  // A pose whose board moved during its scan: its corners disagree with any one pose of the
+  // board by about a pixel. It is used, and reported as an outlier.
+  std::vector<BoardView> moved = views;
+  cv::RNG rng(5);
+  for (cv::Point2f& c : moved[3].camera_corners) {
+    c += cv::Point2f(static_cast<float>(rng.gaussian(1.0)), static_cast<float>(rng.gaussian(1.0)));
+  }
+  const CalibrationSolution with_outlier = SolveCalibration(moved, 0, BoardSpec());
+  ASSERT_TRUE(with_outlier.status.ok()) << with_outlier.status.message();
+  const std::string warned = FormatCalibrationReport(with_outlier);
+  EXPECT_NE(warned.find("warning: pose3: an outlier"), std::string::npos) << warned;
+  EXPECT_NE(warned.find("above 0.500 px"), std::string::npos) << warned;
   // Too few poses.
   const CalibrationSolution few = SolveCalibration({views[0], views[1], views[4]}, 0, BoardSpec());
   EXPECT_FALSE(few.status.ok());
