@@ -463,9 +463,9 @@ TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGo
 // A processing daemon killed while a scan is on its way to it, then restarted (as systemd
 // does): the decoder sees the new pid and sends the scan again from disk, and the scan is
 // restored exactly as `vellum process` restores it. The daemon is frozen (SIGSTOP) before the
-// scan reaches it, so it is killed holding the scan, whatever the machine's speed. Once for the
-// triangulator (the restarted one takes the scan's calibration from disk) and once for the
-// restorer (and the texture).
+// scan reaches it, so it is killed holding the scan, whatever the machine's speed. Once for each
+// processing daemon after the decoder: the restarted triangulator takes the scan's calibration
+// from disk, the flattener and restorer the texture too.
 TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRestored) {
   StartProcessing();
   WaitForHeartbeats(kProcessingStatus);
@@ -492,8 +492,9 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
     const char* upstream;  // The stage before it, and its counter of scans done.
     const char* done;
   } victims[] = {{"vellum-triangulator", "STATUS_DECODER", "scans decoded"},
+                 {"vellum-flattener", "STATUS_TRIANGULATOR", "scans triangulated"},
                  {"vellum-restorer", "STATUS_FLATTENER", "scans flattened"}};
-  for (int round = 0; round < 2; ++round) {
+  for (int round = 0; round < 3; ++round) {
     const auto& victim = victims[round];
     SCOPED_TRACE(victim.daemon);
     Process* target = nullptr;
@@ -502,14 +503,15 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
     }
     ASSERT_NE(target, nullptr);
     ASSERT_EQ(kill(target->pid(), SIGSTOP), 0);
+    const int64_t done_before = counter(victim.upstream, victim.done);  // Restarts reset it.
     const int64_t id = 100 + round;
     const std::string log = dir_ + "/scan" + std::to_string(id) + ".lcmlog";
     ASSERT_EQ(RunTool({"import", dir_ + "/exported", log, "--scan-id", std::to_string(id)}, &out),
               0)
         << out;
     Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, log}, dir_ + "/player.log");
-    ASSERT_TRUE(
-        HandleUntil(*lcm_, 120, [&] { return counter(victim.upstream, victim.done) >= round + 1; }))
+    ASSERT_TRUE(HandleUntil(*lcm_, 120,
+                            [&] { return counter(victim.upstream, victim.done) > done_before; }))
         << victim.upstream << " never finished the scan";
     target->Kill();
     Start(Daemon(victim.daemon), {"--data", dir_ + "/scans"});
@@ -530,12 +532,12 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
     player.Wait(60);
   }
   const std::string decoder_log = processes_[0]->Output();
-  EXPECT_NE(decoder_log.find("vellum-triangulator restarted before the scan was restored"),
-            std::string::npos)
-      << decoder_log;
-  EXPECT_NE(decoder_log.find("vellum-restorer restarted before the scan was restored"),
-            std::string::npos)
-      << decoder_log;
+  for (const auto& victim : victims) {
+    EXPECT_NE(
+        decoder_log.find(std::string(victim.daemon) + " restarted before the scan was restored"),
+        std::string::npos)
+        << decoder_log;
+  }
 }
 
 // `vellum calibrate capture` records one board pose through the real camera (sim, the board
