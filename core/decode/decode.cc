@@ -635,7 +635,7 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
         for (size_t p = 0; p < raw.size(); ++p) {
           float* r = raw[p].ptr<float>(y);
           const float* f = fit_[p].ptr<float>(y);
-          for (int x = 0; x < width; ++x) r[x] = (w[x] > 0) & (res[x] <= cut) ? f[x] : r[x];
+          for (int x = 0; x < width; ++x) r[x] = ((w[x] > 0) & (res[x] <= cut)) ? f[x] : r[x];
         }
       }
       fallbacks += n;
