@@ -27,15 +27,7 @@ int RunCalibrateSolve(const std::vector<std::string>& args) {
                   {"out", "FILE", "the calibration YAML to write", ""},
               });
   std::vector<std::string> dirs, rest;
-  for (size_t i = 0; i < args.size(); ++i) {
-    if (args[i].rfind("--", 0) == 0) {
-      rest.push_back(args[i]);
-      if (args[i].find('=') == std::string::npos && args[i] != "--help" && i + 1 < args.size())
-        rest.push_back(args[++i]);
-    } else {
-      dirs.push_back(args[i]);
-    }
-  }
+  SplitPositional(args, &dirs, &rest);
   if (!flags.Parse(rest)) return 0;
   BoardSpec board;
   board.inner_corners = flags.GetSize("board");

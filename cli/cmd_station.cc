@@ -112,21 +112,6 @@ bool Follow(Node& node, double timeout_s, const std::function<bool()>& done) {
 
 std::vector<Flags::Spec> BusSpecs() { return {{"url", "URL", "LCM bus", station::kDefaultUrl}}; }
 
-// Splits arguments into positional ones and flags (with their values).
-void SplitPositional(const std::vector<std::string>& args, std::vector<std::string>* positional,
-                     std::vector<std::string>* flags) {
-  for (size_t i = 0; i < args.size(); ++i) {
-    if (args[i].rfind("--", 0) == 0) {
-      flags->push_back(args[i]);
-      if (args[i].find('=') == std::string::npos && args[i] != "--help" && i + 1 < args.size()) {
-        flags->push_back(args[++i]);
-      }
-    } else {
-      positional->push_back(args[i]);
-    }
-  }
-}
-
 }  // namespace
 
 int RunScan(const std::vector<std::string>& args) {

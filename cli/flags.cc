@@ -157,4 +157,18 @@ cv::Size Flags::GetSize(const std::string& name) const {
   throw UsageError("flag --" + name + " must be WIDTHxHEIGHT, e.g. 1024x768, got '" + v + "'");
 }
 
+void SplitPositional(const std::vector<std::string>& args, std::vector<std::string>* positional,
+                     std::vector<std::string>* flags) {
+  for (size_t i = 0; i < args.size(); ++i) {
+    if (args[i].rfind("--", 0) == 0) {
+      flags->push_back(args[i]);
+      if (args[i].find('=') == std::string::npos && args[i] != "--help" && i + 1 < args.size()) {
+        flags->push_back(args[++i]);
+      }
+    } else {
+      positional->push_back(args[i]);
+    }
+  }
+}
+
 }  // namespace vellum

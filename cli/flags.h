@@ -44,4 +44,9 @@ class Flags {
   std::map<std::string, std::string> values_;
 };
 
+// Splits a command's arguments into positional ones and flags with their values ("--name
+// value" or "--name=value"), for commands that take both (vellum export LOG DIR).
+void SplitPositional(const std::vector<std::string>& args, std::vector<std::string>* positional,
+                     std::vector<std::string>* flags);
+
 }  // namespace vellum
