@@ -485,6 +485,11 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
     }
     return 0;
   };
+  // The decoder must know each daemon's pid before one is frozen, or the restart looks to it
+  // like a daemon's first start (its heartbeat may have gone out before the decoder listened).
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return counter("STATUS_DECODER", "processing daemons heard") == 3;  // Tri., flat., rest.
+  })) << "the decoder did not hear every processing daemon";
   std::string out;
   ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
   const struct {

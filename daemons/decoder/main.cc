@@ -77,6 +77,7 @@ class DecoderNode {
   // On the LCM thread. A new pid is a restarted daemon: whatever it held is lost. An error it
   // reports about a pending scan ends that scan with a status the operator sees.
   void OnDownstreamStatus(const status_t& msg) {
+    if (downstream_.count(msg.process) == 0) node_->Count("processing daemons heard");
     Seen& seen = downstream_[msg.process];
     if (seen.pid != 0 && msg.pid != seen.pid) {
       const std::string why = msg.process + " restarted";
