@@ -65,10 +65,11 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
   };
   // The sheet's graph as a lower-triangular matrix: the pattern of both systems below, with
   // the Laplacian's values. Per spring, the storage slots of its off-diagonal entry and of
-  // its two nodes' diagonal entries.
+  // its two nodes' diagonal entries; per node, its diagonal slot.
   const double prox = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
   Eigen::SparseMatrix<double> graph(n, n);
   std::vector<std::array<int, 3>> slots(mesh.springs.size());
+  std::vector<int> diagonal(n);
   {
     std::vector<Eigen::Triplet<double>> lt;
     lt.reserve(3 * mesh.springs.size() + n);
@@ -88,6 +89,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
       slots[k] = {slot(std::max(a, b), std::min(a, b)), slot(a, a), slot(b, b)};
     }
+    for (int v = 0; v < n; ++v) diagonal[v] = slot(v, v);
   }
   // Local/global iterations first (Liu et al. 2013): each projects every spring onto its rest
   // length (local) and solves one fixed, pre-factored Laplacian system (global). The energy
@@ -112,8 +114,9 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       pos(v, 1) = x[2 * v + 1];
     }
     double e_prev = std::numeric_limits<double>::infinity();
+    Eigen::MatrixXd rhs(n, 2);
     for (int k = 0; k < options.local_global_iterations; ++k) {
-      Eigen::MatrixXd rhs = prox * pos;
+      rhs = prox * pos;
       for (const Spring& s : mesh.springs) {
         const int a = idx.var[s.a], b = idx.var[s.b];
         const double dx = pos(a, 0) - pos(b, 0), dy = pos(a, 1) - pos(b, 1);
@@ -125,7 +128,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
         rhs(b, 1) -= fy;
       }
       lap_solver.Solve(&rhs);
-      pos = rhs;
+      pos.swap(rhs);
       for (int v = 0; v < n; ++v) {
         x[2 * v] = pos(v, 0);
         x[2 * v + 1] = pos(v, 1);
@@ -182,7 +185,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     }
     if (refactor) {
       for (int v = 0; v < n; ++v) {
-        const int d = 4 * static_cast<int>(&graph.coeffRef(v, v) - graph.valuePtr());
+        const size_t d = 4 * static_cast<size_t>(diagonal[v]);
         blocks[d] += lambda;
         blocks[d + 3] += lambda;
       }
