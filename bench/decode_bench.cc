@@ -162,16 +162,11 @@ int main(int argc, char** argv) {
   std::printf("threads: %d (cv::getNumThreads)\n", cv::getNumThreads());
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  const double ours = reporter.Time("BM_Vellum_DecodeTriangulate");
   for (int threads : {1, 2}) {
-    const double opencv =
-        reporter.Time("BM_OpenCV_GrayCodeDecode/" + std::to_string(threads) + "/");
-    if (ours > 0 && opencv > 0) {
-      std::printf(
-          "vellum decode+triangulate %.1f ms vs OpenCV GrayCodePattern decode alone on %d "
-          "thread%s %.1f ms: OpenCV / vellum = %.1fx\n",
-          ours, threads, threads > 1 ? "s" : "", opencv, opencv / ours);
-    }
+    reporter.PrintRatio("BM_Vellum_DecodeTriangulate", "vellum decode+triangulate",
+                        "BM_OpenCV_GrayCodeDecode/" + std::to_string(threads) + "/",
+                        "OpenCV decode alone on " + std::to_string(threads) +
+                            (threads > 1 ? " threads" : " thread"));
   }
   benchmark::Shutdown();
   return 0;

@@ -233,22 +233,10 @@ int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  const double ours = reporter.Time("BM_Vellum_GaussNewton_45x45"),
-               cgal = reporter.Time("BM_CGAL_ARAP_45x45");
-  if (ours > 0 && cgal > 0) {
-    std::printf(
-        "vellum gauss-newton %.2f ms vs CGAL ARAP %.2f ms on the same 45x45 sheet: "
-        "CGAL / vellum = %.1fx\n",
-        ours, cgal, cgal / ours);
-  }
-  const double frontal = reporter.Time("BM_Factor_Frontal_200x150"),
-               simplicial = reporter.Time("BM_Factor_EigenSimplicialLDLT_200x150");
-  if (frontal > 0 && simplicial > 0) {
-    std::printf(
-        "factorising the 200x150 normal equations: vellum frontal %.1f ms vs Eigen "
-        "SimplicialLDLT %.1f ms: Eigen / vellum = %.1fx\n",
-        frontal, simplicial, simplicial / frontal);
-  }
+  reporter.PrintRatio("BM_Vellum_GaussNewton_45x45", "vellum gauss-newton 45x45",
+                      "BM_CGAL_ARAP_45x45", "CGAL ARAP");
+  reporter.PrintRatio("BM_Factor_Frontal_200x150", "vellum frontal factor 200x150",
+                      "BM_Factor_EigenSimplicialLDLT_200x150", "Eigen SimplicialLDLT");
   benchmark::Shutdown();
   return 0;
 }

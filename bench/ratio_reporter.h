@@ -4,6 +4,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include <cstdio>
 #include <map>
 #include <string>
 #include <vector>
@@ -22,6 +23,15 @@ class RatioReporter : public benchmark::ConsoleReporter {
       if (name.rfind(prefix, 0) == 0) return t;
     }
     return 0.0;
+  }
+  // After the table: "<ours_label> T ms vs <peer_label> T ms: peer / ours = Rx", when both
+  // ran (a --benchmark_filter may leave either out). Times in ms (the benchmarks' unit).
+  void PrintRatio(const std::string& ours, const std::string& ours_label, const std::string& peer,
+                  const std::string& peer_label) const {
+    const double a = Time(ours), b = Time(peer);
+    if (a <= 0 || b <= 0) return;
+    std::printf("%s %.2f ms vs %s %.2f ms: peer / ours = %.1fx\n", ours_label.c_str(), a,
+                peer_label.c_str(), b, b / a);
   }
 
  private:

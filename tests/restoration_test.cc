@@ -78,27 +78,36 @@ INSTANTIATE_TEST_SUITE_P(Developable, FlattenAccuracy,
                                            PageShape::kCone),
                          [](const auto& info) { return std::string(ToString(info.param)); });
 
-// Fine sheets (the issue asks for up to at least 300 x 300): a 200 x 150 grid of ~1 mm cells.
-TEST(FlattenFine, A200x150SheetMeetsTheSameBar) {
-  const Pipeline p = RunPipeline(PageShape::kCurl, FlattenSolver::kGaussNewton, 31, {200, 150});
+// Fine sheets (the issue asks for up to at least 300 x 300): 200 x 150 (cells of about 1 mm)
+// and 300 x 300, each with most of its nodes on the page.
+struct FineSheet {
+  cv::Size grid;
+  int min_nodes;
+};
+
+class FlattenFine : public ::testing::TestWithParam<FineSheet> {};
+
+TEST_P(FlattenFine, MeetsTheSameBar) {
+  const cv::Size grid = GetParam().grid;
+  const Pipeline p = RunPipeline(PageShape::kCurl, FlattenSolver::kGaussNewton, 31, grid);
+  ASSERT_TRUE(p.flat.status.ok()) << p.flat.status.message();
   const FlatErrorStats st = CompareFlat(p.gantry->truth(), p.mesh, p.flat.flat);
-  std::printf("[flatten] curl 200x150 nodes %d: RMS %.4f mm, mean edge error %.4f%%, %d folds\n",
-              st.nodes, st.rms_mm, 100 * st.mean_edge_error, p.flat.folded_quads);
-  EXPECT_GT(st.nodes, 25000);
+  std::printf("[flatten] curl %dx%d nodes %d: RMS %.4f mm, mean edge error %.4f%%, %d folds\n",
+              grid.width, grid.height, st.nodes, st.rms_mm, 100 * st.mean_edge_error,
+              p.flat.folded_quads);
+  EXPECT_GT(st.nodes, GetParam().min_nodes);
   EXPECT_LE(st.rms_mm, 0.08);
+  EXPECT_LE(st.mean_edge_error, 0.003);
   EXPECT_EQ(p.flat.folded_quads, 0);
 }
 
-TEST(FlattenFine, A300x300SheetMeetsTheSameBar) {
-  const Pipeline p = RunPipeline(PageShape::kCurl, FlattenSolver::kGaussNewton, 31, {300, 300});
-  ASSERT_TRUE(p.flat.status.ok()) << p.flat.status.message();
-  const FlatErrorStats st = CompareFlat(p.gantry->truth(), p.mesh, p.flat.flat);
-  std::printf("[flatten] curl 300x300 nodes %d: RMS %.4f mm, mean edge error %.4f%%, %d folds\n",
-              st.nodes, st.rms_mm, 100 * st.mean_edge_error, p.flat.folded_quads);
-  EXPECT_GT(st.nodes, 60000);
-  EXPECT_LE(st.rms_mm, 0.08);
-  EXPECT_EQ(p.flat.folded_quads, 0);
-}
+INSTANTIATE_TEST_SUITE_P(Sheets, FlattenFine,
+                         ::testing::Values(FineSheet{{200, 150}, 25000},
+                                           FineSheet{{300, 300}, 60000}),
+                         [](const auto& info) {
+                           return "A" + std::to_string(info.param.grid.width) + "x" +
+                                  std::to_string(info.param.grid.height);
+                         });
 
 // Real vellum is not developable: a 3 mm bubble (sigma 25 mm) must flatten without folding,
 // with its residual strain reported, and restore with no fold-over or tear (every quad keeps
