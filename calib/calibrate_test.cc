@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "core/geometry/triangulate.h"
+#include "core/io/calibration_io.h"
 #include "core/patterns/patterns.h"
 #include "core/sim/evaluate.h"
 #include "core/sim/gantry.h"
@@ -58,11 +59,9 @@ const std::vector<Pose> kPoses = {
 
 // The station's small rig (config/small_rig.yaml): for the tests of behaviour, quicker to render.
 Calibration SmallRig() {
-  Calibration rig = DefaultRig();
-  rig.camera.size = {640, 480};
-  rig.camera.matrix = cv::Matx33d(960, 0, 319.5, 0, 960, 239.5, 0, 0, 1);
-  rig.projector.size = {512, 384};
-  rig.projector.matrix = cv::Matx33d(900, 0, 255.5, 0, 900, 191.5, 0, 0, 1);
+  Calibration rig;
+  const Status s = ReadCalibration(VELLUM_SOURCE_DIR "/config/small_rig.yaml", &rig);
+  if (!s.ok()) ADD_FAILURE() << s.message();
   return rig;
 }
 
