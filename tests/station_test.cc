@@ -660,7 +660,12 @@ TEST_F(StationTest, ScansBackToBackKeepMemoryBounded) {
     ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] { return restored.count(k) > 0; }))
         << "scan " << k << " not restored";
     player.Wait(30);
-    fs::remove_all(dir_ + "/scans/scan-" + std::to_string(k));  // Keep the disk in check.
+    // Keep the disk in check, once the decoder has cleared the scan's pending mark on its
+    // RESTORED (it deletes that file itself; removing the folder under it races).
+    const std::string folder = dir_ + "/scans/scan-" + std::to_string(k);
+    ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return !fs::exists(folder + "/pending"); }))
+        << "scan " << k << " still pending after its RESTORED";
+    fs::remove_all(folder);
     for (auto& p : processes_) rss[p->name()].push_back(PeakRssMb(p->pid()));
   }
   for (const auto& [name, series] : rss) {
