@@ -12,6 +12,13 @@
 namespace vellum::station {
 namespace fs = std::filesystem;
 
+// Whether `path` exists; an error looking (a folder an operator made unreadable) counts as no,
+// never as an exception on a daemon's thread.
+static bool Exists(const fs::path& path) {
+  std::error_code ec;
+  return fs::exists(path, ec);
+}
+
 ScanFolder ScanFolder::For(const std::string& data_dir, int64_t scan_id) {
   return {(fs::path(data_dir) / ("scan-" + std::to_string(scan_id))).string()};
 }
@@ -58,7 +65,7 @@ std::vector<int64_t> FindPending(const std::string& data_dir) {
     if (name.rfind("scan-", 0) != 0) continue;
     char* stop = nullptr;
     const long long id = std::strtoll(name.c_str() + 5, &stop, 10);
-    if (id > 0 && *stop == '\0' && fs::exists(it->path() / "pending")) ids.push_back(id);
+    if (id > 0 && *stop == '\0' && Exists(it->path() / "pending")) ids.push_back(id);
   }
   std::sort(ids.begin(), ids.end());
   return ids;
@@ -181,7 +188,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
   *count = 0;
   Status s = MakeDirectories(folder.raw());
   if (!s.ok()) return s;
-  if (!fs::exists(folder.log())) return Status::Ok();
+  if (!Exists(folder.log())) return Status::Ok();
   CaptureSet earlier;
   std::vector<capture_t> taken;
   {
@@ -200,7 +207,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
   if (earlier.Complete()) return Status::Ok();
   for (const capture_t& c : taken) {
     const std::string path = (fs::path(folder.raw()) / ImageName(c.pattern_index)).string();
-    if (fs::exists(path)) continue;
+    if (Exists(path)) continue;
     cv::Mat image;
     if (FromMessage(c.image, &image).ok()) {
       s = WriteImage(path, image);
@@ -282,7 +289,7 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
 
 Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, bool* has_calibration,
                    calibration_t* calibration, int64_t* found_scan_id) {
-  if (!fs::exists(log_path)) return Status::Error(log_path + ": file is missing");
+  if (!Exists(log_path)) return Status::Error(log_path + ": file is missing");
   lcm::LogFile log(log_path, "r");
   if (!log.good()) return Status::Error(log_path + ": cannot open as an LCM log");
   CaptureSet set;
