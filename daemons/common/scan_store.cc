@@ -148,13 +148,54 @@ Scan CaptureSet::ToScan() const {
   return scan;
 }
 
+Status TrimTornTail(const std::string& path, int64_t* cut) {
+  *cut = 0;
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) return Status::Ok();  // No log yet.
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::Error(path + ": cannot read the scan's log");
+  // Each event: sync word, event number, timestamp, channel length, data length (big-endian),
+  // then the channel and the data.
+  constexpr uint32_t kSync = 0xEDA1DA01u;
+  constexpr int64_t kHeader = 4 + 8 + 8 + 4 + 4;
+  auto be32 = [](const unsigned char* b) {
+    return (uint32_t{b[0]} << 24) | (uint32_t{b[1]} << 16) | (uint32_t{b[2]} << 8) | b[3];
+  };
+  const int64_t total = static_cast<int64_t>(size);
+  int64_t end = 0;  // End of the whole events read so far.
+  unsigned char h[kHeader];
+  while (end < total) {
+    if (end + kHeader > total) break;  // A torn header.
+    in.seekg(end);
+    if (!in.read(reinterpret_cast<char*>(h), kHeader)) {
+      return Status::Error(path + ": cannot read the scan's log");
+    }
+    const int64_t channel_len = static_cast<int32_t>(be32(h + 20));
+    const int64_t data_len = static_cast<int32_t>(be32(h + 24));
+    // Not an event header: not a torn tail but damage inside the log. Nothing is cut.
+    if (be32(h) != kSync || channel_len < 0 || data_len < 0) return Status::Ok();
+    if (end + kHeader + channel_len + data_len > total) break;  // A torn body.
+    end += kHeader + channel_len + data_len;
+  }
+  if (end == total) return Status::Ok();
+  in.close();
+  fs::resize_file(path, static_cast<uintmax_t>(end), ec);
+  if (ec) return Status::Error(path + ": cannot cut off its torn last event: " + ec.message());
+  *cut = total - end;
+  return Status::Ok();
+}
+
 Status CaptureLog::Append(const ScanFolder& folder, int64_t scan_id, const std::string& channel,
                           int64_t utime, const std::vector<uint8_t>& bytes) {
+  trimmed_ = 0;
   if (!log_ || scan_id != scan_id_) {
     Close();
     Status s = MakeDirectories(folder.raw());
     if (!s.ok()) return s;
     path_ = folder.log();
+    s = TrimTornTail(path_, &trimmed_);
+    if (!s.ok()) return s;
     auto log = std::make_unique<lcm::LogFile>(path_, "a");
     if (!log->good()) return Status::Error(path_ + ": cannot open the scan's log");
     log_ = std::move(log);

@@ -69,16 +69,25 @@ class CaptureSet {
   std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
 };
 
+// Cuts a torn last event off an LCM log: a process killed in the middle of writing one, or a
+// disk that filled, leaves a partial event, and LCM's reader sees nothing of what is appended
+// after it. Every whole event stays. Sets *cut to the bytes removed (0 for a sound log or none).
+Status TrimTornTail(const std::string& path, int64_t* cut);
+
 // The scan's log, raw/captures.lcmlog, written on the LCM thread the moment a message
 // arrives (an append and a flush: a crash of the process loses nothing it has received).
-// Logs are only ever appended to, never truncated.
+// Logs are only ever appended to; before appending to an existing log its torn last event,
+// if any, is cut off (TrimTornTail), so that what follows stays readable.
 class CaptureLog {
  public:
   Status Append(const ScanFolder& folder, int64_t scan_id, const std::string& channel,
                 int64_t utime, const std::vector<uint8_t>& bytes);
   void Close();
+  // Bytes of a torn event the last Append cut off as it opened the log (for the daemon's log).
+  int64_t trimmed() const { return trimmed_; }
 
  private:
+  int64_t trimmed_ = 0;
   int64_t scan_id_ = 0;
   std::string path_;
   std::unique_ptr<lcm::LogFile> log_;

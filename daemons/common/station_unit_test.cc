@@ -256,6 +256,58 @@ TEST(ScanStore, ALogAndAScanDirectoryConvertBothWaysLosslessly) {
   fs::remove_all(dir);
 }
 
+// A decoder killed in the middle of writing a capture leaves a torn last event; the restarted
+// decoder's appends must stay readable after it (LCM's reader stops at the first bad header).
+TEST(ScanStore, AppendingAfterATornEventKeepsEveryWholeEventReadable) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_torn_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const ScanFolder folder = ScanFolder::For(dir.string(), 9);
+  auto count_events = [&] {
+    lcm::LogFile log(folder.log(), "r");
+    int n = 0;
+    while (log.good() && log.readNextEvent()) ++n;
+    return n;
+  };
+  const std::vector<uint8_t> bytes(5000, 7);
+  {
+    CaptureLog log;
+    for (int k = 0; k < 3; ++k) ASSERT_TRUE(log.Append(folder, 9, "CAPTURE", k, bytes).ok());
+    EXPECT_EQ(log.trimmed(), 0);
+  }
+  const auto whole = fs::file_size(folder.log());
+  const int64_t event = static_cast<int64_t>(whole) / 3;
+  // Torn in the data, then torn in the header: each is cut off, the whole events stay.
+  for (const int64_t keep : {event - 100, int64_t{10}}) {
+    fs::resize_file(folder.log(), whole);
+    CaptureLog extra;  // A fourth event, then torn to `keep` of its bytes.
+    ASSERT_TRUE(extra.Append(folder, 9, "CAPTURE", 3, bytes).ok());
+    extra.Close();
+    fs::resize_file(folder.log(), whole + keep);
+    CaptureLog log;
+    ASSERT_TRUE(log.Append(folder, 9, "CAPTURE", 4, bytes).ok());
+    EXPECT_EQ(log.trimmed(), keep);
+    ASSERT_TRUE(log.Append(folder, 9, "CAPTURE", 5, bytes).ok());
+    EXPECT_EQ(log.trimmed(), 0);  // Said once, as the log is opened.
+    log.Close();
+    EXPECT_EQ(count_events(), 5) << "torn to " << keep << " bytes";
+    EXPECT_EQ(fs::file_size(folder.log()), whole + 2 * event);
+  }
+  // Damage inside the log (not an event header where one should start) is not cut.
+  fs::resize_file(folder.log(), whole);
+  {
+    std::fstream f(folder.log(), std::ios::binary | std::ios::in | std::ios::out);
+    f.seekp(event);
+    f.put('x');
+  }
+  int64_t cut = -1;
+  ASSERT_TRUE(TrimTornTail(folder.log(), &cut).ok());
+  EXPECT_EQ(cut, 0);
+  EXPECT_EQ(fs::file_size(folder.log()), whole);
+  ASSERT_TRUE(TrimTornTail((dir / "none.lcmlog").string(), &cut).ok());  // No log yet.
+  EXPECT_EQ(cut, 0);
+  fs::remove_all(dir);
+}
+
 TEST(ScanStore, PendingScansAreFoundWithTheirAttemptsUntilCleared) {
   const fs::path dir = fs::temp_directory_path() / ("vellum_pending_" + std::to_string(getpid()));
   fs::remove_all(dir);

@@ -68,6 +68,11 @@ class DecoderNode {
       return;
     }
     const Status s = log_.Append(ScanFolder::For(data_, scan_id), scan_id, channel, utime, bytes);
+    if (log_.trimmed() > 0) {
+      node_->Log("scan " + std::to_string(scan_id) + ": cut a torn last event (" +
+                 std::to_string(log_.trimmed()) +
+                 " bytes, a write cut short) off the scan's log before appending");
+    }
     if (!s.ok()) {
       node_->Error("scan " + std::to_string(scan_id) + ": recording failed: " + s.message(),
                    scan_id);
