@@ -2,7 +2,6 @@
 
 #include <Eigen/SparseCore>
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 
@@ -64,12 +63,11 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     return e;
   };
   // The sheet's graph as a lower-triangular matrix: the pattern of both systems below, with
-  // the Laplacian's values. Per spring, the storage slots of its off-diagonal entry and of
-  // its two nodes' diagonal entries; per node, its diagonal slot.
+  // the Laplacian's values. The storage slot of each spring's off-diagonal entry and of each
+  // node's diagonal entry.
   const double prox = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
   Eigen::SparseMatrix<double> graph(n, n);
-  std::vector<std::array<int, 3>> slots(mesh.springs.size());
-  std::vector<int> diagonal(n);
+  std::vector<int> off_diagonal(mesh.springs.size()), diagonal(n);
   {
     std::vector<Eigen::Triplet<double>> lt;
     lt.reserve(3 * mesh.springs.size() + n);
@@ -87,7 +85,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     };
     for (size_t k = 0; k < mesh.springs.size(); ++k) {
       const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
-      slots[k] = {slot(std::max(a, b), std::min(a, b)), slot(a, a), slot(b, b)};
+      off_diagonal[k] = slot(std::max(a, b), std::min(a, b));
     }
     for (int v = 0; v < n; ++v) diagonal[v] = slot(v, v);
   }
@@ -139,7 +137,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     }
   }
   // J^T J has the graph's pattern with a 2 x 2 block per entry: each refactorisation refills
-  // the blocks through the springs' slots. A tiny diagonal (Levenberg) term removes the
+  // the blocks through the slots. A tiny diagonal (Levenberg) term removes the
   // rigid-motion null space without moving the minimum.
   FrontalCholesky solver;
   {
@@ -174,9 +172,9 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
       if (!refactor) continue;
       // The spring's J^T J: u u^T on both diagonal blocks, -u u^T between them.
       const double uu[4] = {ux * ux, ux * uy, ux * uy, uy * uy};
-      double* off = &blocks[4 * static_cast<size_t>(slots[k][0])];
-      double* da = &blocks[4 * static_cast<size_t>(slots[k][1])];
-      double* db = &blocks[4 * static_cast<size_t>(slots[k][2])];
+      double* off = &blocks[4 * static_cast<size_t>(off_diagonal[k])];
+      double* da = &blocks[4 * static_cast<size_t>(diagonal[a])];
+      double* db = &blocks[4 * static_cast<size_t>(diagonal[b])];
       for (int q = 0; q < 4; ++q) {
         off[q] -= uu[q];
         da[q] += uu[q];
