@@ -50,16 +50,30 @@ on() {  # namespace, log name, command...
   ip netns exec "$ns" "$@" >"$work/$log.log" 2>&1 &
   pids+=($!)
 }
+# The sanitizer build paces the processing daemons' chunked products (scripts/sanitize.sh).
+pace=()
+[ -n "${VELLUM_TEST_PACE:-}" ] && pace=(--pace "$VELLUM_TEST_PACE")
 for d in decoder triangulator flattener restorer; do
-  on "$proc" "$d" "$build/daemons/vellum-$d" --url "$url" --data "$work/scans"
+  on "$proc" "$d" "$build/daemons/vellum-$d" --url "$url" --data "$work/scans" "${pace[@]}"
 done
+# The sim camera renders each capture: under the sanitizers a render of the curl page can take
+# seconds, so the projector waits as long for a CAPTURE as the station test's does.
 on "$gantry" camera "$build/daemons/vellum-camera" --url "$url" --backend sim --rig "$rig" \
   --page curl
 on "$gantry" projector env SDL_VIDEODRIVER=offscreen "$build/daemons/vellum-projector" \
-  --url "$url" --calibration "$rig" --fullscreen false
+  --url "$url" --calibration "$rig" --fullscreen false --capture-timeout 30
+
+# Every daemon logs "running" once it is subscribed (the sim camera after its first render).
+for log in decoder triangulator flattener restorer camera projector; do
+  for _ in $(seq 600); do
+    grep -q "running (pid" "$work/$log.log" 2>/dev/null && break
+    sleep 0.1
+  done
+  grep -q "running (pid" "$work/$log.log" || { echo "FAIL: vellum-$log did not start:"; \
+    cat "$work/$log.log"; exit 1; }
+done
 
 # The operator scans from the gantry host; it returns once RESTORED comes back over the link.
-sleep 2
 if ! ip netns exec "$gantry" "$build/cli/vellum" scan --url "$url" --label "two hosts" \
   --timeout 120 >"$work/scan.log" 2>&1; then
   echo "FAIL: the scan did not complete across the link:"
