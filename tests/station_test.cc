@@ -145,6 +145,10 @@ class StationTest : public ::testing::Test {
   std::vector<std::unique_ptr<Process>> processes_;
 };
 
+// How long the projector waits for each CAPTURE from the sim camera: the camera renders every
+// frame, which takes seconds under the sanitizers on a loaded machine (the default is 5 s).
+constexpr char kSimCaptureTimeout[] = "30";
+
 const std::vector<std::string> kProcessingStatus = {"STATUS_DECODER", "STATUS_TRIANGULATOR",
                                                     "STATUS_FLATTENER", "STATUS_RESTORER"};
 
@@ -154,7 +158,7 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
   Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", rig, "--page", "curl"});
   Start(Daemon("vellum-projector"),
         {"--calibration", rig, "--fullscreen", "false", "--flip", "horizontal", "--capture-timeout",
-         "30"},
+         kSimCaptureTimeout},
         {"SDL_VIDEODRIVER=offscreen"});
   StartProcessing();
   std::vector<std::string> all = kProcessingStatus;
@@ -370,7 +374,8 @@ TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
   Process* viewer =
       Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
   Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
-  Start(Daemon("vellum-projector"), {"--calibration", kRig, "--fullscreen", "false"},
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
         {"SDL_VIDEODRIVER=offscreen"});
   StartProcessing();
   std::vector<std::string> all = kProcessingStatus;
@@ -413,7 +418,8 @@ TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGo
   Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
   // 300 ms per pattern: time for a restart between two captures.
   Start(Daemon("vellum-projector"),
-        {"--calibration", kRig, "--fullscreen", "false", "--settle-ms", "300"},
+        {"--calibration", kRig, "--fullscreen", "false", "--settle-ms", "300", "--capture-timeout",
+         kSimCaptureTimeout},
         {"SDL_VIDEODRIVER=offscreen"});
   StartProcessing();
   Process* decoder = processes_[2].get();
@@ -551,7 +557,8 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
 TEST_F(StationTest, CalibrateCaptureRecordsABoardPoseThroughTheStation) {
   Start(Daemon("vellum-camera"),
         {"--backend", "sim", "--rig", kRig, "--page", "flat", "--pose", "18,0,4,0,0,60"});
-  Start(Daemon("vellum-projector"), {"--calibration", kRig, "--fullscreen", "false"},
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
         {"SDL_VIDEODRIVER=offscreen"});
   WaitForHeartbeats({"STATUS_CAMERA", "STATUS_PROJECTOR"});
   const std::string pose = dir_ + "/pose";
