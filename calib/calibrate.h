@@ -23,7 +23,7 @@
 #include "core/common/status.h"
 #include "core/decode/decode.h"
 #include "core/geometry/calibration.h"
-#include "core/io/scan_io.h"
+#include "core/patterns/scan.h"
 
 namespace vellum {
 

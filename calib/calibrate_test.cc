@@ -6,10 +6,10 @@
 #include <cstdio>
 
 #include "core/geometry/triangulate.h"
-#include "core/io/calibration_io.h"
 #include "core/patterns/patterns.h"
 #include "core/sim/evaluate.h"
 #include "core/sim/gantry.h"
+#include "io/calibration_io.h"
 
 namespace vellum {
 namespace {

@@ -6,8 +6,8 @@
 
 #include "calib/calibrate.h"
 #include "cli/commands.h"
-#include "core/io/calibration_io.h"
-#include "core/io/scan_io.h"
+#include "io/calibration_io.h"
+#include "io/scan_io.h"
 
 namespace vellum {
 namespace {

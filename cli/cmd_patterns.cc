@@ -1,10 +1,10 @@
 #include <cstdio>
 
 #include "cli/commands.h"
-#include "cli/flags.h"
-#include "cli/options.h"
-#include "core/io/scan_io.h"
 #include "core/patterns/patterns.h"
+#include "flags/flags.h"
+#include "flags/options.h"
+#include "io/scan_io.h"
 
 namespace vellum {
 

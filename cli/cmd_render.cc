@@ -3,11 +3,11 @@
 #include <filesystem>
 
 #include "cli/commands.h"
-#include "cli/options.h"
-#include "core/io/calibration_io.h"
-#include "core/io/scan_io.h"
 #include "core/sim/evaluate.h"
 #include "core/sim/gantry.h"
+#include "flags/options.h"
+#include "io/calibration_io.h"
+#include "io/scan_io.h"
 
 namespace vellum {
 

@@ -10,10 +10,12 @@
 
 #include "cli/commands.h"
 #include "cli/progress.h"
-#include "core/io/calibration_io.h"
-#include "daemons/common/messages.h"
-#include "daemons/common/node.h"
-#include "daemons/common/scan_store.h"
+#include "io/calibration_io.h"
+#include "station/chain.h"
+#include "station/messages.h"
+#include "station/node.h"
+#include "station/scan_log.h"
+#include "station/scan_store.h"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/restored_t.hpp"
 #include "vellum/scan_request_t.hpp"
@@ -39,10 +41,12 @@ class Follower {
                                  std::to_string(m.pattern_count),
                        0.7 * (m.pattern_index + 1) / std::max(1, m.pattern_count + 1));
     });
-    for (const char* process : {"vellum-projector", "vellum-camera", "vellum-decoder",
-                                "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
-      node->Subscribe<status_t>(station::StatusChannel(process),
-                                [this](const status_t& m) { OnStatus(m); });
+    auto on_status = [this](const status_t& m) { OnStatus(m); };
+    for (const char* process : station::kGantry) {
+      node->Subscribe<status_t>(station::StatusChannel(process), on_status);
+    }
+    for (const station::ChainLink& link : station::kChain) {
+      node->Subscribe<status_t>(station::StatusChannel(link.process), on_status);
     }
     node->Subscribe<restored_t>(channel::kRestored, [this](const restored_t& m) {
       if (scan_id_ && m.scan_id != scan_id_) return;
@@ -83,10 +87,9 @@ class Follower {
     }
     if (m.state == "busy" && (!scan_id_ || m.scan_id == scan_id_)) {
       // The processing stages after capture, in order.
-      double fraction = 0.72;
-      if (m.process == "vellum-triangulator") fraction = 0.78;
-      if (m.process == "vellum-flattener") fraction = 0.84;
-      if (m.process == "vellum-restorer") fraction = 0.95;
+      // Capturing is 70% of a scan's time; the chain's daemons share the rest.
+      const int link = std::max(0, station::ChainIndex(m.process));
+      const double fraction = 0.72 + 0.23 * link / (station::kChainLength - 1);
       progress_.Update(m.process.substr(7) + ": " + m.detail, fraction);
     }
   }
@@ -203,7 +206,7 @@ int RunCalibrateCapture(const std::vector<std::string>& args) {
   });
   // Only the gantry's errors fail a capture (the processing daemons may well fail on a board
   // held in the air: it is not a page on the table).
-  for (const char* process : {"vellum-projector", "vellum-camera"}) {
+  for (const char* process : station::kGantry) {
     node.Subscribe<status_t>(station::StatusChannel(process), [&](const status_t& m) {
       if (m.last_error_scan_id == request.scan_id && !m.last_error.empty()) {
         failure = m.process + ": " + m.last_error;

@@ -4,7 +4,7 @@
 #include <string>
 #include <vector>
 
-#include "cli/flags.h"
+#include "flags/flags.h"
 
 namespace vellum {
 

@@ -9,9 +9,9 @@
 #include <fstream>
 #include <string>
 
-#include "core/io/calibration_io.h"
-#include "core/io/ply.h"
-#include "core/io/scan_io.h"
+#include "io/calibration_io.h"
+#include "io/ply.h"
+#include "io/scan_io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vellum;

@@ -1,15 +1,16 @@
 // libFuzzer: bytes from the bus into the core. The first byte picks a message type; the rest
 // is decoded as that type (LCM checks the fingerprint and lengths) and, when it decodes, goes
 // through the station's readers exactly as a daemon would take it: image conversion, capture
-// sets, chunk reassembly of correspondences, point clouds and flat meshes (and the sheet
-// rebuilt from the nodes), calibration. Nothing may crash, hang or read out of bounds.
+// sets, chunk reassembly of correspondences, point clouds, flat meshes (and the sheet rebuilt
+// from the nodes) and textures, calibration, stage reports. Nothing may crash, hang or read out of
+// bounds.
 #include <cstddef>
 #include <cstdint>
 
 #include "core/sim/gantry.h"
-#include "daemons/common/messages.h"
-#include "daemons/common/node.h"
-#include "daemons/common/scan_store.h"
+#include "station/messages.h"
+#include "station/node.h"
+#include "station/scan_store.h"
 
 namespace vellum::station {
 namespace {
@@ -27,7 +28,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vellum;
   using namespace vellum::station;
   if (size < 1) return 0;
-  const uint8_t kind = data[0] % 6;
+  const uint8_t kind = data[0] % 8;
   ++data;
   --size;
   switch (kind) {
@@ -78,6 +79,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       calibration_t m;
       Calibration c;
       if (Decode(data, size, &m)) (void)FromMessage(m, &c);
+      break;
+    }
+    case 6: {
+      texture_t m;
+      cv::Mat texture;
+      if (Decode(data, size, &m)) (void)AddChunk(m, &texture);
+      break;
+    }
+    case 7: {
+      stage_report_t m;
+      StageReport report;
+      if (Decode(data, size, &m)) (void)FromMessage(m, &report);
       break;
     }
   }

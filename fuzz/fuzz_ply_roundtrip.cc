@@ -10,7 +10,7 @@
 #include <filesystem>
 #include <string>
 
-#include "core/io/ply.h"
+#include "io/ply.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vellum;

@@ -9,10 +9,10 @@
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
-#include "core/io/calibration_io.h"
-#include "core/io/ply.h"
-#include "core/io/scan_io.h"
 #include "core/sim/gantry.h"
+#include "io/calibration_io.h"
+#include "io/ply.h"
+#include "io/scan_io.h"
 
 namespace vellum {
 namespace {

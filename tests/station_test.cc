@@ -8,6 +8,7 @@
 #include <csignal>
 #include <map>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -15,8 +16,9 @@
 #include <set>
 #include <tuple>
 
-#include "core/io/scan_io.h"
-#include "daemons/common/scan_store.h"
+#include "io/scan_io.h"
+#include "station/scan_log.h"
+#include "station/scan_store.h"
 #include "tests/station_harness.h"
 #include "tests/xwd.h"
 #include "vellum/capture_t.hpp"
@@ -39,6 +41,15 @@ const std::string kRig = kSource + "/config/small_rig.yaml";
 const std::string kLog = kBuild + "/tests/data/curl_scan.lcmlog";
 
 std::string Daemon(const std::string& name) { return kBuild + "/daemons/" + name; }
+
+// The keys of a JSON object, recursively ("pixels/valid").
+void JsonKeys(const nlohmann::json& j, const std::string& prefix, std::set<std::string>* keys) {
+  if (!j.is_object()) return;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    keys->insert(prefix + it.key());
+    JsonKeys(it.value(), prefix + it.key() + "/", keys);
+  }
+}
 std::string Tool() { return kBuild + "/cli/vellum"; }
 
 class StationTest : public ::testing::Test {
@@ -131,6 +142,17 @@ class StationTest : public ::testing::Test {
       EXPECT_TRUE(fs::exists(results + "/report/" + picture)) << picture;
     }
     EXPECT_TRUE(fs::exists(results + "/report.html"));
+    // report.json: the same keys, and the same options and figures (not the times or paths).
+    const nlohmann::json station = nlohmann::json::parse(ReadText(results + "/report.json"));
+    const nlohmann::json process = nlohmann::json::parse(ReadText(dir_ + "/process/report.json"));
+    std::set<std::string> station_keys, process_keys;
+    JsonKeys(station, "", &station_keys);
+    JsonKeys(process, "", &process_keys);
+    EXPECT_EQ(station_keys, process_keys);
+    for (const char* section : {"options", "sizes", "pixels", "sheet", "flattening", "outputs"}) {
+      EXPECT_EQ(station[section], process[section]) << section;
+    }
+    EXPECT_GE(station_keys.count("options/max_epipolar_error_px"), 1u);
     const cv::Mat a = cv::imread(results + "/restored.tif", cv::IMREAD_UNCHANGED);
     const cv::Mat b = cv::imread(dir_ + "/process/restored.tif", cv::IMREAD_UNCHANGED);
     ASSERT_FALSE(a.empty());
@@ -549,6 +571,74 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
         std::string::npos)
         << decoder_log;
   }
+}
+
+// The supervisor sends a scan again only to a daemon that held it. Here the chain has no
+// restorer yet: a scan goes through the decoder, triangulator and flattener and waits. Then the
+// triangulator and the flattener restart: the scan is past both, so it is not sent again (no
+// stage processes it twice). When the restorer at last starts, the scan is sent once, and
+// restored.
+TEST_F(StationTest, AScanPastARestartedDaemonIsNotProcessedTwice) {
+  for (const char* name : {"vellum-decoder", "vellum-triangulator", "vellum-flattener"}) {
+    Start(Daemon(name), {"--data", dir_ + "/scans"});
+  }
+  std::map<std::string, status_t> last;
+  std::vector<std::unique_ptr<Listener<status_t>>> listeners;
+  for (const std::string& c : kProcessingStatus) {
+    listeners.push_back(std::make_unique<Listener<status_t>>(
+        *lcm_, c, [&last, c](const status_t& m) { last[c] = m; }));
+  }
+  auto counter = [&](const std::string& channel, const std::string& name) -> int64_t {
+    const status_t& st = last[channel];
+    for (int k = 0; k < st.ncounters; ++k) {
+      if (st.counter_names[k] == name) return st.counter_values[k];
+    }
+    return 0;
+  };
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return counter("STATUS_DECODER", "processing daemons heard") == 2;
+  })) << "the decoder did not hear the triangulator and the flattener";
+  std::string out;
+  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
+  const std::string log = dir_ + "/scan300.lcmlog";
+  ASSERT_EQ(RunTool({"import", dir_ + "/exported", log, "--scan-id", "300"}, &out), 0) << out;
+  Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, log}, dir_ + "/player.log");
+  ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] {
+    return counter("STATUS_FLATTENER", "scans flattened") == 1;
+  })) << "the scan did not reach the flattener";
+  EXPECT_EQ(player.Wait(60), 0);
+  // Both daemons the scan has passed restart.
+  for (const char* name : {"vellum-triangulator", "vellum-flattener"}) {
+    for (auto& p : processes_) {
+      if (!p->killed() && p->name().find(name) != std::string::npos) p->Kill();
+    }
+    Start(Daemon(name), {"--data", dir_ + "/scans"});
+  }
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return counter("STATUS_DECODER", "restarts seen") == 2;
+  })) << "the decoder did not see both restarts";
+  // The restorer starts: the scan, never restored, goes down the chain once more, and only once.
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  Start(Daemon("vellum-restorer"), {"--data", dir_ + "/scans"});
+  ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] { return !restored.empty(); })) << "not restored";
+  EXPECT_EQ(restored[0].scan_id, 300);
+  ExpectSameAsProcess(dir_ + "/exported", restored[0].results);
+  const std::string pending = dir_ + "/scans/scan-300/pending";
+  ASSERT_TRUE(HandleUntil(*lcm_, 10, [&] { return !fs::exists(pending); })) << pending;
+  // Each stage after the restarts processed the scan once: one send after the first.
+  ASSERT_TRUE(HandleUntil(*lcm_, 10,
+                          [&] {
+                            return counter("STATUS_DECODER", "scans decoded") == 2 &&
+                                   counter("STATUS_TRIANGULATOR", "scans triangulated") == 1 &&
+                                   counter("STATUS_FLATTENER", "scans flattened") == 1;
+                          }))
+      << "decoded " << counter("STATUS_DECODER", "scans decoded") << ", triangulated "
+      << counter("STATUS_TRIANGULATOR", "scans triangulated") << ", flattened "
+      << counter("STATUS_FLATTENER", "scans flattened");
+  EXPECT_EQ(counter("STATUS_DECODER", "scans sent again"), 1);
+  EXPECT_EQ(restored.size(), 1u);
 }
 
 // `vellum calibrate capture` records one board pose through the real camera (sim, the board

@@ -6,7 +6,8 @@
 
 namespace vellum {
 
-class Status {
+// [[nodiscard]]: a Status dropped on the floor is an error no one hears of.
+class [[nodiscard]] Status {
  public:
   static Status Ok() { return Status(true, ""); }
   static Status Error(std::string message) { return Status(false, std::move(message)); }

@@ -34,7 +34,7 @@ struct PointMap {
 // Holds a calibration and the camera's per-pixel rays (computed once), and triangulates scans.
 class Triangulator {
  public:
-  // The calibration must pass Check(); see Create() for untrusted calibrations.
+  // The calibration must pass Check() (ReadCalibration and the bus's FromMessage check it).
   explicit Triangulator(const Calibration& calibration);
 
   const Calibration& calibration() const { return calibration_; }

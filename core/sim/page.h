@@ -51,7 +51,6 @@ class Page {
   cv::Vec3d Point(double s, double t) const;
   // Unit surface normal with +z component (towards the camera), by central differences.
   cv::Vec3d Normal(double s, double t) const;
-  bool Developable() const { return options_.shape != PageShape::kBump; }
 
  private:
   // The shape's point before the pose.

@@ -43,6 +43,7 @@ void V4l2Camera::Close() {
 
 Status V4l2Camera::Open(const V4l2Options& o) {
   Close();
+  device_ = o.device;
   const std::string& dev = o.device;
   fd_ = v4l2_open(dev.c_str(), O_RDWR | O_NONBLOCK, 0);
   if (fd_ < 0) return Status::Error(dev + ": cannot open: " + std::strerror(errno));
@@ -121,7 +122,20 @@ Status V4l2Camera::Open(const V4l2Options& o) {
   return Status::Ok();
 }
 
-Status V4l2Camera::Capture(int64_t after_utime, cv::Mat* image, int64_t* exposure_utime) {
+std::string V4l2Camera::Describe() const {
+  return "v4l2 camera " + device_ + ", " + std::to_string(size_.width) + "x" +
+         std::to_string(size_.height) + (channels_ == 1 ? " GREY" : " BGR3");
+}
+
+Status V4l2Camera::Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) {
+  return CaptureAfter(request.shown_utime, image, exposure_utime);
+}
+
+Status V4l2Camera::Preview(cv::Mat* image, int64_t* exposure_utime) {
+  return CaptureAfter(ClockUs(CLOCK_REALTIME), image, exposure_utime);
+}
+
+Status V4l2Camera::CaptureAfter(int64_t after_utime, cv::Mat* image, int64_t* exposure_utime) {
   if (fd_ < 0) return Status::Error("camera not open");
   // Buffer timestamps are CLOCK_MONOTONIC: move the deadline onto that clock.
   const int64_t offset = ClockUs(CLOCK_REALTIME) - ClockUs(CLOCK_MONOTONIC);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "daemons/camera/camera.h"
 
 namespace vellum::station {
 
@@ -20,17 +21,22 @@ struct V4l2Options {
   int gain = -1;      // V4L2_CID_GAIN; -1 = leave as is.
 };
 
-class V4l2Camera {
+class V4l2Camera : public Camera {
  public:
-  ~V4l2Camera();
+  ~V4l2Camera() override;
   Status Open(const V4l2Options& options);
   cv::Size size() const { return size_; }
-  // The first frame whose exposure starts at or after `after_utime` (microseconds since the
-  // epoch), as 8-bit BGR (or gray); sets its exposure start.
-  Status Capture(int64_t after_utime, cv::Mat* image, int64_t* exposure_utime);
+  std::string Describe() const override;
+  // The first frame whose exposure starts at or after request.shown_utime, as 8-bit BGR (or
+  // gray); sets its exposure start.
+  Status Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) override;
+  Status Preview(cv::Mat* image, int64_t* exposure_utime) override;
 
  private:
+  // The first frame whose exposure starts at or after `after_utime`.
+  Status CaptureAfter(int64_t after_utime, cv::Mat* image, int64_t* exposure_utime);
   void Close();
+  std::string device_;
   int fd_ = -1;
   cv::Size size_;
   int64_t frame_period_us_ = 0;

@@ -1,0 +1,35 @@
+// What the camera daemon needs of a camera: the frame taken under a pattern the projector
+// shows, and frames for the live preview. A V4L2 camera (v4l2_camera.h) and the virtual
+// gantry (sim_camera.h) implement it; the node sees only this interface.
+#pragma once
+
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/patterns/patterns.h"
+
+namespace vellum::station {
+
+// The frame a scan asks for: the first whose exposure starts after the pattern was shown.
+struct FrameRequest {
+  int64_t shown_utime = 0;  // When the pattern was on screen, microseconds since the epoch.
+  int pattern_index = -1;   // -1: the texture (projector black, studio light).
+  PatternSpec pattern;      // What the projector shows.
+  cv::Size projector;       // The projector's image size.
+};
+
+class Camera {
+ public:
+  virtual ~Camera() = default;
+  // One line for the log: what camera this is.
+  virtual std::string Describe() const = 0;
+  // The frame for `request` (8-bit gray or BGR); sets its exposure start (microseconds since
+  // the epoch, after request.shown_utime).
+  virtual Status Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) = 0;
+  // A current frame for the live preview.
+  virtual Status Preview(cv::Mat* image, int64_t* exposure_utime) = 0;
+};
+
+}  // namespace vellum::station

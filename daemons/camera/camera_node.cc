@@ -1,0 +1,91 @@
+#include "daemons/camera/camera_node.h"
+
+#include <opencv2/imgproc.hpp>
+
+#include "station/messages.h"
+#include "vellum/capture_t.hpp"
+
+namespace vellum::station {
+
+CameraNode::CameraNode(Node* node, std::unique_ptr<Camera> camera, const CameraNodeOptions& options)
+    : node_(node), camera_(std::move(camera)), preview_period_(1.0 / options.preview_hz) {
+  node->Log(camera_->Describe());
+  node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
+    busy_until_ = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    node_->Post([this, m] { OnShown(m); }, "a PATTERN_SHOWN");
+  });
+}
+
+void CameraNode::Tick() {
+  const auto now = std::chrono::steady_clock::now();
+  if (now < busy_until_ || now < next_preview_ || node_->Pending() > 0) return;
+  next_preview_ =
+      now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(preview_period_);
+  node_->Post([this] {
+    cv::Mat image;
+    int64_t exposure = 0;
+    if (camera_->Preview(&image, &exposure).ok()) PublishPreview(image, exposure, 0, -1, 0);
+  });
+}
+
+void CameraNode::PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index,
+                                int count) {
+  cv::Mat small = image;
+  if (image.cols > 640) {
+    const double s = 640.0 / image.cols;
+    cv::resize(image, small, cv::Size(), s, s, cv::INTER_AREA);
+  }
+  image_t p{};
+  ToMessage(small, &p);
+  p.utime = utime;
+  p.scan_id = scan_id;
+  p.pattern_index = index;
+  p.pattern_count = count;
+  node_->Publish(channel::kPreview, &p);
+}
+
+void CameraNode::OnShown(const pattern_shown_t& m) {
+  const std::string where =
+      "scan " + std::to_string(m.scan_id) + ", pattern " + std::to_string(m.pattern_index);
+  FrameRequest request;
+  Status s = FromMessage(m.pattern, &request.pattern);
+  if (!s.ok()) return node_->Error(where + ": PATTERN_SHOWN: " + s.message(), m.scan_id);
+  if (m.pattern_count <= 0 || m.pattern_index < -1 || m.pattern_index >= m.pattern_count) {
+    return node_->Error(
+        where + ": PATTERN_SHOWN: pattern_index outside -1.." + std::to_string(m.pattern_count - 1),
+        m.scan_id);
+  }
+  request.shown_utime = m.utime;
+  request.pattern_index = m.pattern_index;
+  request.projector = cv::Size(m.projector_width, m.projector_height);
+  node_->SetState(
+      "capturing", m.scan_id,
+      "pattern " + std::to_string(m.pattern_index) + " of " + std::to_string(m.pattern_count));
+  cv::Mat image;
+  int64_t exposure = 0;
+  s = camera_->Capture(request, &image, &exposure);
+  if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
+  if (m.pattern_index >= 0 && image.channels() == 3) {
+    cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
+  }
+  capture_t c{};
+  c.scan_id = m.scan_id;
+  c.pattern_index = m.pattern_index;
+  c.pattern_count = m.pattern_count;
+  c.projector_width = m.projector_width;
+  c.projector_height = m.projector_height;
+  c.pattern = m.pattern;
+  c.shown_utime = m.utime;
+  ToMessage(image, &c.image);
+  c.image.utime = exposure;
+  c.image.scan_id = m.scan_id;
+  c.image.pattern_index = m.pattern_index;
+  c.image.pattern_count = m.pattern_count;
+  c.image.seq = node_->Counter("frames captured");
+  node_->Publish(channel::kCapture, &c);
+  node_->Count("frames captured");
+  PublishPreview(image, exposure, m.scan_id, m.pattern_index, m.pattern_count);
+  if (m.pattern_index + 1 == m.pattern_count) node_->SetState("idle", m.scan_id, "scan captured");
+}
+
+}  // namespace vellum::station

@@ -1,0 +1,36 @@
+// vellum-camera's node: on each PATTERN_SHOWN, the camera's first frame whose exposure starts
+// after it, published as CAPTURE (the texture in colour, patterns in gray); a copy at most 640
+// pixels wide on PREVIEW; and a live preview while no scan runs.
+#pragma once
+
+#include <chrono>
+#include <memory>
+
+#include "daemons/camera/camera.h"
+#include "station/node.h"
+#include "vellum/pattern_shown_t.hpp"
+
+namespace vellum::station {
+
+struct CameraNodeOptions {
+  double preview_hz = 2;  // Live preview rate on PREVIEW while idle.
+};
+
+class CameraNode {
+ public:
+  CameraNode(Node* node, std::unique_ptr<Camera> camera, const CameraNodeOptions& options);
+  // On the LCM thread, often: posts a live preview frame when it is time and no scan runs.
+  void Tick();
+
+ private:
+  void OnShown(const pattern_shown_t& m);  // Worker thread.
+  void PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index, int count);
+
+  Node* node_;
+  std::unique_ptr<Camera> camera_;  // Worker thread only (after construction).
+  std::chrono::duration<double> preview_period_;
+  // LCM thread only:
+  std::chrono::steady_clock::time_point busy_until_, next_preview_;
+};
+
+}  // namespace vellum::station

@@ -1,0 +1,105 @@
+// The camera's node on an in-process bus with the virtual gantry as its camera: a
+// PATTERN_SHOWN is answered by a CAPTURE holding exactly the frame the gantry renders (patterns
+// in gray, exposed after the pattern was shown) and a small copy on PREVIEW; a malformed pattern
+// and a projector of another size are reported, and the node goes on.
+#include "daemons/camera/camera_node.h"
+
+#include <gtest/gtest.h>
+
+#include "daemons/camera/sim_camera.h"
+#include "station/messages.h"
+#include "station/testing.h"
+#include "vellum/capture_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+using testing::MemqBus;
+using testing::SmallRig;
+
+class CameraNodeTest : public ::testing::Test {
+ protected:
+  CameraNodeTest() {
+    sim_.rig = SmallRig();
+    sim_.seed = 3;
+    sequence_ = MakePatternSequence(PatternOptions{sim_.rig.projector.size});
+  }
+  pattern_shown_t Shown(int64_t scan, int index) {
+    pattern_shown_t m{};
+    m.scan_id = scan;
+    m.pattern_index = index;
+    m.pattern_count = static_cast<int32_t>(sequence_.patterns.size());
+    m.projector_width = sim_.rig.projector.size.width;
+    m.projector_height = sim_.rig.projector.size.height;
+    PatternSpec black;
+    black.kind = PatternKind::kBlack;
+    m.pattern = ToMessage(index < 0 ? black : sequence_.patterns[index]);
+    return m;
+  }
+
+  SimCameraOptions sim_;
+  PatternSequence sequence_;
+  MemqBus bus_;
+};
+
+TEST_F(CameraNodeTest, AnswersEachPatternShownWithTheFrameTheGantryRenders) {
+  Node node("vellum-camera", &bus_.lcm());
+  CameraNode camera(&node, std::make_unique<SimCamera>(sim_), CameraNodeOptions());
+  auto captures = bus_.Record<capture_t>(channel::kCapture);
+  auto previews = bus_.Record<image_t>(channel::kPreview);
+  for (int index : {-1, 7}) {
+    pattern_shown_t m = Shown(42, index);
+    bus_.probe().Publish(channel::kPatternShown, &m);
+  }
+  ASSERT_TRUE(bus_.RunUntil([&] { return captures->size() == 2 && previews->size() >= 2; }));
+  // The same gantry renders the same frames (the seed follows the pattern index).
+  SimCamera reference(sim_);
+  for (const capture_t& c : *captures) {
+    EXPECT_EQ(c.scan_id, 42);
+    EXPECT_GT(c.image.utime, c.shown_utime);
+    cv::Mat got, expected;
+    ASSERT_TRUE(FromMessage(c.image, &got).ok());
+    FrameRequest request;
+    request.pattern_index = c.pattern_index;
+    request.projector = sim_.rig.projector.size;
+    ASSERT_TRUE(FromMessage(c.pattern, &request.pattern).ok());
+    int64_t exposure = 0;
+    ASSERT_TRUE(reference.Capture(request, &expected, &exposure).ok());
+    ASSERT_EQ(got.size(), sim_.rig.camera.size);
+    if (c.pattern_index >= 0) {
+      EXPECT_EQ(got.channels(), 1) << c.pattern_index;
+    }
+    EXPECT_EQ(cv::norm(got, expected, cv::NORM_INF), 0) << c.pattern_index;
+  }
+  EXPECT_LE(previews->back().width, 640);
+}
+
+TEST_F(CameraNodeTest, BadPatternsAreReportedAndTheNodeGoesOn) {
+  Node node("vellum-camera", &bus_.lcm());
+  CameraNode camera(&node, std::make_unique<SimCamera>(sim_), CameraNodeOptions());
+  bus_.Watch("vellum-camera");
+  auto captures = bus_.Record<capture_t>(channel::kCapture);
+  pattern_shown_t unknown = Shown(43, 3);
+  unknown.pattern.kind = 17;
+  bus_.probe().Publish(channel::kPatternShown, &unknown);
+  EXPECT_TRUE(bus_.WaitForError("vellum-camera", "pattern kind 17 is not known"))
+      << bus_.Status("vellum-camera").last_error;
+  pattern_shown_t other = Shown(43, 4);
+  other.projector_width = 1024;
+  other.projector_height = 768;
+  bus_.probe().Publish(channel::kPatternShown, &other);
+  EXPECT_TRUE(bus_.WaitForError("vellum-camera", "the projector shows 1024x768 images"))
+      << bus_.Status("vellum-camera").last_error;
+  pattern_shown_t beyond = Shown(43, 0);
+  beyond.pattern_index = beyond.pattern_count;
+  bus_.probe().Publish(channel::kPatternShown, &beyond);
+  EXPECT_TRUE(bus_.WaitForError("vellum-camera", "pattern_index outside"))
+      << bus_.Status("vellum-camera").last_error;
+  EXPECT_TRUE(captures->empty());
+  pattern_shown_t good = Shown(44, 0);
+  bus_.probe().Publish(channel::kPatternShown, &good);
+  EXPECT_TRUE(bus_.RunUntil([&] { return captures->size() == 1; }));
+}
+
+}  // namespace
+}  // namespace vellum::station

@@ -1,0 +1,43 @@
+#include "daemons/camera/sim_camera.h"
+
+#include <algorithm>
+
+#include "core/common/text.h"
+#include "station/node.h"
+
+namespace vellum::station {
+
+SimCamera::SimCamera(const SimCameraOptions& options)
+    : options_(options),
+      gantry_(std::make_unique<VirtualGantry>(options.rig, options.page, options.texture,
+                                              options.light)) {
+  preview_ = gantry_->RenderTexture(options.seed);
+}
+
+std::string SimCamera::Describe() const {
+  return "sim: tracing a " + std::string(ToString(options_.page.shape)) + " page for a " +
+         SizeText(options_.rig.camera.size) + " camera";
+}
+
+Status SimCamera::Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) {
+  if (request.projector != gantry_->rig().projector.size) {
+    return Status::Error("the projector shows " + SizeText(request.projector) +
+                         " images but the sim rig's projector is " +
+                         SizeText(gantry_->rig().projector.size));
+  }
+  *exposure_utime = std::max(NowUtime(), request.shown_utime + 1);
+  const uint64_t seed =
+      options_.seed * 1000003ULL + static_cast<uint64_t>(request.pattern_index + 1);
+  *image = request.pattern_index < 0
+               ? gantry_->RenderTexture(seed)
+               : gantry_->RenderFrame(RenderPattern(request.pattern, request.projector), seed);
+  return Status::Ok();
+}
+
+Status SimCamera::Preview(cv::Mat* image, int64_t* exposure_utime) {
+  *image = preview_;
+  *exposure_utime = NowUtime();
+  return Status::Ok();
+}
+
+}  // namespace vellum::station

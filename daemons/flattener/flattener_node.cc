@@ -1,0 +1,61 @@
+#include "daemons/flattener/flattener_node.h"
+
+#include "core/common/text.h"
+#include "io/scan_io.h"
+#include "pipeline/stages.h"
+#include "station/scan_store.h"
+#include "station/supervisor.h"
+
+namespace vellum::station {
+
+FlattenerNode::FlattenerNode(Node* node, const FlattenerNodeOptions& options)
+    : node_(node),
+      options_(options),
+      calibrations_(node, options.fallback_calibration ? &*options.fallback_calibration : nullptr,
+                    options.data_dir),
+      textures_(node, options.data_dir),
+      assembler_(
+          node, channel::kPointCloud,
+          [](const point_cloud_t& m, cv::Mat* points) { return AddChunk(m, points); },
+          [this](int64_t id, cv::Mat* points, const point_cloud_t& last) {
+            points_ = *points;
+            Process(id, last);
+          }) {}
+
+void FlattenerNode::Fail(int64_t id, const std::string& message) {
+  node_->Error("scan " + std::to_string(id) + ": " + message, id);
+  node_->SetState("idle");
+}
+
+void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
+  node_->SetState("busy", id, "building the sheet");
+  std::vector<StageReport> stages;
+  Status s = FromMessages(last.stages, &stages);
+  if (!s.ok()) return Fail(id, "POINT_CLOUD: " + s.message());
+  Calibration calibration;
+  s = calibrations_.Get(id, &calibration);
+  if (!s.ok()) return Fail(id, s.message());
+  cv::Mat texture;
+  s = textures_.Get(id, &texture);
+  if (!s.ok()) return Fail(id, s.message());
+  Mesh mesh;
+  stages.push_back(MeshStage(points_, texture, calibration.camera, options_.mesh, &mesh));
+  if (!stages.back().status.ok()) return Fail(id, stages.back().status.message());
+  node_->SetState("busy", id, "flattening");
+  const std::string results = ScanFolder::For(options_.data_dir, id).results();
+  s = MakeDirectories(results);
+  if (!s.ok()) return Fail(id, s.message());
+  FlattenResult flat;
+  stages.push_back(FlattenStage(mesh, options_.flatten, results, &flat));
+  if (!stages.back().status.ok()) return Fail(id, stages.back().status.message());
+  std::vector<mesh_t> chunks = ToMessages(id, mesh, options_.mesh.bend_springs, flat.flat, stages);
+  node_->PublishChunks(channel::kFlatMesh, &chunks);
+  node_->Count("scans flattened");
+  AnnounceHandedOn(node_, id, channel::kFlatMesh);
+  node_->Log("scan " + std::to_string(id) + ": flattened " + SizeText(options_.mesh.grid) + " in " +
+             std::to_string(stages.back().seconds) + " s, strain mean " +
+             std::to_string(flat.mean_strain) + " max " + std::to_string(flat.max_strain));
+  node_->SetState("idle");
+}
+
+}  // namespace vellum::station

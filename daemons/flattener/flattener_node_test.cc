@@ -1,0 +1,104 @@
+// The flattener's node on an in-process bus: POINT_CLOUD, TEXTURE and CALIBRATION in, the
+// flattened sheet on disk and FLAT_MESH out, equal to the mesh and flatten stages run directly;
+// a scan whose texture never came, a texture of another size and a malformed chunk are each
+// reported, and the node goes on.
+#include "daemons/flattener/flattener_node.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <opencv2/imgproc.hpp>
+
+#include "station/scan_store.h"
+#include "station/testing.h"
+#include "vellum/scan_progress_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::FirstStages;
+using testing::MemqBus;
+using testing::SmallRig;
+using testing::SmallScan;
+using testing::SmallScanProducts;
+
+class FlattenerNodeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    options_.data_dir = (fs::temp_directory_path() /
+                         ("vellum_flattener_node_" + std::to_string(getpid()) + "_" +
+                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
+                            .string();
+    fs::remove_all(options_.data_dir);
+    options_.fallback_calibration = SmallRig();
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(options_.data_dir);
+  }
+  void PublishTexture(int64_t id, const cv::Mat& texture) {
+    for (texture_t& m : ToMessages(id, texture)) bus_.probe().Publish(channel::kTexture, &m);
+  }
+  void PublishPoints(int64_t id) {
+    for (point_cloud_t& m : ToMessages(id, SmallScanProducts().map.points, FirstStages(2))) {
+      bus_.probe().Publish(channel::kPointCloud, &m);
+    }
+  }
+
+  FlattenerNodeOptions options_;
+  MemqBus bus_;
+};
+
+TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
+  Node node("vellum-flattener", &bus_.lcm());
+  FlattenerNode flattener(&node, options_);
+  auto sheets = bus_.Record<mesh_t>(channel::kFlatMesh);
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  PublishTexture(5, SmallScan().texture);
+  PublishPoints(5);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  EXPECT_EQ(progress->back().product, "FLAT_MESH");
+  Mesh mesh;
+  std::vector<cv::Point2d> flat;
+  for (const mesh_t& m : *sheets) ASSERT_TRUE(AddChunk(m, &mesh, &flat).ok());
+  EXPECT_EQ(flat, SmallScanProducts().flat.flat);
+  EXPECT_EQ(mesh.point, SmallScanProducts().mesh.point);
+  std::vector<StageReport> stages;
+  ASSERT_TRUE(FromMessages(sheets->back().stages, &stages).ok());
+  ASSERT_EQ(stages.size(), 4u);
+  EXPECT_EQ(stages[2].stage, "mesh");
+  EXPECT_EQ(stages[3].stage, "flatten");
+  EXPECT_TRUE(fs::exists(ScanFolder::For(options_.data_dir, 5).results() + "/flat.ply"));
+  EXPECT_EQ(node.Counter("scans flattened"), 1);
+}
+
+TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
+  Node node("vellum-flattener", &bus_.lcm());
+  FlattenerNode flattener(&node, options_);
+  bus_.Watch("vellum-flattener");
+  PublishPoints(6);  // No TEXTURE for scan 6, and none on disk.
+  EXPECT_TRUE(bus_.WaitForError("vellum-flattener", "scan 6: its texture (TEXTURE) never arrived"))
+      << bus_.Status("vellum-flattener").last_error;
+  cv::Mat small;
+  cv::resize(SmallScan().texture, small, cv::Size(200, 150));
+  PublishTexture(7, small);
+  PublishPoints(7);
+  EXPECT_TRUE(
+      bus_.WaitForError("vellum-flattener", "the texture is 200x150, the point map 400x300"))
+      << bus_.Status("vellum-flattener").last_error;
+  point_cloud_t bad = ToMessages(8, SmallScanProducts().map.points, FirstStages(2))[0];
+  bad.nxyz -= 1;
+  bad.xyz.pop_back();
+  bus_.probe().Publish(channel::kPointCloud, &bad);
+  EXPECT_TRUE(bus_.WaitForError("vellum-flattener", "POINT_CLOUD: nxyz is not a multiple of 3"))
+      << bus_.Status("vellum-flattener").last_error;
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  PublishTexture(9, SmallScan().texture);
+  PublishPoints(9);
+  EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  EXPECT_EQ(node.Counter("scans flattened"), 1);
+}
+
+}  // namespace
+}  // namespace vellum::station

@@ -1,0 +1,111 @@
+#include "daemons/projector/projector_node.h"
+
+#include <thread>
+
+#include "core/common/text.h"
+#include "station/messages.h"
+#include "vellum/calibration_t.hpp"
+#include "vellum/pattern_shown_t.hpp"
+
+namespace vellum::station {
+
+ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
+                             const ProjectorNodeOptions& options)
+    : node_(node),
+      projector_(std::move(projector)),
+      options_(options),
+      sequence_(MakePatternSequence(options.patterns)) {
+  black_ = cv::Mat::zeros(projector_->size(), CV_8U);
+  projector_->Show(black_);
+  node->Subscribe<scan_request_t>(channel::kScanRequest,
+                                  [this](const scan_request_t& m) { OnRequest(m); });
+  node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& m) { OnCapture(m); });
+  node->Log("projector " + SizeText(projector_->size()) + ", " +
+            std::to_string(sequence_.patterns.size()) + " patterns per scan");
+}
+
+void ProjectorNode::Tick() {
+  if (!projector_->Poll()) node_->Stop();
+  if (scan_id_ != 0 && std::chrono::steady_clock::now() - shown_at_ > options_.capture_timeout) {
+    Fail("no CAPTURE of " + What(index_) + " within " +
+         std::to_string(static_cast<int>(options_.capture_timeout.count() * 1000)) +
+         " ms (is vellum-camera running and on the same bus?)");
+  }
+}
+
+std::string ProjectorNode::What(int index) const {
+  return index < 0 ? std::string("the texture")
+                   : "pattern " + std::to_string(index) + " of " +
+                         std::to_string(sequence_.patterns.size());
+}
+
+void ProjectorNode::OnRequest(const scan_request_t& m) {
+  if (m.scan_id <= 0) {
+    node_->Error("SCAN_REQUEST with scan_id " + std::to_string(m.scan_id) + " refused");
+    return;
+  }
+  if (scan_id_ != 0) {
+    node_->Error("scan " + std::to_string(m.scan_id) + " refused: scan " +
+                     std::to_string(scan_id_) + " is in progress",
+                 m.scan_id);
+    return;
+  }
+  scan_id_ = m.scan_id;
+  node_->Log("scan " + std::to_string(scan_id_) + " started" +
+             (m.label.empty() ? "" : " (" + m.label + ")"));
+  if (options_.calibration) {
+    calibration_t c{};
+    c.scan_id = scan_id_;
+    c.source = options_.calibration_source;
+    ToMessage(*options_.calibration, &c);
+    node_->Publish(channel::kCalibration, &c);
+  }
+  started_ = std::chrono::steady_clock::now();
+  ShowPattern(-1);
+}
+
+void ProjectorNode::OnCapture(const capture_t& m) {
+  if (scan_id_ == 0 || m.scan_id != scan_id_ || m.pattern_index != index_) return;
+  if (index_ + 1 < static_cast<int>(sequence_.patterns.size())) {
+    ShowPattern(index_ + 1);
+    return;
+  }
+  const double secs =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
+  node_->Log("scan " + std::to_string(scan_id_) + ": " +
+             std::to_string(sequence_.patterns.size() + 1) + " captures in " +
+             std::to_string(secs) + " s");
+  node_->Count("scans captured");
+  projector_->Show(black_);
+  node_->SetState("idle", scan_id_, "scan captured");
+  scan_id_ = 0;
+}
+
+void ProjectorNode::ShowPattern(int index) {
+  index_ = index;
+  PatternSpec spec;
+  spec.kind = PatternKind::kBlack;
+  if (index >= 0) spec = sequence_.patterns[index];
+  projector_->Show(index < 0 ? black_ : RenderPattern(spec, sequence_.projector_size));
+  std::this_thread::sleep_for(options_.settle);
+  pattern_shown_t m{};
+  m.scan_id = scan_id_;
+  m.pattern_index = index;
+  m.pattern_count = static_cast<int32_t>(sequence_.patterns.size());
+  m.projector_width = sequence_.projector_size.width;
+  m.projector_height = sequence_.projector_size.height;
+  m.pattern = ToMessage(spec);
+  node_->Publish(channel::kPatternShown, &m);
+  shown_at_ = std::chrono::steady_clock::now();
+  node_->SetState("scanning", scan_id_, "showing " + What(index));
+}
+
+void ProjectorNode::Fail(const std::string& why) {
+  node_->Error("scan " + std::to_string(scan_id_) + " failed: " + why, scan_id_);
+  node_->Count("scans failed");
+  projector_->Show(black_);
+  node_->SetState("idle");
+  scan_id_ = 0;
+}
+
+}  // namespace vellum::station

@@ -1,0 +1,58 @@
+// vellum-projector's node: the scan's conductor. On SCAN_REQUEST it publishes the station's
+// CALIBRATION, then for the texture and each pattern k: shows it (projector black for the
+// texture), waits the settle time, publishes PATTERN_SHOWN(k) and waits for the camera's
+// CAPTURE(k) before the next. A capture that does not come fails the scan with a clear status.
+#pragma once
+
+#include <chrono>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "core/geometry/calibration.h"
+#include "core/patterns/patterns.h"
+#include "daemons/projector/projector.h"
+#include "station/node.h"
+#include "vellum/capture_t.hpp"
+#include "vellum/scan_request_t.hpp"
+
+namespace vellum::station {
+
+struct ProjectorNodeOptions {
+  PatternOptions patterns;                 // The sequence (its projector_size: the screen's).
+  std::optional<Calibration> calibration;  // Published as CALIBRATION with every scan.
+  std::string calibration_source;          // Where it came from (the message says).
+  std::chrono::milliseconds settle{30};    // Wait after the image is on screen.
+  std::chrono::duration<double> capture_timeout{5.0};  // Longest wait for each CAPTURE.
+};
+
+class ProjectorNode {
+ public:
+  // `projector` shows images of options.patterns.projector_size.
+  ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
+                const ProjectorNodeOptions& options);
+
+  // On the LCM thread, often (every few ms): the window's events and the capture timeout.
+  void Tick();
+  // The scan in progress (0: none).
+  int64_t scan_id() const { return scan_id_; }
+
+ private:
+  std::string What(int index) const;
+  void OnRequest(const scan_request_t& m);
+  void OnCapture(const capture_t& m);
+  void ShowPattern(int index);
+  void Fail(const std::string& why);
+
+  Node* node_;
+  std::unique_ptr<Projector> projector_;
+  ProjectorNodeOptions options_;
+  PatternSequence sequence_;
+  cv::Mat black_;
+  // LCM thread only (the projector runs its scans there, one message at a time):
+  int64_t scan_id_ = 0;  // The scan in progress, 0 if none.
+  int index_ = -1;       // What is on screen: -1 the texture, k pattern k.
+  std::chrono::steady_clock::time_point shown_at_, started_;
+};
+
+}  // namespace vellum::station

@@ -1,0 +1,137 @@
+// The projector's node on an in-process bus with its real SDL screen (SDL's dummy video
+// driver): a scan request publishes the calibration and runs the whole sequence, one pattern per
+// CAPTURE, each pattern on screen with the mirror's flip before PATTERN_SHOWN; bad requests and a
+// capture that never comes are reported, and the projector takes the next scan.
+#include "daemons/projector/projector_node.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <opencv2/imgproc.hpp>
+
+#include "daemons/projector/sdl_projector.h"
+#include "station/messages.h"
+#include "station/testing.h"
+#include "vellum/calibration_t.hpp"
+#include "vellum/pattern_shown_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+using testing::MemqBus;
+using testing::SmallRig;
+
+// The projector's screen, as a projector with a mirror would show it: remembers what was on
+// screen (read back from SDL) when each pattern was shown.
+class WatchedProjector : public Projector {
+ public:
+  explicit WatchedProjector(const SdlProjectorOptions& options) : sdl_(options) {}
+  cv::Size size() const override { return sdl_.size(); }
+  void Show(const cv::Mat& gray) override {
+    sdl_.Show(gray);
+    shown.push_back(gray.clone());
+    screens.push_back(sdl_.Screen());
+  }
+  bool Poll() override { return sdl_.Poll(); }
+  std::vector<cv::Mat> shown, screens;
+
+ private:
+  SdlProjector sdl_;
+};
+
+class ProjectorNodeTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { setenv("SDL_VIDEODRIVER", "dummy", 1); }
+  ProjectorNodeTest() {
+    screen_.size = SmallRig().projector.size;
+    screen_.fullscreen = false;
+    screen_.flip = display::Flip::kHorizontal;
+    options_.patterns.projector_size = screen_.size;
+    options_.calibration = SmallRig();
+    options_.calibration_source = "small rig";
+    options_.settle = std::chrono::milliseconds(0);
+  }
+  void Request(int64_t id) {
+    scan_request_t r{};
+    r.scan_id = id;
+    bus_.probe().Publish(channel::kScanRequest, &r);
+  }
+  // Answers every PATTERN_SHOWN with its CAPTURE (a frame-less ack) until the scan's end.
+  void AnswerEveryPattern(const std::shared_ptr<std::vector<pattern_shown_t>>& shown,
+                          size_t* answered) {
+    while (*answered < shown->size()) {
+      const pattern_shown_t& m = (*shown)[(*answered)++];
+      capture_t c{};
+      c.scan_id = m.scan_id;
+      c.pattern_index = m.pattern_index;
+      c.pattern_count = m.pattern_count;
+      bus_.probe().Publish(channel::kCapture, &c);
+    }
+  }
+
+  SdlProjectorOptions screen_;
+  ProjectorNodeOptions options_;
+  MemqBus bus_;
+};
+
+TEST_F(ProjectorNodeTest, RunsTheWholeSequenceOnePatternPerCaptureWithTheMirrorFlipOnScreen) {
+  Node node("vellum-projector", &bus_.lcm());
+  auto projector = std::make_unique<WatchedProjector>(screen_);
+  WatchedProjector* screen = projector.get();
+  ProjectorNode conductor(&node, std::move(projector), options_);
+  bus_.AddTick([&] { conductor.Tick(); });
+  auto calibrations = bus_.Record<calibration_t>(channel::kCalibration);
+  auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
+  size_t answered = 0;
+  bus_.AddTick([&] { AnswerEveryPattern(shown, &answered); });
+  Request(77);
+  const PatternSequence sequence = MakePatternSequence(options_.patterns);
+  const size_t total = sequence.patterns.size() + 1;
+  ASSERT_TRUE(bus_.RunUntil([&] { return shown->size() == total && conductor.scan_id() == 0; }));
+  ASSERT_EQ(calibrations->size(), 1u);
+  EXPECT_EQ(calibrations->front().scan_id, 77);
+  EXPECT_EQ(calibrations->front().source, "small rig");
+  for (size_t k = 0; k < total; ++k) EXPECT_EQ((*shown)[k].pattern_index, int(k) - 1);
+  EXPECT_EQ(node.Counter("scans captured"), 1);
+  // Pattern k was on screen, mirrored left to right, when PATTERN_SHOWN(k) went out. (Shows:
+  // black at start, black for the texture, the patterns, black at the end.)
+  ASSERT_EQ(screen->shown.size(), total + 2);
+  int asymmetric = 0;  // Patterns that a mirror changes: the flip shows on them.
+  for (size_t p = 0; p < sequence.patterns.size(); ++p) {
+    const PatternSpec& spec = sequence.patterns[p];
+    const cv::Mat expected = RenderPattern(spec, sequence.projector_size);
+    EXPECT_EQ(cv::norm(screen->shown[p + 2], expected, cv::NORM_INF), 0) << p;
+    cv::Mat on_screen, mirrored;
+    cv::cvtColor(screen->screens[p + 2], on_screen, cv::COLOR_BGR2GRAY);
+    cv::flip(expected, mirrored, 1);
+    ASSERT_EQ(on_screen.size(), mirrored.size());
+    EXPECT_EQ(cv::norm(on_screen, mirrored, cv::NORM_INF), 0) << "pattern " << p;
+    if (cv::norm(mirrored, expected, cv::NORM_INF) > 0) ++asymmetric;
+  }
+  EXPECT_GT(asymmetric, 5);
+}
+
+TEST_F(ProjectorNodeTest, BadRequestsAndAMissingCaptureAreReportedAndTheNextScanRuns) {
+  Node node("vellum-projector", &bus_.lcm());
+  options_.capture_timeout = std::chrono::duration<double>(0.3);
+  ProjectorNode conductor(&node, std::make_unique<SdlProjector>(screen_), options_);
+  bus_.AddTick([&] { conductor.Tick(); });
+  bus_.Watch("vellum-projector");
+  Request(0);
+  EXPECT_TRUE(bus_.WaitForError("vellum-projector", "SCAN_REQUEST with scan_id 0 refused"));
+  Request(5);
+  Request(6);
+  EXPECT_TRUE(bus_.WaitForError("vellum-projector", "scan 6 refused: scan 5 is in progress"));
+  EXPECT_TRUE(bus_.WaitForError("vellum-projector",
+                                "scan 5 failed: no CAPTURE of the texture within 300 ms"));
+  EXPECT_EQ(conductor.scan_id(), 0);
+  auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
+  size_t answered = 0;
+  bus_.AddTick([&] { AnswerEveryPattern(shown, &answered); });
+  Request(7);
+  EXPECT_TRUE(bus_.RunUntil([&] { return node.Counter("scans captured") == 1; }));
+  EXPECT_EQ(node.Counter("scans failed"), 1);
+}
+
+}  // namespace
+}  // namespace vellum::station

@@ -1,0 +1,120 @@
+// The restorer's node on an in-process bus: FLAT_MESH, TEXTURE and CALIBRATION in, the restored
+// page and the scan's report on disk and RESTORED out, equal to the restore stage run directly,
+// with report.json holding every stage's report; a sheet with an unknown node kind is reported,
+// and the node goes on.
+#include "daemons/restorer/restorer_node.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "station/scan_store.h"
+#include "station/testing.h"
+#include "vellum/restored_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::FirstStages;
+using testing::MemqBus;
+using testing::SmallRig;
+using testing::SmallScan;
+using testing::SmallScanProducts;
+
+std::string Bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class RestorerNodeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    options_.data_dir = (fs::temp_directory_path() /
+                         ("vellum_restorer_node_" + std::to_string(getpid()) + "_" +
+                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
+                            .string();
+    fs::remove_all(options_.data_dir);
+    options_.fallback_calibration = SmallRig();
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(options_.data_dir);
+  }
+  std::vector<mesh_t> Sheet(int64_t id) {
+    const auto& p = SmallScanProducts();
+    return ToMessages(id, p.mesh, MeshOptions().bend_springs, p.flat.flat, FirstStages(4));
+  }
+  void Publish(int64_t id, std::vector<mesh_t> sheet) {
+    for (texture_t& m : ToMessages(id, SmallScan().texture)) {
+      bus_.probe().Publish(channel::kTexture, &m);
+    }
+    for (mesh_t& m : sheet) bus_.probe().Publish(channel::kFlatMesh, &m);
+  }
+
+  RestorerNodeOptions options_;
+  MemqBus bus_;
+};
+
+TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
+  Node node("vellum-restorer", &bus_.lcm());
+  RestorerNode restorer(&node, options_);
+  auto restored = bus_.Record<restored_t>(channel::kRestored);
+  Publish(5, Sheet(5));
+  ASSERT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
+  const std::string results = ScanFolder::For(options_.data_dir, 5).results();
+  EXPECT_EQ(restored->back().results, results);
+  for (const char* file : {"restored.tif", "restored.json"}) {
+    EXPECT_EQ(Bytes(results + "/" + file), Bytes(SmallScanProducts().results + "/" + file)) << file;
+  }
+  EXPECT_GT(restored->back().preview.width, 100);
+  std::ifstream in(results + "/report.json");
+  const nlohmann::json report = nlohmann::json::parse(in);
+  for (const char* stage : {"decode", "triangulate", "mesh", "flatten", "restore"}) {
+    EXPECT_TRUE(report["stages_seconds"].contains(stage)) << stage;
+  }
+  EXPECT_EQ(report["options"]["decoder"], "phase");
+  EXPECT_EQ(report["options"]["grid"], "45x45");
+  EXPECT_EQ(report["scan"], ScanFolder::For(options_.data_dir, 5).raw());
+  // Every file it lists was written, the report's own included.
+  ASSERT_TRUE(report["outputs"].is_array());
+  for (const auto& file : report["outputs"]) {
+    const std::string name = file.get<std::string>();
+    const bool here = fs::exists(results + "/" + name);
+    const bool upstream = name == "points.ply" || name == "depth.png" || name == "mesh.ply" ||
+                          name == "flat.ply" || name == "report/valid.png" ||
+                          name == "report/depth.png";  // Written by the stages before it.
+    EXPECT_TRUE(here || upstream) << name;
+  }
+  EXPECT_NE(std::find(report["outputs"].begin(), report["outputs"].end(), "report.html"),
+            report["outputs"].end());
+  EXPECT_EQ(node.Counter("scans restored"), 1);
+}
+
+TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
+  Node node("vellum-restorer", &bus_.lcm());
+  RestorerNode restorer(&node, options_);
+  bus_.Watch("vellum-restorer");
+  std::vector<mesh_t> bad = Sheet(6);
+  bad[0].kind[3] = 9;
+  Publish(6, bad);
+  EXPECT_TRUE(bus_.WaitForError("vellum-restorer", "FLAT_MESH: node 3 has unknown kind 9"))
+      << bus_.Status("vellum-restorer").last_error;
+  std::vector<mesh_t> no_report = Sheet(7);
+  for (mesh_t& m : no_report) m.stages[0].stage = "";
+  Publish(7, no_report);
+  EXPECT_TRUE(bus_.WaitForError("vellum-restorer", "a stage report without a stage name"))
+      << bus_.Status("vellum-restorer").last_error;
+  auto restored = bus_.Record<restored_t>(channel::kRestored);
+  Publish(8, Sheet(8));
+  EXPECT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
+  EXPECT_EQ(node.Counter("scans restored"), 1);
+}
+
+}  // namespace
+}  // namespace vellum::station

@@ -1,0 +1,75 @@
+#include "daemons/triangulator/triangulator_node.h"
+
+#include "core/common/text.h"
+#include "io/scan_io.h"
+#include "pipeline/stages.h"
+#include "station/scan_store.h"
+#include "station/supervisor.h"
+
+namespace vellum::station {
+namespace {
+
+bool SameCalibration(const Calibration& a, const Calibration& b) {
+  auto same = [](const CameraModel& x, const CameraModel& y) {
+    return x.size == y.size && x.matrix == y.matrix && x.distortion == y.distortion &&
+           x.rotation == y.rotation && x.translation == y.translation;
+  };
+  return same(a.camera, b.camera) && same(a.projector, b.projector);
+}
+
+}  // namespace
+
+TriangulatorNode::TriangulatorNode(Node* node, const TriangulatorNodeOptions& options)
+    : node_(node),
+      options_(options),
+      calibrations_(node, options.fallback_calibration ? &*options.fallback_calibration : nullptr,
+                    options.data_dir),
+      assembler_(
+          node, channel::kCorrespondence,
+          [](const correspondence_t& m, Correspondence* c) {
+            return AddChunk(m, &c->decoded, &c->projector);
+          },
+          [this](int64_t id, Correspondence* c, const correspondence_t& last) {
+            std::swap(product_, *c);
+            Process(id, last);
+          }) {}
+
+void TriangulatorNode::Fail(int64_t id, const std::string& message) {
+  node_->Error("scan " + std::to_string(id) + ": " + message, id);
+  node_->SetState("idle");
+}
+
+void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
+  node_->SetState("busy", id, "triangulating");
+  std::vector<StageReport> stages;
+  Status s = FromMessages(last.stages, &stages);
+  if (!s.ok()) return Fail(id, "CORRESPONDENCE: " + s.message());
+  Calibration calibration;
+  s = calibrations_.Get(id, &calibration);
+  if (!s.ok()) return Fail(id, s.message());
+  const DecodeResult& decoded = product_.decoded;
+  if (calibration.camera.size != decoded.projector_x.size() ||
+      calibration.projector.size != product_.projector) {
+    return Fail(id, "the calibration is for a " + SizeText(calibration.camera.size) +
+                        " camera and " + SizeText(calibration.projector.size) +
+                        " projector, the scan has " + SizeText(decoded.projector_x.size()) +
+                        " and " + SizeText(product_.projector));
+  }
+  if (!triangulator_ || !SameCalibration(triangulator_->calibration(), calibration)) {
+    triangulator_ = std::make_unique<Triangulator>(calibration);
+  }
+  const std::string results = ScanFolder::For(options_.data_dir, id).results();
+  s = MakeDirectories(results);
+  if (!s.ok()) return Fail(id, s.message());
+  stages.push_back(TriangulateStage(decoded, *triangulator_, options_.triangulate, results, &map_));
+  if (!stages.back().status.ok()) return Fail(id, stages.back().status.message());
+  std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, stages);
+  node_->PublishChunks(channel::kPointCloud, &chunks);
+  node_->Count("scans triangulated");
+  AnnounceHandedOn(node_, id, channel::kPointCloud);
+  node_->Log("scan " + std::to_string(id) + ": " + std::to_string(map_.valid) + " points in " +
+             std::to_string(stages.back().seconds) + " s");
+  node_->SetState("idle");
+}
+
+}  // namespace vellum::station

@@ -1,0 +1,121 @@
+// The triangulator's node on an in-process bus: CORRESPONDENCE and CALIBRATION in, the point
+// map on disk and POINT_CLOUD out, equal to the triangulate stage run directly; a malformed
+// chunk, a calibration of another rig and a scan without calibration are each reported, and the
+// node goes on.
+#include "daemons/triangulator/triangulator_node.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "station/scan_store.h"
+#include "station/testing.h"
+#include "vellum/scan_progress_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::FirstStages;
+using testing::MemqBus;
+using testing::SmallRig;
+using testing::SmallScan;
+using testing::SmallScanProducts;
+
+std::string Bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+class TriangulatorNodeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    options_.data_dir = (fs::temp_directory_path() /
+                         ("vellum_triangulator_node_" + std::to_string(getpid()) + "_" +
+                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
+                            .string();
+    fs::remove_all(options_.data_dir);
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(options_.data_dir);
+  }
+  void PublishCalibration(int64_t id, const Calibration& c) {
+    calibration_t m{};
+    m.scan_id = id;
+    ToMessage(c, &m);
+    bus_.probe().Publish(channel::kCalibration, &m);
+  }
+  std::vector<correspondence_t> Chunks(int64_t id) {
+    return ToMessages(id, SmallScanProducts().decoded, SmallScan().sequence.projector_size,
+                      FirstStages(1));
+  }
+  void PublishChunks(std::vector<correspondence_t> chunks) {
+    for (correspondence_t& m : chunks) bus_.probe().Publish(channel::kCorrespondence, &m);
+  }
+
+  TriangulatorNodeOptions options_;
+  MemqBus bus_;
+};
+
+TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
+  Node node("vellum-triangulator", &bus_.lcm());
+  TriangulatorNode triangulator(&node, options_);
+  auto clouds = bus_.Record<point_cloud_t>(channel::kPointCloud);
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  PublishCalibration(5, SmallRig());
+  PublishChunks(Chunks(5));
+  ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  EXPECT_EQ(progress->back().product, "POINT_CLOUD");
+  cv::Mat points;
+  for (const point_cloud_t& m : *clouds) ASSERT_TRUE(AddChunk(m, &points).ok());
+  const cv::Mat& expected = SmallScanProducts().map.points;
+  ASSERT_EQ(points.size(), expected.size());
+  EXPECT_EQ(std::memcmp(points.data, expected.data, expected.total() * expected.elemSize()), 0);
+  const std::string results = ScanFolder::For(options_.data_dir, 5).results();
+  EXPECT_EQ(Bytes(results + "/points.ply"), Bytes(SmallScanProducts().results + "/points.ply"));
+  std::vector<StageReport> stages;
+  ASSERT_TRUE(FromMessages(clouds->back().stages, &stages).ok());
+  ASSERT_EQ(stages.size(), 2u);
+  EXPECT_EQ(stages[1].stage, "triangulate");
+  EXPECT_EQ(stages[1].outputs, SmallScanProducts().stages[1].outputs);
+  EXPECT_EQ(node.Counter("scans triangulated"), 1);
+}
+
+TEST_F(TriangulatorNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
+  Node node("vellum-triangulator", &bus_.lcm());
+  TriangulatorNode triangulator(&node, options_);
+  bus_.Watch("vellum-triangulator");
+  // A chunk whose values do not fill its rows.
+  std::vector<correspondence_t> chunks = Chunks(6);
+  chunks[0].n -= 1;
+  chunks[0].projector_x.pop_back();
+  chunks[0].projector_y.pop_back();
+  chunks[0].valid.pop_back();
+  PublishChunks({chunks[0]});
+  EXPECT_TRUE(bus_.WaitForError("vellum-triangulator", "scan 6: CORRESPONDENCE:"))
+      << bus_.Status("vellum-triangulator").last_error;
+  // The calibration of another rig.
+  PublishCalibration(7, DefaultRig());
+  PublishChunks(Chunks(7));
+  EXPECT_TRUE(bus_.WaitForError("vellum-triangulator", "the calibration is for a 1600x1200"))
+      << bus_.Status("vellum-triangulator").last_error;
+  // No calibration at all (none on the bus, on disk or configured).
+  PublishChunks(Chunks(8));
+  EXPECT_TRUE(bus_.WaitForError("vellum-triangulator", "scan 8: no CALIBRATION message"))
+      << bus_.Status("vellum-triangulator").last_error;
+  EXPECT_EQ(bus_.Status("vellum-triangulator").last_error_scan_id, 8);
+  // And a good scan after all that.
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  PublishCalibration(9, SmallRig());
+  PublishChunks(Chunks(9));
+  EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  EXPECT_EQ(node.Counter("scans triangulated"), 1);
+}
+
+}  // namespace
+}  // namespace vellum::station

@@ -1,0 +1,53 @@
+// The processing options as flags, one group per stage, shared by `vellum process` and the
+// station's daemons (vellum-decoder takes the decode group, and so on), so that both run the
+// same stages with the same defaults and give the same results.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/decode/decode.h"
+#include "core/flatten/flatten.h"
+#include "core/geometry/triangulate.h"
+#include "core/mesh/mesh.h"
+#include "core/patterns/patterns.h"
+#include "core/restore/restore.h"
+#include "core/sim/gantry.h"
+#include "flags/flags.h"
+#include "pipeline/stages.h"
+
+namespace vellum {
+
+// Pattern sequence flags (--phase-steps, --period), shared by `patterns`, `render` and the
+// projector daemon.
+std::vector<Flags::Spec> PatternFlagSpecs();
+PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector);
+
+// The virtual gantry's page and camera flags (--page, --texture, --page-size, --noise, --seed),
+// shared by `vellum render` and the sim camera; `prefix` starts each help line ("sim: ").
+std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix = "");
+// Fills the page, its texture (an image texture is read from disk), the camera noise and the
+// seed (also the texture's). A bad name throws UsageError; an unreadable image is an error.
+Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions* texture,
+                           LightOptions* light, uint64_t* seed);
+
+std::vector<Flags::Spec> DecodeFlagSpecs();       // --decoder, --smooth-radius
+std::vector<Flags::Spec> TriangulateFlagSpecs();  // --max-epipolar
+std::vector<Flags::Spec> FlattenFlagSpecs();      // --grid, --solver
+std::vector<Flags::Spec> RestoreFlagSpecs();      // --view, --dpi
+
+// Each throws UsageError naming the flag when a value is bad.
+DecodeOptions DecodeOptionsFromFlags(const Flags& flags);
+TriangulateOptions TriangulateOptionsFromFlags(const Flags& flags);
+MeshOptions MeshOptionsFromFlags(const Flags& flags);
+FlattenOptions FlattenOptionsFromFlags(const Flags& flags);
+RestoreOptions RestoreOptionsFromFlags(const Flags& flags);
+
+// The flags of every stage (`vellum process`), and the options they give.
+std::vector<Flags::Spec> PipelineFlagSpecs();
+PipelineOptions PipelineOptionsFromFlags(const Flags& flags);
+
+// Appends b to a.
+std::vector<Flags::Spec> Join(std::vector<Flags::Spec> a, const std::vector<Flags::Spec>& b);
+
+}  // namespace vellum

@@ -1,0 +1,153 @@
+#include "io/calibration_io.h"
+
+#include <opencv2/core.hpp>
+
+#include "io/yaml_guard.h"
+
+namespace vellum {
+namespace {
+
+// Reads a numeric matrix node of any depth into doubles, accepting rows x cols or its
+// transpose when `either_orientation` (a 3x1 translation may come as 1x3).
+bool ReadMatrix(const cv::FileNode& node, int rows, int cols, bool either_orientation, cv::Mat* out,
+                std::string* why) {
+  if (node.empty() || node.isNone()) {
+    *why = "is missing";
+    return false;
+  }
+  if (!MatrixNodeAtMost(node, 64)) {
+    *why = "declares a matrix far larger than " + std::to_string(rows) + "x" + std::to_string(cols);
+    return false;
+  }
+  cv::Mat m;
+  try {
+    node >> m;
+  } catch (const std::exception&) {
+    m.release();
+  }
+  if (m.empty()) {
+    *why = "is not an !!opencv-matrix";
+    return false;
+  }
+  if (m.channels() != 1) {
+    *why = "must have one channel";
+    return false;
+  }
+  if (m.rows == rows && m.cols == cols) {
+    m.convertTo(*out, CV_64F);
+  } else if (either_orientation && m.rows == cols && m.cols == rows) {
+    cv::Mat t = m.t();
+    t.convertTo(*out, CV_64F);
+  } else {
+    *why = "must be " + std::to_string(rows) + "x" + std::to_string(cols) + ", found " +
+           std::to_string(m.rows) + "x" + std::to_string(m.cols);
+    return false;
+  }
+  for (int i = 0; i < rows * cols; ++i) {
+    if (!std::isfinite(out->at<double>(i))) {
+      *why = "holds a NaN or infinity";
+      return false;
+    }
+  }
+  return true;
+}
+
+bool ReadSize(const cv::FileNode& node, cv::Size* size, std::string* why) {
+  if (node.empty() || node.isNone()) {
+    *why = "is missing";
+    return false;
+  }
+  if (node.isSeq()) {
+    if (node.size() != 2 || !node[0].isInt() || !node[1].isInt()) {
+      *why = "must be a [ width, height ] sequence of two integers";
+      return false;
+    }
+    *size = cv::Size(static_cast<int>(node[0]), static_cast<int>(node[1]));
+  } else {
+    cv::Mat m;
+    std::string sub;
+    if (!ReadMatrix(node, 1, 2, true, &m, &sub)) {
+      *why = "must be [ width, height ] or a 1x2 matrix (" + sub + ")";
+      return false;
+    }
+    *size = cv::Size(cvRound(m.at<double>(0)), cvRound(m.at<double>(1)));
+  }
+  if (size->width <= 0 || size->height <= 0) {
+    *why = "must be positive";
+    return false;
+  }
+  return true;
+}
+
+Status ReadDevice(const cv::FileStorage& fs, const std::string& path, const std::string& prefix,
+                  CameraModel* model) {
+  std::string why;
+  auto fail = [&](const std::string& key) {
+    return Status::Error(path + ": key '" + prefix + key + "' " + why);
+  };
+  if (!ReadSize(fs[prefix + "size"], &model->size, &why)) return fail("size");
+  cv::Mat m;
+  if (!ReadMatrix(fs[prefix + "matrix"], 3, 3, false, &m, &why)) return fail("matrix");
+  model->matrix = cv::Matx33d(m.ptr<double>());
+  if (!ReadMatrix(fs[prefix + "distortion"], 1, 5, true, &m, &why)) return fail("distortion");
+  model->distortion = cv::Vec<double, 5>(m.ptr<double>());
+  if (!ReadMatrix(fs[prefix + "rotation"], 3, 3, false, &m, &why)) return fail("rotation");
+  model->rotation = cv::Matx33d(m.ptr<double>());
+  if (!ReadMatrix(fs[prefix + "translation"], 3, 1, true, &m, &why)) return fail("translation");
+  model->translation = cv::Vec3d(m.ptr<double>());
+  if (!model->Check(&why)) {
+    return Status::Error(path + ": " + prefix.substr(0, prefix.size() - 1) + ": " + why);
+  }
+  return Status::Ok();
+}
+
+void WriteDevice(cv::FileStorage& fs, const std::string& prefix, const CameraModel& model) {
+  fs << prefix + "size" << model.size;
+  fs << prefix + "matrix" << cv::Mat(model.matrix);
+  fs << prefix + "distortion" << cv::Mat(model.distortion).t();
+  fs << prefix + "rotation" << cv::Mat(model.rotation);
+  fs << prefix + "translation" << cv::Mat(model.translation);
+}
+
+}  // namespace
+
+Status ReadCalibration(const std::string& path, Calibration* calibration) {
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
+  cv::FileStorage fs;
+  try {
+    if (!fs.open(path, cv::FileStorage::READ)) {
+      return Status::Error(path + ": cannot open the calibration file");
+    }
+  } catch (const std::exception&) {
+    return Status::Error(path + ": not a valid OpenCV YAML/XML calibration file");
+  }
+  if (!fs.root().isMap()) {
+    return Status::Error(path + ": not a calibration (expected a map of keys, see DESIGN.md)");
+  }
+  Status s = Status::Ok();
+  try {
+    s = ReadDevice(fs, path, "camera_", &calibration->camera);
+    if (s.ok()) s = ReadDevice(fs, path, "projector_", &calibration->projector);
+  } catch (const std::exception& e) {
+    s = Status::Error(path + ": malformed: " + e.what());
+  }
+  if (!s.ok()) return s;
+  std::string why;
+  if (!calibration->Check(&why)) return Status::Error(path + ": " + why);
+  return Status::Ok();
+}
+
+Status WriteCalibration(const std::string& path, const Calibration& calibration) {
+  try {
+    cv::FileStorage fs(path, cv::FileStorage::WRITE);
+    if (!fs.isOpened()) return Status::Error(path + ": cannot write the calibration file");
+    WriteDevice(fs, "camera_", calibration.camera);
+    WriteDevice(fs, "projector_", calibration.projector);
+  } catch (const cv::Exception& e) {
+    return Status::Error(path + ": cannot write the calibration file: " + e.what());
+  }
+  return Status::Ok();
+}
+
+}  // namespace vellum

@@ -1,0 +1,283 @@
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/sim/gantry.h"
+#include "io/calibration_io.h"
+#include "io/ply.h"
+#include "io/scan_io.h"
+
+namespace vellum {
+namespace {
+
+namespace fs = std::filesystem;
+
+class IoTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("vellum_io_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+TEST_F(IoTest, CalibrationRoundTrip) {
+  Calibration c = DefaultRig();
+  c.projector.distortion = cv::Vec<double, 5>(0.01, -0.02, 0.001, 0.002, 0.003);
+  ASSERT_TRUE(WriteCalibration(Path("c.yaml"), c).ok());
+  Calibration r;
+  const Status s = ReadCalibration(Path("c.yaml"), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.camera.size, c.camera.size);
+  EXPECT_LT(cv::norm(r.projector.distortion - c.projector.distortion), 1e-12);
+  EXPECT_LT(cv::norm(r.projector.rotation - c.projector.rotation), 1e-12);
+  EXPECT_LT(cv::norm(r.camera.translation - c.camera.translation), 1e-9);
+}
+
+// What Python's cv2.FileStorage writes: sizes as 1x2 integer matrices, float matrices, and a
+// translation as 1x3.
+// The shipped example calibration is the virtual gantry's default rig.
+TEST_F(IoTest, ShippedDefaultCalibrationIsTheDefaultRig) {
+  Calibration shipped;
+  const Status s = ReadCalibration(VELLUM_SOURCE_DIR "/config/default_calibration.yaml", &shipped);
+  ASSERT_TRUE(s.ok()) << s.message();
+  const Calibration rig = DefaultRig();
+  for (const auto& [a, b] :
+       {std::pair{&shipped.camera, &rig.camera}, std::pair{&shipped.projector, &rig.projector}}) {
+    EXPECT_EQ(a->size, b->size);
+    EXPECT_LT(cv::norm(a->matrix - b->matrix), 1e-9);
+    EXPECT_LT(cv::norm(a->distortion - b->distortion), 1e-12);
+    EXPECT_LT(cv::norm(a->rotation - b->rotation), 1e-12);
+    EXPECT_LT(cv::norm(a->translation - b->translation), 1e-9);
+  }
+}
+
+TEST_F(IoTest, ReadsPythonStyleSizesAndRowTranslations) {
+  const Calibration c = DefaultRig();
+  std::ofstream f(Path("py.yaml"));
+  f << "%YAML:1.0\n---\n";
+  for (const char* dev : {"camera", "projector"}) {
+    const CameraModel& m = std::string(dev) == "camera" ? c.camera : c.projector;
+    f << dev << "_size: !!opencv-matrix\n   rows: 1\n   cols: 2\n   dt: i\n   data: [ "
+      << m.size.width << ", " << m.size.height << " ]\n";
+    auto mat = [&](const std::string& key, const double* v, int rows, int cols) {
+      f << dev << "_" << key << ": !!opencv-matrix\n   rows: " << rows << "\n   cols: " << cols
+        << "\n   dt: f\n   data: [ ";
+      for (int i = 0; i < rows * cols; ++i) f << (i ? ", " : "") << v[i];
+      f << " ]\n";
+    };
+    mat("matrix", m.matrix.val, 3, 3);
+    mat("distortion", m.distortion.val, 1, 5);
+    mat("rotation", m.rotation.val, 3, 3);
+    mat("translation", m.translation.val, 1, 3);
+  }
+  f.close();
+  Calibration r;
+  const Status s = ReadCalibration(Path("py.yaml"), &r);
+  // float storage of the rotation rounds it at 1e-7; Check() allows 1e-6.
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.projector.size, cv::Size(1024, 768));
+  EXPECT_NEAR(r.camera.translation[2], 600, 1e-3);
+}
+
+TEST_F(IoTest, CalibrationErrorsNameTheFileAndKey) {
+  ASSERT_TRUE(WriteCalibration(Path("c.yaml"), DefaultRig()).ok());
+  std::ifstream in(Path("c.yaml"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // Rename a key.
+  std::string bad = text;
+  bad.replace(bad.find("projector_matrix"), 16, "projector_matrx");
+  std::ofstream(Path("bad_key.yaml")) << bad;
+  Calibration r;
+  Status s = ReadCalibration(Path("bad_key.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("bad_key.yaml"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("projector_matrix"), std::string::npos) << s.message();
+  // A 3x3 where 1x5 belongs.
+  cv::FileStorage fs(Path("bad_size.yaml"), cv::FileStorage::WRITE);
+  const Calibration c = DefaultRig();
+  fs << "camera_size" << c.camera.size << "camera_matrix" << cv::Mat(c.camera.matrix)
+     << "camera_distortion" << cv::Mat(c.camera.matrix);
+  fs.release();
+  s = ReadCalibration(Path("bad_size.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("camera_distortion"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("1x5"), std::string::npos) << s.message();
+  // Not YAML at all.
+  std::ofstream(Path("junk.yaml")) << "\x01\x02 not yaml {{{";
+  s = ReadCalibration(Path("junk.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("junk.yaml"), std::string::npos) << s.message();
+}
+
+Scan SmallScan() {
+  Scan scan;
+  PatternOptions o;
+  o.projector_size = {40, 30};
+  scan.sequence = MakePatternSequence(o);
+  scan.camera_size = {32, 24};
+  scan.texture = cv::Mat(24, 32, CV_8U, cv::Scalar(100));
+  for (size_t k = 0; k < scan.sequence.patterns.size(); ++k) {
+    scan.frames.push_back(cv::Mat(24, 32, CV_8U, cv::Scalar(static_cast<double>(k))));
+  }
+  return scan;
+}
+
+TEST_F(IoTest, ScanRoundTrip) {
+  const Scan scan = SmallScan();
+  ASSERT_TRUE(WriteScan(Path("scan"), scan).ok());
+  Scan r;
+  const Status s = ReadScan(Path("scan"), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(r.sequence.patterns.size(), scan.sequence.patterns.size());
+  for (size_t k = 0; k < r.frames.size(); ++k) {
+    EXPECT_TRUE(r.sequence.patterns[k] == scan.sequence.patterns[k]);
+    EXPECT_EQ(cv::norm(r.frames[k], scan.frames[k], cv::NORM_INF), 0);
+  }
+}
+
+TEST_F(IoTest, ScanErrorsNameTheFileAndProblem) {
+  const Scan scan = SmallScan();
+  Scan r;
+  // Missing frame.
+  ASSERT_TRUE(WriteScan(Path("missing"), scan).ok());
+  fs::remove(Path("missing/" + FrameName(5)));
+  Status s = ReadScan(Path("missing"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_005.png: file is missing"), std::string::npos) << s.message();
+  // Mixed sizes.
+  ASSERT_TRUE(WriteScan(Path("mixed"), scan).ok());
+  cv::imwrite(Path("mixed/" + FrameName(7)), cv::Mat(20, 20, CV_8U, cv::Scalar(0)));
+  s = ReadScan(Path("mixed"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_007.png: image is 20x20"), std::string::npos) << s.message();
+  // Not an image.
+  ASSERT_TRUE(WriteScan(Path("junk"), scan).ok());
+  std::ofstream(Path("junk/" + FrameName(2))) << "this is not a PNG";
+  s = ReadScan(Path("junk"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_002.png: not a readable image"), std::string::npos)
+      << s.message();
+  // Corrupt scan.yaml.
+  ASSERT_TRUE(WriteScan(Path("yaml"), scan).ok());
+  std::ofstream(Path("yaml/scan.yaml"))
+      << "%YAML:1.0\n---\nprojector_size: [ 40, 30 ]\npatterns: 7\n";
+  s = ReadScan(Path("yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("scan.yaml"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("patterns"), std::string::npos) << s.message();
+}
+
+TEST_F(IoTest, PlyRoundTrip) {
+  cv::Mat points(3, 4, CV_32FC3, cv::Scalar::all(NAN));
+  points.at<cv::Vec3f>(1, 2) = cv::Vec3f(1.5f, -2.0f, 3.25f);
+  points.at<cv::Vec3f>(2, 3) = cv::Vec3f(4, 5, 6);
+  ASSERT_TRUE(WritePointsPly(Path("p.ply"), points).ok());
+  std::vector<PlyPoint> r;
+  ASSERT_TRUE(ReadPointsPly(Path("p.ply"), &r).ok());
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[0].x, 1.5f);
+  EXPECT_EQ(r[0].u, 2.0f);
+  EXPECT_EQ(r[0].v, 1.0f);
+  EXPECT_EQ(r[1].z, 6.0f);
+}
+
+}  // namespace
+}  // namespace vellum
+
+namespace vellum {
+namespace {
+
+// Inputs the fuzzers found that made OpenCV's YAML reader throw std::length_error (not a
+// cv::Exception), which ended the reading process; now they are errors naming the file.
+TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
+  const std::string seed =
+      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-yaml-length-error";
+  std::ifstream in(seed, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(bytes.empty());
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("vellum_io_regress_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "scan.yaml", std::ios::binary) << bytes.substr(1);
+  std::ofstream(dir / "calibration.yaml", std::ios::binary) << bytes.substr(1);
+  PatternSequence sequence;
+  cv::Size camera;
+  EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
+  Calibration calibration;
+  EXPECT_FALSE(ReadCalibration((dir / "calibration.yaml").string(), &calibration).ok());
+  std::filesystem::remove_all(dir);
+}
+
+// Texts on which OpenCV 4.6's YAML parser never returns (found by fuzz/fuzz_files): each is
+// refused, naming the problem, before OpenCV sees it. (A regression shows as a hang, which the
+// test's timeout turns into a failure.)
+TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("vellum_io_hang_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const struct {
+    std::string text, problem;
+  } cases[] = {
+      {std::string("%YAML:1.0\ncamera_size: [ 4, 3 ]\0\n", 33), "NUL"},
+      {"%YAML:1.0\n   rows: 3\n* v-m\n", "indented"},
+      {"%YAML:1.0\na: 1\n...\n-x\n", "\"...\""},
+  };
+  for (const auto& c : cases) {
+    const std::string path = (dir / "calibration.yaml").string();
+    std::ofstream(path, std::ios::binary) << c.text;
+    Calibration calibration;
+    const Status s = ReadCalibration(path, &calibration);
+    EXPECT_FALSE(s.ok());
+    EXPECT_NE(s.message().find(c.problem), std::string::npos) << s.message();
+    std::ofstream(dir / "scan.yaml", std::ios::binary) << c.text;
+    PatternSequence sequence;
+    cv::Size camera;
+    EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
+  }
+  // The header OpenCV writes, comments and blank lines before the first entry are fine.
+  Calibration calibration;
+  ASSERT_TRUE(WriteCalibration((dir / "ok.yaml").string(), DefaultRig()).ok());
+  std::ifstream in(dir / "ok.yaml");
+  const std::string written((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t header = written.find('\n') + 1;  // After "%YAML:1.0".
+  std::ofstream(dir / "commented.yaml") << written.substr(0, header) << "# hand-edited\n\n"
+                                        << written.substr(header);
+  const Status s = ReadCalibration((dir / "commented.yaml").string(), &calibration);
+  EXPECT_TRUE(s.ok()) << s.message();
+  std::filesystem::remove_all(dir);
+}
+
+// A PLY header declaring more data than the file holds is refused before anything is allocated
+// (a fuzzed mesh asked for 10^100 vertices).
+TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
+  const std::string seed =
+      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-ply-huge-vertex-count";
+  std::ifstream in(seed, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(bytes.empty());
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("vellum_ply_" + std::to_string(getpid()) + ".ply"))
+          .string();
+  std::ofstream(path, std::ios::binary) << "ply\nformat binary_little_endian 1.0\n"
+                                        << "element vertex 1000000\nelement face 0\nend_header\n";
+  std::vector<cv::Vec3f> vertices;
+  std::vector<cv::Vec4i> quads;
+  const Status s = ReadQuadMeshPly(path, &vertices, &quads);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("declares 1000000 vertices"), std::string::npos) << s.message();
+  std::ofstream(path, std::ios::binary) << bytes.substr(1);
+  EXPECT_FALSE(ReadQuadMeshPly(path, &vertices, &quads).ok());
+  std::remove(path.c_str());
+}
+
+}  // namespace
+}  // namespace vellum

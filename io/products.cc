@@ -1,0 +1,99 @@
+#include "io/products.h"
+
+#include <filesystem>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "io/json.h"
+#include "io/ply.h"
+#include "io/scan_io.h"
+
+namespace vellum {
+namespace fs = std::filesystem;
+
+cv::Mat DepthPicture(const cv::Mat& points, double* z_min_mm, double* z_max_mm) {
+  std::vector<cv::Mat> planes;
+  cv::split(points, planes);
+  const cv::Mat valid = planes[2] == planes[2];  // Not NaN.
+  *z_min_mm = 0;
+  *z_max_mm = 1;
+  if (cv::countNonZero(valid) > 0) {
+    cv::minMaxLoc(planes[2], z_min_mm, z_max_mm, nullptr, nullptr, valid);
+  }
+  cv::Mat z8;
+  const double range = std::max(*z_max_mm - *z_min_mm, 1e-3);
+  planes[2].convertTo(z8, CV_8U, 255.0 / range, -*z_min_mm * 255.0 / range);
+  cv::Mat color;
+  cv::applyColorMap(z8, color, cv::COLORMAP_TURBO);
+  color.setTo(cv::Scalar::all(0), ~valid);
+  return color;
+}
+
+Status WritePointProducts(const std::string& dir, const cv::Mat& points, double* z_min_mm,
+                          double* z_max_mm) {
+  Status s = WritePointsPly((fs::path(dir) / "points.ply").string(), points);
+  if (!s.ok()) return s;
+  return WriteImage((fs::path(dir) / "depth.png").string(),
+                    DepthPicture(points, z_min_mm, z_max_mm));
+}
+
+Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat) {
+  std::vector<int> index(mesh.kind.size(), -1);
+  std::vector<cv::Vec3f> before, after;
+  for (size_t k = 0; k < mesh.kind.size(); ++k) {
+    if (!mesh.Active(static_cast<int>(k))) continue;
+    index[k] = static_cast<int>(before.size());
+    before.push_back(cv::Vec3f(mesh.point[k]));
+    after.emplace_back(static_cast<float>(flat[k].x), static_cast<float>(flat[k].y), 0.0f);
+  }
+  std::vector<cv::Vec4i> quads;
+  for (const cv::Vec4i& q : mesh.quads)
+    quads.emplace_back(index[q[0]], index[q[1]], index[q[2]], index[q[3]]);
+  Status s = WriteQuadMeshPly((fs::path(dir) / "mesh.ply").string(), before, quads,
+                              "vellum sheet before flattening: world frame, mm");
+  if (!s.ok()) return s;
+  return WriteQuadMeshPly(
+      (fs::path(dir) / "flat.ply").string(), after, quads,
+      "vellum sheet after flattening: page plane, mm (same vertices as mesh.ply)");
+}
+
+Status WriteRestored(const std::string& dir, const RestoreResult& restored) {
+  std::vector<int> tiff_params;
+  if (restored.view == RestoreView::kOrthographic) {
+    const int dpi = static_cast<int>(std::lround(restored.dpi));
+    tiff_params = {cv::IMWRITE_TIFF_RESUNIT, 2,  cv::IMWRITE_TIFF_XDPI, dpi,
+                   cv::IMWRITE_TIFF_YDPI,    dpi};
+  }
+  const std::string tif = (fs::path(dir) / "restored.tif").string();
+  try {
+    if (!cv::imwrite(tif, restored.image, tiff_params)) {
+      return Status::Error(tif + ": cannot write image");
+    }
+  } catch (const cv::Exception& e) {
+    return Status::Error(tif + ": cannot write image: " + e.what());
+  }
+  Json r;
+  r["view"] = ToString(restored.view);
+  r["image"] = "restored.tif";
+  r["width"] = restored.image.cols;
+  r["height"] = restored.image.rows;
+  if (restored.view == RestoreView::kOrthographic) {
+    const cv::Matx23d& a = restored.pixel_from_flat;
+    r["dpi"] = JsonNumber(restored.dpi);
+    r["flat_frame"] = "the x, y of flat.ply, mm";
+    Json rows = Json::array();
+    for (int row = 0; row < 2; ++row) {
+      Json cols = Json::array();
+      for (int col = 0; col < 3; ++col) cols.push_back(JsonNumber(a(row, col)));
+      rows.push_back(cols);
+    }
+    r["pixel_from_flat_mm"] = rows;
+    r["pixel_convention"] = "pixel centres at integer coordinates; column = x, row = -y";
+  } else {
+    r["flat_frame"] = "the x, y of flat.ply, mm, on the table plane z = 0";
+    r["pixel_from_flat_mm"] = "the calibrated camera's projection of (x, y, 0)";
+  }
+  return WriteJsonFile((fs::path(dir) / "restored.json").string(), r);
+}
+
+}  // namespace vellum

@@ -1,0 +1,29 @@
+// What processing a scan writes (DESIGN.md, `vellum process`): points.ply and depth.png,
+// mesh.ply and flat.ply, restored.tif and restored.json. One writer for each, called by the
+// pipeline's stages (pipeline/stages.h) for `vellum process` and the daemons alike.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/common/text.h"
+#include "core/mesh/mesh.h"
+#include "core/restore/restore.h"
+
+namespace vellum {
+
+// The height map as a picture: z over the valid points' range in colour, invalid black; sets
+// the range in mm.
+cv::Mat DepthPicture(const cv::Mat& points, double* z_min_mm, double* z_max_mm);
+
+// points.ply and depth.png of an organised point map (CV_32FC3, NaN where invalid).
+Status WritePointProducts(const std::string& dir, const cv::Mat& points, double* z_min_mm,
+                          double* z_max_mm);
+// mesh.ply (3D) and flat.ply (z = 0): the sheet's active nodes in the same order, quad faces.
+Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat);
+// restored.tif (TIFF dpi tags in orthographic view) and restored.json.
+Status WriteRestored(const std::string& dir, const RestoreResult& restored);
+
+}  // namespace vellum

@@ -1,0 +1,291 @@
+#include "io/scan_io.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "io/yaml_guard.h"
+
+namespace vellum {
+namespace fs = std::filesystem;
+namespace {
+
+constexpr char kScanYaml[] = "scan.yaml";
+constexpr char kTexture[] = "texture.png";
+constexpr char kFormat[] = "vellum-scan";
+
+std::string Describe(const PatternSpec& s) {
+  std::string d = ToString(s.kind);
+  if (s.kind == PatternKind::kGray) {
+    d += std::string(" ") + ToString(s.axis) + " bit " + std::to_string(s.bit) +
+         (s.inverted ? " inverse" : "");
+  } else if (s.kind == PatternKind::kPhase) {
+    d += std::string(" ") + ToString(s.axis) + " step " + std::to_string(s.step) + " of " +
+         std::to_string(s.steps);
+  }
+  return d;
+}
+
+Status ReadImageFile(const std::string& path, cv::Mat* image) {
+  if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  cv::Mat img;
+  try {
+    img = cv::imread(path, cv::IMREAD_UNCHANGED);
+  } catch (const std::exception&) {
+    img.release();
+  }
+  if (img.empty()) return Status::Error(path + ": not a readable image");
+  if (img.depth() != CV_8U) return Status::Error(path + ": must be an 8-bit image");
+  if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_BGRA2BGR);
+  if (img.channels() != 1 && img.channels() != 3) {
+    return Status::Error(path + ": must be gray or colour");
+  }
+  *image = img;
+  return Status::Ok();
+}
+
+}  // namespace
+
+std::string FrameName(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "frame_%03d.png", index);
+  return buf;
+}
+
+std::string PatternName(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "pattern_%03d.png", index);
+  return buf;
+}
+
+Status MakeDirectories(const std::string& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec) return Status::Error(dir + ": cannot create directory: " + ec.message());
+  return Status::Ok();
+}
+
+Status WriteImage(const std::string& path, const cv::Mat& image) {
+  bool ok = false;
+  try {
+    ok = cv::imwrite(path, image);
+  } catch (const cv::Exception& e) {
+    return Status::Error(path + ": cannot write image: " + e.what());
+  }
+  return ok ? Status::Ok() : Status::Error(path + ": cannot write image");
+}
+
+Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence,
+                     cv::Size camera_size) {
+  const std::string path = (fs::path(dir) / kScanYaml).string();
+  try {
+    cv::FileStorage out(path, cv::FileStorage::WRITE);
+    if (!out.isOpened()) return Status::Error(path + ": cannot write");
+    out << "format" << kFormat;
+    out << "version" << 1;
+    out << "projector_size" << sequence.projector_size;
+    if (camera_size.area() > 0) out << "camera_size" << camera_size;
+    out << "texture" << kTexture;
+    out << "patterns"
+        << "[";
+    for (const PatternSpec& s : sequence.patterns) {
+      out << "{"
+          << "kind" << ToString(s.kind);
+      if (s.kind == PatternKind::kGray) {
+        out << "axis" << ToString(s.axis) << "bit" << s.bit << "inverted" << (s.inverted ? 1 : 0);
+      } else if (s.kind == PatternKind::kPhase) {
+        out << "axis" << ToString(s.axis) << "step" << s.step << "steps" << s.steps << "period_px"
+            << s.period_px;
+      }
+      out << "}";
+    }
+    out << "]";
+  } catch (const cv::Exception& e) {
+    return Status::Error(path + ": cannot write: " + e.what());
+  }
+  return Status::Ok();
+}
+
+Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size) {
+  const std::string path = (fs::path(dir) / kScanYaml).string();
+  if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
+  if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
+  cv::FileStorage in;
+  try {
+    if (!in.open(path, cv::FileStorage::READ)) return Status::Error(path + ": cannot open");
+  } catch (const std::exception&) {
+    return Status::Error(path + ": not valid YAML");
+  }
+  try {
+    if (!in["format"].empty() && std::string(in["format"]) != kFormat) {
+      return Status::Error(path + ": format is '" + std::string(in["format"]) + "', expected '" +
+                           kFormat + "'");
+    }
+    auto read_size = [&](const char* key, cv::Size* size, bool required) {
+      const cv::FileNode n = in[key];
+      if (n.empty() || n.isNone()) {
+        *size = cv::Size();
+        return required ? Status::Error(path + ": key '" + key + "' is missing") : Status::Ok();
+      }
+      if (n.isSeq() && n.size() == 2 && n[0].isInt() && n[1].isInt()) {
+        *size = cv::Size(static_cast<int>(n[0]), static_cast<int>(n[1]));
+      } else {
+        if (!MatrixNodeAtMost(n, 2)) {
+          return Status::Error(path + ": key '" + key + "' must be [ width, height ]");
+        }
+        cv::Mat m;
+        n >> m;
+        if (m.total() != 2) {
+          return Status::Error(path + ": key '" + key + "' must be [ width, height ]");
+        }
+        m.convertTo(m, CV_32S);
+        *size = cv::Size(m.at<int>(0), m.at<int>(1));
+      }
+      if (size->width <= 0 || size->height <= 0) {
+        return Status::Error(path + ": key '" + key + "' must be positive");
+      }
+      return Status::Ok();
+    };
+    Status s = read_size("projector_size", &sequence->projector_size, true);
+    if (!s.ok()) return s;
+    s = read_size("camera_size", camera_size, false);
+    if (!s.ok()) return s;
+    const cv::FileNode list = in["patterns"];
+    if (!list.isSeq() || list.size() == 0) {
+      return Status::Error(path + ": key 'patterns' must be a non-empty sequence");
+    }
+    sequence->patterns.clear();
+    int index = 0;
+    for (const cv::FileNode& n : list) {
+      PatternSpec spec;
+      const std::string where = path + ": pattern " + std::to_string(index);
+      if (!n.isMap() ||
+          !ParsePatternKind(n["kind"].isString() ? std::string(n["kind"]) : "", &spec.kind)) {
+        return Status::Error(where + ": 'kind' must be white, black, gray or phase");
+      }
+      if (spec.kind == PatternKind::kGray || spec.kind == PatternKind::kPhase) {
+        if (!ParseAxis(n["axis"].isString() ? std::string(n["axis"]) : "", &spec.axis)) {
+          return Status::Error(where + ": 'axis' must be column or row");
+        }
+      }
+      if (spec.kind == PatternKind::kGray) {
+        if (!n["bit"].isInt() || !n["inverted"].isInt()) {
+          return Status::Error(where + ": a gray pattern needs integer 'bit' and 'inverted'");
+        }
+        spec.bit = static_cast<int>(n["bit"]);
+        spec.inverted = static_cast<int>(n["inverted"]) != 0;
+        if (spec.bit < 0 || spec.bit > 20) return Status::Error(where + ": 'bit' out of range");
+      } else if (spec.kind == PatternKind::kPhase) {
+        if (!n["step"].isInt() || !n["steps"].isInt() || !n["period_px"].isInt()) {
+          return Status::Error(where +
+                               ": a phase pattern needs integer 'step', 'steps', 'period_px'");
+        }
+        spec.step = static_cast<int>(n["step"]);
+        spec.steps = static_cast<int>(n["steps"]);
+        spec.period_px = static_cast<int>(n["period_px"]);
+        if (spec.steps < 3 || spec.step < 0 || spec.step >= spec.steps || spec.period_px < 4) {
+          return Status::Error(where + ": phase step/steps/period_px out of range");
+        }
+      }
+      sequence->patterns.push_back(spec);
+      ++index;
+    }
+  } catch (const std::exception& e) {
+    return Status::Error(path + ": malformed: " + e.what());
+  }
+  std::string why;
+  if (!sequence->Check(&why)) return Status::Error(path + ": " + why);
+  return Status::Ok();
+}
+
+Status ReadTexture(const std::string& dir, cv::Mat* texture) {
+  return ReadImageFile((fs::path(dir) / kTexture).string(), texture);
+}
+
+Status ReadScan(const std::string& dir, Scan* scan) {
+  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size);
+  if (!s.ok()) return s;
+  const fs::path root(dir);
+  s = ReadImageFile((root / kTexture).string(), &scan->texture);
+  if (!s.ok()) return s;
+  cv::Size expected = scan->camera_size.area() > 0 ? scan->camera_size : scan->texture.size();
+  const char* expected_from = scan->camera_size.area() > 0 ? "camera_size in scan.yaml" : kTexture;
+  if (scan->texture.size() != expected) {
+    return Status::Error((root / kTexture).string() + ": image is " +
+                         std::to_string(scan->texture.cols) + "x" +
+                         std::to_string(scan->texture.rows) + " but " + expected_from + " says " +
+                         std::to_string(expected.width) + "x" + std::to_string(expected.height));
+  }
+  const int n = static_cast<int>(scan->sequence.patterns.size());
+  scan->frames.assign(n, cv::Mat());
+  // PNG decoding dominates reading a scan: frames are read in parallel, and the error of the
+  // lowest-numbered bad frame is reported, as a serial read would.
+  std::vector<Status> errors(n, Status::Ok());
+  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
+    for (int k = range.start; k < range.end; ++k) {
+      const std::string path = (root / FrameName(k)).string();
+      if (!fs::exists(path)) {
+        errors[k] = Status::Error(path + ": file is missing (frame " + std::to_string(k) + " of " +
+                                  std::to_string(n) + ", pattern '" +
+                                  Describe(scan->sequence.patterns[k]) + "')");
+        continue;
+      }
+      cv::Mat img;
+      errors[k] = ReadImageFile(path, &img);
+      if (!errors[k].ok()) continue;
+      if (img.size() != expected) {
+        errors[k] =
+            Status::Error(path + ": image is " + std::to_string(img.cols) + "x" +
+                          std::to_string(img.rows) + " but " + expected_from + " says " +
+                          std::to_string(expected.width) + "x" + std::to_string(expected.height));
+        continue;
+      }
+      if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
+      scan->frames[k] = img;
+    }
+  });
+  for (const Status& e : errors) {
+    if (!e.ok()) return e;
+  }
+  if (fs::exists(root / FrameName(n))) {
+    return Status::Error((root / FrameName(n)).string() + ": more frames than the " +
+                         std::to_string(n) + " patterns of scan.yaml");
+  }
+  scan->camera_size = expected;
+  return Status::Ok();
+}
+
+Status WriteScan(const std::string& dir, const Scan& scan) {
+  Status s = MakeDirectories(dir);
+  if (!s.ok()) return s;
+  s = WriteScanYaml(dir, scan.sequence, scan.camera_size);
+  if (!s.ok()) return s;
+  const fs::path root(dir);
+  s = WriteImage((root / kTexture).string(), scan.texture);
+  if (!s.ok()) return s;
+  for (size_t k = 0; k < scan.frames.size(); ++k) {
+    s = WriteImage((root / FrameName(static_cast<int>(k))).string(), scan.frames[k]);
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+Status WritePatterns(const std::string& dir, const PatternSequence& sequence) {
+  Status s = MakeDirectories(dir);
+  if (!s.ok()) return s;
+  s = WriteScanYaml(dir, sequence, cv::Size());
+  if (!s.ok()) return s;
+  for (size_t k = 0; k < sequence.patterns.size(); ++k) {
+    s = WriteImage((fs::path(dir) / PatternName(static_cast<int>(k))).string(),
+                   RenderPattern(sequence.patterns[k], sequence.projector_size));
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+}  // namespace vellum

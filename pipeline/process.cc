@@ -1,0 +1,83 @@
+#include "pipeline/process.h"
+
+#include "core/common/text.h"
+#include "io/calibration_io.h"
+#include "io/scan_io.h"
+
+namespace vellum {
+
+Status ReadProcessInput(const std::string& scan_dir, const std::string& calibration_path,
+                        ProcessInput* input) {
+  input->scan_dir = scan_dir;
+  input->calibration_path = calibration_path;
+  Status s = ReadCalibration(calibration_path, &input->calibration);
+  if (!s.ok()) return s;
+  s = ReadScan(scan_dir, &input->scan);
+  if (!s.ok()) return s;
+  const Calibration& c = input->calibration;
+  const Scan& scan = input->scan;
+  if (scan.camera_size != c.camera.size) {
+    return Status::Error(scan_dir + ": camera images are " + SizeText(scan.camera_size) + " but " +
+                         calibration_path + " calibrates a " + SizeText(c.camera.size) + " camera");
+  }
+  if (scan.sequence.projector_size != c.projector.size) {
+    return Status::Error(scan_dir + "/scan.yaml: projector_size is " +
+                         SizeText(scan.sequence.projector_size) + " but " + calibration_path +
+                         " calibrates a " + SizeText(c.projector.size) + " projector");
+  }
+  return Status::Ok();
+}
+
+ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& options,
+                          const std::string& results, const PipelineProgress& progress) {
+  ProcessResult out;
+  ProcessReport& report = out.report;
+  report.scan = input.scan_dir;
+  report.calibration = input.calibration_path;
+  // The share of a typical run done before each stage (the simulators flatten for longer).
+  const bool slow = options.flatten.solver != FlattenSolver::kGaussNewton;
+  auto next = [&](const char* stage, double done) {
+    if (progress) progress(stage, done);
+  };
+  // Runs one stage; false (with out.status set) when it failed.
+  auto ran = [&](StageReport stage, bool name_scan) {
+    report.stages.push_back(stage);
+    if (stage.status.ok()) return true;
+    out.status =
+        Status::Error((name_scan ? input.scan_dir + ": " : std::string()) + stage.status.message());
+    return false;
+  };
+  Status s = MakeDirectories(results);
+  if (!s.ok()) {
+    out.status = s;
+    return out;
+  }
+  const CameraModel& camera = input.calibration.camera;
+  next("decode", 0.35);
+  Decoder decoder(options.decode);
+  DecodeResult decoded;
+  if (!ran(DecodeStage(input.scan, &decoder, &decoded), true)) return out;
+  next("triangulate", 0.5);
+  const Triangulator triangulator(input.calibration);
+  if (!ran(TriangulateStage(decoded, triangulator, options.triangulate, results, &out.map),
+           false)) {
+    return out;
+  }
+  next("mesh", 0.7);
+  if (!ran(MeshStage(out.map.points, input.scan.texture, camera, options.mesh, &out.mesh), true)) {
+    return out;
+  }
+  next("flatten", 0.75);
+  if (!ran(FlattenStage(out.mesh, options.flatten, results, &out.flat), true)) return out;
+  next("restore", slow ? 0.95 : 0.8);
+  if (!ran(RestoreStage(input.scan.texture, out.mesh, out.flat.flat, camera, options.restore,
+                        results, &out.restored),
+           true)) {
+    return out;
+  }
+  next("report", 0.97);
+  out.status = WriteReports(results, input.scan_dir, &report);
+  return out;
+}
+
+}  // namespace vellum

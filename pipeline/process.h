@@ -1,0 +1,44 @@
+// `vellum process` as one call: a scan directory and its calibration through every stage of
+// pipeline/stages.h, into a results folder (DESIGN.md's products, report.json, report.html).
+#pragma once
+
+#include <functional>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/geometry/calibration.h"
+#include "core/patterns/scan.h"
+#include "pipeline/report.h"
+#include "pipeline/stages.h"
+
+namespace vellum {
+
+struct ProcessInput {
+  std::string scan_dir, calibration_path;  // Where they were read from (for messages, report).
+  Scan scan;
+  Calibration calibration;
+};
+
+// Reads the scan directory and the calibration and checks that they belong together (camera
+// and projector sizes); errors name the file and the problem.
+Status ReadProcessInput(const std::string& scan_dir, const std::string& calibration_path,
+                        ProcessInput* input);
+
+struct ProcessResult {
+  Status status = Status::Error("pipeline not run");
+  ProcessReport report;  // The stages that ran, and the files written.
+  PointMap map;          // The products, for a caller's summary.
+  Mesh mesh;
+  FlattenResult flat;
+  RestoreResult restored;
+};
+
+// Called before each stage with its name and the share of the whole run done so far.
+using PipelineProgress = std::function<void(const std::string& stage, double done)>;
+
+// Runs decode, triangulate, mesh, flatten and restore into `results` (created), then writes
+// report.html and report.json. Errors name the scan directory, or the file that failed.
+ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& options,
+                          const std::string& results, const PipelineProgress& progress = nullptr);
+
+}  // namespace vellum

@@ -1,0 +1,223 @@
+#include "pipeline/report.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <sstream>
+
+#include "io/json.h"
+
+namespace vellum {
+namespace fs = std::filesystem;
+namespace {
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    if (c == '<')
+      out += "&lt;";
+    else if (c == '>')
+      out += "&gt;";
+    else if (c == '&')
+      out += "&amp;";
+    else if (c == '"')
+      out += "&quot;";
+    else
+      out += c;
+  }
+  return out;
+}
+
+std::string Number(double v, int precision = 3) {
+  std::ostringstream o;
+  o.precision(precision);
+  o << v;
+  return o.str();
+}
+
+// The pictures a report can show (written by the stages to report/), in the order shown.
+struct Picture {
+  const char* file;
+  const char* caption;
+};
+constexpr Picture kPictures[] = {
+    {"report/texture.png", "Texture: the page under studio light, as the camera saw it."},
+    {"report/valid.png",
+     "Valid pixels: white where a 3D point was measured (black: ink, shadow, table beyond the "
+     "projector, rejected)."},
+    {"report/depth.png", "Height above the table, mm (colour bar on the right)."},
+    {"report/grid.png", "The restored page with the flattened sheet's grid (every 4th line)."},
+    {"report/strain.png",
+     "Residual strain of each quad after flattening (mean relative spring-length error); high "
+     "values mark stretch or creases the flat page cannot keep."},
+    {"report/before_after.png",
+     "The centre of the page before (left, camera) and after (right, restored)."},
+};
+
+// report.json's sections in their order; a section no stage fills is left out.
+constexpr const char* kSections[] = {"options",   "sizes", "stages_seconds", "pixels",
+                                     "height_mm", "sheet", "flattening",     "restored"};
+
+Json ToJson(const ReportValue& v) { return v.is_text ? Json(v.text) : JsonNumber(v.number); }
+
+Status WriteHtml(const std::string& dir, const std::string& title, const ProcessReport& r) {
+  std::ostringstream h;
+  h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>vellum: "
+    << Escape(title) << "</title>\n<style>\n"
+    << "body{font-family:sans-serif;margin:2em;max-width:1500px;color:#222}\n"
+    << "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px "
+       "10px;text-align:left}\nfigure{margin:1.5em 0}img{max-width:100%;border:1px solid "
+       "#ccc}\nfigcaption{color:#555;margin-top:4px}.warn{color:#a40}\n</style></head><body>\n";
+  h << "<h1>vellum: " << Escape(title) << "</h1>\n";
+  const double pixels = r.Number("pixels", "camera"), valid = r.Number("pixels", "valid");
+  const double folded = r.Number("flattening", "folded_quads");
+  h << "<h2>Key figures</h2>\n<table>\n";
+  h << "<tr><th>Valid pixels</th><td>" << valid << " of " << pixels << " ("
+    << Number(pixels > 0 ? 100.0 * valid / pixels : 0) << "%); page " << r.Number("pixels", "page")
+    << "</td></tr>\n";
+  h << "<tr><th>Residual strain</th><td>mean " << Number(r.Number("flattening", "mean_strain"))
+    << ", max " << Number(r.Number("flattening", "max_strain"))
+    << (folded > 0 ? ", <span class=warn>" : ", ") << folded << " folded quads"
+    << (folded > 0 ? "</span>" : "") << "</td></tr>\n";
+  h << "<tr><th>Solver</th><td>" << Escape(r.Text("flattening", "solver")) << ", "
+    << r.Number("flattening", "iterations") << " iterations</td></tr>\n";
+  if (r.Find("restored", "width")) {
+    h << "<tr><th>Restored</th><td>" << r.Number("restored", "width") << " x "
+      << r.Number("restored", "height") << " px, "
+      << (r.Text("options", "view") == "orthographic"
+              ? Number(r.Number("options", "dpi"), 4) + " dpi (orthographic)"
+              : std::string("camera view"))
+      << "</td></tr>\n";
+  }
+  h << "<tr><th>Height</th><td>" << Number(r.Number("height_mm", "min")) << " .. "
+    << Number(r.Number("height_mm", "max")) << " mm</td></tr>\n";
+  h << "<tr><th>Sizes</th><td>camera " << Escape(r.Text("sizes", "camera")) << ", projector "
+    << Escape(r.Text("sizes", "projector")) << ", " << r.Number("sizes", "patterns")
+    << " patterns</td></tr>\n";
+  h << "</table>\n<h2>Stage timings</h2>\n<table>\n";
+  double total = 0;
+  for (const StageReport& stage : r.stages) {
+    h << "<tr><th>" << Escape(stage.stage) << "</th><td>" << Number(stage.seconds)
+      << " s</td></tr>\n";
+    total += stage.seconds;
+  }
+  h << "<tr><th>total</th><td>" << Number(total) << " s</td></tr>\n</table>\n";
+  h << "<h2>Pictures</h2>\n";
+  const std::vector<std::string> outputs = r.Outputs();
+  for (const Picture& p : kPictures) {
+    if (std::find(outputs.begin(), outputs.end(), p.file) == outputs.end()) continue;
+    h << "<figure><img src=\"" << p.file << "\" alt=\"" << Escape(p.caption) << "\"><figcaption>"
+      << Escape(p.caption) << "</figcaption></figure>\n";
+  }
+  h << "<h2>Configuration</h2>\n<table>\n";
+  h << "<tr><th>scan</th><td>" << Escape(r.scan) << "</td></tr>\n";
+  h << "<tr><th>calibration</th><td>" << Escape(r.calibration) << "</td></tr>\n";
+  for (const StageReport& stage : r.stages) {
+    for (const ReportValue& v : stage.values) {
+      if (v.section != "options") continue;
+      h << "<tr><th>" << Escape(v.key) << "</th><td>"
+        << (v.is_text ? Escape(v.text) : Number(v.number, 6)) << "</td></tr>\n";
+    }
+  }
+  h << "</table>\n";
+  // For tests and the curious: how many pictures loaded (body data-images="loaded/total").
+  h << "<script>window.addEventListener('load',function(){var im=document.images,n=0;"
+       "for(var i=0;i<im.length;i++)if(im[i].complete&&im[i].naturalWidth>0)n++;"
+       "document.body.setAttribute('data-images',n+'/'+im.length);});</script>\n";
+  h << "</body></html>\n";
+  return WriteTextFile((fs::path(dir) / "report.html").string(), h.str());
+}
+
+Status WriteJson(const std::string& dir, const ProcessReport& r) {
+  Json j;
+  j["scan"] = r.scan;
+  j["calibration"] = r.calibration;
+  for (const char* section : kSections) {
+    Json s = Json::object();
+    if (std::string(section) == "stages_seconds") {
+      double total = 0;
+      for (const StageReport& stage : r.stages) {
+        s[stage.stage] = JsonNumber(stage.seconds);
+        total += stage.seconds;
+      }
+      s["total"] = JsonNumber(total);
+    }
+    for (const StageReport& stage : r.stages) {
+      for (const ReportValue& v : stage.values) {
+        if (v.section == section) s[v.key] = ToJson(v);
+      }
+    }
+    if (!s.empty()) j[section] = s;
+  }
+  // Sections outside the usual ones, in the order the stages set them.
+  for (const StageReport& stage : r.stages) {
+    for (const ReportValue& v : stage.values) {
+      if (std::find_if(std::begin(kSections), std::end(kSections),
+                       [&](const char* k) { return v.section == k; }) == std::end(kSections)) {
+        j[v.section][v.key] = ToJson(v);
+      }
+    }
+  }
+  j["outputs"] = r.Outputs();
+  return WriteJsonFile((fs::path(dir) / "report.json").string(), j);
+}
+
+}  // namespace
+
+void StageReport::Text(const std::string& section, const std::string& key,
+                       const std::string& value) {
+  ReportValue v;
+  v.section = section;
+  v.key = key;
+  v.is_text = true;
+  v.text = value;
+  values.push_back(std::move(v));
+}
+
+void StageReport::Number(const std::string& section, const std::string& key, double value) {
+  ReportValue v;
+  v.section = section;
+  v.key = key;
+  v.number = value;
+  values.push_back(std::move(v));
+}
+
+const ReportValue* ProcessReport::Find(const std::string& section, const std::string& key) const {
+  const ReportValue* found = nullptr;
+  for (const StageReport& stage : stages) {
+    for (const ReportValue& v : stage.values) {
+      if (v.section == section && v.key == key) found = &v;
+    }
+  }
+  return found;
+}
+
+double ProcessReport::Number(const std::string& section, const std::string& key) const {
+  const ReportValue* v = Find(section, key);
+  return v && !v->is_text ? v->number : 0.0;
+}
+
+std::string ProcessReport::Text(const std::string& section, const std::string& key) const {
+  const ReportValue* v = Find(section, key);
+  return v && v->is_text ? v->text : std::string();
+}
+
+std::vector<std::string> ProcessReport::Outputs() const {
+  std::vector<std::string> all;
+  for (const StageReport& stage : stages) {
+    all.insert(all.end(), stage.outputs.begin(), stage.outputs.end());
+  }
+  all.insert(all.end(), outputs.begin(), outputs.end());
+  return all;
+}
+
+Status WriteReports(const std::string& dir, const std::string& title, ProcessReport* report) {
+  Status s = WriteHtml(dir, title, *report);
+  if (!s.ok()) return s;
+  report->outputs.push_back("report.html");
+  report->outputs.push_back("report.json");
+  s = WriteJson(dir, *report);
+  if (!s.ok()) report->outputs.pop_back();
+  return s;
+}
+
+}  // namespace vellum

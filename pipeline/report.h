@@ -1,0 +1,53 @@
+// The account of one scan's processing: each stage describes itself in a StageReport (the
+// options it ran with, the figures it measured, the files it wrote), and the reports merge, in
+// pipeline order, into the ProcessReport that report.json and report.html show. `vellum
+// process` and the station's daemons fill the same StageReports in the same stage functions
+// (pipeline/stages.h); the station carries them down the chain with the products. So both
+// write the same report.json, key for key.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+
+namespace vellum {
+
+// One figure or option, under its report.json section ("options", "pixels", ...).
+struct ReportValue {
+  std::string section, key;
+  bool is_text = false;
+  std::string text;   // When is_text.
+  double number = 0;  // Otherwise.
+};
+
+struct StageReport {
+  Status status = Status::Error("stage not run");
+  std::string stage;                 // decode, triangulate, mesh, flatten, restore
+  double seconds = 0;                // Wall time, writing the stage's products included.
+  std::vector<ReportValue> values;   // In the order they were set.
+  std::vector<std::string> outputs;  // Files written, relative to the results folder.
+
+  void Text(const std::string& section, const std::string& key, const std::string& value);
+  void Number(const std::string& section, const std::string& key, double value);
+};
+
+struct ProcessReport {
+  std::string scan, calibration;     // Where the input came from.
+  std::vector<StageReport> stages;   // In pipeline order.
+  std::vector<std::string> outputs;  // The report's own files (report.html, report.json).
+
+  // The value of section/key (the last stage that set it), or nullptr.
+  const ReportValue* Find(const std::string& section, const std::string& key) const;
+  double Number(const std::string& section, const std::string& key) const;     // 0 if absent.
+  std::string Text(const std::string& section, const std::string& key) const;  // "" if absent.
+  // Every file written for the scan: the stages' outputs, in order, then the report's own.
+  std::vector<std::string> Outputs() const;
+};
+
+// Writes report.html (the key figures, the pictures the stages wrote to report/, the options)
+// and then report.json (every section, and `outputs`: the files actually written, itself
+// included). `title` heads the page.
+Status WriteReports(const std::string& dir, const std::string& title, ProcessReport* report);
+
+}  // namespace vellum

@@ -1,0 +1,88 @@
+#include "station/books.h"
+
+#include <filesystem>
+
+#include "io/calibration_io.h"
+#include "io/scan_io.h"
+#include "station/messages.h"
+#include "station/scan_store.h"
+
+namespace vellum::station {
+namespace {
+
+constexpr size_t kKeepScans = 8;  // Per-scan inputs kept (a few scans in flight at most).
+
+template <class T>
+void KeepRecent(std::map<int64_t, T>* m) {
+  while (m->size() > kKeepScans) m->erase(m->begin());  // Scan ids grow with time.
+}
+
+}  // namespace
+
+CalibrationBook::CalibrationBook(Node* node, const Calibration* fallback,
+                                 const std::string& data_dir)
+    : node_(node), data_dir_(data_dir) {
+  if (fallback) {
+    has_fallback_ = true;
+    fallback_ = *fallback;
+  }
+  node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
+    Calibration c;
+    const Status s = FromMessage(msg, &c);
+    if (!s.ok()) {
+      node_->Error("CALIBRATION of scan " + std::to_string(msg.scan_id) + ": " + s.message(),
+                   msg.scan_id);
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    by_scan_[msg.scan_id] = c;
+    KeepRecent(&by_scan_);
+  });
+}
+
+Status CalibrationBook::Get(int64_t scan_id, Calibration* calibration) const {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = by_scan_.find(scan_id);
+    if (it != by_scan_.end()) {
+      *calibration = it->second;
+      return Status::Ok();
+    }
+  }
+  const std::string recorded = ScanFolder::For(data_dir_, scan_id).calibration();
+  std::error_code ec;
+  if (!data_dir_.empty() && std::filesystem::exists(recorded, ec)) {
+    const Status s = ReadCalibration(recorded, calibration);
+    return s.ok() ? s : Status::Error("scan " + std::to_string(scan_id) + ": " + s.message());
+  }
+  if (has_fallback_) {
+    *calibration = fallback_;
+    return Status::Ok();
+  }
+  return Status::Error("scan " + std::to_string(scan_id) +
+                       ": no CALIBRATION message for it, and no --calibration file configured");
+}
+
+TextureBook::TextureBook(Node* node, const std::string& data_dir)
+    : data_dir_(data_dir),
+      assembler_(
+          node, channel::kTexture,
+          [](const texture_t& m, cv::Mat* texture) { return AddChunk(m, texture); },
+          [this](int64_t id, cv::Mat* texture, const texture_t&) {
+            by_scan_[id] = *texture;
+            KeepRecent(&by_scan_);
+          }) {}
+
+Status TextureBook::Get(int64_t scan_id, cv::Mat* texture) const {
+  auto it = by_scan_.find(scan_id);
+  if (it != by_scan_.end()) {
+    *texture = it->second;
+    return Status::Ok();
+  }
+  const std::string raw = ScanFolder::For(data_dir_, scan_id).raw();
+  if (!data_dir_.empty() && ReadTexture(raw, texture).ok()) return Status::Ok();
+  return Status::Error("scan " + std::to_string(scan_id) +
+                       ": its texture (TEXTURE) never arrived, and " + raw + " has none");
+}
+
+}  // namespace vellum::station

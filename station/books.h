@@ -1,0 +1,56 @@
+// What a processing daemon needs of a scan besides its product: the calibration (CALIBRATION,
+// from the projector at the start of the scan) and the texture (TEXTURE, from the decoder as
+// it sends the scan down the chain). A daemon that restarted after they went by takes them
+// from the scan's raw folder on disk, where the decoder recorded them (README, "What lives
+// where").
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <opencv2/core.hpp>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/geometry/calibration.h"
+#include "station/assembler.h"
+#include "station/node.h"
+
+namespace vellum::station {
+
+// The calibration of each scan, from CALIBRATION messages; for a scan whose message this
+// process has not seen (it restarted since), the one the decoder recorded in the scan's folder
+// under `data_dir`; else the fallback.
+class CalibrationBook {
+ public:
+  // `fallback` may be null (then a scan without a CALIBRATION message fails).
+  CalibrationBook(Node* node, const Calibration* fallback, const std::string& data_dir);
+  Status Get(int64_t scan_id, Calibration* calibration) const;
+
+ private:
+  Node* node_;
+  std::string data_dir_;
+  bool has_fallback_ = false;
+  Calibration fallback_;
+  mutable std::mutex mutex_;  // Guards by_scan_: filled on the LCM thread, read on the worker.
+  std::map<int64_t, Calibration> by_scan_;
+};
+
+// The texture of each recent scan, reassembled from TEXTURE chunks; for a scan whose texture
+// this process has not seen (it restarted since), the one the decoder recorded under
+// `data_dir`. Worker thread only (the chunks are reassembled there, in order with the
+// products that need them).
+class TextureBook {
+ public:
+  TextureBook(Node* node, const std::string& data_dir);
+  Status Get(int64_t scan_id, cv::Mat* texture) const;
+  // About once a second: gives up a texture whose chunks stopped coming.
+  void Tick() { assembler_.Tick(); }
+
+ private:
+  std::string data_dir_;
+  std::map<int64_t, cv::Mat> by_scan_;
+  Assembler<texture_t, cv::Mat> assembler_;
+};
+
+}  // namespace vellum::station

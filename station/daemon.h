@@ -1,0 +1,37 @@
+// What every daemon's main shares: the common flags (--url, --config, --data, --pace), and a
+// main() wrapper that turns bad flags and config files into a clear message and exit status 2.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/geometry/calibration.h"
+#include "flags/flags.h"
+#include "station/node.h"
+
+namespace vellum::station {
+
+// --url, --config, and (with_data) --data.
+std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data);
+
+// --calibration FILE of the processing daemons: used when a scan comes without CALIBRATION.
+Flags::Spec FallbackCalibrationSpec();
+// The calibration that flag names, or none when it is empty; a bad file throws UsageError.
+std::optional<Calibration> FallbackCalibrationFromFlags(const Flags& flags);
+
+// Parses the flags (printing --help), opens the node and calls body; returns the exit status.
+int DaemonMain(int argc, char** argv, const std::string& process, const std::string& summary,
+               const std::vector<Flags::Spec>& specs,
+               const std::function<int(const Flags&, Node&)>& body);
+
+// Wraps f so that calling it often (Node::Run's tick) runs it at most once a second.
+std::function<void()> EverySecond(std::function<void()> f);
+
+// Seconds since `start`.
+double SecondsSince(int64_t start_utime);
+
+}  // namespace vellum::station

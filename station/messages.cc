@@ -1,0 +1,518 @@
+#include "station/messages.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace vellum::station {
+namespace {
+
+template <class Matx>
+void CopyOut(const Matx& m, double* out) {
+  for (int k = 0; k < Matx::rows * Matx::cols; ++k) out[k] = m.val[k];
+}
+
+void ToModel(const CameraModel& c, camera_model_t* m) {
+  m->width = c.size.width;
+  m->height = c.size.height;
+  CopyOut(c.matrix, m->matrix);
+  CopyOut(c.distortion, m->distortion);
+  CopyOut(c.rotation, m->rotation);
+  CopyOut(c.translation, m->translation);
+}
+
+bool AllFinite(const double* v, int n) {
+  for (int k = 0; k < n; ++k) {
+    if (!std::isfinite(v[k])) return false;
+  }
+  return true;
+}
+
+Status FromModel(const camera_model_t& m, const std::string& what, CameraModel* c) {
+  if (!AllFinite(m.matrix, 9) || !AllFinite(m.distortion, 5) || !AllFinite(m.rotation, 9) ||
+      !AllFinite(m.translation, 3)) {
+    return Status::Error(what + ": not all numbers are finite");
+  }
+  c->size = cv::Size(m.width, m.height);
+  std::copy(m.matrix, m.matrix + 9, c->matrix.val);
+  std::copy(m.distortion, m.distortion + 5, c->distortion.val);
+  std::copy(m.rotation, m.rotation + 9, c->rotation.val);
+  std::copy(m.translation, m.translation + 3, c->translation.val);
+  std::string why;
+  if (!c->Check(&why)) return Status::Error(what + ": " + why);
+  return Status::Ok();
+}
+
+// Checks a row chunk's geometry against the whole product's.
+Status CheckRows(const std::string& what, int width, int height, int row_begin, int row_count,
+                 int n, int index, int count) {
+  if (width <= 0 || height <= 0 || width > 65535 || height > 65535) {
+    return Status::Error(what + ": bad size " + std::to_string(width) + "x" +
+                         std::to_string(height));
+  }
+  if (row_begin < 0 || row_count <= 0 || row_count > height - row_begin) {
+    return Status::Error(what + ": rows " + std::to_string(row_begin) + "+" +
+                         std::to_string(row_count) + " outside the " + std::to_string(height) +
+                         "-row image");
+  }
+  if (static_cast<int64_t>(n) != static_cast<int64_t>(row_count) * width) {
+    return Status::Error(what + ": " + std::to_string(n) + " values for " +
+                         std::to_string(row_count) + " rows of " + std::to_string(width));
+  }
+  if (count <= 0 || index < 0 || index >= count) {
+    return Status::Error(what + ": chunk " + std::to_string(index) + " of " +
+                         std::to_string(count));
+  }
+  return Status::Ok();
+}
+
+// Every chunk of a product carries the reports of the stages so far.
+template <class Msg>
+void SetStages(const std::vector<StageReport>& stages, Msg* m) {
+  m->stages.clear();
+  for (const StageReport& s : stages) m->stages.push_back(ToMessage(s));
+  m->nstages = static_cast<int32_t>(m->stages.size());
+}
+
+}  // namespace
+
+void ToMessage(const cv::Mat& image, image_t* msg) {
+  CV_Assert(image.depth() == CV_8U && (image.channels() == 1 || image.channels() == 3));
+  msg->width = image.cols;
+  msg->height = image.rows;
+  msg->row_stride = static_cast<int32_t>(image.cols * image.elemSize());
+  msg->pixelformat = image.channels() == 1 ? static_cast<int32_t>(image_t::PIXEL_FORMAT_GRAY)
+                                           : static_cast<int32_t>(image_t::PIXEL_FORMAT_BGR);
+  msg->size = msg->row_stride * image.rows;
+  msg->data.resize(msg->size);
+  for (int y = 0; y < image.rows; ++y) {
+    std::memcpy(msg->data.data() + static_cast<size_t>(y) * msg->row_stride, image.ptr(y),
+                msg->row_stride);
+  }
+}
+
+Status FromMessage(const image_t& msg, cv::Mat* image) {
+  int channels = 0;
+  if (msg.pixelformat == image_t::PIXEL_FORMAT_GRAY) {
+    channels = 1;
+  } else if (msg.pixelformat == image_t::PIXEL_FORMAT_BGR) {
+    channels = 3;
+  } else {
+    char fourcc[5] = {0};
+    for (int k = 0; k < 4; ++k) {
+      const char c = static_cast<char>((msg.pixelformat >> (8 * k)) & 0xff);
+      fourcc[k] = c >= 32 && c < 127 ? c : '?';
+    }
+    return Status::Error(std::string("image pixel format '") + fourcc +
+                         "' is not supported (GREY or BGR3)");
+  }
+  if (msg.width <= 0 || msg.height <= 0 || msg.width > 65535 || msg.height > 65535) {
+    return Status::Error("image size " + std::to_string(msg.width) + "x" +
+                         std::to_string(msg.height) + " is not valid");
+  }
+  const int64_t row_bytes = static_cast<int64_t>(msg.width) * channels;
+  if (msg.row_stride < row_bytes) {
+    return Status::Error("image row_stride " + std::to_string(msg.row_stride) +
+                         " is less than a row of " + std::to_string(row_bytes) + " bytes");
+  }
+  const int64_t need = static_cast<int64_t>(msg.row_stride) * (msg.height - 1) + row_bytes;
+  if (msg.size < need || static_cast<int64_t>(msg.data.size()) != msg.size) {
+    return Status::Error("image data is " + std::to_string(msg.data.size()) + " bytes; " +
+                         std::to_string(msg.width) + "x" + std::to_string(msg.height) + " needs " +
+                         std::to_string(need));
+  }
+  image->create(msg.height, msg.width, CV_8UC(channels));
+  for (int y = 0; y < msg.height; ++y) {
+    std::memcpy(image->ptr(y), msg.data.data() + static_cast<size_t>(y) * msg.row_stride,
+                row_bytes);
+  }
+  return Status::Ok();
+}
+
+pattern_spec_t ToMessage(const PatternSpec& spec) {
+  pattern_spec_t m;
+  m.kind = static_cast<int8_t>(spec.kind);
+  m.axis = static_cast<int8_t>(spec.axis);
+  m.bit = static_cast<int8_t>(spec.bit);
+  m.inverted = spec.inverted;
+  m.step = static_cast<int16_t>(spec.step);
+  m.steps = static_cast<int16_t>(spec.steps);
+  m.period_px = static_cast<int16_t>(spec.period_px);
+  return m;
+}
+
+Status FromMessage(const pattern_spec_t& m, PatternSpec* spec) {
+  if (m.kind < pattern_spec_t::KIND_WHITE || m.kind > pattern_spec_t::KIND_PHASE) {
+    return Status::Error("pattern kind " + std::to_string(m.kind) + " is not known");
+  }
+  if (m.axis != pattern_spec_t::AXIS_COLUMN && m.axis != pattern_spec_t::AXIS_ROW) {
+    return Status::Error("pattern axis " + std::to_string(m.axis) + " is not known");
+  }
+  PatternSpec s;
+  s.kind = static_cast<PatternKind>(m.kind);
+  if (s.kind == PatternKind::kGray || s.kind == PatternKind::kPhase) {
+    s.axis = static_cast<Axis>(m.axis);
+  }
+  if (s.kind == PatternKind::kGray) {
+    if (m.bit < 0 || m.bit > 20) return Status::Error("gray pattern bit out of range");
+    s.bit = m.bit;
+    s.inverted = m.inverted;
+  } else if (s.kind == PatternKind::kPhase) {
+    if (m.steps < 3 || m.step < 0 || m.step >= m.steps || m.period_px < 4) {
+      return Status::Error("phase pattern step/steps/period out of range");
+    }
+    s.step = m.step;
+    s.steps = m.steps;
+    s.period_px = m.period_px;
+  }
+  *spec = s;
+  return Status::Ok();
+}
+
+void ToMessage(const Calibration& calibration, calibration_t* msg) {
+  ToModel(calibration.camera, &msg->camera);
+  ToModel(calibration.projector, &msg->projector);
+}
+
+Status FromMessage(const calibration_t& msg, Calibration* calibration) {
+  Calibration c;
+  Status s = FromModel(msg.camera, "calibration camera", &c.camera);
+  if (!s.ok()) return s;
+  s = FromModel(msg.projector, "calibration projector", &c.projector);
+  if (!s.ok()) return s;
+  *calibration = c;
+  return Status::Ok();
+}
+
+std::vector<std::pair<int, int>> RowChunks(int rows, size_t bytes_per_row, size_t max_bytes) {
+  const int per =
+      static_cast<int>(std::max<size_t>(1, max_bytes / std::max<size_t>(1, bytes_per_row)));
+  std::vector<std::pair<int, int>> chunks;
+  for (int begin = 0; begin < rows; begin += per)
+    chunks.emplace_back(begin, std::min(per, rows - begin));
+  return chunks;
+}
+
+Status ChunkSet::Add(int64_t scan_id, int index, int count) {
+  if (count <= 0 || index < 0 || index >= count) {
+    return Status::Error("chunk " + std::to_string(index) + " of " + std::to_string(count) +
+                         " is not a valid chunk number");
+  }
+  if (!Started()) {
+    scan_id_ = scan_id;
+    count_ = count;
+    have_.assign(count, false);
+  } else if (scan_id != scan_id_ || count != count_) {
+    return Status::Error("chunk " + std::to_string(index) + " of " + std::to_string(count) +
+                         " does not belong to scan " + std::to_string(scan_id_) + "'s " +
+                         std::to_string(count_) + " chunks");
+  }
+  if (have_[index]) return Status::Error("chunk " + std::to_string(index) + " came twice");
+  last_add_ = std::chrono::steady_clock::now();
+  have_[index] = true;
+  ++received_;
+  return Status::Ok();
+}
+
+bool ChunkSet::Stale(double seconds) const {
+  return Started() && !Complete() &&
+         std::chrono::steady_clock::now() - last_add_ > std::chrono::duration<double>(seconds);
+}
+
+std::string ChunkSet::Missing() const {
+  std::string list;
+  int n = 0;
+  for (int k = 0; k < count_; ++k) {
+    if (have_[k]) continue;
+    if (n < 8) list += (n ? ", " : "") + std::to_string(k);
+    ++n;
+  }
+  if (n > 8) list += ", ...";
+  return "chunk" + std::string(n == 1 ? " " : "s ") + list + " of " + std::to_string(count_) +
+         " missing";
+}
+
+stage_report_t ToMessage(const StageReport& report) {
+  stage_report_t m;
+  m.stage = report.stage;
+  m.seconds = report.seconds;
+  for (const ReportValue& v : report.values) {
+    m.sections.push_back(v.section);
+    m.keys.push_back(v.key);
+    m.is_text.push_back(v.is_text);
+    m.texts.push_back(v.text);
+    m.numbers.push_back(v.number);
+  }
+  m.nvalues = static_cast<int32_t>(m.keys.size());
+  m.outputs = report.outputs;
+  m.noutputs = static_cast<int32_t>(m.outputs.size());
+  return m;
+}
+
+Status FromMessage(const stage_report_t& m, StageReport* report) {
+  StageReport r;
+  if (m.stage.empty()) return Status::Error("a stage report without a stage name");
+  if (!std::isfinite(m.seconds) || m.seconds < 0) {
+    return Status::Error("stage report " + m.stage + ": bad time");
+  }
+  r.stage = m.stage;
+  r.seconds = m.seconds;
+  for (int k = 0; k < m.nvalues; ++k) {
+    if (m.sections[k].empty() || m.keys[k].empty()) {
+      return Status::Error("stage report " + m.stage + ": value " + std::to_string(k) +
+                           " has no section or key");
+    }
+    ReportValue v;
+    v.section = m.sections[k];
+    v.key = m.keys[k];
+    v.is_text = m.is_text[k];
+    v.text = m.texts[k];
+    v.number = m.numbers[k];
+    r.values.push_back(std::move(v));
+  }
+  r.outputs = m.outputs;
+  r.status = Status::Ok();
+  *report = std::move(r);
+  return Status::Ok();
+}
+
+Status FromMessages(const std::vector<stage_report_t>& msgs, std::vector<StageReport>* reports) {
+  std::vector<StageReport> out(msgs.size());
+  for (size_t k = 0; k < msgs.size(); ++k) {
+    const Status s = FromMessage(msgs[k], &out[k]);
+    if (!s.ok()) return s;
+  }
+  *reports = std::move(out);
+  return Status::Ok();
+}
+
+std::vector<texture_t> ToMessages(int64_t scan_id, const cv::Mat& texture) {
+  CV_Assert(texture.depth() == CV_8U && (texture.channels() == 1 || texture.channels() == 3));
+  const size_t row_bytes = texture.cols * texture.elemSize();
+  const auto chunks = RowChunks(texture.rows, row_bytes);
+  std::vector<texture_t> out(chunks.size());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    texture_t& m = out[c];
+    m.utime = 0;
+    m.scan_id = scan_id;
+    m.chunk_index = static_cast<int32_t>(c);
+    m.chunk_count = static_cast<int32_t>(chunks.size());
+    m.width = texture.cols;
+    m.height = texture.rows;
+    m.row_begin = chunks[c].first;
+    m.row_count = chunks[c].second;
+    m.channels = texture.channels();
+    m.size = static_cast<int32_t>(m.row_count * row_bytes);
+    m.data.resize(m.size);
+    for (int r = 0; r < m.row_count; ++r) {
+      std::memcpy(&m.data[r * row_bytes], texture.ptr(m.row_begin + r), row_bytes);
+    }
+  }
+  return out;
+}
+
+Status AddChunk(const texture_t& m, cv::Mat* texture) {
+  if (m.channels != 1 && m.channels != 3) {
+    return Status::Error("TEXTURE: " + std::to_string(m.channels) + " channels (1 or 3)");
+  }
+  if (m.size % m.channels != 0) return Status::Error("TEXTURE: size is not whole pixels");
+  Status s = CheckRows("TEXTURE", m.width, m.height, m.row_begin, m.row_count, m.size / m.channels,
+                       m.chunk_index, m.chunk_count);
+  if (!s.ok()) return s;
+  const cv::Size size(m.width, m.height);
+  if (texture->empty()) {
+    texture->create(size, CV_8UC(m.channels));
+  } else if (texture->size() != size || texture->channels() != m.channels) {
+    return Status::Error("TEXTURE: chunk " + std::to_string(m.chunk_index) +
+                         " disagrees with the first chunk on the size or channels");
+  }
+  const size_t row_bytes = static_cast<size_t>(m.width) * m.channels;
+  for (int r = 0; r < m.row_count; ++r) {
+    std::memcpy(texture->ptr(m.row_begin + r), &m.data[r * row_bytes], row_bytes);
+  }
+  return Status::Ok();
+}
+
+std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
+                                         cv::Size projector_size,
+                                         const std::vector<StageReport>& stages) {
+  const int width = decoded.projector_x.cols, height = decoded.projector_x.rows;
+  const auto chunks = RowChunks(height, static_cast<size_t>(width) * 9);
+  std::vector<correspondence_t> out(chunks.size());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    correspondence_t& m = out[c];
+    m.utime = 0;
+    m.scan_id = scan_id;
+    m.chunk_index = static_cast<int32_t>(c);
+    m.chunk_count = static_cast<int32_t>(chunks.size());
+    m.width = width;
+    m.height = height;
+    m.row_begin = chunks[c].first;
+    m.row_count = chunks[c].second;
+    m.projector_width = projector_size.width;
+    m.projector_height = projector_size.height;
+    m.has_columns = decoded.has_columns;
+    m.has_rows = decoded.has_rows;
+    m.n = m.row_count * width;
+    m.projector_x.resize(m.n);
+    m.projector_y.resize(m.n);
+    m.valid.resize(m.n);
+    for (int r = 0; r < m.row_count; ++r) {
+      const int y = m.row_begin + r;
+      std::memcpy(&m.projector_x[r * width], decoded.projector_x.ptr<float>(y), width * 4);
+      std::memcpy(&m.projector_y[r * width], decoded.projector_y.ptr<float>(y), width * 4);
+      std::memcpy(&m.valid[r * width], decoded.valid.ptr<uint8_t>(y), width);
+    }
+    SetStages(stages, &m);
+  }
+  return out;
+}
+
+Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* projector_size) {
+  Status s = CheckRows("CORRESPONDENCE", m.width, m.height, m.row_begin, m.row_count, m.n,
+                       m.chunk_index, m.chunk_count);
+  if (!s.ok()) return s;
+  if (m.projector_width <= 0 || m.projector_height <= 0) {
+    return Status::Error("CORRESPONDENCE: bad projector size");
+  }
+  const cv::Size size(m.width, m.height);
+  if (decoded->projector_x.empty()) {
+    decoded->projector_x.create(size, CV_32F);
+    decoded->projector_y.create(size, CV_32F);
+    decoded->valid.create(size, CV_8U);
+    decoded->has_columns = m.has_columns;
+    decoded->has_rows = m.has_rows;
+    decoded->status = Status::Ok();
+    *projector_size = cv::Size(m.projector_width, m.projector_height);
+  } else if (decoded->projector_x.size() != size || decoded->has_columns != m.has_columns ||
+             decoded->has_rows != m.has_rows ||
+             *projector_size != cv::Size(m.projector_width, m.projector_height)) {
+    return Status::Error("CORRESPONDENCE: chunk " + std::to_string(m.chunk_index) +
+                         " disagrees with the first chunk on sizes or axes");
+  }
+  for (int r = 0; r < m.row_count; ++r) {
+    const int y = m.row_begin + r;
+    std::memcpy(decoded->projector_x.ptr<float>(y), &m.projector_x[r * m.width], m.width * 4);
+    std::memcpy(decoded->projector_y.ptr<float>(y), &m.projector_y[r * m.width], m.width * 4);
+    std::memcpy(decoded->valid.ptr<uint8_t>(y), &m.valid[r * m.width], m.width);
+  }
+  return Status::Ok();
+}
+
+std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
+                                      const std::vector<StageReport>& stages) {
+  const int width = points.cols;
+  const auto chunks = RowChunks(points.rows, static_cast<size_t>(width) * 12);
+  std::vector<point_cloud_t> out(chunks.size());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    point_cloud_t& m = out[c];
+    m.utime = 0;
+    m.scan_id = scan_id;
+    m.chunk_index = static_cast<int32_t>(c);
+    m.chunk_count = static_cast<int32_t>(chunks.size());
+    m.width = width;
+    m.height = points.rows;
+    m.row_begin = chunks[c].first;
+    m.row_count = chunks[c].second;
+    m.nxyz = 3 * m.row_count * width;
+    m.xyz.resize(m.nxyz);
+    for (int r = 0; r < m.row_count; ++r) {
+      std::memcpy(&m.xyz[3 * r * width], points.ptr<float>(m.row_begin + r), 12 * width);
+    }
+    SetStages(stages, &m);
+  }
+  return out;
+}
+
+Status AddChunk(const point_cloud_t& m, cv::Mat* points) {
+  if (m.nxyz % 3 != 0) return Status::Error("POINT_CLOUD: nxyz is not a multiple of 3");
+  Status s = CheckRows("POINT_CLOUD", m.width, m.height, m.row_begin, m.row_count, m.nxyz / 3,
+                       m.chunk_index, m.chunk_count);
+  if (!s.ok()) return s;
+  const cv::Size size(m.width, m.height);
+  if (points->empty()) {
+    points->create(size, CV_32FC3);
+  } else if (points->size() != size) {
+    return Status::Error("POINT_CLOUD: chunk " + std::to_string(m.chunk_index) +
+                         " disagrees with the first chunk on the size");
+  }
+  for (int r = 0; r < m.row_count; ++r) {
+    std::memcpy(points->ptr<float>(m.row_begin + r), &m.xyz[3 * r * m.width], 12 * m.width);
+  }
+  return Status::Ok();
+}
+
+std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
+                               const std::vector<cv::Point2d>& flat,
+                               const std::vector<StageReport>& stages) {
+  const auto chunks = RowChunks(mesh.rows, static_cast<size_t>(mesh.cols) * 41);
+  std::vector<mesh_t> out(chunks.size());
+  for (size_t c = 0; c < chunks.size(); ++c) {
+    mesh_t& m = out[c];
+    m.utime = 0;
+    m.scan_id = scan_id;
+    m.chunk_index = static_cast<int32_t>(c);
+    m.chunk_count = static_cast<int32_t>(chunks.size());
+    m.cols = mesh.cols;
+    m.rows = mesh.rows;
+    m.row_begin = chunks[c].first;
+    m.row_count = chunks[c].second;
+    m.bend_springs = bend_springs;
+    m.n = m.row_count * mesh.cols;
+    m.kind.resize(m.n);
+    m.npoint = 3 * m.n;
+    m.point.resize(m.npoint);
+    m.nflat = 2 * m.n;
+    m.flat.resize(m.nflat);
+    for (int k = 0; k < m.n; ++k) {
+      const int node = m.row_begin * mesh.cols + k;
+      m.kind[k] = static_cast<int8_t>(mesh.kind[node]);
+      for (int d = 0; d < 3; ++d) m.point[3 * k + d] = mesh.point[node][d];
+      m.flat[2 * k] = flat[node].x;
+      m.flat[2 * k + 1] = flat[node].y;
+    }
+    SetStages(stages, &m);
+  }
+  return out;
+}
+
+Status AddChunk(const mesh_t& m, Mesh* mesh, std::vector<cv::Point2d>* flat) {
+  Status s = CheckRows("FLAT_MESH", m.cols, m.rows, m.row_begin, m.row_count, m.n, m.chunk_index,
+                       m.chunk_count);
+  if (!s.ok()) return s;
+  if (m.cols < 2 || m.rows < 2) return Status::Error("FLAT_MESH: a grid needs 2x2 nodes");
+  if (m.npoint != 3 * static_cast<int64_t>(m.n) || m.nflat != 2 * static_cast<int64_t>(m.n)) {
+    return Status::Error("FLAT_MESH: " + std::to_string(m.n) + " nodes need " +
+                         std::to_string(3 * m.n) + " point and " + std::to_string(2 * m.n) +
+                         " flat values");
+  }
+  const size_t total = static_cast<size_t>(m.cols) * m.rows;
+  if (mesh->kind.empty()) {
+    mesh->cols = m.cols;
+    mesh->rows = m.rows;
+    mesh->kind.assign(total, NodeKind::kOff);
+    mesh->point.assign(total, cv::Vec3d(0, 0, 0));
+    flat->assign(total, cv::Point2d(0, 0));
+  } else if (mesh->cols != m.cols || mesh->rows != m.rows) {
+    return Status::Error("FLAT_MESH: chunk " + std::to_string(m.chunk_index) +
+                         " disagrees with the first chunk on the grid size");
+  }
+  for (int k = 0; k < m.n; ++k) {
+    const size_t node = static_cast<size_t>(m.row_begin) * m.cols + k;
+    if (m.kind[k] < 0 || m.kind[k] > static_cast<int8_t>(NodeKind::kSkirt)) {
+      return Status::Error("FLAT_MESH: node " + std::to_string(node) + " has unknown kind " +
+                           std::to_string(m.kind[k]));
+    }
+    mesh->kind[node] = static_cast<NodeKind>(m.kind[k]);
+    mesh->point[node] = cv::Vec3d(m.point[3 * k], m.point[3 * k + 1], m.point[3 * k + 2]);
+    (*flat)[node] = cv::Point2d(m.flat[2 * k], m.flat[2 * k + 1]);
+    if (mesh->kind[node] != NodeKind::kOff &&
+        !(std::isfinite(m.flat[2 * k]) && std::isfinite(m.flat[2 * k + 1]))) {
+      return Status::Error("FLAT_MESH: node " + std::to_string(node) +
+                           " has a non-finite flat position");
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace vellum::station

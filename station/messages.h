@@ -1,0 +1,103 @@
+// Conversions between the bus's messages (lcmtypes/) and the core's types, with validation:
+// a message from the bus is untrusted, so every reader checks sizes, ranges and NaNs and
+// returns a Status naming what was wrong. Large products travel in row chunks.
+#pragma once
+
+#include <chrono>
+#include <opencv2/core.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/decode/decode.h"
+#include "core/geometry/calibration.h"
+#include "core/geometry/triangulate.h"
+#include "core/mesh/mesh.h"
+#include "core/patterns/patterns.h"
+#include "pipeline/report.h"
+#include "vellum/calibration_t.hpp"
+#include "vellum/capture_t.hpp"
+#include "vellum/correspondence_t.hpp"
+#include "vellum/image_t.hpp"
+#include "vellum/mesh_t.hpp"
+#include "vellum/pattern_spec_t.hpp"
+#include "vellum/point_cloud_t.hpp"
+#include "vellum/stage_report_t.hpp"
+#include "vellum/texture_t.hpp"
+
+namespace vellum::station {
+
+// Messages stay under this size on the bus (LCM udpm loses a whole message with any of its
+// fragments; smaller messages lose less and reassemble within the receive buffer).
+inline constexpr size_t kMaxMessageBytes = 1 << 20;
+
+// Images: 8-bit gray (GREY) or BGR (BGR3).
+void ToMessage(const cv::Mat& image, image_t* msg);
+Status FromMessage(const image_t& msg, cv::Mat* image);  // A deep copy.
+
+pattern_spec_t ToMessage(const PatternSpec& spec);
+Status FromMessage(const pattern_spec_t& msg, PatternSpec* spec);
+
+void ToMessage(const Calibration& calibration, calibration_t* msg);
+Status FromMessage(const calibration_t& msg, Calibration* calibration);
+
+// Row ranges [begin, begin + count) that split `rows` rows of `bytes_per_row` bytes into
+// chunks of at most max_bytes (at least one row each).
+std::vector<std::pair<int, int>> RowChunks(int rows, size_t bytes_per_row,
+                                           size_t max_bytes = kMaxMessageBytes);
+
+// Which chunks of one scan's product have arrived.
+class ChunkSet {
+ public:
+  // Starts on the first chunk; later chunks must agree on the count. Duplicates are errors.
+  Status Add(int64_t scan_id, int index, int count);
+  bool Started() const { return count_ > 0; }
+  // Started, incomplete, and no chunk for longer than `seconds`.
+  bool Stale(double seconds) const;
+  bool Complete() const { return Started() && received_ == count_; }
+  int64_t scan_id() const { return scan_id_; }
+  // "chunks 3, 5 of 12 missing".
+  std::string Missing() const;
+  void Reset() { *this = ChunkSet(); }
+
+ private:
+  int64_t scan_id_ = 0;
+  int count_ = 0, received_ = 0;
+  std::vector<bool> have_;
+  std::chrono::steady_clock::time_point last_add_;
+};
+
+// A stage's report as it travels with the products (only the reports of stages that
+// succeeded travel); the reader checks that every value has a section and a key.
+stage_report_t ToMessage(const StageReport& report);
+Status FromMessage(const stage_report_t& msg, StageReport* report);
+// The reports a product carries (every chunk carries them all).
+Status FromMessages(const std::vector<stage_report_t>& msgs, std::vector<StageReport>* reports);
+
+// The texture in chunks of rows (TEXTURE), and its reassembly.
+std::vector<texture_t> ToMessages(int64_t scan_id, const cv::Mat& texture);
+Status AddChunk(const texture_t& msg, cv::Mat* texture);
+
+// Decoded correspondences: chunks of rows, and their reassembly. A reassembled map has an ok
+// status (it decoded upstream).
+std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
+                                         cv::Size projector_size,
+                                         const std::vector<StageReport>& stages);
+// Checks a chunk against the map under construction (allocated on the first chunk) and copies
+// its rows into it.
+Status AddChunk(const correspondence_t& msg, DecodeResult* decoded, cv::Size* projector_size);
+
+std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
+                                      const std::vector<StageReport>& stages);
+Status AddChunk(const point_cloud_t& msg, cv::Mat* points);
+
+// The flattened sheet as nodes (kind, point, flat); the receiver rebuilds springs and quads
+// with ConnectSheet.
+std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
+                               const std::vector<cv::Point2d>& flat,
+                               const std::vector<StageReport>& stages);
+// Copies a chunk's nodes into *mesh (cols, rows, kind, point) and *flat.
+Status AddChunk(const mesh_t& msg, Mesh* mesh, std::vector<cv::Point2d>* flat);
+
+}  // namespace vellum::station

@@ -1,0 +1,242 @@
+#include "station/node.h"
+
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cctype>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <stdexcept>
+
+#include "vellum/status_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+std::atomic<bool> g_signalled{false};
+
+void OnSignal(int) { g_signalled = true; }
+
+}  // namespace
+
+int64_t NowUtime() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string StatusChannel(const std::string& process) {
+  std::string name = process.rfind("vellum-", 0) == 0 ? process.substr(7) : process;
+  for (char& c : name) c = c == '-' ? '_' : static_cast<char>(std::toupper(c));
+  return channel::kStatusPrefix + name;
+}
+
+void NotifySystemd(const std::string& state) {
+  const char* path = std::getenv("NOTIFY_SOCKET");
+  if (!path || !*path) return;
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  if (std::strlen(path) >= sizeof(addr.sun_path)) return;
+  std::strcpy(addr.sun_path, path);
+  socklen_t len = sizeof(sa_family_t) + std::strlen(path);
+  if (addr.sun_path[0] == '@') addr.sun_path[0] = '\0';  // Abstract socket.
+  const int fd = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return;
+  (void)sendto(fd, state.data(), state.size(), MSG_NOSIGNAL, reinterpret_cast<sockaddr*>(&addr),
+               len);
+  close(fd);
+}
+
+Node::Node(std::string process, const std::string& url)
+    : process_(std::move(process)),
+      own_lcm_(std::make_unique<lcm::LCM>(url)),
+      lcm_(own_lcm_.get()) {
+  if (!lcm_->good()) {
+    throw std::runtime_error("cannot open the LCM bus '" + url +
+                             "' (for udpm: is there a multicast route? see the README)");
+  }
+  std::signal(SIGTERM, OnSignal);
+  std::signal(SIGINT, OnSignal);
+  worker_ = std::thread([this] { WorkerLoop(); });
+}
+
+Node::Node(std::string process, lcm::LCM* lcm) : process_(std::move(process)), lcm_(lcm) {
+  worker_ = std::thread([this] { WorkerLoop(); });
+}
+
+Node::~Node() {
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    work_done_ = true;
+  }
+  work_cv_.notify_all();
+  if (worker_.joinable()) worker_.join();
+}
+
+bool Node::Stopping() const { return stop_ || g_signalled; }
+
+void Node::Log(const std::string& message) const {
+  std::fprintf(stderr, "%s: %s\n", process_.c_str(), message.c_str());
+}
+
+void Node::SubscribeRaw(const std::string& channel,
+                        std::function<void(const lcm::ReceiveBuffer*)> handler) {
+  handlers_.push_back(std::make_unique<RawHandler>(RawHandler{std::move(handler)}));
+  lcm_->subscribe(channel, &RawHandler::Handle, handlers_.back().get());
+}
+
+void Node::CheckSequence(const std::string& channel, int64_t seq) {
+  int64_t lost = 0, last = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto it = seq_in_.find(channel);
+    if (it != seq_in_.end() && seq > it->second + 1) {
+      lost = seq - it->second - 1;
+      last = it->second;
+    }
+    // A smaller seq is a restarted publisher (or a replayed log): follow it.
+    seq_in_[channel] = seq;
+    counters_["received " + channel] += 1;
+  }
+  if (lost > 0) {
+    Count("lost messages", lost);
+    Error(channel + ": " + std::to_string(lost) + " message(s) lost on the bus (seq " +
+          std::to_string(last) + " then " + std::to_string(seq) + ")");
+  }
+}
+
+int64_t Node::NextSeq(const std::string& channel) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return seq_out_[channel]++;
+}
+
+void Node::SetState(const std::string& state, int64_t scan_id, const std::string& detail) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (state == state_ && scan_id == scan_id_ && detail == detail_) return;
+    state_ = state;
+    scan_id_ = scan_id;
+    detail_ = detail;
+  }
+  PublishStatus();
+}
+
+void Node::Error(const std::string& message, int64_t scan_id) {
+  Log("error: " + message);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++errors_;
+    last_error_ = message;
+    last_error_utime_ = NowUtime();
+    last_error_scan_ = scan_id;
+  }
+  PublishStatus();
+}
+
+void Node::Count(const std::string& counter, int64_t n) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  counters_[counter] += n;
+}
+
+int64_t Node::Counter(const std::string& counter) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  auto it = counters_.find(counter);
+  return it == counters_.end() ? 0 : it->second;
+}
+
+void Node::PublishStatus() {
+  status_t msg;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    msg.utime = 0;
+    msg.process = process_;
+    msg.pid = static_cast<int32_t>(getpid());
+    msg.state = state_;
+    msg.scan_id = scan_id_;
+    msg.detail = detail_;
+    for (const auto& [name, value] : counters_) {
+      msg.counter_names.push_back(name);
+      msg.counter_values.push_back(value);
+    }
+    msg.ncounters = static_cast<int32_t>(msg.counter_names.size());
+    msg.errors = errors_;
+    msg.last_error = last_error_;
+    msg.last_error_utime = last_error_utime_;
+    msg.last_error_scan_id = last_error_scan_;
+  }
+  Publish(StatusChannel(process_), &msg);
+}
+
+bool Node::Post(std::function<void()> work, const std::string& what) {
+  bool full = false;
+  {
+    std::lock_guard<std::mutex> lock(work_mutex_);
+    full = work_.size() >= kMaxQueuedJobs;
+    if (!full) {
+      ++pending_;
+      work_.push_back(std::move(work));
+    }
+  }
+  if (full) {
+    Count("jobs refused");
+    Error("worker busy with " + std::to_string(kMaxQueuedJobs) + " jobs waiting: " + what +
+          " dropped");
+    return false;
+  }
+  work_cv_.notify_one();
+  return true;
+}
+
+size_t Node::Pending() const { return pending_; }
+
+void Node::WorkerLoop() {
+  for (;;) {
+    std::function<void()> work;
+    {
+      std::unique_lock<std::mutex> lock(work_mutex_);
+      work_cv_.wait(lock, [&] { return work_done_ || !work_.empty(); });
+      if (work_.empty()) return;
+      work = std::move(work_.front());
+      work_.pop_front();
+    }
+    try {
+      work();
+    } catch (const std::exception& e) {
+      Error(std::string("internal error: ") + e.what());
+    }
+    --pending_;
+  }
+}
+
+int Node::Run(const std::function<void()>& tick, int tick_ms) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (state_ == "starting") state_ = "idle";
+  }
+  PublishStatus();
+  NotifySystemd("READY=1\nSTATUS=" + process_ + " on the bus");
+  Log("running (pid " + std::to_string(getpid()) + ")");
+  auto next_beat = std::chrono::steady_clock::now();
+  while (!Stopping()) {
+    lcm_->handleTimeout(tick_ms);
+    if (tick) tick();
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= next_beat) {
+      PublishStatus();
+      NotifySystemd("WATCHDOG=1");
+      next_beat = now + std::chrono::seconds(1);
+    }
+  }
+  NotifySystemd("STOPPING=1");
+  Log("stopping: finishing " + std::to_string(Pending()) + " posted job(s)");
+  SetState("stopping");
+  while (Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  Log("stopped");
+  return 0;
+}
+
+}  // namespace vellum::station

@@ -1,0 +1,183 @@
+// The shell every station process shares: an LCM handle, typed subscriptions that report
+// corrupt or wrong-type messages and sequence gaps instead of dropping them silently, a status
+// heartbeat (1 Hz, and at once on a change or an error), a worker thread so that long work
+// never blocks the LCM thread, clean shutdown on SIGTERM/SIGINT, and systemd's notify protocol
+// (READY, WATCHDOG, STOPPING) when run as a Type=notify service.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <exception>
+#include <functional>
+#include <lcm/lcm-cpp.hpp>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace vellum::station {
+
+// Microseconds since the epoch (the utime of every message).
+int64_t NowUtime();
+
+// The channel names of DESIGN.md's process graph.
+namespace channel {
+inline constexpr char kScanRequest[] = "SCAN_REQUEST";
+inline constexpr char kPatternShown[] = "PATTERN_SHOWN";
+inline constexpr char kCapture[] = "CAPTURE";
+inline constexpr char kCalibration[] = "CALIBRATION";
+inline constexpr char kTexture[] = "TEXTURE";  // From the decoder, as it sends a scan down.
+inline constexpr char kCorrespondence[] = "CORRESPONDENCE";
+inline constexpr char kPointCloud[] = "POINT_CLOUD";
+inline constexpr char kFlatMesh[] = "FLAT_MESH";
+inline constexpr char kRestored[] = "RESTORED";
+inline constexpr char kScanProgress[] = "SCAN_PROGRESS";  // A product handed on.
+inline constexpr char kPreview[] = "PREVIEW";             // Camera preview, at most 640 px wide.
+inline constexpr char kStatusPrefix[] = "STATUS_";        // + the process name, upper case
+}  // namespace channel
+
+// Decodes an LCM message from untrusted bytes. lcm-gen 1.3.1's decoders throw
+// std::length_error for a string whose length field is 0 (found by fuzz_messages); that, like
+// any other malformed input, is reported as "does not decode" instead of ending the process.
+template <class Msg>
+bool SafeDecode(const void* data, int64_t size, Msg* msg) {
+  if (size < 0 || size > INT32_MAX) return false;
+  try {
+    return msg->decode(data, 0, static_cast<int>(size)) >= 0;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+// The status channel of a process: "vellum-camera" -> "STATUS_CAMERA".
+std::string StatusChannel(const std::string& process);
+
+// The default bus: multicast on this host only (ttl=0), with a 4 MB receive buffer (the kernel
+// caps it at net.core.rmem_max: systemd/60-vellum.conf raises that).
+inline constexpr char kDefaultUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
+
+class Node {
+ public:
+  // Most jobs waiting for the worker: beyond, Post refuses work with an error (a flood of
+  // messages must not grow a daemon without bound).
+  static constexpr size_t kMaxQueuedJobs = 256;
+
+  // Opens its own LCM handle on `url`. Throws std::runtime_error naming the URL when LCM
+  // cannot start.
+  Node(std::string process, const std::string& url);
+  // Shares `lcm` (not owned; it outlives the node): several nodes in one process on one bus,
+  // as the in-process tests drive them on memq://.
+  Node(std::string process, lcm::LCM* lcm);
+  ~Node();
+  Node(const Node&) = delete;
+  Node& operator=(const Node&) = delete;
+
+  const std::string& process() const { return process_; }
+  lcm::LCM& lcm() { return *lcm_; }
+
+  // Calls handler with each decoded message of `channel`, on the LCM thread. Messages that do
+  // not decode as Msg are reported as errors (with their size) and dropped; a jump in a
+  // publisher's seq is reported as lost messages.
+  template <class Msg>
+  void Subscribe(const std::string& channel, std::function<void(const Msg&)> handler) {
+    SubscribeRaw(channel, [this, channel, handler](const lcm::ReceiveBuffer* buffer) {
+      Msg msg;
+      if (!SafeDecode(buffer->data, buffer->data_size, &msg)) {
+        Error(channel + ": a message of " + std::to_string(buffer->data_size) +
+              " bytes does not decode as vellum." + Msg::getTypeName() +
+              " (corrupt, truncated or of another type); dropped");
+        return;
+      }
+      CheckSequence(channel, msg.seq);
+      handler(msg);
+    });
+  }
+
+  // Sets msg->seq (this process's counter for the channel) and, when it is 0, msg->utime;
+  // then publishes.
+  template <class Msg>
+  void Publish(const std::string& channel, Msg* msg) {
+    msg->seq = NextSeq(channel);
+    if (msg->utime == 0) msg->utime = NowUtime();
+    if (lcm_->publish(channel, msg) != 0) Error(channel + ": publish failed");
+  }
+
+  // Publishes the chunks of one product paced at about SetPace's rate: a burst of many
+  // megabytes overflows the receivers' socket buffers, and udpm loses a whole message with
+  // any of its fragments.
+  template <class Msg>
+  void PublishChunks(const std::string& channel, std::vector<Msg>* chunks) {
+    for (Msg& m : *chunks) {
+      const auto start = std::chrono::steady_clock::now();
+      Publish(channel, &m);
+      std::this_thread::sleep_until(start +
+                                    std::chrono::duration<double>(m.getEncodedSize() / pace_));
+    }
+  }
+  void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
+
+  // Status: the state ("idle", "busy", "scanning", ...), the scan and a line for the operator.
+  void SetState(const std::string& state, int64_t scan_id = 0, const std::string& detail = "");
+  // Reports an error on stderr and on the status channel (at once); the process goes on.
+  void Error(const std::string& message, int64_t scan_id = 0);
+  // A line on stderr for the log (journald under systemd).
+  void Log(const std::string& message) const;
+  void Count(const std::string& counter, int64_t n = 1);
+  int64_t Counter(const std::string& counter) const;
+
+  // Runs `work` on the worker thread, in the order posted. With kMaxQueuedJobs waiting, the
+  // work is refused: reported as an error (naming `what`) and counted; returns false.
+  bool Post(std::function<void()> work, const std::string& what = "a job");
+  // Work posted and not yet finished.
+  size_t Pending() const;
+
+  // Handles LCM messages and calls `tick` about every tick_ms until SIGTERM/SIGINT or Stop();
+  // then finishes the posted work and returns 0.
+  int Run(const std::function<void()>& tick = nullptr, int tick_ms = 50);
+  void Stop() { stop_ = true; }
+  bool Stopping() const;
+
+ private:
+  struct RawHandler {
+    std::function<void(const lcm::ReceiveBuffer*)> f;
+    void Handle(const lcm::ReceiveBuffer* buffer, const std::string&) { f(buffer); }
+  };
+  void SubscribeRaw(const std::string& channel,
+                    std::function<void(const lcm::ReceiveBuffer*)> handler);
+  void CheckSequence(const std::string& channel, int64_t seq);
+  int64_t NextSeq(const std::string& channel);
+  void PublishStatus();
+  void WorkerLoop();
+
+  std::string process_;
+  std::unique_ptr<lcm::LCM> own_lcm_;  // Null when the bus is shared.
+  lcm::LCM* lcm_;
+  std::vector<std::unique_ptr<RawHandler>> handlers_;
+  std::atomic<bool> stop_{false};
+  double pace_ = 100e6;  // Bytes per second of chunked products.
+
+  // Guards the sequence numbers, the status (state, detail, errors) and the counters below:
+  // the LCM thread and the worker both report.
+  mutable std::mutex mutex_;
+  std::map<std::string, int64_t> seq_out_, seq_in_;
+  std::string state_ = "starting", detail_, last_error_;
+  int64_t scan_id_ = 0, errors_ = 0, last_error_utime_ = 0, last_error_scan_ = 0;
+  std::map<std::string, int64_t> counters_;
+
+  std::mutex work_mutex_;  // Guards work_ and work_done_ (posted by any thread, run by the worker).
+  std::condition_variable work_cv_;
+  std::deque<std::function<void()>> work_;
+  std::atomic<size_t> pending_{0};
+  bool work_done_ = false;
+  std::thread worker_;
+};
+
+// systemd's notify protocol without libsystemd: a datagram to $NOTIFY_SOCKET, if set.
+void NotifySystemd(const std::string& state);
+
+}  // namespace vellum::station

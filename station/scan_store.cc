@@ -1,0 +1,239 @@
+#include "station/scan_store.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+#include "core/common/text.h"
+#include "io/calibration_io.h"
+#include "station/messages.h"
+#include "station/node.h"
+
+namespace vellum::station {
+namespace fs = std::filesystem;
+
+// Whether `path` exists; an error looking (a folder an operator made unreadable) counts as no,
+// never as an exception on a daemon's thread.
+static bool Exists(const fs::path& path) {
+  std::error_code ec;
+  return fs::exists(path, ec);
+}
+
+ScanFolder ScanFolder::For(const std::string& data_dir, int64_t scan_id) {
+  return {(fs::path(data_dir) / ("scan-" + std::to_string(scan_id))).string()};
+}
+std::string ScanFolder::raw() const { return (fs::path(root) / "raw").string(); }
+std::string ScanFolder::results() const { return (fs::path(root) / "results").string(); }
+std::string ScanFolder::log() const { return (fs::path(raw()) / "captures.lcmlog").string(); }
+std::string ScanFolder::calibration() const {
+  return (fs::path(raw()) / "calibration.yaml").string();
+}
+
+std::string ScanFolder::pending() const { return (fs::path(root) / "pending").string(); }
+
+Status CaptureSet::Add(const capture_t& c) {
+  const std::string where =
+      "scan " + std::to_string(c.scan_id) + ", pattern " + std::to_string(c.pattern_index);
+  if (c.pattern_count <= 0 || c.pattern_count > 1000) {
+    return Status::Error(where + ": pattern_count " + std::to_string(c.pattern_count) +
+                         " is not valid");
+  }
+  if (c.pattern_index < -1 || c.pattern_index >= c.pattern_count) {
+    return Status::Error(where + ": pattern_index outside -1.." +
+                         std::to_string(c.pattern_count - 1));
+  }
+  cv::Mat image;
+  Status s = FromMessage(c.image, &image);
+  if (!s.ok()) return Status::Error(where + ": " + s.message());
+  PatternSpec spec;
+  s = FromMessage(c.pattern, &spec);
+  if (!s.ok()) return Status::Error(where + ": " + s.message());
+  const cv::Size projector(c.projector_width, c.projector_height);
+  if (!Started()) {
+    if (projector.width <= 0 || projector.height <= 0) {
+      return Status::Error(where + ": bad projector size");
+    }
+    scan_id_ = c.scan_id;
+    count_ = c.pattern_count;
+    projector_ = projector;
+    camera_ = image.size();
+    frames_.assign(count_, cv::Mat());
+    specs_.assign(count_, PatternSpec());
+    have_.assign(count_ + 1, false);
+  } else if (c.scan_id != scan_id_ || c.pattern_count != count_ || projector != projector_) {
+    return Status::Error(where + ": does not match the scan's " + std::to_string(count_) +
+                         " patterns for a " + SizeText(projector_) + " projector");
+  }
+  if (image.size() != camera_) {
+    return Status::Error(where + ": image is " + SizeText(image.size()) + ", the scan's are " +
+                         SizeText(camera_));
+  }
+  if (have_[c.pattern_index + 1]) return Status::Error(where + ": captured twice");
+  if (c.pattern_index == -1) {
+    texture_ = image;
+  } else {
+    if (image.channels() != 1) {
+      return Status::Error(where + ": pattern frames must be gray (GREY)");
+    }
+    frames_[c.pattern_index] = image;
+    specs_[c.pattern_index] = spec;
+  }
+  have_[c.pattern_index + 1] = true;
+  ++received_;
+  return Status::Ok();
+}
+
+bool CaptureSet::Complete() const { return Started() && received_ == count_ + 1; }
+
+std::string CaptureSet::Missing() const {
+  std::string list;
+  int n = 0;
+  for (int k = 0; k <= count_; ++k) {
+    if (have_[k]) continue;
+    if (n < 8) list += (n ? ", " : "") + (k == 0 ? std::string("texture") : std::to_string(k - 1));
+    ++n;
+  }
+  if (n > 8) list += ", ...";
+  return std::to_string(n) + " of " + std::to_string(count_ + 1) + " captures missing (" + list +
+         ")";
+}
+
+Scan CaptureSet::ToScan() const {
+  Scan scan;
+  scan.sequence.projector_size = projector_;
+  scan.sequence.patterns = specs_;
+  scan.camera_size = camera_;
+  scan.texture = texture_;
+  scan.frames = frames_;
+  return scan;
+}
+
+Status TrimTornTail(const std::string& path, int64_t* cut) {
+  *cut = 0;
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) return Status::Ok();  // No log yet.
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::Error(path + ": cannot read the scan's log");
+  // Each event: sync word, event number, timestamp, channel length, data length (big-endian),
+  // then the channel and the data.
+  constexpr uint32_t kSync = 0xEDA1DA01u;
+  constexpr int64_t kHeader = 4 + 8 + 8 + 4 + 4;
+  auto be32 = [](const unsigned char* b) {
+    return (uint32_t{b[0]} << 24) | (uint32_t{b[1]} << 16) | (uint32_t{b[2]} << 8) | b[3];
+  };
+  const int64_t total = static_cast<int64_t>(size);
+  int64_t end = 0;  // End of the whole events read so far.
+  unsigned char h[kHeader];
+  while (end < total) {
+    if (end + kHeader > total) break;  // A torn header.
+    in.seekg(end);
+    if (!in.read(reinterpret_cast<char*>(h), kHeader)) {
+      return Status::Error(path + ": cannot read the scan's log");
+    }
+    const int64_t channel_len = static_cast<int32_t>(be32(h + 20));
+    const int64_t data_len = static_cast<int32_t>(be32(h + 24));
+    // Not an event header: not a torn tail but damage inside the log. Nothing is cut.
+    if (be32(h) != kSync || channel_len < 0 || data_len < 0) return Status::Ok();
+    if (end + kHeader + channel_len + data_len > total) break;  // A torn body.
+    end += kHeader + channel_len + data_len;
+  }
+  if (end == total) return Status::Ok();
+  in.close();
+  fs::resize_file(path, static_cast<uintmax_t>(end), ec);
+  if (ec) return Status::Error(path + ": cannot cut off its torn last event: " + ec.message());
+  *cut = total - end;
+  return Status::Ok();
+}
+
+Status CaptureLog::Append(const ScanFolder& folder, int64_t scan_id, const std::string& channel,
+                          int64_t utime, const std::vector<uint8_t>& bytes) {
+  trimmed_ = 0;
+  if (!log_ || scan_id != scan_id_) {
+    Close();
+    Status s = MakeDirectories(folder.raw());
+    if (!s.ok()) return s;
+    path_ = folder.log();
+    s = TrimTornTail(path_, &trimmed_);
+    if (!s.ok()) return s;
+    auto log = std::make_unique<lcm::LogFile>(path_, "a");
+    if (!log->good()) return Status::Error(path_ + ": cannot open the scan's log");
+    log_ = std::move(log);
+    scan_id_ = scan_id;
+  }
+  lcm::LogEvent event;
+  event.eventnum = 0;
+  event.timestamp = utime;
+  event.channel = channel;
+  event.datalen = static_cast<int32_t>(bytes.size());
+  event.data = const_cast<uint8_t*>(bytes.data());
+  if (log_->writeEvent(&event) != 0 || fflush(log_->getFilePtr()) != 0) {
+    Close();  // Reopened (appending) for the next message.
+    return Status::Error(path_ + ": cannot write (disk full?)");
+  }
+  return Status::Ok();
+}
+
+void CaptureLog::Close() {
+  log_.reset();
+  scan_id_ = 0;
+}
+
+static std::string ImageName(int pattern_index) {
+  return pattern_index < 0 ? "texture.png" : FrameName(pattern_index);
+}
+
+Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed,
+                          int* count) {
+  folder_ = folder;
+  *count = 0;
+  Status s = MakeDirectories(folder.raw());
+  if (!s.ok()) return s;
+  if (!Exists(folder.log())) return Status::Ok();
+  CaptureSet earlier;
+  std::vector<capture_t> taken;
+  {
+    lcm::LogFile old(folder.log(), "r");
+    for (const lcm::LogEvent* e = old.good() ? old.readNextEvent() : nullptr; e;
+         e = old.readNextEvent()) {
+      capture_t c;
+      if (e->channel != channel::kCapture || !SafeDecode(e->data, e->datalen, &c) ||
+          c.scan_id != scan_id || earlier.Has(c.pattern_index)) {
+        continue;
+      }
+      if (earlier.Add(c).ok()) taken.push_back(std::move(c));
+    }
+  }
+  // A complete scan in the log was processed before: this is the scan again (a replay).
+  if (earlier.Complete()) return Status::Ok();
+  for (const capture_t& c : taken) {
+    const std::string path = (fs::path(folder.raw()) / ImageName(c.pattern_index)).string();
+    if (Exists(path)) continue;
+    cv::Mat image;
+    if (FromMessage(c.image, &image).ok()) {
+      s = WriteImage(path, image);
+      if (!s.ok()) return s;
+    }
+  }
+  *resumed = earlier;
+  *count = static_cast<int>(taken.size());
+  return Status::Ok();
+}
+
+Status ScanRecorder::Write(const capture_t& capture, const cv::Mat& image) {
+  return WriteImage((fs::path(folder_.raw()) / ImageName(capture.pattern_index)).string(), image);
+}
+
+Status ScanRecorder::Write(const calibration_t& calibration) {
+  Calibration c;
+  Status s = FromMessage(calibration, &c);
+  if (!s.ok()) return s;
+  return WriteCalibration(folder_.calibration(), c);
+}
+
+Status ScanRecorder::Finish(const Scan& scan) {
+  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size);
+}
+
+}  // namespace vellum::station

@@ -1,0 +1,110 @@
+// A scan's captures on their way to disk: the set of CAPTURE messages of one scan (checked
+// for consistency, with the missing ones named), and the scan's folder (raw captures as an LCM
+// log and as the scan directory of DESIGN.md, written as they arrive, before any processing).
+#pragma once
+
+#include <cstdint>
+#include <lcm/lcm-cpp.hpp>
+#include <memory>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "io/scan_io.h"
+#include "vellum/calibration_t.hpp"
+#include "vellum/capture_t.hpp"
+
+namespace vellum::station {
+
+// The encoded bytes of a message (what the bus and the logs carry).
+template <class Msg>
+std::vector<uint8_t> Encode(const Msg& msg) {
+  std::vector<uint8_t> bytes(msg.getEncodedSize());
+  msg.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  return bytes;
+}
+
+// <data>/scan-<id>/raw (the scan directory, captures.lcmlog, calibration.yaml) and
+// <data>/scan-<id>/results (what `vellum process` writes).
+struct ScanFolder {
+  std::string root;
+  static ScanFolder For(const std::string& data_dir, int64_t scan_id);
+  std::string raw() const;
+  std::string results() const;
+  std::string log() const;          // raw/captures.lcmlog
+  std::string calibration() const;  // raw/calibration.yaml
+  std::string pending() const;      // pending: the supervisor's ledger (station/supervisor.h)
+};
+
+// The captures of one scan, as they arrive.
+class CaptureSet {
+ public:
+  // Checks the capture against the scan (ids, counts, projector size, image size) and keeps
+  // its image. Errors name the scan and pattern.
+  Status Add(const capture_t& capture);
+  bool Started() const { return count_ >= 0; }
+  bool Complete() const;
+  int64_t scan_id() const { return scan_id_; }
+  int Received() const { return received_; }
+  int Expected() const { return count_ + 1; }  // Texture + patterns.
+  // Whether the capture of pattern_index (-1: texture) is in.
+  bool Has(int pattern_index) const {
+    return Started() && pattern_index >= -1 && pattern_index < count_ && have_[pattern_index + 1];
+  }
+  // "texture, frames 3, 7 of 54 missing".
+  std::string Missing() const;
+  // The whole scan (only when Complete()).
+  Scan ToScan() const;
+
+ private:
+  int64_t scan_id_ = 0;
+  int count_ = -1, received_ = 0;
+  cv::Size projector_, camera_;
+  cv::Mat texture_;
+  std::vector<cv::Mat> frames_;
+  std::vector<PatternSpec> specs_;
+  std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
+};
+
+// Cuts a torn last event off an LCM log: a process killed in the middle of writing one, or a
+// disk that filled, leaves a partial event, and LCM's reader sees nothing of what is appended
+// after it. Every whole event stays. Sets *cut to the bytes removed (0 for a sound log or none).
+Status TrimTornTail(const std::string& path, int64_t* cut);
+
+// The scan's log, raw/captures.lcmlog, written on the LCM thread the moment a message
+// arrives (an append and a flush: a crash of the process loses nothing it has received).
+// Logs are only ever appended to; before appending to an existing log its torn last event,
+// if any, is cut off (TrimTornTail), so that what follows stays readable.
+class CaptureLog {
+ public:
+  Status Append(const ScanFolder& folder, int64_t scan_id, const std::string& channel,
+                int64_t utime, const std::vector<uint8_t>& bytes);
+  void Close();
+  // Bytes of a torn event the last Append cut off as it opened the log (for the daemon's log).
+  int64_t trimmed() const { return trimmed_; }
+
+ private:
+  int64_t trimmed_ = 0;
+  int64_t scan_id_ = 0;
+  std::string path_;
+  std::unique_ptr<lcm::LogFile> log_;
+};
+
+// The rest of a scan's folder, on the worker thread: each capture as raw/texture.png or
+// raw/frame_NNN.png, raw/calibration.yaml, and raw/scan.yaml once complete.
+class ScanRecorder {
+ public:
+  // Opens the scan's folder. When its log already holds captures of this scan that were not
+  // processed (the decoder restarted in the middle of the scan), they are taken up: added to
+  // *resumed (*count of them), their images written if missing.
+  Status Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed, int* count);
+  Status Write(const capture_t& capture, const cv::Mat& image);
+  Status Write(const calibration_t& calibration);
+  Status Finish(const Scan& scan);
+
+ private:
+  ScanFolder folder_;
+};
+
+}  // namespace vellum::station

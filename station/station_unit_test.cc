@@ -1,0 +1,381 @@
+// The station library without processes: message conversions and their validation, row
+// chunking under the bus's size limit, reassembly that names what is missing, capture sets,
+// scan logs <-> scan directories, and the node shell on LCM's in-process memq:// bus.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <opencv2/imgproc.hpp>
+#include <thread>
+
+#include "core/mesh/mesh.h"
+#include "core/sim/gantry.h"
+#include "station/messages.h"
+#include "station/node.h"
+#include "station/scan_log.h"
+#include "station/scan_store.h"
+#include "station/supervisor.h"
+#include "vellum/point_cloud_t.hpp"
+#include "vellum/scan_request_t.hpp"
+#include "vellum/status_t.hpp"
+
+namespace vellum::station {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool SameBits(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  for (int y = 0; y < a.rows; ++y) {
+    if (std::memcmp(a.ptr(y), b.ptr(y), a.cols * a.elemSize()) != 0) return false;
+  }
+  return true;
+}
+
+TEST(Messages, ImagesRoundTripGrayAndColourAndBadImagesAreNamed) {
+  cv::Mat gray(37, 53, CV_8U), bgr(20, 31, CV_8UC3);
+  cv::randu(gray, 0, 256);
+  cv::randu(bgr, 0, 256);
+  for (const cv::Mat& image : {gray, bgr}) {
+    image_t msg;
+    ToMessage(image, &msg);
+    cv::Mat back;
+    ASSERT_TRUE(FromMessage(msg, &back).ok());
+    EXPECT_TRUE(SameBits(image, back));
+  }
+  image_t msg;
+  ToMessage(gray, &msg);
+  msg.row_stride = 60;  // Rows padded: data too short now.
+  Status s = FromMessage(msg, &gray);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("needs"), std::string::npos) << s.message();
+  ToMessage(bgr, &msg);
+  msg.pixelformat = 0x47504a4d;  // 'MJPG'
+  s = FromMessage(msg, &bgr);
+  EXPECT_NE(s.message().find("'MJPG' is not supported"), std::string::npos) << s.message();
+}
+
+TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
+  DecodeResult d;
+  const cv::Size size(1600, 1200);
+  d.projector_x.create(size, CV_32F);
+  d.projector_y.create(size, CV_32F);
+  cv::randu(d.projector_x, 0, 1024);
+  cv::randu(d.projector_y, 0, 768);
+  d.projector_x(cv::Rect(10, 10, 50, 50)).setTo(std::numeric_limits<float>::quiet_NaN());
+  d.valid = d.projector_x == d.projector_x;
+  d.has_columns = d.has_rows = true;
+  StageReport stage;
+  stage.stage = "decode";
+  stage.Number("pixels", "decoded", 12345);
+  stage.outputs = {"nothing.txt"};
+  std::vector<correspondence_t> chunks = ToMessages(7, d, cv::Size(1024, 768), {stage});
+  ASSERT_GT(chunks.size(), 10u);  // 17 MB in all.
+  DecodeResult back;
+  cv::Size projector;
+  ChunkSet set;
+  std::reverse(chunks.begin(), chunks.end());  // Any order.
+  for (const correspondence_t& c : chunks) {
+    EXPECT_LE(static_cast<size_t>(c.getEncodedSize()), kMaxMessageBytes + 1024);
+    std::vector<StageReport> stages;
+    ASSERT_TRUE(FromMessages(c.stages, &stages).ok());
+    ASSERT_EQ(stages.size(), 1u);
+    EXPECT_EQ(stages[0].stage, "decode");
+    ASSERT_EQ(stages[0].values.size(), 1u);
+    EXPECT_EQ(stages[0].values[0].number, 12345);
+    EXPECT_EQ(stages[0].outputs, stage.outputs);
+    ASSERT_TRUE(set.Add(c.scan_id, c.chunk_index, c.chunk_count).ok());
+    ASSERT_TRUE(AddChunk(c, &back, &projector).ok());
+  }
+  EXPECT_TRUE(set.Complete());
+  EXPECT_EQ(projector, cv::Size(1024, 768));
+  EXPECT_TRUE(SameBits(d.projector_x, back.projector_x));
+  EXPECT_TRUE(SameBits(d.projector_y, back.projector_y));
+  EXPECT_TRUE(SameBits(d.valid, back.valid));
+
+  correspondence_t bad = chunks[0];
+  bad.row_begin = 1190;  // Rows past the image.
+  EXPECT_NE(AddChunk(bad, &back, &projector).message().find("outside"), std::string::npos);
+  bad = chunks[0];
+  bad.n -= 1;
+  EXPECT_FALSE(AddChunk(bad, &back, &projector).ok());
+}
+
+TEST(Messages, ALengthFieldLargerThanTheMessageIsRefusedBeforeAllocating) {
+  point_cloud_t m{};
+  m.nxyz = 3;
+  m.xyz = {1, 2, 3};
+  std::vector<uint8_t> bytes(m.getEncodedSize());
+  m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  // nxyz sits after the fingerprint, 3 int64 and 6 int32 fields: claim 10^9 floats.
+  const size_t at = 8 + 3 * 8 + 6 * 4;
+  const uint32_t huge = 1000000000u;
+  for (int k = 0; k < 4; ++k) bytes[at + k] = static_cast<uint8_t>(huge >> (24 - 8 * k));
+  point_cloud_t back;
+  EXPECT_FALSE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &back));
+  EXPECT_LT(back.xyz.capacity(), 1000u);  // Refused before sizing the array.
+}
+
+TEST(Messages, ChunkSetNamesMissingAndDuplicateChunks) {
+  ChunkSet set;
+  ASSERT_TRUE(set.Add(3, 0, 5).ok());
+  ASSERT_TRUE(set.Add(3, 4, 5).ok());
+  EXPECT_FALSE(set.Complete());
+  EXPECT_EQ(set.Missing(), "chunks 1, 2, 3 of 5 missing");
+  EXPECT_NE(set.Add(3, 4, 5).message().find("came twice"), std::string::npos);
+  EXPECT_FALSE(set.Add(3, 1, 6).ok());  // Another count.
+  EXPECT_FALSE(set.Add(4, 1, 5).ok());  // Another scan.
+  EXPECT_FALSE(set.Add(3, 5, 5).ok());  // Out of range.
+}
+
+TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
+  const Calibration rig = DefaultRig();
+  // A synthetic organised point map: a gentle cylinder over the camera's view.
+  cv::Mat points(120, 160, CV_32FC3);
+  for (int v = 0; v < points.rows; ++v) {
+    for (int u = 0; u < points.cols; ++u) {
+      const float x = (u - 80) * 1.0f, y = (60 - v) * 1.0f;
+      points.at<cv::Vec3f>(v, u) = cv::Vec3f(x, y, 0.002f * x * x);
+    }
+  }
+  std::vector<point_cloud_t> pc = ToMessages(9, points, {});
+  cv::Mat back;
+  for (const point_cloud_t& m : pc) ASSERT_TRUE(AddChunk(m, &back).ok());
+  EXPECT_TRUE(SameBits(points, back));
+
+  Mesh mesh;
+  mesh.cols = 6;
+  mesh.rows = 5;
+  mesh.kind.assign(30, NodeKind::kMeasured);
+  mesh.kind[0] = NodeKind::kOff;
+  mesh.kind[7] = NodeKind::kFilled;
+  mesh.point.assign(30, cv::Vec3d(0, 0, 0));
+  std::vector<cv::Point2d> flat(30);
+  for (int k = 0; k < 30; ++k) {
+    mesh.point[k] = cv::Vec3d(10.0 * (k % 6), 10.0 * (k / 6), 0.1 * k);
+    flat[k] = cv::Point2d(mesh.point[k][0], mesh.point[k][1]);
+  }
+  auto project = [&](const cv::Vec3d& x) { return rig.camera.Project(x); };
+  ConnectSheet(true, project, &mesh);
+  ASSERT_TRUE(mesh.status.ok()) << mesh.status.message();
+  Mesh received;
+  std::vector<cv::Point2d> received_flat;
+  for (const mesh_t& m : ToMessages(9, mesh, true, flat, {})) {
+    ASSERT_TRUE(AddChunk(m, &received, &received_flat).ok());
+  }
+  ConnectSheet(true, project, &received);
+  ASSERT_TRUE(received.status.ok());
+  EXPECT_EQ(received.springs.size(), mesh.springs.size());
+  EXPECT_EQ(received.quads, mesh.quads);
+  EXPECT_EQ(received.pixel, mesh.pixel);
+  EXPECT_EQ(received_flat, flat);
+
+  mesh_t bad = ToMessages(9, mesh, true, flat, {})[0];
+  bad.kind[3] = 9;
+  Mesh m2;
+  std::vector<cv::Point2d> f2;
+  EXPECT_NE(AddChunk(bad, &m2, &f2).message().find("unknown kind 9"), std::string::npos);
+}
+
+TEST(Messages, CalibrationRoundTripsAndNaNIsRejected) {
+  const Calibration rig = DefaultRig();
+  calibration_t msg;
+  ToMessage(rig, &msg);
+  Calibration back;
+  ASSERT_TRUE(FromMessage(msg, &back).ok());
+  EXPECT_EQ(back.camera.matrix, rig.camera.matrix);
+  EXPECT_EQ(back.projector.translation, rig.projector.translation);
+  msg.projector.rotation[4] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(FromMessage(msg, &back).message().find("not all numbers are finite"),
+            std::string::npos);
+}
+
+Scan SmallScan() {
+  PatternOptions options;
+  options.projector_size = cv::Size(64, 48);
+  options.phase_steps = 4;
+  Scan scan;
+  scan.sequence = MakePatternSequence(options);
+  scan.camera_size = cv::Size(40, 30);
+  scan.texture.create(30, 40, CV_8UC3);
+  cv::randu(scan.texture, 0, 256);
+  for (size_t k = 0; k < scan.sequence.patterns.size(); ++k) {
+    cv::Mat f(30, 40, CV_8U);
+    cv::randu(f, 0, 256);
+    scan.frames.push_back(f);
+  }
+  return scan;
+}
+
+TEST(ScanStore, CaptureSetNamesWhatIsMissingAndRejectsMismatches) {
+  const Scan scan = SmallScan();
+  const int n = static_cast<int>(scan.frames.size());
+  CaptureSet set;
+  ASSERT_TRUE(set.Add(MakeCapture(scan, 5, -1, 1000)).ok());
+  for (int k = 0; k < n; ++k) {
+    if (k == 3 || k == 7) continue;
+    ASSERT_TRUE(set.Add(MakeCapture(scan, 5, k, 2000 + k)).ok());
+  }
+  EXPECT_FALSE(set.Complete());
+  EXPECT_EQ(set.Missing(), "2 of " + std::to_string(n + 1) + " captures missing (3, 7)");
+  EXPECT_NE(set.Add(MakeCapture(scan, 5, 0, 1)).message().find("captured twice"),
+            std::string::npos);
+  capture_t other = MakeCapture(scan, 5, 3, 1);
+  other.projector_width = 65;
+  EXPECT_FALSE(set.Add(other).ok());
+  Scan small = scan;
+  cv::resize(small.frames[3], small.frames[3], cv::Size(20, 15));
+  EXPECT_NE(set.Add(MakeCapture(small, 5, 3, 1)).message().find("image is 20x15"),
+            std::string::npos);
+}
+
+TEST(ScanStore, ALogAndAScanDirectoryConvertBothWaysLosslessly) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_store_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const Scan scan = SmallScan();
+  calibration_t calibration;
+  ToMessage(DefaultRig(), &calibration);
+  const std::string log = (dir / "scan.lcmlog").string();
+  ASSERT_TRUE(WriteScanLog(log, scan, 77, &calibration).ok());
+  Scan back;
+  bool has_calibration = false;
+  calibration_t calibration_back;
+  int64_t id = 0;
+  ASSERT_TRUE(ReadScanLog(log, 0, &back, &has_calibration, &calibration_back, &id).ok());
+  EXPECT_EQ(id, 77);
+  EXPECT_TRUE(has_calibration);
+  EXPECT_EQ(back.sequence.patterns, scan.sequence.patterns);
+  EXPECT_EQ(back.sequence.projector_size, scan.sequence.projector_size);
+  EXPECT_TRUE(SameBits(back.texture, scan.texture));
+  ASSERT_EQ(back.frames.size(), scan.frames.size());
+  for (size_t k = 0; k < scan.frames.size(); ++k)
+    EXPECT_TRUE(SameBits(back.frames[k], scan.frames[k]));
+
+  // A log cut short names the missing captures.
+  const auto size = fs::file_size(log);
+  fs::resize_file(log, size - 1500);
+  Status s = ReadScanLog(log, 0, &back, &has_calibration, &calibration_back, &id);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("incomplete"), std::string::npos) << s.message();
+  EXPECT_FALSE(ReadScanLog((dir / "none.lcmlog").string(), 0, &back, &has_calibration,
+                           &calibration_back, &id)
+                   .ok());
+  fs::remove_all(dir);
+}
+
+// A decoder killed in the middle of writing a capture leaves a torn last event; the restarted
+// decoder's appends must stay readable after it (LCM's reader stops at the first bad header).
+TEST(ScanStore, AppendingAfterATornEventKeepsEveryWholeEventReadable) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_torn_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const ScanFolder folder = ScanFolder::For(dir.string(), 9);
+  auto count_events = [&] {
+    lcm::LogFile log(folder.log(), "r");
+    int n = 0;
+    while (log.good() && log.readNextEvent()) ++n;
+    return n;
+  };
+  const std::vector<uint8_t> bytes(5000, 7);
+  {
+    CaptureLog log;
+    for (int k = 0; k < 3; ++k) ASSERT_TRUE(log.Append(folder, 9, "CAPTURE", k, bytes).ok());
+    EXPECT_EQ(log.trimmed(), 0);
+  }
+  const auto whole = fs::file_size(folder.log());
+  const int64_t event = static_cast<int64_t>(whole) / 3;
+  // Torn in the data, then torn in the header: each is cut off, the whole events stay.
+  for (const int64_t keep : {event - 100, int64_t{10}}) {
+    fs::resize_file(folder.log(), whole);
+    CaptureLog extra;  // A fourth event, then torn to `keep` of its bytes.
+    ASSERT_TRUE(extra.Append(folder, 9, "CAPTURE", 3, bytes).ok());
+    extra.Close();
+    fs::resize_file(folder.log(), whole + keep);
+    CaptureLog log;
+    ASSERT_TRUE(log.Append(folder, 9, "CAPTURE", 4, bytes).ok());
+    EXPECT_EQ(log.trimmed(), keep);
+    ASSERT_TRUE(log.Append(folder, 9, "CAPTURE", 5, bytes).ok());
+    EXPECT_EQ(log.trimmed(), 0);  // Said once, as the log is opened.
+    log.Close();
+    EXPECT_EQ(count_events(), 5) << "torn to " << keep << " bytes";
+    EXPECT_EQ(fs::file_size(folder.log()), whole + 2 * event);
+  }
+  // Damage inside the log (not an event header where one should start) is not cut.
+  fs::resize_file(folder.log(), whole);
+  {
+    std::fstream f(folder.log(), std::ios::binary | std::ios::in | std::ios::out);
+    f.seekp(event);
+    f.put('x');
+  }
+  int64_t cut = -1;
+  ASSERT_TRUE(TrimTornTail(folder.log(), &cut).ok());
+  EXPECT_EQ(cut, 0);
+  EXPECT_EQ(fs::file_size(folder.log()), whole);
+  ASSERT_TRUE(TrimTornTail((dir / "none.lcmlog").string(), &cut).ok());  // No log yet.
+  EXPECT_EQ(cut, 0);
+  fs::remove_all(dir);
+}
+
+TEST(ScanStore, PendingScansAreFoundWithTheirAttemptsUntilCleared) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_pending_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  EXPECT_TRUE(FindPending(dir.string()).empty());  // No data folder yet: nothing pending.
+  for (int64_t id : {30, 4, 1000}) fs::create_directories(dir / ("scan-" + std::to_string(id)));
+  fs::create_directories(dir / "scan-x12");  // Not a scan folder.
+  std::ofstream(dir / "scan-x12" / "pending") << "1\n";
+  const ScanFolder a = ScanFolder::For(dir.string(), 30), b = ScanFolder::For(dir.string(), 1000);
+  EXPECT_EQ(PendingAttempts(a), 0);
+  ASSERT_TRUE(MarkPending(a, 1).ok());
+  ASSERT_TRUE(MarkPending(b, 1).ok());
+  ASSERT_TRUE(MarkPending(b, 2).ok());
+  EXPECT_EQ(FindPending(dir.string()), (std::vector<int64_t>{30, 1000}));
+  EXPECT_EQ(PendingAttempts(a), 1);
+  EXPECT_EQ(PendingAttempts(b), 2);
+  ClearPending(b);
+  EXPECT_EQ(FindPending(dir.string()), std::vector<int64_t>{30});
+  EXPECT_EQ(PendingAttempts(b), 0);
+  std::ofstream(a.pending()) << "garbage";  // Unreadable: still pending, one attempt made.
+  EXPECT_EQ(PendingAttempts(a), 1);
+  fs::remove_all(dir);
+}
+
+TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
+  Node node("vellum-unit", "memq://");
+  std::vector<status_t> statuses;
+  node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
+  int received = 0;
+  node.Subscribe<scan_request_t>("SCAN_REQUEST", [&](const scan_request_t&) { ++received; });
+  const std::vector<uint8_t> junk(10, 1);
+  node.lcm().publish("SCAN_REQUEST", junk.data(), static_cast<unsigned>(junk.size()));
+  // A string whose length field is 0 makes lcm-gen's decoder throw (found by fuzzing).
+  scan_request_t bad{};
+  bad.label = "x";
+  std::vector<uint8_t> bytes(bad.getEncodedSize());
+  bad.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+  std::fill(bytes.begin() + 32, bytes.begin() + 36, 0);  // label's length (after 4 int64s).
+  node.lcm().publish("SCAN_REQUEST", bytes.data(), static_cast<unsigned>(bytes.size()));
+  scan_request_t r{};
+  for (int64_t seq : {0, 1, 5}) {
+    r.seq = seq;
+    node.lcm().publish("SCAN_REQUEST", &r);
+  }
+  for (int k = 0; k < 10; ++k) node.lcm().handleTimeout(10);
+  EXPECT_EQ(received, 3);
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().process, "vellum-unit");
+  EXPECT_EQ(statuses.back().errors, 3);
+  EXPECT_NE(statuses.back().last_error.find("3 message(s) lost on the bus (seq 1 then 5)"),
+            std::string::npos)
+      << statuses.back().last_error;
+  EXPECT_EQ(node.Counter("lost messages"), 3);
+  // Posted work runs in order, off the LCM thread.
+  std::vector<int> order;
+  for (int k = 0; k < 5; ++k) node.Post([&order, k] { order.push_back(k); });
+  while (node.Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_EQ(order, (std::vector<int>{0, 1, 2, 3, 4}));
+}
+
+}  // namespace
+}  // namespace vellum::station

@@ -1,0 +1,84 @@
+// The station's supervisor: sees every scan from its recording to RESTORED, so that no scan is
+// lost when a processing daemon dies holding it. It lives in vellum-decoder (which holds every
+// scan's captures and can send a scan down the chain again), on the decoder's worker thread.
+//
+// It watches, on the bus:
+//  - SCAN_PROGRESS: how far down the chain each scan has come (the last daemon that handed it
+//    on, station/chain.h);
+//  - the processing daemons' STATUS heartbeats: a new pid is a restart; an error a daemon
+//    reports about a scan ends that scan (the operator sees the error);
+//  - RESTORED: the scan is done.
+// It keeps, on disk, the ledger of scans recorded and not yet restored: <data>/scan-<id>/pending,
+// holding how many times the scan was sent down the chain. It outlives every process.
+//
+// When a processing daemon restarts, the scans it held, or that were on their way to it (handed
+// on by the daemon before it and not yet by itself), are sent again from disk: a scan already
+// past it is not. When the decoder itself starts, once every processing daemon is heard, every
+// scan in the ledger is sent again (the station stopped, or a daemon had not started). A scan is
+// sent at most kMaxAttempts times, then fails with a message naming its raw captures.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/patterns/scan.h"
+#include "station/node.h"
+#include "station/scan_store.h"
+#include "vellum/status_t.hpp"
+
+namespace vellum::station {
+
+// The ledger: marks a scan pending with the times it was sent (written whole or not at all).
+[[nodiscard]] Status MarkPending(const ScanFolder& folder, int attempts);
+int PendingAttempts(const ScanFolder& folder);  // 0: not pending.
+void ClearPending(const ScanFolder& folder);
+std::vector<int64_t> FindPending(const std::string& data_dir);  // Ascending.
+
+// Announces on SCAN_PROGRESS that this process has handed `scan_id` on with `product`.
+void AnnounceHandedOn(Node* node, int64_t scan_id, const std::string& product);
+
+class Supervisor {
+ public:
+  static constexpr int kMaxAttempts = 3;
+
+  // Sends a scan down the chain (the decoder decodes it and publishes its products); called on
+  // the worker thread. A failure is reported by the sender.
+  using Send = std::function<Status(int64_t scan_id, const Scan& scan)>;
+
+  Supervisor(Node* node, std::string data_dir, Send send);
+
+  // Worker thread. A scan is recorded whole: it enters the ledger, and is sent (first attempt).
+  // False when it could not be marked (the error is reported).
+  bool Recorded(int64_t scan_id, const Scan& scan);
+  // Worker thread. A scan failed with a reported error: it leaves the ledger.
+  void Failed(int64_t scan_id);
+  // Worker thread. The scan being recorded (0: none): never sent again from under the recorder.
+  void Recording(int64_t scan_id) { recording_ = scan_id; }
+
+ private:
+  struct Daemon {
+    int32_t pid = 0;
+    int64_t error_utime = -1;  // -1: no status yet (its old errors are not news).
+  };
+
+  void OnStatus(const status_t& msg);
+  void Finished(int64_t scan_id);
+  // Sends again every pending scan for which `held` holds; `why` ends up in the log.
+  void SendAgain(const std::function<bool(int64_t)>& held, const std::string& why);
+  bool RestoredSinceSent(const ScanFolder& folder) const;
+
+  Node* node_;
+  std::string data_;
+  Send send_;
+  // Worker thread only (every handler posts its work there):
+  std::map<std::string, Daemon> daemons_;  // The processing daemons after the decoder.
+  std::map<int64_t, int> reached_;         // Scan -> chain index of the last to hand it on.
+  bool sent_at_start_ = false;
+  int64_t recording_ = 0;
+};
+
+}  // namespace vellum::station

@@ -1,0 +1,153 @@
+// The station on one in-process bus, for unit tests of the daemons' nodes: LCM's memq://
+// provider, nodes that share it (station::Node over a shared handle), a probe that records what
+// they publish, and a pump that handles messages until a condition holds.
+#pragma once
+
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <lcm/lcm-cpp.hpp>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/patterns/scan.h"
+#include "core/sim/evaluate.h"
+#include "pipeline/stages.h"
+#include "station/node.h"
+#include "vellum/status_t.hpp"
+
+namespace vellum::station::testing {
+
+class MemqBus {
+ public:
+  MemqBus() : lcm_("memq://"), probe_("vellum-test", &lcm_) {}
+
+  lcm::LCM& lcm() { return lcm_; }
+  // The test's own node: publishes as "vellum-test".
+  Node& probe() { return probe_; }
+
+  // Called between messages, as a daemon's Run calls its node's Tick.
+  void AddTick(std::function<void()> tick) { ticks_.push_back(std::move(tick)); }
+
+  // Handles messages (the nodes' workers run meanwhile) and calls the ticks until `done` holds;
+  // false after `timeout_s`.
+  bool RunUntil(const std::function<bool()>& done, double timeout_s = 60) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    while (!done()) {
+      if (std::chrono::steady_clock::now() > end) return false;
+      lcm_.handleTimeout(5);
+      for (const auto& tick : ticks_) tick();
+    }
+    return true;
+  }
+
+  // Records every message of `channel` (decoded as Msg) from now on.
+  template <class Msg>
+  std::shared_ptr<std::vector<Msg>> Record(const std::string& channel) {
+    auto seen = std::make_shared<std::vector<Msg>>();
+    probe_.Subscribe<Msg>(channel, [seen](const Msg& m) { seen->push_back(m); });
+    return seen;
+  }
+
+  // Follows the status of `process` ("vellum-decoder") from now on.
+  void Watch(const std::string& process) {
+    auto& last = statuses_[process];
+    probe_.Subscribe<status_t>(StatusChannel(process), [&last](const status_t& m) { last = m; });
+  }
+  const status_t& Status(const std::string& process) { return statuses_[process]; }
+  // A counter of the last status of a watched process (0 if absent).
+  int64_t Counter(const std::string& process, const std::string& name) {
+    const status_t& s = statuses_[process];
+    for (int k = 0; k < s.ncounters; ++k) {
+      if (s.counter_names[k] == name) return s.counter_values[k];
+    }
+    return 0;
+  }
+  // Waits until the watched process reports an error containing `text`.
+  bool WaitForError(const std::string& process, const std::string& text, double timeout_s = 30) {
+    return RunUntil([&] { return statuses_[process].last_error.find(text) != std::string::npos; },
+                    timeout_s);
+  }
+
+ private:
+  lcm::LCM lcm_;
+  Node probe_;
+  std::vector<std::function<void()>> ticks_;
+  std::map<std::string, status_t> statuses_;
+};
+
+// A small rig (camera 400x300 at about 0.6 mm per pixel, projector 320x200) whose scans render
+// and process in about a second: the default rig's geometry with smaller images.
+inline Calibration SmallRig() {
+  Calibration rig = DefaultRig();
+  rig.camera.size = {400, 300};
+  rig.camera.matrix = cv::Matx33d(600, 0, 199.5, 0, 600, 149.5, 0, 0, 1);
+  rig.projector.size = {320, 200};
+  rig.projector.matrix = cv::Matx33d(560, 0, 159.5, 0, 560, 99.5, 0, 0, 1);
+  return rig;
+}
+
+// A curled page scanned on the small rig by the virtual gantry (rendered once per process).
+inline const Scan& SmallScan() {
+  static const Scan scan = [] {
+    SimulatedScan sim = SimulateScan(SmallRig(), PageShape::kCurl, 7);
+    Scan s;
+    s.sequence = sim.sequence;
+    s.camera_size = SmallRig().camera.size;
+    s.texture = sim.texture;
+    s.frames = sim.frames;
+    return s;
+  }();
+  return scan;
+}
+
+// SmallScan() through each stage with the default options (computed once per process, its
+// files in a temporary folder): the inputs the daemons after the decoder take, and what their
+// products must equal.
+struct SmallProducts {
+  std::string results;  // Where the stages wrote their files.
+  DecodeResult decoded;
+  PointMap map;
+  Mesh mesh;
+  FlattenResult flat;
+  RestoreResult restored;
+  std::vector<StageReport> stages;  // decode, triangulate, mesh, flatten, restore.
+};
+inline const SmallProducts& SmallScanProducts() {
+  static const SmallProducts products = [] {
+    SmallProducts p;
+    p.results = (std::filesystem::temp_directory_path() /
+                 ("vellum_small_products_" + std::to_string(::getpid())))
+                    .string();
+    std::filesystem::create_directories(p.results);
+    const Calibration rig = SmallRig();
+    Decoder decoder;
+    p.stages.push_back(DecodeStage(SmallScan(), &decoder, &p.decoded));
+    p.stages.push_back(
+        TriangulateStage(p.decoded, Triangulator(rig), TriangulateOptions(), p.results, &p.map));
+    p.stages.push_back(
+        MeshStage(p.map.points, SmallScan().texture, rig.camera, MeshOptions(), &p.mesh));
+    p.stages.push_back(FlattenStage(p.mesh, FlattenOptions(), p.results, &p.flat));
+    p.stages.push_back(RestoreStage(SmallScan().texture, p.mesh, p.flat.flat, rig.camera,
+                                    RestoreOptions(), p.results, &p.restored));
+    for (const StageReport& stage : p.stages) {
+      if (!stage.status.ok()) throw std::runtime_error(stage.stage + ": " + stage.status.message());
+    }
+    return p;
+  }();
+  return products;
+}
+
+// The first `n` stage reports of SmallScanProducts().
+inline std::vector<StageReport> FirstStages(size_t n) {
+  const auto& all = SmallScanProducts().stages;
+  return std::vector<StageReport>(all.begin(), all.begin() + n);
+}
+
+}  // namespace vellum::station::testing
