@@ -8,7 +8,7 @@ packages=(
   liblcm-dev liblcm-bin liblcm-java
   libv4l-dev libsdl2-dev
   googletest libgtest-dev libgmock-dev libbenchmark-dev
-  libcgal-dev clang-format
+  libcgal-dev libsuitesparse-dev nlohmann-json3-dev clang-format
   default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux
   chromium xvfb clang libclang-rt-14-dev
 )
