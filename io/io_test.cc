@@ -230,6 +230,7 @@ TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
       {std::string("%YAML:1.0\ncamera_size: [ 4, 3 ]\0\n", 33), "NUL"},
       {"%YAML:1.0\n   rows: 3\n* v-m\n", "indented"},
       {"%YAML:1.0\na: 1\n...\n-x\n", "\"...\""},
+      {"%YAML:1.0\n---  rows: 3\n* v-m\n", "an entry on a \"---\" line"},
   };
   for (const auto& c : cases) {
     const std::string path = (dir / "calibration.yaml").string();

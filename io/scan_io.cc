@@ -61,6 +61,11 @@ std::string PatternName(int index) {
   return buf;
 }
 
+bool PathExists(const std::string& path) {
+  std::error_code ec;
+  return std::filesystem::exists(path, ec);
+}
+
 Status MakeDirectories(const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);

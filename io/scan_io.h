@@ -32,5 +32,8 @@ Status WritePatterns(const std::string& dir, const PatternSequence& sequence);
 // Writes an image, creating nothing; errors name the file.
 Status WriteImage(const std::string& path, const cv::Mat& image);
 Status MakeDirectories(const std::string& dir);
+// Whether `path` exists; an error looking (a folder an operator made unreadable) counts as no,
+// never as an exception on a daemon's thread.
+bool PathExists(const std::string& path);
 
 }  // namespace vellum

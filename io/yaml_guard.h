@@ -21,9 +21,9 @@ inline bool MatrixNodeAtMost(const cv::FileNode& node, double max_elements) {
 }
 
 // Checks that `path` is a text file of a sane size, with nothing known to hang OpenCV 4.6's
-// YAML parser, before OpenCV parses it: the parser loops forever on a NUL byte, and on a
-// second document not started by "---" (both found by fuzz/fuzz_files). Returns "" when fine,
-// else what is wrong.
+// YAML parser, before OpenCV parses it: the parser loops forever on a NUL byte, on a second
+// document not started by "---", and on a "---" line with an entry after it (all found by
+// fuzz/fuzz_files). Returns "" when fine, else what is wrong.
 inline std::string YamlTextProblem(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return "cannot open";
@@ -46,6 +46,12 @@ inline std::string YamlTextProblem(const std::string& path) {
     if (first == std::string::npos || line[first] == '#') continue;
     if (line.compare(first, 3, "...") == 0) {
       return "a \"...\" line (end of a YAML document) is not supported";
+    }
+    if (line.compare(first, 3, "---") == 0) {
+      const size_t rest = line.find_first_not_of(" \r", first + 3);
+      if (rest != std::string::npos && line[rest] != '#') {
+        return "an entry on a \"---\" line is not supported (start it on the next line)";
+      }
     }
     if (content || line[first] == '%' || line.compare(first, 3, "---") == 0) continue;
     if (first != 0) return "the first entry is indented (it must start at column 0)";

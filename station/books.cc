@@ -50,17 +50,15 @@ Status CalibrationBook::Get(int64_t scan_id, Calibration* calibration) const {
     }
   }
   const std::string recorded = ScanFolder::For(data_dir_, scan_id).calibration();
-  std::error_code ec;
-  if (!data_dir_.empty() && std::filesystem::exists(recorded, ec)) {
+  if (!data_dir_.empty() && PathExists(recorded)) {
     const Status s = ReadCalibration(recorded, calibration);
-    return s.ok() ? s : Status::Error("scan " + std::to_string(scan_id) + ": " + s.message());
+    return s;
   }
   if (has_fallback_) {
     *calibration = fallback_;
     return Status::Ok();
   }
-  return Status::Error("scan " + std::to_string(scan_id) +
-                       ": no CALIBRATION message for it, and no --calibration file configured");
+  return Status::Error("no CALIBRATION message for it, and no --calibration file configured");
 }
 
 TextureBook::TextureBook(Node* node, const std::string& data_dir)
@@ -81,8 +79,7 @@ Status TextureBook::Get(int64_t scan_id, cv::Mat* texture) const {
   }
   const std::string raw = ScanFolder::For(data_dir_, scan_id).raw();
   if (!data_dir_.empty() && ReadTexture(raw, texture).ok()) return Status::Ok();
-  return Status::Error("scan " + std::to_string(scan_id) +
-                       ": its texture (TEXTURE) never arrived, and " + raw + " has none");
+  return Status::Error("its texture (TEXTURE) never arrived, and " + raw + " has none");
 }
 
 }  // namespace vellum::station

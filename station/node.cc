@@ -137,6 +137,11 @@ void Node::Error(const std::string& message, int64_t scan_id) {
   PublishStatus();
 }
 
+void Node::FailScan(int64_t scan_id, const std::string& message) {
+  Error("scan " + std::to_string(scan_id) + ": " + message, scan_id);
+  SetState("idle");
+}
+
 void Node::Count(const std::string& counter, int64_t n) {
   std::lock_guard<std::mutex> lock(mutex_);
   counters_[counter] += n;

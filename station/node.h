@@ -125,6 +125,9 @@ class Node {
   void SetState(const std::string& state, int64_t scan_id = 0, const std::string& detail = "");
   // Reports an error on stderr and on the status channel (at once); the process goes on.
   void Error(const std::string& message, int64_t scan_id = 0);
+  // A scan failed in this process: reports "scan <id>: <message>" as an error about the scan,
+  // and the process is idle again.
+  void FailScan(int64_t scan_id, const std::string& message);
   // A line on stderr for the log (journald under systemd).
   void Log(const std::string& message) const;
   void Count(const std::string& counter, int64_t n = 1);

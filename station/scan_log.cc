@@ -3,20 +3,12 @@
 #include <filesystem>
 #include <lcm/lcm-cpp.hpp>
 
+#include "io/scan_io.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_store.h"
 
 namespace vellum::station {
-namespace {
-
-bool Exists(const std::string& path) {
-  std::error_code ec;
-  return std::filesystem::exists(path, ec);
-}
-
-}  // namespace
-
 capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime) {
   capture_t c;
   c.utime = utime;
@@ -72,7 +64,7 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
 
 Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, bool* has_calibration,
                    calibration_t* calibration, int64_t* found_scan_id) {
-  if (!Exists(log_path)) return Status::Error(log_path + ": file is missing");
+  if (!PathExists(log_path)) return Status::Error(log_path + ": file is missing");
   lcm::LogFile log(log_path, "r");
   if (!log.good()) return Status::Error(log_path + ": cannot open as an LCM log");
   CaptureSet set;

@@ -13,13 +13,6 @@
 namespace vellum::station {
 namespace fs = std::filesystem;
 
-// Whether `path` exists; an error looking (a folder an operator made unreadable) counts as no,
-// never as an exception on a daemon's thread.
-static bool Exists(const fs::path& path) {
-  std::error_code ec;
-  return fs::exists(path, ec);
-}
-
 ScanFolder ScanFolder::For(const std::string& data_dir, int64_t scan_id) {
   return {(fs::path(data_dir) / ("scan-" + std::to_string(scan_id))).string()};
 }
@@ -190,7 +183,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
   *count = 0;
   Status s = MakeDirectories(folder.raw());
   if (!s.ok()) return s;
-  if (!Exists(folder.log())) return Status::Ok();
+  if (!PathExists(folder.log())) return Status::Ok();
   CaptureSet earlier;
   std::vector<capture_t> taken;
   {
@@ -209,7 +202,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
   if (earlier.Complete()) return Status::Ok();
   for (const capture_t& c : taken) {
     const std::string path = (fs::path(folder.raw()) / ImageName(c.pattern_index)).string();
-    if (Exists(path)) continue;
+    if (PathExists(path)) continue;
     cv::Mat image;
     if (FromMessage(c.image, &image).ok()) {
       s = WriteImage(path, image);

@@ -50,8 +50,7 @@ std::vector<int64_t> FindPending(const std::string& data_dir) {
     if (name.rfind("scan-", 0) != 0) continue;
     char* stop = nullptr;
     const long long id = std::strtoll(name.c_str() + 5, &stop, 10);
-    std::error_code exists_ec;
-    if (id > 0 && *stop == '\0' && fs::exists(it->path() / "pending", exists_ec)) {
+    if (id > 0 && *stop == '\0' && PathExists((it->path() / "pending").string())) {
       ids.push_back(id);
     }
   }

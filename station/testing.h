@@ -3,14 +3,17 @@
 // they publish, and a pump that handles messages until a condition holds.
 #pragma once
 
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -82,24 +85,32 @@ class MemqBus {
   std::map<std::string, status_t> statuses_;
 };
 
-// A small rig (camera 400x300 at about 0.6 mm per pixel, projector 320x200) whose scans render
-// and process in about a second: the default rig's geometry with smaller images.
-inline Calibration SmallRig() {
-  Calibration rig = DefaultRig();
-  rig.camera.size = {400, 300};
-  rig.camera.matrix = cv::Matx33d(600, 0, 199.5, 0, 600, 149.5, 0, 0, 1);
-  rig.projector.size = {320, 200};
-  rig.projector.matrix = cv::Matx33d(560, 0, 159.5, 0, 560, 99.5, 0, 0, 1);
-  return rig;
+// A fresh folder for one test's files, named after the test: <tmp>/vellum_<what>_<pid>_<test>.
+inline std::string TestDir(const std::string& what) {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() /
+      ("vellum_" + what + "_" + std::to_string(::getpid()) + "_" + (info ? info->name() : "x"));
+  std::filesystem::remove_all(dir);
+  return dir.string();
 }
 
-// A curled page scanned on the small rig by the virtual gantry (rendered once per process).
+// A file's bytes ("" if it cannot be read).
+inline std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// A curled page scanned on the quick rig (QuickRig) by the virtual gantry (rendered once per
+// process).
 inline const Scan& SmallScan() {
   static const Scan scan = [] {
-    SimulatedScan sim = SimulateScan(SmallRig(), PageShape::kCurl, 7);
+    SimulatedScan sim = SimulateScan(QuickRig(), PageShape::kCurl, 7);
     Scan s;
     s.sequence = sim.sequence;
-    s.camera_size = SmallRig().camera.size;
+    s.camera_size = QuickRig().camera.size;
     s.texture = sim.texture;
     s.frames = sim.frames;
     return s;
@@ -126,7 +137,7 @@ inline const SmallProducts& SmallScanProducts() {
                  ("vellum_small_products_" + std::to_string(::getpid())))
                     .string();
     std::filesystem::create_directories(p.results);
-    const Calibration rig = SmallRig();
+    const Calibration rig = QuickRig();
     Decoder decoder;
     p.stages.push_back(DecodeStage(SmallScan(), &decoder, &p.decoded));
     p.stages.push_back(

@@ -24,15 +24,8 @@ namespace {
 
 namespace fs = std::filesystem;
 using testing::MemqBus;
-using testing::SmallRig;
+using testing::ReadBytes;
 using testing::SmallScan;
-
-std::string Bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 nlohmann::json ReadJson(const std::string& path) {
   std::ifstream in(path);
@@ -49,9 +42,7 @@ void Keys(const nlohmann::json& j, const std::string& prefix, std::set<std::stri
 }
 
 TEST(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
-  const fs::path dir =
-      fs::temp_directory_path() / ("vellum_chain_test_" + std::to_string(getpid()));
-  fs::remove_all(dir);
+  const fs::path dir = testing::TestDir("chain");
   const std::string data = (dir / "scans").string();
   MemqBus bus;
   Node decoder_node("vellum-decoder", &bus.lcm()),
@@ -73,7 +64,7 @@ TEST(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   // The scan as the station receives it: its calibration, then the captures.
   calibration_t calibration{};
   calibration.scan_id = 3;
-  ToMessage(SmallRig(), &calibration);
+  ToMessage(QuickRig(), &calibration);
   bus.probe().Publish(channel::kCalibration, &calibration);
   for (int k = -1; k < static_cast<int>(SmallScan().frames.size()); ++k) {
     capture_t c = MakeCapture(SmallScan(), 3, k, NowUtime());
@@ -94,7 +85,8 @@ TEST(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   for (const char* file : {"restored.tif", "restored.json", "points.ply", "depth.png", "mesh.ply",
                            "flat.ply", "report/texture.png", "report/valid.png", "report/depth.png",
                            "report/grid.png", "report/strain.png", "report/before_after.png"}) {
-    const std::string a = Bytes(folder.results() + "/" + file), b = Bytes(process + "/" + file);
+    const std::string a = ReadBytes(folder.results() + "/" + file),
+                      b = ReadBytes(process + "/" + file);
     EXPECT_FALSE(a.empty()) << file;
     EXPECT_TRUE(a == b) << file << " differs between the daemons and vellum process";
   }

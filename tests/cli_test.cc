@@ -36,23 +36,13 @@ Result RunVellum(const std::string& args) {
   return r;
 }
 
-// A small rig (camera 400x300 at 1 mm/px, projector 320x200) keeps these tests quick.
-Calibration SmallRig() {
-  Calibration rig = DefaultRig();
-  rig.camera.size = {400, 300};
-  rig.camera.matrix = cv::Matx33d(600, 0, 199.5, 0, 600, 149.5, 0, 0, 1);
-  rig.projector.size = {320, 200};
-  rig.projector.matrix = cv::Matx33d(560, 0, 159.5, 0, 560, 99.5, 0, 0, 1);
-  return rig;
-}
-
 class CliTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     root_ = fs::temp_directory_path() / ("vellum_cli_test_" + std::to_string(::getpid()));
     fs::remove_all(root_);
     fs::create_directories(root_);
-    ASSERT_TRUE(WriteCalibration((root_ / "rig.yaml").string(), SmallRig()).ok());
+    ASSERT_TRUE(WriteCalibration((root_ / "rig.yaml").string(), QuickRig()).ok());
     const Result r = RunVellum("render --page curl --calibration " + (root_ / "rig.yaml").string() +
                                " --out " + (root_ / "scan").string());
     ASSERT_EQ(r.exit_code, 0) << r.output;

@@ -167,6 +167,29 @@ class StationTest : public ::testing::Test {
   std::vector<std::unique_ptr<Process>> processes_;
 };
 
+// The last status of each of some daemons, from their heartbeats, and their counters.
+class StatusBoard {
+ public:
+  StatusBoard(lcm::LCM& lcm, const std::vector<std::string>& channels) {
+    for (const std::string& c : channels) {
+      listeners_.push_back(std::make_unique<Listener<status_t>>(
+          lcm, c, [this, c](const status_t& m) { last_[c] = m; }));
+    }
+  }
+  // A counter of the last status on `channel` (0 if absent).
+  int64_t Counter(const std::string& channel, const std::string& name) {
+    const status_t& st = last_[channel];
+    for (int k = 0; k < st.ncounters; ++k) {
+      if (st.counter_names[k] == name) return st.counter_values[k];
+    }
+    return 0;
+  }
+
+ private:
+  std::map<std::string, status_t> last_;
+  std::vector<std::unique_ptr<Listener<status_t>>> listeners_;
+};
+
 // How long the projector waits for each CAPTURE from the sim camera: the camera renders every
 // frame, which takes seconds under the sanitizers on a loaded machine (the default is 5 s).
 constexpr char kSimCaptureTimeout[] = "30";
@@ -500,18 +523,9 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
   std::vector<restored_t> restored;
   Listener<restored_t> on_restored(*lcm_, "RESTORED",
                                    [&](const restored_t& m) { restored.push_back(m); });
-  std::map<std::string, status_t> last;
-  std::vector<std::unique_ptr<Listener<status_t>>> listeners;
-  for (const std::string& c : kProcessingStatus) {
-    listeners.push_back(std::make_unique<Listener<status_t>>(
-        *lcm_, c, [&last, c](const status_t& m) { last[c] = m; }));
-  }
-  auto counter = [&](const std::string& channel, const std::string& name) -> int64_t {
-    const status_t& st = last[channel];
-    for (int k = 0; k < st.ncounters; ++k) {
-      if (st.counter_names[k] == name) return st.counter_values[k];
-    }
-    return 0;
+  StatusBoard board(*lcm_, kProcessingStatus);
+  auto counter = [&](const std::string& channel, const std::string& name) {
+    return board.Counter(channel, name);
   };
   // The decoder must know each daemon's pid before one is frozen, or the restart looks to it
   // like a daemon's first start (its heartbeat may have gone out before the decoder listened).
@@ -582,18 +596,9 @@ TEST_F(StationTest, AScanPastARestartedDaemonIsNotProcessedTwice) {
   for (const char* name : {"vellum-decoder", "vellum-triangulator", "vellum-flattener"}) {
     Start(Daemon(name), {"--data", dir_ + "/scans"});
   }
-  std::map<std::string, status_t> last;
-  std::vector<std::unique_ptr<Listener<status_t>>> listeners;
-  for (const std::string& c : kProcessingStatus) {
-    listeners.push_back(std::make_unique<Listener<status_t>>(
-        *lcm_, c, [&last, c](const status_t& m) { last[c] = m; }));
-  }
-  auto counter = [&](const std::string& channel, const std::string& name) -> int64_t {
-    const status_t& st = last[channel];
-    for (int k = 0; k < st.ncounters; ++k) {
-      if (st.counter_names[k] == name) return st.counter_values[k];
-    }
-    return 0;
+  StatusBoard board(*lcm_, kProcessingStatus);
+  auto counter = [&](const std::string& channel, const std::string& name) {
+    return board.Counter(channel, name);
   };
   ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
     return counter("STATUS_DECODER", "processing daemons heard") == 2;

@@ -99,6 +99,15 @@ Calibration DefaultRig() {
   return rig;
 }
 
+Calibration QuickRig() {
+  Calibration rig = DefaultRig();
+  rig.camera.size = {400, 300};
+  rig.camera.matrix = cv::Matx33d(600, 0, 199.5, 0, 600, 149.5, 0, 0, 1);
+  rig.projector.size = {320, 200};
+  rig.projector.matrix = cv::Matx33d(560, 0, 159.5, 0, 560, 99.5, 0, 0, 1);
+  return rig;
+}
+
 VirtualGantry::VirtualGantry(const Calibration& rig, const PageOptions& page_options,
                              const TextureOptions& texture_options, const LightOptions& light)
     : rig_(rig), light_(light) {

@@ -29,6 +29,9 @@ struct LightOptions {
 // The default station: camera 1600x1200, f = 2400 px, 600 mm above the table (0.25 mm/px),
 // projector 1024x768, f = 1800 px, 225 mm to the side and 650 mm up, aimed at the page.
 Calibration DefaultRig();
+// A rig for quick tests: DefaultRig's geometry with a 400x300 camera (about 1 mm per pixel)
+// and a 320x200 projector; a scan of it renders and processes in about a second.
+Calibration QuickRig();
 
 // Per camera pixel ground truth.
 struct GroundTruth {

@@ -15,12 +15,11 @@ namespace vellum::station {
 namespace {
 
 using testing::MemqBus;
-using testing::SmallRig;
 
 class CameraNodeTest : public ::testing::Test {
  protected:
   CameraNodeTest() {
-    sim_.rig = SmallRig();
+    sim_.rig = QuickRig();
     sim_.seed = 3;
     sequence_ = MakePatternSequence(PatternOptions{sim_.rig.projector.size});
   }

@@ -27,11 +27,7 @@ using testing::SmallScan;
 class DecoderNodeTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    data_ = (fs::temp_directory_path() /
-             ("vellum_decoder_node_" + std::to_string(getpid()) + "_" +
-              ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-                .string();
-    fs::remove_all(data_);
+    data_ = testing::TestDir("decoder_node");
     options_.data_dir = data_;
     options_.scan_timeout_s = 1;
   }

@@ -22,32 +22,27 @@ FlattenerNode::FlattenerNode(Node* node, const FlattenerNodeOptions& options)
             Process(id, last);
           }) {}
 
-void FlattenerNode::Fail(int64_t id, const std::string& message) {
-  node_->Error("scan " + std::to_string(id) + ": " + message, id);
-  node_->SetState("idle");
-}
-
 void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   node_->SetState("busy", id, "building the sheet");
   std::vector<StageReport> stages;
   Status s = FromMessages(last.stages, &stages);
-  if (!s.ok()) return Fail(id, "POINT_CLOUD: " + s.message());
+  if (!s.ok()) return node_->FailScan(id, "POINT_CLOUD: " + s.message());
   Calibration calibration;
   s = calibrations_.Get(id, &calibration);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   cv::Mat texture;
   s = textures_.Get(id, &texture);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   Mesh mesh;
   stages.push_back(MeshStage(points_, texture, calibration.camera, options_.mesh, &mesh));
-  if (!stages.back().status.ok()) return Fail(id, stages.back().status.message());
+  if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
   node_->SetState("busy", id, "flattening");
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   FlattenResult flat;
   stages.push_back(FlattenStage(mesh, options_.flatten, results, &flat));
-  if (!stages.back().status.ok()) return Fail(id, stages.back().status.message());
+  if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
   std::vector<mesh_t> chunks = ToMessages(id, mesh, options_.mesh.bend_springs, flat.flat, stages);
   node_->PublishChunks(channel::kFlatMesh, &chunks);
   node_->Count("scans flattened");

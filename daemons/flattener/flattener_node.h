@@ -33,7 +33,6 @@ class FlattenerNode {
 
  private:
   void Process(int64_t id, const point_cloud_t& last);  // Worker thread.
-  void Fail(int64_t id, const std::string& message);
 
   Node* node_;
   FlattenerNodeOptions options_;

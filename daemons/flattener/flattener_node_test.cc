@@ -20,19 +20,15 @@ namespace {
 namespace fs = std::filesystem;
 using testing::FirstStages;
 using testing::MemqBus;
-using testing::SmallRig;
+using testing::ReadBytes;
 using testing::SmallScan;
 using testing::SmallScanProducts;
 
 class FlattenerNodeTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    options_.data_dir = (fs::temp_directory_path() /
-                         ("vellum_flattener_node_" + std::to_string(getpid()) + "_" +
-                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-                            .string();
-    fs::remove_all(options_.data_dir);
-    options_.fallback_calibration = SmallRig();
+    options_.data_dir = testing::TestDir("flattener_node");
+    options_.fallback_calibration = QuickRig();
   }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(options_.data_dir);

@@ -19,7 +19,6 @@ namespace vellum::station {
 namespace {
 
 using testing::MemqBus;
-using testing::SmallRig;
 
 // The projector's screen, as a projector with a mirror would show it: remembers what was on
 // screen (read back from SDL) when each pattern was shown.
@@ -43,11 +42,11 @@ class ProjectorNodeTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() { setenv("SDL_VIDEODRIVER", "dummy", 1); }
   ProjectorNodeTest() {
-    screen_.size = SmallRig().projector.size;
+    screen_.size = QuickRig().projector.size;
     screen_.fullscreen = false;
     screen_.flip = display::Flip::kHorizontal;
     options_.patterns.projector_size = screen_.size;
-    options_.calibration = SmallRig();
+    options_.calibration = QuickRig();
     options_.calibration_source = "small rig";
     options_.settle = std::chrono::milliseconds(0);
   }

@@ -27,37 +27,34 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
             Process(id, last);
           }) {}
 
-void RestorerNode::Fail(int64_t id, const std::string& message) {
-  node_->Error("scan " + std::to_string(id) + ": " + message, id);
-  node_->SetState("idle");
-}
-
 void RestorerNode::Process(int64_t id, const mesh_t& last) {
   node_->SetState("busy", id, "restoring");
   ProcessReport report;
   Status s = FromMessages(last.stages, &report.stages);
-  if (!s.ok()) return Fail(id, "FLAT_MESH: " + s.message());
+  if (!s.ok()) return node_->FailScan(id, "FLAT_MESH: " + s.message());
   Calibration calibration;
   s = calibrations_.Get(id, &calibration);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   cv::Mat texture;
   s = textures_.Get(id, &texture);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   const CameraModel& camera = calibration.camera;
   ConnectSheet(
       last.bend_springs, [&](const cv::Vec3d& x) { return camera.Project(x); }, &sheet_.mesh);
-  if (!sheet_.mesh.status.ok()) return Fail(id, "FLAT_MESH: " + sheet_.mesh.status.message());
+  if (!sheet_.mesh.status.ok())
+    return node_->FailScan(id, "FLAT_MESH: " + sheet_.mesh.status.message());
   const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
   s = MakeDirectories(folder.results());
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   RestoreResult restored;
   report.stages.push_back(RestoreStage(texture, sheet_.mesh, sheet_.flat, camera, options_.restore,
                                        folder.results(), &restored));
-  if (!report.stages.back().status.ok()) return Fail(id, report.stages.back().status.message());
+  if (!report.stages.back().status.ok())
+    return node_->FailScan(id, report.stages.back().status.message());
   report.scan = folder.raw();
   report.calibration = folder.calibration();
   s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
 
   restored_t out{};
   out.scan_id = id;

@@ -40,7 +40,6 @@ class RestorerNode {
     std::vector<cv::Point2d> flat;
   };
   void Process(int64_t id, const mesh_t& last);  // Worker thread.
-  void Fail(int64_t id, const std::string& message);
 
   Node* node_;
   RestorerNodeOptions options_;

@@ -22,26 +22,15 @@ namespace {
 namespace fs = std::filesystem;
 using testing::FirstStages;
 using testing::MemqBus;
-using testing::SmallRig;
+using testing::ReadBytes;
 using testing::SmallScan;
 using testing::SmallScanProducts;
-
-std::string Bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 class RestorerNodeTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    options_.data_dir = (fs::temp_directory_path() /
-                         ("vellum_restorer_node_" + std::to_string(getpid()) + "_" +
-                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-                            .string();
-    fs::remove_all(options_.data_dir);
-    options_.fallback_calibration = SmallRig();
+    options_.data_dir = testing::TestDir("restorer_node");
+    options_.fallback_calibration = QuickRig();
   }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(options_.data_dir);
@@ -70,7 +59,8 @@ TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
   const std::string results = ScanFolder::For(options_.data_dir, 5).results();
   EXPECT_EQ(restored->back().results, results);
   for (const char* file : {"restored.tif", "restored.json"}) {
-    EXPECT_EQ(Bytes(results + "/" + file), Bytes(SmallScanProducts().results + "/" + file)) << file;
+    EXPECT_EQ(ReadBytes(results + "/" + file), ReadBytes(SmallScanProducts().results + "/" + file))
+        << file;
   }
   EXPECT_GT(restored->back().preview.width, 100);
   std::ifstream in(results + "/report.json");

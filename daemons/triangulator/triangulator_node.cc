@@ -34,35 +34,30 @@ TriangulatorNode::TriangulatorNode(Node* node, const TriangulatorNodeOptions& op
             Process(id, last);
           }) {}
 
-void TriangulatorNode::Fail(int64_t id, const std::string& message) {
-  node_->Error("scan " + std::to_string(id) + ": " + message, id);
-  node_->SetState("idle");
-}
-
 void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   node_->SetState("busy", id, "triangulating");
   std::vector<StageReport> stages;
   Status s = FromMessages(last.stages, &stages);
-  if (!s.ok()) return Fail(id, "CORRESPONDENCE: " + s.message());
+  if (!s.ok()) return node_->FailScan(id, "CORRESPONDENCE: " + s.message());
   Calibration calibration;
   s = calibrations_.Get(id, &calibration);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   const DecodeResult& decoded = product_.decoded;
   if (calibration.camera.size != decoded.projector_x.size() ||
       calibration.projector.size != product_.projector) {
-    return Fail(id, "the calibration is for a " + SizeText(calibration.camera.size) +
-                        " camera and " + SizeText(calibration.projector.size) +
-                        " projector, the scan has " + SizeText(decoded.projector_x.size()) +
-                        " and " + SizeText(product_.projector));
+    return node_->FailScan(
+        id, "the calibration is for a " + SizeText(calibration.camera.size) + " camera and " +
+                SizeText(calibration.projector.size) + " projector, the scan has " +
+                SizeText(decoded.projector_x.size()) + " and " + SizeText(product_.projector));
   }
   if (!triangulator_ || !SameCalibration(triangulator_->calibration(), calibration)) {
     triangulator_ = std::make_unique<Triangulator>(calibration);
   }
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
-  if (!s.ok()) return Fail(id, s.message());
+  if (!s.ok()) return node_->FailScan(id, s.message());
   stages.push_back(TriangulateStage(decoded, *triangulator_, options_.triangulate, results, &map_));
-  if (!stages.back().status.ok()) return Fail(id, stages.back().status.message());
+  if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
   std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, stages);
   node_->PublishChunks(channel::kPointCloud, &chunks);
   node_->Count("scans triangulated");

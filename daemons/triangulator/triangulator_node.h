@@ -35,7 +35,6 @@ class TriangulatorNode {
     cv::Size projector;
   };
   void Process(int64_t id, const correspondence_t& last);  // Worker thread.
-  void Fail(int64_t id, const std::string& message);
 
   Node* node_;
   TriangulatorNodeOptions options_;

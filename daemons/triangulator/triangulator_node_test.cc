@@ -21,26 +21,13 @@ namespace {
 namespace fs = std::filesystem;
 using testing::FirstStages;
 using testing::MemqBus;
-using testing::SmallRig;
+using testing::ReadBytes;
 using testing::SmallScan;
 using testing::SmallScanProducts;
 
-std::string Bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 class TriangulatorNodeTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    options_.data_dir = (fs::temp_directory_path() /
-                         ("vellum_triangulator_node_" + std::to_string(getpid()) + "_" +
-                          ::testing::UnitTest::GetInstance()->current_test_info()->name()))
-                            .string();
-    fs::remove_all(options_.data_dir);
-  }
+  void SetUp() override { options_.data_dir = testing::TestDir("triangulator_node"); }
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(options_.data_dir);
   }
@@ -67,7 +54,7 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
   TriangulatorNode triangulator(&node, options_);
   auto clouds = bus_.Record<point_cloud_t>(channel::kPointCloud);
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
-  PublishCalibration(5, SmallRig());
+  PublishCalibration(5, QuickRig());
   PublishChunks(Chunks(5));
   ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
   EXPECT_EQ(progress->back().product, "POINT_CLOUD");
@@ -77,7 +64,8 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
   ASSERT_EQ(points.size(), expected.size());
   EXPECT_EQ(std::memcmp(points.data, expected.data, expected.total() * expected.elemSize()), 0);
   const std::string results = ScanFolder::For(options_.data_dir, 5).results();
-  EXPECT_EQ(Bytes(results + "/points.ply"), Bytes(SmallScanProducts().results + "/points.ply"));
+  EXPECT_EQ(ReadBytes(results + "/points.ply"),
+            ReadBytes(SmallScanProducts().results + "/points.ply"));
   std::vector<StageReport> stages;
   ASSERT_TRUE(FromMessages(clouds->back().stages, &stages).ok());
   ASSERT_EQ(stages.size(), 2u);
@@ -111,7 +99,7 @@ TEST_F(TriangulatorNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   EXPECT_EQ(bus_.Status("vellum-triangulator").last_error_scan_id, 8);
   // And a good scan after all that.
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
-  PublishCalibration(9, SmallRig());
+  PublishCalibration(9, QuickRig());
   PublishChunks(Chunks(9));
   EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
   EXPECT_EQ(node.Counter("scans triangulated"), 1);
