@@ -23,7 +23,8 @@ int RunRender(const std::vector<std::string>& args) {
   Flags flags("vellum render",
               "Renders a scan of a warped page with the virtual gantry: scan.yaml, texture.png,\n"
               "frame_000.png, ..., the rig's calibration.yaml, and the ground truth of every\n"
-              "camera pixel (truth_points.tiff: x y z mm; truth_page.tiff: s t mm and page mask).",
+              "camera pixel (truth_points.tiff: x y z mm; truth_page.tiff: s t mm and the page:\n"
+              "1, on a spread 1 left and 2 right, 0 off it).",
               specs);
   if (!flags.Parse(args)) return 0;
   const std::string out = flags.Require("out");
@@ -38,8 +39,9 @@ int RunRender(const std::vector<std::string>& args) {
   PageOptions page;
   TextureOptions texture;
   LightOptions light;
+  SceneOptions scene;
   uint64_t seed = 1;
-  const Status sim = SimOptionsFromFlags(flags, &page, &texture, &light, &seed);
+  const Status sim = SimOptionsFromFlags(flags, &page, &texture, &light, &scene, &seed);
   if (!sim.ok()) {
     std::fprintf(stderr, "vellum render: %s\n", sim.message().c_str());
     return 1;
@@ -51,7 +53,7 @@ int RunRender(const std::vector<std::string>& args) {
 
   const auto t0 = std::chrono::steady_clock::now();
   std::fprintf(stderr, "render: tracing a %s page...\n", ToString(page.shape));
-  const VirtualGantry gantry(rig, page, texture, light);
+  const VirtualGantry gantry(rig, page, texture, light, scene);
   Scan scan;
   scan.sequence = seq;
   scan.camera_size = rig.camera.size;
@@ -66,8 +68,8 @@ int RunRender(const std::vector<std::string>& args) {
     if (s.ok()) {
       std::vector<cv::Mat> planes;
       cv::split(gantry.truth().page, planes);
-      cv::Mat mask;
-      gantry.truth().on_page.convertTo(mask, CV_32F, 1.0 / 255);
+      cv::Mat mask;  // 1 on the page (on a spread: 1 left page, 2 right page), 0 off it.
+      gantry.truth().page_index.convertTo(mask, CV_32F);
       planes.push_back(mask);
       cv::Mat page_truth;
       cv::merge(planes, page_truth);

@@ -30,12 +30,21 @@ PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
 
 std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
   return {
-      {"page", "SHAPE", prefix + "flat, curl, fold, cone or bump", "curl"},
+      {"page", "SHAPE", prefix + "flat, curl, fold, cone, bump, ripple or gutter", "curl"},
       {"texture", "KIND|FILE", prefix + "checkerboard, text, plain, or an image file of the page",
        "checkerboard"},
       {"page-size", "WxH", prefix + "page size, mm", "190x240"},
       {"noise", "DN", prefix + "camera noise sigma, DN", "1.5"},
       {"seed", "N", prefix + "noise seed (the same seed gives the same images)", "1"},
+      {"scene", "NAME",
+       prefix + "what the page lies on: table, support (a board as bright as paper), frame (a "
+                "paper mount around the leaf) or spread (an open book: two pages and a gutter)",
+       "table"},
+      {"outline", "KIND", prefix + "the leaf's outline: rectangle, or burnt (eaten edges, holes)",
+       "rectangle"},
+      {"thickness", "MM", prefix + "the leaf's thickness, mm", "0.2"},
+      {"table-albedo", "A", prefix + "the table's reflectance, 0..1", "0.35"},
+      {"scene-albedo", "A", prefix + "the support's or frame's reflectance, 0..1", "0.8"},
       {"pose", "RX,RY,RZ,X,Y,Z",
        prefix + "hold the page in a rigid pose (a calibration board): turned about x, y, z by "
                 "these degrees about its centre, its centre then at X, Y, Z mm",
@@ -44,10 +53,26 @@ std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
 }
 
 Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions* texture,
-                           LightOptions* light, uint64_t* seed) {
+                           LightOptions* light, SceneOptions* scene, uint64_t* seed) {
+  const std::string scene_name = flags.Get("scene");
+  if (scene_name != "table" && scene_name != "support" && scene_name != "frame" &&
+      scene_name != "spread") {
+    throw UsageError("--scene must be table, support, frame or spread, got '" + scene_name + "'");
+  }
+  scene->support = scene_name == "support";
+  scene->frame = scene_name == "frame";
+  scene->spread = scene_name == "spread";
+  scene->support_albedo = scene->frame_albedo = flags.GetDouble("scene-albedo", 0, 1);
+  light->table_albedo = flags.GetDouble("table-albedo", 0, 1);
+  const std::string outline = flags.Get("outline");
+  if (outline != "rectangle" && outline != "burnt") {
+    throw UsageError("--outline must be rectangle or burnt, got '" + outline + "'");
+  }
+  page->outline = outline == "burnt" ? OutlineKind::kBurnt : OutlineKind::kRectangle;
+  page->thickness_mm = flags.GetDouble("thickness", 0, 10);
   if (!ParsePageShape(flags.Get("page"), &page->shape)) {
-    throw UsageError("--page must be flat, curl, fold, cone or bump, got '" + flags.Get("page") +
-                     "'");
+    throw UsageError("--page must be flat, curl, fold, cone, bump, ripple or gutter, got '" +
+                     flags.Get("page") + "'");
   }
   const cv::Size page_size = flags.GetSize("page-size");
   page->size_mm = cv::Size2d(page_size.width, page_size.height);
@@ -62,6 +87,7 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   page->pose_rotation = PoseRotation(pose[0], pose[1], pose[2]);
   page->pose_translation = cv::Vec3d(pose[3], pose[4], pose[5]);
   *seed = static_cast<uint64_t>(flags.GetInt("seed", 0, 1 << 30));
+  page->outline_seed = *seed;
   texture->seed = *seed;
   const std::string tex = flags.Get("texture");
   if (!ParseTextureKind(tex, &texture->kind) || texture->kind == TextureKind::kImage) {

@@ -23,13 +23,15 @@ namespace vellum {
 std::vector<Flags::Spec> PatternFlagSpecs();
 PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector);
 
-// The virtual gantry's page and camera flags (--page, --texture, --page-size, --noise, --seed),
-// shared by `vellum render` and the sim camera; `prefix` starts each help line ("sim: ").
+// The virtual gantry's page, scene and camera flags (--page, --texture, --page-size, --scene,
+// --outline, --thickness, --noise, --seed, ...), shared by `vellum render` and the sim camera;
+// `prefix` starts each help line ("sim: ").
 std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix = "");
-// Fills the page, its texture (an image texture is read from disk), the camera noise and the
-// seed (also the texture's). A bad name throws UsageError; an unreadable image is an error.
+// Fills the page, its texture (an image texture is read from disk), the scene around it, the
+// camera noise and the seed (also the texture's). A bad name throws UsageError; an unreadable
+// image is an error.
 Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions* texture,
-                           LightOptions* light, uint64_t* seed);
+                           LightOptions* light, SceneOptions* scene, uint64_t* seed);
 
 std::vector<Flags::Spec> DecodeFlagSpecs();       // --decoder, --smooth-radius
 std::vector<Flags::Spec> TriangulateFlagSpecs();  // --max-epipolar

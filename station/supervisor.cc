@@ -150,12 +150,12 @@ void Supervisor::SendAgain(const std::function<bool(int64_t)>& held, const std::
     const int attempts = PendingAttempts(folder);
     if (attempts >= kMaxAttempts) {
       Finished(id);
+      node_->Count("scans failed");  // Before the error goes out with the count.
       node_->Error("scan " + std::to_string(id) + " failed: not restored after " +
                        std::to_string(attempts) + " attempts (the last ended when " + why +
                        "); its captures are kept in " + folder.raw() + " (`vellum process --scan " +
                        folder.raw() + "` restores it by hand)",
                    id);
-      node_->Count("scans failed");
       continue;
     }
     Scan scan;
@@ -163,9 +163,9 @@ void Supervisor::SendAgain(const std::function<bool(int64_t)>& held, const std::
     if (s.ok()) s = MarkPending(folder, attempts + 1);
     if (!s.ok()) {
       Finished(id);
+      node_->Count("scans failed");  // Before the error goes out with the count.
       node_->Error(
           "scan " + std::to_string(id) + " failed: cannot process it again: " + s.message(), id);
-      node_->Count("scans failed");
       continue;
     }
     node_->Log("scan " + std::to_string(id) + ": " + why + " before the scan was restored; " +

@@ -108,10 +108,22 @@ std::vector<cv::Mat> RenderSequence(const VirtualGantry& gantry, const PatternSe
 
 SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t seed,
                            const TextureOptions& texture) {
-  SimulatedScan scan;
   PageOptions page;
   page.shape = shape;
-  scan.gantry = std::make_unique<VirtualGantry>(rig, page, texture);
+  return SimulateScan(rig, page, texture, SceneOptions(), seed);
+}
+
+double MaskIoU(const cv::Mat& a, const cv::Mat& b) {
+  const cv::Mat in_a = a != 0, in_b = b != 0;
+  const int both = cv::countNonZero(in_a & in_b), either = cv::countNonZero(in_a | in_b);
+  return either > 0 ? static_cast<double>(both) / either : 0.0;
+}
+
+SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
+                           const TextureOptions& texture, const SceneOptions& scene,
+                           uint64_t seed) {
+  SimulatedScan scan;
+  scan.gantry = std::make_unique<VirtualGantry>(rig, page, texture, LightOptions(), scene);
   scan.sequence = MakePatternSequence(PatternOptions{rig.projector.size});
   scan.frames = RenderSequence(*scan.gantry, scan.sequence, seed);
   scan.texture = scan.gantry->RenderTexture(seed);

@@ -48,5 +48,11 @@ struct SimulatedScan {
 };
 SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t seed,
                            const TextureOptions& texture = TextureOptions());
+// The same for any page, in any scene.
+SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
+                           const TextureOptions& texture, const SceneOptions& scene, uint64_t seed);
+
+// Intersection over union of two masks (CV_8U, nonzero = in); 0 if both are empty.
+double MaskIoU(const cv::Mat& a, const cv::Mat& b);
 
 }  // namespace vellum

@@ -12,10 +12,12 @@ namespace {
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr double kMeshStepMm = 1.0;  // Rasterisation mesh; Newton refinement makes it exact.
 
-// Depth-buffer rasterisation of the page mesh into a device image (scaled by `scale`), storing
-// the device-frame depth and the interpolated page coordinate of the nearest surface.
-void Rasterize(const CameraModel& device, double scale, const Page& page, cv::Mat* depth,
-               cv::Mat* page_coord) {
+// Depth-buffer rasterisation of the pages' meshes into a device image (scaled by `scale`),
+// storing the device-frame depth of the nearest surface and, when asked, its page coordinate
+// and which page it is (1 + the index; 0 where no page is). Triangles off a leaf's outline
+// (burnt edges, holes) are left out, so rays and light pass there.
+void Rasterize(const CameraModel& device, double scale, const std::vector<Page>& pages,
+               cv::Mat* depth, cv::Mat* page_coord, cv::Mat* page_index) {
   const cv::Size size(static_cast<int>(device.size.width * scale),
                       static_cast<int>(device.size.height * scale));
   depth->create(size, CV_32F);
@@ -24,57 +26,67 @@ void Rasterize(const CameraModel& device, double scale, const Page& page, cv::Ma
     page_coord->create(size, CV_32FC2);
     page_coord->setTo(cv::Scalar(kNaN, kNaN));
   }
-  const double w = page.options().size_mm.width, h = page.options().size_mm.height;
-  const int ns = static_cast<int>(std::ceil(w / kMeshStepMm)) + 1;
-  const int nt = static_cast<int>(std::ceil(h / kMeshStepMm)) + 1;
-  std::vector<cv::Vec3d> vert(static_cast<size_t>(ns) * nt);  // Image x, y, depth.
-  std::vector<cv::Vec2d> st(vert.size());
-  for (int j = 0; j < nt; ++j) {
-    for (int i = 0; i < ns; ++i) {
-      const double s = std::min(w, i * kMeshStepMm), t = std::min(h, j * kMeshStepMm);
-      const cv::Vec3d x = page.Point(s, t);
-      const cv::Point2d p = device.Project(x);
-      const double z = (device.rotation * x + device.translation)[2];
-      // Pixel centres of the scaled image sit at (i + 0.5) / scale - 0.5 device pixels.
-      vert[j * ns + i] = {(p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5, z};
-      st[j * ns + i] = {s, t};
-    }
+  if (page_index) {
+    page_index->create(size, CV_8U);
+    page_index->setTo(0);
   }
-  auto raster = [&](int ia, int ib, int ic) {
-    const cv::Vec3d &a = vert[ia], &b = vert[ib], &c = vert[ic];
-    if (!std::isfinite(a[0]) || !std::isfinite(b[0]) || !std::isfinite(c[0])) return;
-    const double area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
-    if (std::fabs(area) < 1e-12) return;
-    const int x0 = std::max(0, static_cast<int>(std::ceil(std::min({a[0], b[0], c[0]}))));
-    const int x1 =
-        std::min(size.width - 1, static_cast<int>(std::floor(std::max({a[0], b[0], c[0]}))));
-    const int y0 = std::max(0, static_cast<int>(std::ceil(std::min({a[1], b[1], c[1]}))));
-    const int y1 =
-        std::min(size.height - 1, static_cast<int>(std::floor(std::max({a[1], b[1], c[1]}))));
-    for (int y = y0; y <= y1; ++y) {
-      for (int x = x0; x <= x1; ++x) {
-        const double wa = ((b[0] - x) * (c[1] - y) - (b[1] - y) * (c[0] - x)) / area;
-        const double wb = ((c[0] - x) * (a[1] - y) - (c[1] - y) * (a[0] - x)) / area;
-        const double wc = 1.0 - wa - wb;
-        if (wa < -1e-9 || wb < -1e-9 || wc < -1e-9) continue;
-        const float z = static_cast<float>(wa * a[2] + wb * b[2] + wc * c[2]);
-        float& zb = depth->at<float>(y, x);
-        if (z < zb) {
-          zb = z;
-          if (page_coord) {
-            const cv::Vec2d p = wa * st[ia] + wb * st[ib] + wc * st[ic];
-            page_coord->at<cv::Vec2f>(y, x) =
-                cv::Vec2f(static_cast<float>(p[0]), static_cast<float>(p[1]));
+  for (size_t index = 0; index < pages.size(); ++index) {
+    const Page& page = pages[index];
+    const double w = page.options().size_mm.width, h = page.options().size_mm.height;
+    const int ns = static_cast<int>(std::ceil(w / kMeshStepMm)) + 1;
+    const int nt = static_cast<int>(std::ceil(h / kMeshStepMm)) + 1;
+    std::vector<cv::Vec3d> vert(static_cast<size_t>(ns) * nt);  // Image x, y, depth.
+    std::vector<cv::Vec2d> st(vert.size());
+    for (int j = 0; j < nt; ++j) {
+      for (int i = 0; i < ns; ++i) {
+        const double s = std::min(w, i * kMeshStepMm), t = std::min(h, j * kMeshStepMm);
+        const cv::Vec3d x = page.Point(s, t);
+        const cv::Point2d p = device.Project(x);
+        const double z = (device.rotation * x + device.translation)[2];
+        // Pixel centres of the scaled image sit at (i + 0.5) / scale - 0.5 device pixels.
+        vert[j * ns + i] = {(p.x + 0.5) * scale - 0.5, (p.y + 0.5) * scale - 0.5, z};
+        st[j * ns + i] = {s, t};
+      }
+    }
+    auto raster = [&](int ia, int ib, int ic) {
+      const cv::Vec3d &a = vert[ia], &b = vert[ib], &c = vert[ic];
+      if (!std::isfinite(a[0]) || !std::isfinite(b[0]) || !std::isfinite(c[0])) return;
+      const cv::Vec2d centroid = (st[ia] + st[ib] + st[ic]) / 3.0;
+      if (!page.Contains(centroid[0], centroid[1])) return;
+      const double area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+      if (std::fabs(area) < 1e-12) return;
+      const int x0 = std::max(0, static_cast<int>(std::ceil(std::min({a[0], b[0], c[0]}))));
+      const int x1 =
+          std::min(size.width - 1, static_cast<int>(std::floor(std::max({a[0], b[0], c[0]}))));
+      const int y0 = std::max(0, static_cast<int>(std::ceil(std::min({a[1], b[1], c[1]}))));
+      const int y1 =
+          std::min(size.height - 1, static_cast<int>(std::floor(std::max({a[1], b[1], c[1]}))));
+      for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+          const double wa = ((b[0] - x) * (c[1] - y) - (b[1] - y) * (c[0] - x)) / area;
+          const double wb = ((c[0] - x) * (a[1] - y) - (c[1] - y) * (a[0] - x)) / area;
+          const double wc = 1.0 - wa - wb;
+          if (wa < -1e-9 || wb < -1e-9 || wc < -1e-9) continue;
+          const float z = static_cast<float>(wa * a[2] + wb * b[2] + wc * c[2]);
+          float& zb = depth->at<float>(y, x);
+          if (z < zb) {
+            zb = z;
+            if (page_coord) {
+              const cv::Vec2d p = wa * st[ia] + wb * st[ib] + wc * st[ic];
+              page_coord->at<cv::Vec2f>(y, x) =
+                  cv::Vec2f(static_cast<float>(p[0]), static_cast<float>(p[1]));
+            }
+            if (page_index) page_index->at<uint8_t>(y, x) = static_cast<uint8_t>(index + 1);
           }
         }
       }
-    }
-  };
-  for (int j = 0; j + 1 < nt; ++j) {
-    for (int i = 0; i + 1 < ns; ++i) {
-      const int q = j * ns + i;
-      raster(q, q + 1, q + ns + 1);
-      raster(q, q + ns + 1, q + ns);
+    };
+    for (int j = 0; j + 1 < nt; ++j) {
+      for (int i = 0; i + 1 < ns; ++i) {
+        const int q = j * ns + i;
+        raster(q, q + 1, q + ns + 1);
+        raster(q, q + ns + 1, q + ns);
+      }
     }
   }
 }
@@ -109,33 +121,91 @@ Calibration QuickRig() {
 }
 
 VirtualGantry::VirtualGantry(const Calibration& rig, const PageOptions& page_options,
-                             const TextureOptions& texture_options, const LightOptions& light)
-    : rig_(rig), light_(light) {
-  const Page page(page_options);
-  const PageTexture texture(texture_options, page_options.size_mm);
-  TraceCamera(page);
-  ShadeSetup(page, texture);
+                             const TextureOptions& texture_options, const LightOptions& light,
+                             const SceneOptions& scene)
+    : rig_(rig), light_(light), scene_(scene) {
+  PageOptions base = page_options;
+  base.base_mm = scene.support ? scene.support_height_mm : 0.0;
+  if (scene.spread) {
+    // An open book: two pages bending down into a gutter along y at x = 0, left and right of
+    // it as the camera sees them (the camera's image x runs along world x).
+    for (bool left : {true, false}) {
+      PageOptions o = base;
+      o.shape = PageShape::kGutter;
+      o.gutter_left = !left;  // The left page's gutter is its s = w edge.
+      o.centre_mm = {0.0, base.centre_mm[1]};
+      const double gutter_x = Page(o).Point(left ? o.size_mm.width : 0.0, 0)[0];
+      o.centre_mm[0] = (left ? -1 : 1) * scene.spread_gap_mm / 2 - gutter_x;
+      pages_.emplace_back(o);
+    }
+  } else {
+    pages_.emplace_back(base);
+  }
+  std::vector<PageTexture> textures;
+  for (size_t k = 0; k < pages_.size(); ++k) {
+    TextureOptions t = texture_options;
+    t.seed = texture_options.seed + k;
+    textures.emplace_back(t, pages_[k].options().size_mm);
+  }
+  TraceCamera();
+  ShadeSetup(textures);
 }
 
-void VirtualGantry::TraceCamera(const Page& page) {
+cv::Vec3d VirtualGantry::Background(const cv::Vec3d& centre, const cv::Vec3d& ray,
+                                    double* albedo) const {
+  if (!(ray[2] < 0)) return cv::Vec3d(kNaN, kNaN, kNaN);
+  auto at = [&](double z) { return centre + ((z - centre[2]) / ray[2]) * ray; };
+  auto inside = [](const cv::Rect2d& r, const cv::Vec3d& x) {
+    return x[0] >= r.x && x[0] <= r.x + r.width && x[1] >= r.y && x[1] <= r.y + r.height;
+  };
+  const double base = scene_.support ? scene_.support_height_mm : 0.0;
+  if (scene_.frame) {
+    const cv::Vec3d x = at(base + scene_.frame_thickness_mm);
+    if (inside(scene_.frame_mm, x) && !inside(FrameWindow(), x)) {
+      *albedo = scene_.frame_albedo;
+      return x;
+    }
+  }
+  if (scene_.support) {
+    const cv::Vec3d x = at(scene_.support_height_mm);
+    if (inside(scene_.support_mm, x)) {
+      *albedo = scene_.support_albedo;
+      return x;
+    }
+  }
+  *albedo = light_.table_albedo;
+  return at(0.0);
+}
+
+cv::Rect2d VirtualGantry::FrameWindow() const {
+  const PageOptions& o = pages_.front().options();
+  const double m = scene_.frame_window_margin_mm;
+  return {o.centre_mm[0] - o.size_mm.width / 2 - m, o.centre_mm[1] - o.size_mm.height / 2 - m,
+          o.size_mm.width + 2 * m, o.size_mm.height + 2 * m};
+}
+
+void VirtualGantry::TraceCamera() {
   const CameraModel& cam = rig_.camera;
   const cv::Size size = cam.size;
-  cv::Mat depth, guess;
-  Rasterize(cam, 1.0, page, &depth, &guess);
+  cv::Mat depth, guess, index;
+  Rasterize(cam, 1.0, pages_, &depth, &guess, &index);
   truth_.points.create(size, CV_32FC3);
   truth_.page.create(size, CV_32FC2);
   truth_.on_page.create(size, CV_8U);
+  truth_.page_index.create(size, CV_8U);
+  background_albedo_.create(size, CV_32F);
   const cv::Vec3d centre = cam.Center();
-  const double w = page.options().size_mm.width, h = page.options().size_mm.height;
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
       for (int u = 0; u < size.width; ++u) {
         const cv::Point2d pixel(u, v);
         cv::Vec2f& pc = truth_.page.at<cv::Vec2f>(v, u);
         const cv::Vec2f g = guess.at<cv::Vec2f>(v, u);
+        const int k = index.at<uint8_t>(v, u);
         bool hit = false;
         cv::Vec3d x;
-        if (!std::isnan(g[0])) {
+        if (k > 0 && !std::isnan(g[0])) {
+          const Page& page = pages_[k - 1];
           // Newton on Project(Page(s, t)) = pixel, from the mesh's guess.
           double s = g[0], t = g[1];
           for (int it = 0; it < 6; ++it) {
@@ -153,31 +223,33 @@ void VirtualGantry::TraceCamera(const Page& page) {
             if (ds * ds + dt * dt < 1e-16) break;
           }
           const cv::Point2d p = cam.Project(page.Point(s, t));
-          hit = s >= 0 && s <= w && t >= 0 && t <= h && cv::norm(p - pixel) < 1e-6;
+          hit = page.Contains(s, t) && cv::norm(p - pixel) < 1e-6;
           if (hit) {
             x = page.Point(s, t);
             pc = cv::Vec2f(static_cast<float>(s), static_cast<float>(t));
           }
         }
+        double albedo = 0;
         if (!hit) {
-          const cv::Vec3d d = cam.RayDirection(pixel);
-          x = d[2] < 0 ? centre - (centre[2] / d[2]) * d : cv::Vec3d(kNaN, kNaN, kNaN);
+          x = Background(centre, cam.RayDirection(pixel), &albedo);
           pc = cv::Vec2f(kNaN, kNaN);
         }
         truth_.points.at<cv::Vec3f>(v, u) =
             cv::Vec3f(static_cast<float>(x[0]), static_cast<float>(x[1]), static_cast<float>(x[2]));
         truth_.on_page.at<uint8_t>(v, u) = hit ? 255 : 0;
+        truth_.page_index.at<uint8_t>(v, u) = hit ? static_cast<uint8_t>(k) : 0;
+        background_albedo_.at<float>(v, u) = static_cast<float>(albedo);
       }
     }
   });
 }
 
-void VirtualGantry::ShadeSetup(const Page& page, const PageTexture& texture) {
+void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
   const CameraModel& prj = rig_.projector;
   const cv::Size size = rig_.camera.size;
   constexpr double kShadowScale = 2.0;
   cv::Mat shadow_depth;
-  Rasterize(prj, kShadowScale, page, &shadow_depth, nullptr);
+  Rasterize(prj, kShadowScale, pages_, &shadow_depth, nullptr, nullptr);
   projector_map_.create(size, CV_32FC2);
   gain_.create(size, CV_32F);
   offset_.create(size, CV_32F);
@@ -190,16 +262,16 @@ void VirtualGantry::ShadeSetup(const Page& page, const PageTexture& texture) {
       for (int u = 0; u < size.width; ++u) {
         const cv::Vec3f xf = truth_.points.at<cv::Vec3f>(v, u);
         const cv::Vec3d x(xf[0], xf[1], xf[2]);
-        const bool on_page = truth_.on_page.at<uint8_t>(v, u) != 0;
+        const int k = truth_.page_index.at<uint8_t>(v, u);
         const cv::Vec2f st = truth_.page.at<cv::Vec2f>(v, u);
-        double albedo = light_.table_albedo;
+        double albedo = background_albedo_.at<float>(v, u);
         cv::Vec3d normal(0, 0, 1);
-        if (on_page) {
-          normal = page.Normal(st[0], st[1]);
+        if (k > 0) {
+          normal = pages_[k - 1].Normal(st[0], st[1]);
           // Area-average the albedo over the pixel using the local page-from-pixel Jacobian.
           auto page_at = [&](int uu, int vv, cv::Vec2f* out) {
             if (uu < 0 || vv < 0 || uu >= size.width || vv >= size.height) return false;
-            if (!truth_.on_page.at<uint8_t>(vv, uu)) return false;
+            if (truth_.page_index.at<uint8_t>(vv, uu) != k) return false;
             *out = truth_.page.at<cv::Vec2f>(vv, uu);
             return true;
           };
@@ -212,7 +284,7 @@ void VirtualGantry::ShadeSetup(const Page& page, const PageTexture& texture) {
             for (int i = 0; i < ss; ++i) {
               const double ou = (i + 0.5) / ss - 0.5, ov = (j + 0.5) / ss - 0.5;
               const cv::Vec2d p = cv::Vec2d(st[0], st[1]) + ou * du + ov * dv;
-              sum += texture.Albedo(p[0], p[1]);
+              sum += textures[k - 1].Albedo(p[0], p[1]);
             }
           }
           albedo = sum / (ss * ss);

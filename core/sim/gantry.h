@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "core/geometry/calibration.h"
 #include "core/sim/page.h"
@@ -26,6 +27,23 @@ struct LightOptions {
   int albedo_supersampling = 4;   // Albedo samples per pixel side (area-integrates ink edges).
 };
 
+// What the page lies on and among: the table (z = 0) and, on it, optionally a support board
+// under the page and a flat paper frame (mount) whose window the leaf lies in; or, instead of
+// one page, an open book. (The board's and frame's sides are not modelled: their tops only.)
+struct SceneOptions {
+  bool support = false;  // A board under the page (foam board, a box).
+  cv::Rect2d support_mm{-180.0, -145.0, 360.0, 290.0};  // World x, y extent of its top, mm.
+  double support_height_mm = 5.0;                     // Its top above the table (the page's base).
+  double support_albedo = 0.80;                       // White foam board: within 10% of paper.
+  bool frame = false;                                 // A paper mount on the page's base.
+  cv::Rect2d frame_mm{-150.0, -145.0, 300.0, 290.0};  // Its outer extent, mm.
+  double frame_window_margin_mm = 0.0;                // Window: the leaf's rectangle grown by this.
+  double frame_thickness_mm = 0.5;
+  double frame_albedo = 0.80;
+  bool spread = false;         // An open book: two pages (kGutter) left and right of x = 0.
+  double spread_gap_mm = 2.0;  // Between the two pages' gutter edges, mm.
+};
+
 // The default station: camera 1600x1200, f = 2400 px, 600 mm above the table (0.25 mm/px),
 // projector 1024x768, f = 1800 px, 225 mm to the side and 650 mm up, aimed at the page.
 Calibration DefaultRig();
@@ -35,19 +53,24 @@ Calibration QuickRig();
 
 // Per camera pixel ground truth.
 struct GroundTruth {
-  cv::Mat points;   // CV_32FC3 true world point of the surface seen by the pixel, mm.
-  cv::Mat page;     // CV_32FC2 true flat page coordinate (s, t), mm; NaN off the page.
-  cv::Mat on_page;  // CV_8U 255 where the pixel sees the page.
-  cv::Mat lit;      // CV_8U 255 where the projector lights the surface directly.
+  cv::Mat points;      // CV_32FC3 true world point of the surface seen by the pixel, mm.
+  cv::Mat page;        // CV_32FC2 true flat page coordinate (s, t), mm; NaN off the page.
+  cv::Mat on_page;     // CV_8U 255 where the pixel sees a page.
+  cv::Mat page_index;  // CV_8U which page the pixel sees: 1 + its index in pages(); 0 none.
+  cv::Mat lit;         // CV_8U 255 where the projector lights the surface directly.
 };
 
 class VirtualGantry {
  public:
+  // `page` is the leaf; with scene.spread, the shape of both pages of the book is kGutter.
   VirtualGantry(const Calibration& rig, const PageOptions& page, const TextureOptions& texture,
-                const LightOptions& light = LightOptions());
+                const LightOptions& light = LightOptions(),
+                const SceneOptions& scene = SceneOptions());
 
   const GroundTruth& truth() const { return truth_; }
   const Calibration& rig() const { return rig_; }
+  // The pages in the scene (one leaf, or the two pages of a spread, left then right).
+  const std::vector<Page>& pages() const { return pages_; }
 
   // Camera frame (CV_8U) while the projector shows `projector_image` (CV_8U, projector size,
   // virtual unmirrored frame). `seed` makes the noise repeatable.
@@ -56,11 +79,18 @@ class VirtualGantry {
   cv::Mat RenderTexture(uint64_t seed) const;
 
  private:
-  void TraceCamera(const Page& page);
-  void ShadeSetup(const Page& page, const PageTexture& texture);
+  void TraceCamera();
+  void ShadeSetup(const std::vector<PageTexture>& textures);
+  // Where a camera ray from `centre` meets the scene around the pages (frame, support, table),
+  // and that surface's albedo.
+  cv::Vec3d Background(const cv::Vec3d& centre, const cv::Vec3d& ray, double* albedo) const;
+  cv::Rect2d FrameWindow() const;
 
   Calibration rig_;
   LightOptions light_;
+  SceneOptions scene_;
+  std::vector<Page> pages_;
+  cv::Mat background_albedo_;  // CV_32F albedo of the scene behind each pixel.
   GroundTruth truth_;
   cv::Mat projector_map_;  // CV_32FC2 projector pixel hit by each camera pixel's point.
   cv::Mat gain_;           // CV_32F DN per unit projector intensity (0 in shadow).

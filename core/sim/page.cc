@@ -44,13 +44,17 @@ const char* ToString(PageShape shape) {
       return "cone";
     case PageShape::kBump:
       return "bump";
+    case PageShape::kRipple:
+      return "ripple";
+    case PageShape::kGutter:
+      return "gutter";
   }
   return "?";
 }
 
 bool ParsePageShape(const std::string& text, PageShape* shape) {
-  for (PageShape s :
-       {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone, PageShape::kBump}) {
+  for (PageShape s : {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone,
+                      PageShape::kBump, PageShape::kRipple, PageShape::kGutter}) {
     if (text == ToString(s)) {
       *shape = s;
       return true;
@@ -74,14 +78,93 @@ Page::Page(const PageOptions& options) : options_(options) {
     const double half_arc = slope * options.fold_radius_mm;
     forward_ = {{half_arc, -1.0 / options.fold_radius_mm}};
     backward_ = forward_;
+  } else if (options.shape == PageShape::kRipple) {
+    // From the s = 0 edge: half an arc up, then arcs of alternating curvature, each turning
+    // the slope from +max to -max or back: one ripple per ripple_period_mm across.
+    const double slope = options.ripple_slope_deg * kDeg;
+    const double kappa = 4 * std::sin(slope) / options.ripple_period_mm;
+    const double arc = 2 * slope / kappa;
+    across_dir_ = {1.0, 0.0};
+    sigma_origin_ = 0.0;
+    forward_ = {{arc / 2, kappa}};
+    for (double done = arc / 2, sign = -1; done < w + arc; done += arc, sign = -sign) {
+      forward_.push_back({arc, sign * kappa});
+    }
+  } else if (options.shape == PageShape::kGutter) {
+    // Flat from the outer edge; the last stretch bends down into the gutter.
+    const double bend = options.gutter_radius_mm * options.gutter_angle_deg * kDeg;
+    if (options.gutter_left) {
+      across_dir_ = {-1.0, 0.0};  // From s = w towards s = 0.
+      sigma_origin_ = -w;
+    } else {
+      across_dir_ = {1.0, 0.0};
+      sigma_origin_ = 0.0;
+    }
+    forward_ = {{w - bend, 0.0}, {1e9, -1.0 / options.gutter_radius_mm}};
   }
   if (options.shape == PageShape::kFold) {
     double zmin = 0;
     for (double s : {0.0, w}) {
-      for (double t : {0.0, h}) zmin = std::min(zmin, Point(s, t)[2]);
+      for (double t : {0.0, h}) zmin = std::min(zmin, ShapePoint(s, t)[2]);
     }
     z_offset_ = -zmin;
+  } else if (options.shape == PageShape::kRipple || options.shape == PageShape::kGutter) {
+    // The lowest point across the page rests at z = 0 (the profile does not vary along t).
+    double zmin = 0;
+    for (int k = 0; k <= 1000; ++k) zmin = std::min(zmin, ShapePoint(w * k / 1000.0, 0)[2]);
+    z_offset_ = -zmin;
   }
+  if (options.outline == OutlineKind::kBurnt) {
+    // Deterministic pseudo-random numbers from the seed (SplitMix64).
+    uint64_t state = options.outline_seed * 0x9E3779B97F4A7C15ULL + 1;
+    auto uniform = [&state] {
+      uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
+      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+      z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+      return static_cast<double>((z ^ (z >> 31)) >> 11) / 9007199254740992.0;
+    };
+    auto waves = [&](int count, double amplitude, double longest) {
+      std::vector<Wave> out;
+      for (int k = 0; k < count; ++k) {
+        const double wavelength = longest / (1 + 2.5 * k * uniform() + k);
+        out.push_back({amplitude * (0.4 + 0.6 * uniform()) / (1 + k), 2 * M_PI / wavelength,
+                       2 * M_PI * uniform()});
+      }
+      return out;
+    };
+    for (int e = 0; e < 4; ++e) burn_[e] = waves(5, options.burn_depth_mm, 120.0);
+    for (int k = 0; k < options.holes; ++k) {
+      Hole hole;
+      hole.centre = {w * (0.2 + 0.6 * uniform()), h * (0.2 + 0.6 * uniform())};
+      hole.radius = 3.0 + 5.0 * uniform();
+      hole.rim = waves(3, 0.3, 2 * M_PI);
+      holes_.push_back(hole);
+    }
+  }
+}
+
+bool Page::Contains(double s, double t) const {
+  const double w = options_.size_mm.width, h = options_.size_mm.height;
+  if (!(s >= 0 && s <= w && t >= 0 && t <= h)) return false;
+  if (options_.outline == OutlineKind::kRectangle) return true;
+  auto depth = [](const std::vector<Wave>& waves, double x) {
+    double d = 0;
+    for (const Wave& wv : waves)
+      d += wv.amplitude * (1 + std::sin(wv.frequency * x + wv.phase)) / 2;
+    return d;
+  };
+  if (s < depth(burn_[0], t) || w - s < depth(burn_[1], t) || t < depth(burn_[2], s) ||
+      h - t < depth(burn_[3], s)) {
+    return false;
+  }
+  for (const Hole& hole : holes_) {
+    const double ds = s - hole.centre[0], dt = t - hole.centre[1];
+    const double angle = std::atan2(dt, ds);
+    double r = 1;
+    for (const Wave& wv : hole.rim) r += wv.amplitude * std::sin(wv.frequency * angle + wv.phase);
+    if (std::hypot(ds, dt) < hole.radius * r) return false;
+  }
+  return true;
 }
 
 cv::Vec2d Page::Profile(double sigma) const {
@@ -102,7 +185,8 @@ cv::Matx33d PoseRotation(double rx_deg, double ry_deg, double rz_deg) {
 }
 
 cv::Vec3d Page::Point(double s, double t) const {
-  return options_.pose_rotation * ShapePoint(s, t) + options_.pose_translation;
+  return options_.pose_rotation * ShapePoint(s, t) + options_.pose_translation +
+         cv::Vec3d(0, 0, options_.base_mm + options_.thickness_mm);
 }
 
 cv::Vec3d Page::ShapePoint(double s, double t) const {
@@ -119,7 +203,9 @@ cv::Vec3d Page::ShapePoint(double s, double t) const {
       return {cx + ds, cy + dt, z};
     }
     case PageShape::kCurl:
-    case PageShape::kFold: {
+    case PageShape::kFold:
+    case PageShape::kRipple:
+    case PageShape::kGutter: {
       const cv::Vec2d st(s, t);
       const double sigma = across_dir_.dot(st) - sigma_origin_;
       const cv::Vec2d along(-across_dir_[1], across_dir_[0]);

@@ -1,6 +1,8 @@
 // Warped pages for the virtual gantry. Every shape but kBump is an isometric (developable)
 // deformation of the flat page, so the true flat page coordinate of every surface point is
-// known exactly: generalised cylinders (curl, fold) and a cone.
+// known exactly: generalised cylinders (curl, fold, ripple, a book's page at the gutter) and a
+// cone. A leaf has a thickness (it lies that far above what it rests on) and an outline: a
+// rectangle, or the irregular edge and holes of a fire-damaged leaf.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -10,11 +12,18 @@
 namespace vellum {
 
 enum class PageShape {
-  kFlat,  // Lies on the table.
-  kCurl,  // Binder curl: flat, then one side rolls up on a circular arc.
-  kFold,  // Rounded diagonal fold: a ridge along a diagonal, resting on its edges.
-  kCone,  // Rests on one generator of a cone and rises on both sides.
-  kBump,  // Flat with a Gaussian bubble (not developable: real vellum).
+  kFlat,    // Lies on the table.
+  kCurl,    // Binder curl: flat, then one side rolls up on a circular arc.
+  kFold,    // Rounded diagonal fold: a ridge along a diagonal, resting on its edges.
+  kCone,    // Rests on one generator of a cone and rises on both sides.
+  kBump,    // Flat with a Gaussian bubble (not developable: real vellum).
+  kRipple,  // Ripples across the page: arcs of alternating curvature, steep slopes.
+  kGutter,  // A page of an open book in a cradle: flat, then bending down into the gutter.
+};
+
+enum class OutlineKind {
+  kRectangle,  // The whole page.
+  kBurnt,      // Edges eaten away irregularly (up to burn_depth_mm), and holes.
 };
 
 const char* ToString(PageShape shape);
@@ -33,6 +42,17 @@ struct PageOptions {
   double cone_apex_distance_mm = 250.0;  // kCone: apex distance below the page's t = 0 edge.
   double bump_height_mm = 3.0;           // kBump: peak height, mm.
   double bump_sigma_mm = 25.0;           // kBump: Gaussian sigma, mm.
+  double ripple_period_mm = 40.0;        // kRipple: one ripple every this much across, mm.
+  double ripple_slope_deg = 50.0;        // kRipple: steepest slope, degrees.
+  bool gutter_left = false;              // kGutter: the gutter is at the s = 0 edge (else s = w).
+  double gutter_radius_mm = 45.0;        // kGutter: radius of the bend into the gutter, mm.
+  double gutter_angle_deg = 70.0;        // kGutter: how far the page turns down, degrees.
+  double thickness_mm = 0.2;             // The leaf's thickness: it lies this far above its base.
+  double base_mm = 0.0;                  // Height of what it rests on (a support's top), mm.
+  OutlineKind outline = OutlineKind::kRectangle;
+  double burn_depth_mm = 10.0;  // kBurnt: the deepest the edges are eaten, mm.
+  int holes = 3;                // kBurnt: holes burnt through the leaf.
+  uint64_t outline_seed = 1;    // kBurnt: the same seed gives the same outline.
   // A rigid motion applied after the shape (a calibration board held in a pose above the
   // table): world = pose_rotation * shaped point + pose_translation.
   cv::Matx33d pose_rotation = cv::Matx33d::eye();
@@ -51,6 +71,8 @@ class Page {
   cv::Vec3d Point(double s, double t) const;
   // Unit surface normal with +z component (towards the camera), by central differences.
   cv::Vec3d Normal(double s, double t) const;
+  // Whether (s, t) is leaf: inside the page and its outline, not in a hole.
+  bool Contains(double s, double t) const;
 
  private:
   // The shape's point before the pose.
@@ -66,6 +88,18 @@ class Page {
   cv::Vec2d across_dir_{1.0, 0.0};           // Page direction of increasing sigma.
   double sigma_origin_ = 0.0;                // Page sigma of the profile's reference point.
   double z_offset_ = 0.0;                    // Lifts the shape so its lowest point is z = 0.
+  // kBurnt: how deep each edge is eaten, as a function of the position along it (sums of
+  // sinusoids, >= 0): [0] s = 0, [1] s = w (along t); [2] t = 0, [3] t = h (along s).
+  struct Wave {
+    double amplitude, frequency, phase;
+  };
+  std::vector<Wave> burn_[4];
+  struct Hole {
+    cv::Vec2d centre;
+    double radius;
+    std::vector<Wave> rim;  // Relative radius as a function of the angle.
+  };
+  std::vector<Hole> holes_;
 };
 
 }  // namespace vellum

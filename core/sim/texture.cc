@@ -100,9 +100,12 @@ double PageTexture::Albedo(double s, double t) const {
     }
     case TextureKind::kText:
     case TextureKind::kImage: {
-      // Bilinear lookup, pixel centres at (i + 0.5) / px_per_mm.
+      // Bilinear lookup, pixel centres at (i + 0.5) / px_per_mm. The image's top row is the
+      // page's top edge, t = height (t runs up the page, as world y does on the table), so the
+      // page reads the right way up from above: in the texture and in the restored page.
       const double x = std::clamp(s * px_per_mm_x_ - 0.5, 0.0, albedo_.cols - 1.0);
-      const double y = std::clamp(t * px_per_mm_y_ - 0.5, 0.0, albedo_.rows - 1.0);
+      const double y =
+          std::clamp((page_size_.height - t) * px_per_mm_y_ - 0.5, 0.0, albedo_.rows - 1.0);
       const int x0 = std::min(static_cast<int>(x), albedo_.cols - 2);
       const int y0 = std::min(static_cast<int>(y), albedo_.rows - 2);
       const double fx = x - x0, fy = y - y0;

@@ -19,7 +19,7 @@ struct TextureOptions {
   double square_mm = 10.0;     // kCheckerboard: square side, mm.
   double margin_mm = 10.0;     // kCheckerboard: bare paper around the board, mm.
   uint64_t seed = 1;           // kText: seed of the generated text.
-  cv::Mat image;               // kImage: 8-bit gray or BGR image covering the whole page.
+  cv::Mat image;  // kImage: 8-bit gray or BGR image covering the whole page, top row at its top.
 };
 
 class PageTexture {

@@ -38,7 +38,7 @@ int main(int argc, char** argv) {
                           if (!s.ok()) throw UsageError(s.message());
                         }
                         const Status s = SimOptionsFromFlags(flags, &sim.page, &sim.texture,
-                                                             &sim.light, &sim.seed);
+                                                             &sim.light, &sim.scene, &sim.seed);
                         if (!s.ok()) throw UsageError("--texture " + s.message());
                         camera = std::make_unique<SimCamera>(sim);
                       } else if (backend == "v4l2") {

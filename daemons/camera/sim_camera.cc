@@ -10,7 +10,7 @@ namespace vellum::station {
 SimCamera::SimCamera(const SimCameraOptions& options)
     : options_(options),
       gantry_(std::make_unique<VirtualGantry>(options.rig, options.page, options.texture,
-                                              options.light)) {
+                                              options.light, options.scene)) {
   preview_ = gantry_->RenderTexture(options.seed);
 }
 

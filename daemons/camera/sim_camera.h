@@ -15,6 +15,7 @@ struct SimCameraOptions {
   PageOptions page;
   TextureOptions texture;
   LightOptions light;
+  SceneOptions scene;
   uint64_t seed = 1;  // Each frame's noise from it and the pattern index: repeatable.
 };
 

@@ -69,11 +69,11 @@ void DecoderNode::Stop() {
 }
 
 void DecoderNode::Abandon(const std::string& why) {
+  node_->Count("scans failed");  // Before the error goes out with the count.
   node_->Error("scan " + std::to_string(set_.scan_id()) + " failed: " + why + "; " +
                    set_.Missing() + "; the captures received are kept in " +
                    ScanFolder::For(options_.data_dir, set_.scan_id()).raw(),
                set_.scan_id());
-  node_->Count("scans failed");
   Stop();
 }
 
@@ -121,9 +121,9 @@ void DecoderNode::OnCapture(const capture_t& msg) {
     s = FromMessage(msg.image, &image);  // Checked by Add.
     if (s.ok()) s = recorder_.Write(msg, image);
     if (!s.ok()) {
+      node_->Count("scans failed");  // Before the error goes out with the count.
       node_->Error("scan " + std::to_string(msg.scan_id) + " failed: recording: " + s.message(),
                    msg.scan_id);
-      node_->Count("scans failed");
       Stop();
       return;
     }

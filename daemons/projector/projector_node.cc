@@ -101,8 +101,8 @@ void ProjectorNode::ShowPattern(int index) {
 }
 
 void ProjectorNode::Fail(const std::string& why) {
+  node_->Count("scans failed");  // Before the error goes out with the count.
   node_->Error("scan " + std::to_string(scan_id_) + " failed: " + why, scan_id_);
-  node_->Count("scans failed");
   projector_->Show(black_);
   node_->SetState("idle");
   scan_id_ = 0;

@@ -1,0 +1,472 @@
+#include "core/outline/outline.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/mesh/mesh.h"
+
+namespace vellum {
+namespace {
+
+constexpr float kNoData = -1e4f;  // Heights below -1e3 mean "no point".
+
+bool Valid(float z) { return z > -1e3f; }
+
+// Heights of the point map with a 3x3 median (which removes the decoder's isolated outliers and
+// keeps steps sharp); kNoData where fewer than half the window has a point.
+cv::Mat SmoothHeights(const cv::Mat& points) {
+  cv::Mat z(points.size(), CV_32F);
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    float* out = z.ptr<float>(v);
+    for (int u = 0; u < points.cols; ++u) out[u] = std::isfinite(p[u][2]) ? p[u][2] : kNoData;
+  }
+  cv::Mat smooth;
+  cv::medianBlur(z, smooth, 3);
+  return smooth;
+}
+
+// How strongly each pixel lies on a rim, mm: where the height steps, or where the surface
+// turns nearly parallel to the camera's rays (a silhouette, with its flying mixed pixels).
+// The decoder's local fit spreads a step over its window, so a step is measured at that scale:
+// the surface `scale` to 2 * `scale` pixels away on either side, extrapolated linearly to the
+// pixel, must agree (a plane or a symmetric curve agrees exactly; a step of height S disagrees
+// by S over a band about as wide as the fit's window, centred on the edge). Along rows, columns
+// and both diagonals; the strongest disagreement is kept.
+cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& z, int scale, double max_slope_deg) {
+  cv::Mat strength = cv::Mat::zeros(z.size(), CV_32F);
+  const int a = scale, b = 2 * scale, w = z.cols;
+  const float tan_max = static_cast<float>(std::tan(max_slope_deg * M_PI / 180.0));
+  const float tan2 = tan_max * tan_max;
+  // Heights with NaN where there is none: the comparisons below then drop out by themselves.
+  cv::Mat zn = z.clone();
+  zn.setTo(std::numeric_limits<float>::quiet_NaN(), z < -1e3f);
+  cv::parallel_for_(cv::Range(0, z.rows), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      const float* row = zn.ptr<float>(v);
+      float* out = strength.ptr<float>(v);
+      // The surface a and b pixels before and after, extrapolated to the pixel: |after - before|,
+      // less what a steep, curved surface gives without any step (its samples thin out as it
+      // turns from the camera: half the height it changes per pixel there).
+      auto disagree = [a](float fb, float nb, float na, float fa) {
+        const float d =
+            std::fabs((na - (fa - na)) - (nb + (nb - fb))) - 0.5f * std::fabs(na - nb) / (2 * a);
+        return d == d ? std::max(d, 0.0f) : 0.0f;  // NaN (a missing height): no evidence.
+      };
+      if (v >= b && v + b < z.rows) {
+        const float *rb = zn.ptr<float>(v - b), *ra = zn.ptr<float>(v - a);
+        const float *sa = zn.ptr<float>(v + a), *sb = zn.ptr<float>(v + b);
+        for (int u = b; u < w - b; ++u) {
+          float worst = disagree(row[u - b], row[u - a], row[u + a], row[u + b]);
+          worst = std::max(worst, disagree(rb[u], ra[u], sa[u], sb[u]));
+          worst = std::max(worst, disagree(rb[u - b], ra[u - a], sa[u + a], sb[u + b]));
+          worst = std::max(worst, disagree(rb[u + b], ra[u + a], sa[u - a], sb[u - b]));
+          out[u] = worst;
+        }
+      }
+      // Silhouettes: the height changes faster than a surface at max_slope_deg would between a
+      // point and its right or lower neighbour.
+      const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+      const cv::Vec3f* q = v + 1 < z.rows ? points.ptr<cv::Vec3f>(v + 1) : nullptr;
+      const float* below = v + 1 < z.rows ? zn.ptr<float>(v + 1) : nullptr;
+      for (int u = 0; u < w; ++u) {
+        if (!(row[u] == row[u])) continue;
+        if (u + 1 < w && row[u + 1] == row[u + 1]) {
+          const float rise = row[u + 1] - row[u];
+          const float dx = p[u + 1][0] - p[u][0], dy = p[u + 1][1] - p[u][1];
+          if (rise * rise > tan2 * (dx * dx + dy * dy)) out[u] = std::max(out[u], std::fabs(rise));
+        }
+        if (below && below[u] == below[u]) {
+          const float rise = below[u] - row[u];
+          const float dx = q[u][0] - p[u][0], dy = q[u][1] - p[u][1];
+          if (rise * rise > tan2 * (dx * dx + dy * dy)) out[u] = std::max(out[u], std::fabs(rise));
+        }
+      }
+    }
+  });
+  return strength;
+}
+
+// Labels `label` (1 leaf, 2 surround) spread from their seeds over the pixels with a height,
+// lowest rim strength first (a watershed: two floods meet on the rim's crest, even where the
+// rim is faint). `labels` holds the seeds on input; pixels without a height stay 0.
+void Flood(const cv::Mat& strength, const cv::Mat& z, double step, cv::Mat* labels) {
+  constexpr int kLevels = 256;
+  auto level = [&](int v, int u) {
+    return std::min(kLevels - 1,
+                    static_cast<int>(strength.at<float>(v, u) / static_cast<float>(step) * 32));
+  };
+  std::vector<std::vector<int>> buckets(kLevels);
+  const int w = z.cols, h = z.rows;
+  auto push_neighbours = [&](int v, int u, int floor) {
+    const int du[4] = {1, -1, 0, 0}, dv[4] = {0, 0, 1, -1};
+    for (int d = 0; d < 4; ++d) {
+      const int uu = u + du[d], vv = v + dv[d];
+      if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
+      if (labels->at<uint8_t>(vv, uu) != 0 || !Valid(z.at<float>(vv, uu))) continue;
+      buckets[std::max(floor, level(vv, uu))].push_back(vv * w + uu);
+    }
+  };
+  // The floods start from the seeds' edges: unlabelled pixels with a height beside a seed.
+  for (int v = 0; v < h; ++v) {
+    const uint8_t* row = labels->ptr<uint8_t>(v);
+    const float* zr = z.ptr<float>(v);
+    for (int u = 0; u < w; ++u) {
+      if (row[u] != 0 || !Valid(zr[u])) continue;
+      const bool beside = (u > 0 && row[u - 1]) || (u + 1 < w && row[u + 1]) ||
+                          (v > 0 && labels->at<uint8_t>(v - 1, u)) ||
+                          (v + 1 < h && labels->at<uint8_t>(v + 1, u));
+      if (beside) buckets[level(v, u)].push_back(v * w + u);
+    }
+  }
+  for (int l = 0; l < kLevels; ++l) {
+    for (size_t k = 0; k < buckets[l].size(); ++k) {
+      const int at = buckets[l][k], v = at / w, u = at % w;
+      if (labels->at<uint8_t>(v, u) != 0) continue;
+      // The label of the flood that reached it: a labelled 4-neighbour.
+      const int du[4] = {1, -1, 0, 0}, dv[4] = {0, 0, 1, -1};
+      uint8_t from = 0;
+      for (int d = 0; d < 4 && !from; ++d) {
+        const int uu = u + du[d], vv = v + dv[d];
+        if (uu >= 0 && vv >= 0 && uu < w && vv < h) from = labels->at<uint8_t>(vv, uu);
+      }
+      if (!from) continue;
+      labels->at<uint8_t>(v, u) = from;
+      push_neighbours(v, u, l);
+    }
+    std::vector<int>().swap(buckets[l]);
+  }
+}
+
+double Median(std::vector<float>* values) {
+  if (values->empty()) return 0;
+  std::nth_element(values->begin(), values->begin() + values->size() / 2, values->end());
+  return (*values)[values->size() / 2];
+}
+
+// Whether the heights `inside` continue the surface `around` them: within `step` (median) of
+// the plane fitted to the surrounding heights (a leaf may slope steeply around a hole).
+bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Point3f>& inside,
+               double step) {
+  if (around.size() < 3 || inside.empty()) return false;
+  cv::Mat a(static_cast<int>(around.size()), 3, CV_64F), b(a.rows, 1, CV_64F);
+  for (int k = 0; k < a.rows; ++k) {
+    a.at<double>(k, 0) = 1;
+    a.at<double>(k, 1) = around[k].x;
+    a.at<double>(k, 2) = around[k].y;
+    b.at<double>(k) = around[k].z;
+  }
+  cv::Mat plane;
+  if (!cv::solve(a, b, plane, cv::DECOMP_SVD)) return false;
+  std::vector<float> off;
+  for (const cv::Point3f& p : inside) {
+    off.push_back(
+        std::fabs(p.z - static_cast<float>(plane.at<double>(0) + plane.at<double>(1) * p.x +
+                                           plane.at<double>(2) * p.y)));
+  }
+  return Median(&off) < step;
+}
+
+// Fills the holes of `leaf` that show no other surface, and returns how many it keeps. A hole
+// with heights is kept when they differ from the leaf's around it (another surface shows
+// through), filled when they do not (an island the rim test cut out). A hole without heights
+// (the projector's light did not reach it: a shadow on the leaf, or what lies under a raised
+// leaf) is kept when it looks unlike the leaf around it in the texture (by more than 3% of the
+// leaf's brightness), filled otherwise.
+int FillHoles(const cv::Mat& z, const cv::Mat& gray, double step, cv::Mat* leaf) {
+  cv::Mat outside = ~*leaf, labels, stats, centroids;
+  const int n = cv::connectedComponentsWithStats(outside, labels, stats, centroids, 4, CV_32S);
+  // Heights (u, v, z) inside each hole and on the leaf around it; brightness likewise.
+  std::vector<std::vector<cv::Point3f>> inside(n), around(n);
+  std::vector<std::vector<float>> look_in(n), look_around(n);
+  std::vector<int> touches(n, 0), valid(n, 0);
+  constexpr size_t kSamples = 20000;
+  for (int v = 0; v < z.rows; ++v) {
+    const int* lab = labels.ptr<int>(v);
+    for (int u = 0; u < z.cols; ++u) {
+      const int l = lab[u];
+      if (l == 0) continue;
+      if (u == 0 || v == 0 || u == z.cols - 1 || v == z.rows - 1) touches[l] = 1;
+      const float h = z.at<float>(v, u);
+      if (Valid(h)) {
+        ++valid[l];
+        if (inside[l].size() < kSamples) inside[l].emplace_back(u, v, h);
+      }
+      if (look_in[l].size() < kSamples) look_in[l].push_back(gray.at<uint8_t>(v, u));
+    }
+  }
+  // The leaf around each hole: leaf pixels within two of it.
+  cv::Mat grown;
+  cv::dilate(outside, grown, cv::getStructuringElement(cv::MORPH_RECT, {5, 5}));
+  const cv::Mat band = grown & *leaf;
+  for (int v = 0; v < z.rows; ++v) {
+    const uint8_t* in = band.ptr<uint8_t>(v);
+    for (int u = 0; u < z.cols; ++u) {
+      if (!in[u]) continue;
+      const float h = z.at<float>(v, u);
+      int last = 0;
+      for (int dv = -2; dv <= 2; ++dv) {
+        for (int du = -2; du <= 2; ++du) {
+          const int uu = u + du, vv = v + dv;
+          if (uu < 0 || vv < 0 || uu >= z.cols || vv >= z.rows) continue;
+          const int l = labels.at<int>(vv, uu);
+          if (l == 0 || l == last) continue;
+          last = l;
+          if (Valid(h) && around[l].size() < kSamples) around[l].emplace_back(u, v, h);
+          if (look_around[l].size() < kSamples) look_around[l].push_back(gray.at<uint8_t>(v, u));
+        }
+      }
+    }
+  }
+  std::vector<uint8_t> fill(n, 0);
+  int kept = 0;
+  for (int l = 1; l < n; ++l) {
+    if (touches[l]) continue;  // The surround, not a hole.
+    const int area = stats.at<int>(l, cv::CC_STAT_AREA);
+    bool island;
+    if (valid[l] >= area / 2) {
+      island = OnSurface(around[l], inside[l], step);
+    } else {
+      const double leaf_look = Median(&look_around[l]);
+      island = std::fabs(Median(&look_in[l]) - leaf_look) <= 0.03 * std::max(leaf_look, 1.0);
+    }
+    fill[l] = island || area < 9;
+    kept += !fill[l];
+  }
+  for (int v = 0; v < z.rows; ++v) {
+    const int* lab = labels.ptr<int>(v);
+    uint8_t* out = leaf->ptr<uint8_t>(v);
+    for (int u = 0; u < z.cols; ++u) {
+      if (fill[lab[u]]) out[u] = 255;
+    }
+  }
+  return kept;
+}
+
+// Share of the leaf's rim pixels that are set apart from what is beside them: on a rim (a
+// step or a silhouette), beside pixels without a height (shadow, or the leaf seen edge-on), or
+// at the image border.
+double RimConfidence(const cv::Mat& leaf, const cv::Mat& strength, const cv::Mat& z, double step) {
+  cv::Mat eroded;
+  cv::erode(leaf, eroded, cv::Mat());
+  const cv::Mat rim = leaf & ~eroded;
+  cv::Mat apart = strength > step / 2;
+  cv::dilate(apart, apart, cv::Mat(), cv::Point(-1, -1), 3);
+  cv::Mat no_data = z < -1e3f;
+  cv::dilate(no_data, no_data, cv::Mat(), cv::Point(-1, -1), 2);
+  const int total = cv::countNonZero(rim);
+  if (total == 0) return 0;
+  return static_cast<double>(cv::countNonZero(rim & (apart | no_data))) / total;
+}
+
+// Whether the leaf runs off the view: leaf pixels within `border` of the image edge.
+bool TouchesBorder(const cv::Mat& leaf, int border) {
+  const cv::Rect inner(border, border, leaf.cols - 2 * border, leaf.rows - 2 * border);
+  if (inner.width <= 0 || inner.height <= 0) return true;
+  return cv::countNonZero(leaf) > cv::countNonZero(leaf(inner));
+}
+
+// An open book's gutter: a straight valley down the leaf from which the surface rises at least
+// `rise` mm on both sides. Splits the leaf into its left and right pages; false if there is no
+// such valley.
+bool SplitAtGutter(const cv::Mat& z, const cv::Mat& leaf, double rise, cv::Vec4f* line,
+                   cv::Mat* left, cv::Mat* right) {
+  const cv::Rect box = cv::boundingRect(leaf);
+  if (box.width < 20 || box.height < 20) return false;
+  std::vector<cv::Point2f> valley;
+  for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
+    const float* row = z.ptr<float>(v);
+    const uint8_t* in = leaf.ptr<uint8_t>(v);
+    // The lowest leaf point in the middle half of the row, and the highest on either side.
+    int lowest = -1;
+    for (int u = box.x + box.width / 4; u < box.x + box.width * 3 / 4; ++u) {
+      if (in[u] && Valid(row[u]) && (lowest < 0 || row[u] < row[lowest])) lowest = u;
+    }
+    if (lowest < 0) continue;
+    float high_left = kNoData, high_right = kNoData;
+    for (int u = box.x; u < box.x + box.width; ++u) {
+      if (!in[u] || !Valid(row[u])) continue;
+      if (u < lowest) high_left = std::max(high_left, row[u]);
+      if (u > lowest) high_right = std::max(high_right, row[u]);
+    }
+    if (high_left - row[lowest] >= rise && high_right - row[lowest] >= rise) {
+      valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
+    }
+  }
+  // Most rows must show the valley, on one straight line.
+  const int rows = (box.height * 8 / 10) / 4;
+  if (static_cast<int>(valley.size()) < rows * 2 / 3 || valley.size() < 5) return false;
+  cv::fitLine(valley, *line, cv::DIST_HUBER, 0, 0.01, 0.01);
+  const float vx = (*line)[0], vy = (*line)[1], x0 = (*line)[2], y0 = (*line)[3];
+  int off = 0;
+  for (const cv::Point2f& p : valley) {
+    off += std::fabs((p.x - x0) * vy - (p.y - y0) * vx) > 8;  // Pixels from the line.
+  }
+  if (off > static_cast<int>(valley.size()) / 4) return false;
+  *left = cv::Mat::zeros(leaf.size(), CV_8U);
+  *right = cv::Mat::zeros(leaf.size(), CV_8U);
+  for (int v = 0; v < leaf.rows; ++v) {
+    // The line's column at this row (the gutter runs down the image).
+    const float at = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
+    const uint8_t* in = leaf.ptr<uint8_t>(v);
+    for (int u = 0; u < leaf.cols; ++u) {
+      if (!in[u]) continue;
+      (u < at ? left : right)->at<uint8_t>(v, u) = 255;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+bool OutlineOptions::Check(std::string* why) const {
+  if (!(step_mm > 0) || gap_px < 0 || gap_px > 10 || !(min_area > 0 && min_area < 1) ||
+      border_px < 0 || !(gutter_rise_mm > 0)) {
+    *why = "step_mm and gutter_rise_mm must be > 0, gap_px in [0, 10], min_area in (0, 1)";
+    return false;
+  }
+  return true;
+}
+
+Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options) {
+  Outline out;
+  std::string why;
+  if (!options.Check(&why)) {
+    out.status = Status::Error("outline options: " + why);
+    return out;
+  }
+  if (points.type() != CV_32FC3 || points.empty() || texture.size() != points.size()) {
+    out.status = Status::Error("outline input: a CV_32FC3 point map and a texture of its size");
+    return out;
+  }
+  const cv::Size size = points.size();
+  const double step = options.step_mm;
+  const cv::Mat z = SmoothHeights(points);
+  const cv::Mat strength = RimStrength(points, z, options.scale_px, options.max_slope_deg);
+  // Surfaces: pixels with a height, away from every rim (gaps in a rim closed), as components.
+  cv::Mat rims;
+  cv::dilate(strength > step, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),
+             cv::Point(-1, -1), options.gap_px);
+  const cv::Mat surface = (z > -1e3f) & ~rims;
+  // Labelled at half resolution (a 2 x 2 block is surface when all of it is; rims are several
+  // pixels wide, so no surface joins another by it), then brought back to full size.
+  cv::Mat blocks, half_components, stats, centroids;
+  cv::erode(surface, blocks, cv::Mat::ones(2, 2, CV_8U), cv::Point(0, 0));
+  cv::resize(blocks, blocks, cv::Size(size.width / 2, size.height / 2), 0, 0, cv::INTER_NEAREST);
+  const int count =
+      cv::connectedComponentsWithStats(blocks, half_components, stats, centroids, 4, CV_32S);
+  cv::Mat components;
+  cv::resize(half_components, components, cv::Size(size.width / 2 * 2, size.height / 2 * 2), 0, 0,
+             cv::INTER_NEAREST);
+  if (components.size() != size) {
+    cv::copyMakeBorder(components, components, 0, size.height - components.rows, 0,
+                       size.width - components.cols, cv::BORDER_CONSTANT, 0);
+  }
+  // The leaf: the surfaces that cover much of the seed region (the hint, or the centre of the
+  // view; an open book's two pages share it).
+  cv::Rect seed = options.hint & cv::Rect(0, 0, size.width, size.height);
+  if (seed.area() == 0) {
+    seed = cv::Rect(size.width * 2 / 5, size.height * 2 / 5, size.width / 5, size.height / 5);
+  }
+  std::vector<int> votes(count, 0);
+  for (int v = seed.y; v < seed.y + seed.height; ++v) {
+    const int* row = components.ptr<int>(v);
+    for (int u = seed.x; u < seed.x + seed.width; ++u) ++votes[row[u]];
+  }
+  votes[0] = 0;
+  const int most = *std::max_element(votes.begin(), votes.end());
+  // Seeds for the flood: 1 the leaf's surfaces, 2 every other surface.
+  std::vector<uint8_t> kind(count, 0);
+  int leaf_area = 0;
+  for (int l = 1; l < count; ++l) {
+    const int area = 4 * stats.at<int>(l, cv::CC_STAT_AREA);
+    if (most > 0 && votes[l] >= std::max(1, most / 4) && votes[l] >= seed.area() / 10) {
+      kind[l] = 1;
+      leaf_area += area;
+    } else {
+      kind[l] = 2;  // Every other surface, however small (what shows through a hole).
+    }
+  }
+  cv::Mat labels(size, CV_8U);
+  for (int v = 0; v < size.height; ++v) {
+    const int* c = components.ptr<int>(v);
+    uint8_t* out = labels.ptr<uint8_t>(v);
+    const uint8_t* in = surface.ptr<uint8_t>(v);
+    for (int u = 0; u < size.width; ++u) out[u] = in[u] ? kind[c[u]] : 0;
+  }
+  const double area_min = options.min_area * size.area();
+  cv::Mat leaf;
+  if (leaf_area >= area_min) {
+    // The leaf grows from its seed by no more than a rim's width: the floods and the holes are
+    // worked out in the seed's box with a margin.
+    const int margin = 4 * (options.scale_px + options.gap_px) + 4;
+    cv::Rect box = cv::boundingRect(labels == 1);
+    box =
+        cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
+        cv::Rect(0, 0, size.width, size.height);
+    cv::Mat box_labels = labels(box).clone();
+    Flood(strength(box), z(box), step, &box_labels);
+    leaf = cv::Mat::zeros(size, CV_8U);
+    leaf(box).setTo(255, box_labels == 1);
+    cv::Mat gray = texture;
+    if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+    if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 257);
+    const cv::Rect holes_box = (cv::boundingRect(leaf) + cv::Size(4, 4) - cv::Point(2, 2)) &
+                               cv::Rect(0, 0, size.width, size.height);
+    cv::Mat box_leaf = leaf(holes_box);
+    out.holes = FillHoles(z(holes_box), gray(holes_box), step, &box_leaf);
+    out.confidence = RimConfidence(leaf(holes_box), strength(holes_box), z(holes_box), step);
+    out.touches_border = TouchesBorder(leaf, options.border_px);
+    out.method = "shape";
+  }
+  // The brightness rule: the fallback when the shape finds no leaf, or one that spreads over
+  // the view with nothing setting it apart, where a bright page on a dark surround is clear.
+  if (leaf.empty() || (out.touches_border && out.confidence < 0.5)) {
+    const cv::Mat bright = SegmentPage(texture);
+    if (cv::countNonZero(bright) >= area_min && !TouchesBorder(bright, options.border_px)) {
+      leaf = bright.clone();
+      out.method = "brightness";
+      out.holes = 0;
+      out.confidence = RimConfidence(leaf, strength, z, step);
+      out.touches_border = false;
+    } else if (leaf.empty()) {
+      out.status = Status::Error(
+          "no leaf found: no surface set apart by its rim around the centre of the view, and "
+          "no bright page on a darker surround");
+      return out;
+    }
+  }
+  out.mask = leaf;
+  cv::Mat left, right;
+  if (options.find_spread &&
+      SplitAtGutter(z, leaf, options.gutter_rise_mm, &out.gutter, &left, &right)) {
+    out.pages = {left, right};
+  } else {
+    out.pages = {leaf};
+  }
+  out.status = Status::Ok();
+  return out;
+}
+
+cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline) {
+  cv::Mat out;
+  if (texture.channels() == 1) {
+    cv::cvtColor(texture, out, cv::COLOR_GRAY2BGR);
+  } else {
+    out = texture.clone();
+  }
+  if (out.depth() != CV_8U) out.convertTo(out, CV_8U, 1.0 / 257);
+  const cv::Scalar colours[] = {cv::Scalar(0, 200, 255), cv::Scalar(255, 120, 0)};
+  const int thickness = std::max(1, out.cols / 600);
+  for (size_t k = 0; k < outline.pages.size(); ++k) {
+    std::vector<std::vector<cv::Point>> contours;
+    cv::findContours(outline.pages[k].clone(), contours, cv::RETR_LIST, cv::CHAIN_APPROX_SIMPLE);
+    cv::drawContours(out, contours, -1, colours[k % 2], thickness, cv::LINE_AA);
+  }
+  return out;
+}
+
+}  // namespace vellum

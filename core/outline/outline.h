@@ -1,0 +1,57 @@
+// Finding the leaf in a scan by its shape and its look together.
+//
+// Brown & Seales (2004) assume a bright page on a darker table. A real leaf lies on a support
+// as bright as it is, in a paper frame, with burnt edges and holes, or is one of the two pages
+// of an open book. What always sets it apart is its rim: a leaf has a thickness, so where it
+// ends the measured surface steps down (by at least its thickness, 0.1-0.3 mm, far above the
+// scanner's noise), or it curls away. The leaf is found as the surface that such steps enclose
+// (slope-compensated height differences between neighbouring pixels, after a robust smoothing),
+// around the centre of the view or an operator's hint; holes that show another surface stay
+// holes, holes without data (shadows, ink) are filled. The brightness rule of the paper is the
+// fallback, and a cross-check, when the shape finds nothing plausible. An open book is found as
+// two pages meeting at a gutter: a valley from which the surface rises steeply on both sides.
+#pragma once
+
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+
+namespace vellum {
+
+struct OutlineOptions {
+  double step_mm = 0.08;       // A height step this high is a rim, mm.
+  int scale_px = 3;            // Steps measured across 2 x this many pixels (the decoder's fit).
+  int gap_px = 4;              // Rims are closed over gaps of up to twice this, in pixels.
+  double max_slope_deg = 80;   // A surface seen steeper than this is a silhouette (a rim).
+  double min_area = 0.02;      // A leaf covers at least this share of the image.
+  cv::Rect hint;               // Camera pixels inside the leaf (empty: the centre of the view).
+  int border_px = 2;           // A leaf within this of the image border runs off the view.
+  bool find_spread = true;     // Look for two pages meeting at a gutter.
+  double gutter_rise_mm = 15;  // A spread's pages rise at least this much from the gutter, mm.
+
+  bool Check(std::string* why) const;
+};
+
+struct Outline {
+  Status status = Status::Error("outline not found (not run)");
+  cv::Mat mask;                  // CV_8U 255 on the leaf (on both pages of a spread), holes out.
+  std::vector<cv::Mat> pages;    // One mask per page: the leaf, or a spread's left then right.
+  double confidence = 0;         // Share of the rim where the leaf is set apart from its surround.
+  bool touches_border = false;   // The leaf runs off the camera's view.
+  std::string method;            // "shape", or "brightness" when the shape found no leaf.
+  int holes = 0;                 // Holes in the leaf that show what is under it.
+  cv::Vec4f gutter{0, 0, 0, 0};  // A spread's gutter line in the image: (vx, vy, x0, y0).
+};
+
+// Finds the leaf in an organised point map (CV_32FC3, mm, NaN where invalid) and its texture
+// (the same size).
+Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
+                 const OutlineOptions& options = OutlineOptions());
+
+// The texture with the outline drawn over it (each page in its own colour), for the report and
+// the viewer.
+cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline);
+
+}  // namespace vellum

@@ -1,0 +1,110 @@
+// The leaf found by its shape on the virtual gantry (default rig and noise), against the truth:
+// on a dark table, a support as bright as the page, in a paper frame, burnt with holes, half
+// lying flat on a light support, and the two pages of an open book.
+#include "core/outline/outline.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/decode/decode.h"
+#include "core/geometry/triangulate.h"
+#include "core/sim/evaluate.h"
+
+namespace vellum {
+namespace {
+
+struct Scene {
+  const char* name;
+  PageShape shape;
+  bool support, frame, spread;
+  OutlineKind outline;
+};
+
+struct Found {
+  Outline outline;
+  cv::Mat truth;  // page_index
+  double iou = 0;
+  int background_inside = 0;  // Off-page pixels inside the found leaf.
+  double farthest_px = 0;     // The farthest of them from the true page, pixels.
+};
+
+Found FindIn(const Scene& scene) {
+  PageOptions page;
+  page.shape = scene.shape;
+  page.outline = scene.outline;
+  if (scene.spread) page.size_mm = {170.0, 230.0};
+  SceneOptions s;
+  s.support = scene.support;
+  s.frame = scene.frame;
+  s.spread = scene.spread;
+  TextureOptions texture;
+  texture.kind = TextureKind::kText;
+  const SimulatedScan scan = SimulateScan(DefaultRig(), page, texture, s, 11);
+  const Triangulator triangulator(scan.gantry->rig());
+  const PointMap map = triangulator.Triangulate(Decode(scan.sequence, scan.frames));
+  Found f;
+  f.outline = FindLeaf(map.points, scan.texture);
+  f.truth = scan.gantry->truth().page_index;
+  if (f.outline.status.ok()) {
+    f.iou = MaskIoU(f.outline.mask, f.truth);
+    const cv::Mat off = f.outline.mask & (f.truth == 0);
+    f.background_inside = cv::countNonZero(off);
+    cv::Mat distance;
+    cv::distanceTransform(f.truth == 0, distance, cv::DIST_L2, 3);
+    cv::minMaxLoc(distance, nullptr, &f.farthest_px, nullptr, nullptr, off);
+    if (getenv("OUTLINE_DUMP")) {
+      cv::Mat show;
+      cv::cvtColor(scan.texture, show, cv::COLOR_GRAY2BGR);
+      show.setTo(cv::Scalar(0, 0, 255), off);
+      show.setTo(cv::Scalar(255, 0, 0), (f.truth != 0) & ~f.outline.mask);
+      show.setTo(cv::Scalar(0, 255, 0), (f.truth == 0) & ~f.outline.mask & (f.outline.mask == 0));
+      static int n = 0;
+      cv::imwrite(std::string(getenv("OUTLINE_DUMP")) + "/off" + std::to_string(n++) + ".png",
+                  show);
+    }
+  }
+  std::printf(
+      "%-28s method %-10s IoU %.4f, off-page inside %d (at most %.1f px out), "
+      "confidence %.3f, holes %d, pages %zu\n",
+      scene.name, f.outline.method.c_str(), f.iou, f.background_inside, f.farthest_px,
+      f.outline.confidence, f.outline.holes, f.outline.pages.size());
+  return f;
+}
+
+class LeafScenes : public ::testing::TestWithParam<Scene> {};
+
+// IoU >= 0.98: on a 760 x 960 px leaf, the outline within about 4 px (1 mm) all round.
+TEST_P(LeafScenes, TheLeafIsFoundByItsShape) {
+  const Found f = FindIn(GetParam());
+  ASSERT_TRUE(f.outline.status.ok()) << f.outline.status.message();
+  EXPECT_GE(f.iou, 0.98);
+  // No table, support or frame inside the leaf: what lies outside the true page is its rim's
+  // mixed pixels (the decoder's fit window reaches 3 px; a silhouette's flying pixels 2 more).
+  EXPECT_LE(f.farthest_px, 5.0);
+  EXPECT_FALSE(f.outline.touches_border);
+  EXPECT_GE(f.outline.confidence, 0.9);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Scenes, LeafScenes,
+    ::testing::Values(
+        Scene{"dark table, curl", PageShape::kCurl, false, false, false, OutlineKind::kRectangle},
+        Scene{"light support, curl", PageShape::kCurl, true, false, false, OutlineKind::kRectangle},
+        Scene{"light support, flat", PageShape::kFlat, true, false, false, OutlineKind::kRectangle},
+        Scene{"paper frame, curl", PageShape::kCurl, false, true, false, OutlineKind::kRectangle},
+        Scene{"burnt, on support", PageShape::kCurl, true, false, false, OutlineKind::kBurnt},
+        Scene{"burnt, dark table", PageShape::kFold, false, false, false, OutlineKind::kBurnt},
+        Scene{"spread", PageShape::kFlat, false, false, true, OutlineKind::kRectangle}),
+    [](const ::testing::TestParamInfo<Scene>& info) {
+      std::string name = info.param.name;
+      for (char& c : name) {
+        if (!isalnum(static_cast<unsigned char>(c))) c = '_';
+      }
+      return name;
+    });
+
+}  // namespace
+}  // namespace vellum
