@@ -8,6 +8,9 @@
 
 namespace vellum {
 
+// The exit status of a scan restored with warnings: written, but not to be delivered unchecked.
+constexpr int kExitDoubtful = 3;
+
 int RunProcess(const std::vector<std::string>& args) {
   const std::vector<Flags::Spec> specs = Join(
       {
@@ -23,8 +26,13 @@ int RunProcess(const std::vector<std::string>& args) {
       "texture. Writes points.ply (x y z mm world, u v camera pixel), depth.png, mesh.ply and\n"
       "flat.ply (the sheet before/after flattening), restored.tif (with its dpi in the TIFF\n"
       "tags in orthographic view), restored.json (view, dpi, flat mm -> pixel map),\n"
-      "report.json (stage times, pixel counts, strain, the options used, the files written)\n"
-      "and report.html (the same with pictures, for a browser).",
+      "report.json (stage times, pixel counts, strain, the options used, the files written,\n"
+      "warnings) and report.html (the same with pictures, for a browser). On a spread (an\n"
+      "open book) each page's files go to pages/left/ and pages/right/.\n"
+      "Exit status: 0 restored; 1 an error (one line names the file and the problem); 2 bad\n"
+      "flags; 3 restored with warnings that make the result doubtful (the leaf runs off the\n"
+      "view, an uncertain outline, high strain or fold-over, an unexpected leaf size): check\n"
+      "report.html before delivering it.",
       specs);
   if (!flags.Parse(args)) return 0;
   const std::string scan_dir = flags.Require("scan");
@@ -48,16 +56,25 @@ int RunProcess(const std::vector<std::string>& args) {
     std::fprintf(stderr, "vellum process: %s\n", s.message().c_str());
     return 1;
   }
-  const RestoreResult& restored = result.restored;
-  std::printf(
-      "%d valid points; sheet %s, %s residual strain mean %.2e max %.2e; restored %dx%d"
-      "%s; results in %s\n",
-      result.map.valid, SizeText(options.mesh.grid).c_str(), ToString(options.flatten.solver),
-      result.flat.mean_strain, result.flat.max_strain, restored.image.cols, restored.image.rows,
-      restored.view == RestoreView::kOrthographic
-          ? (" at " + std::to_string(static_cast<int>(restored.dpi)) + " dpi").c_str()
-          : " (camera view)",
-      out.c_str());
+  std::printf("%d valid points; %s\n", result.map.valid,
+              result.outline.pages.size() > 1 ? "a spread of two pages" : "one leaf");
+  for (const PageResult& page : result.pages) {
+    const RestoreResult& restored = page.restored;
+    std::printf("%s: sheet %dx%d, %s residual strain mean %.2e max %.2e; restored %dx%d%s\n",
+                page.name.empty() ? "leaf" : page.name.c_str(), page.mesh.cols, page.mesh.rows,
+                ToString(options.flatten.solver), page.flat.mean_strain, page.flat.max_strain,
+                restored.image.cols, restored.image.rows,
+                restored.view == RestoreView::kOrthographic
+                    ? (" at " + std::to_string(static_cast<int>(restored.dpi)) + " dpi").c_str()
+                    : " (camera view)");
+  }
+  std::printf("results in %s\n", out.c_str());
+  // A doubtful result is written, and said so: on stderr and in the exit status.
+  const std::vector<Warning> warnings = result.report.Warnings();
+  for (const Warning& w : warnings) {
+    std::fprintf(stderr, "vellum process: warning %s: %s\n", w.code.c_str(), w.message.c_str());
+  }
+  if (!warnings.empty()) return kExitDoubtful;
   return 0;
 }
 

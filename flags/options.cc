@@ -115,9 +115,16 @@ std::vector<Flags::Spec> TriangulateFlagSpecs() {
 
 std::vector<Flags::Spec> FlattenFlagSpecs() {
   return {
-      {"grid", "GxH", "flattening grid, nodes across x down", "45x45"},
+      {"grid", "GxH|auto",
+       "flattening grid, nodes across x down; auto: from the page's shape, at least 45x45, fine "
+       "enough that the warp strays less than --max-warp-error",
+       "auto"},
+      {"max-warp-error", "PX", "auto grid: the warp's error allowed, camera pixels", "0.05"},
       {"solver", "NAME", "gauss-newton (fast), euler or rk4 (the paper's simulator)",
        "gauss-newton"},
+      {"leaf-hint", "X,Y,W,H",
+       "camera pixels inside the leaf, where the scene is ambiguous (default: the view's centre)",
+       ""},
   };
 }
 
@@ -126,6 +133,13 @@ std::vector<Flags::Spec> RestoreFlagSpecs() {
       {"view", "NAME", "orthographic (true scale) or camera (as the camera would see it)",
        "orthographic"},
       {"dpi", "N", "orthographic resolution; 0 = the camera's sampling on the table", "0"},
+      {"deskew", "BOOL", "orthographic: turn the page so the leaf stands upright", "true"},
+      {"crop", "BOOL", "orthographic: crop to the leaf plus --margin", "true"},
+      {"margin", "MM", "orthographic: border kept around the leaf, mm", "3"},
+      {"leaf-size", "WxH",
+       "the leaf's expected size, mm: a restored leaf more than 10% off is "
+       "flagged (default: not checked)",
+       ""},
   };
 }
 
@@ -146,12 +160,25 @@ TriangulateOptions TriangulateOptionsFromFlags(const Flags& flags) {
   return options;
 }
 
-MeshOptions MeshOptionsFromFlags(const Flags& flags) {
-  MeshOptions options;
-  options.grid = flags.GetSize("grid");
-  std::string why;
-  if (!options.Check(&why)) throw UsageError("--grid: " + why);
-  return options;
+void FlattenGroupFromFlags(const Flags& flags, PipelineOptions* options) {
+  options->auto_grid = flags.Get("grid") == "auto";
+  if (!options->auto_grid) {
+    options->mesh.grid = flags.GetSize("grid");
+    std::string why;
+    if (!options->mesh.Check(&why)) throw UsageError("--grid: " + why);
+  }
+  options->max_warp_error_px = flags.GetDouble("max-warp-error", 0.001, 10);
+  options->flatten = FlattenOptionsFromFlags(flags);
+  const std::string hint = flags.Get("leaf-hint");
+  if (!hint.empty()) {
+    int x = 0, y = 0, w = 0, h = 0;
+    char end = 0;
+    if (std::sscanf(hint.c_str(), "%d,%d,%d,%d%c", &x, &y, &w, &h, &end) != 4 || x < 0 || y < 0 ||
+        w <= 0 || h <= 0) {
+      throw UsageError("--leaf-hint must be X,Y,W,H in camera pixels, got '" + hint + "'");
+    }
+    options->outline.hint = cv::Rect(x, y, w, h);
+  }
 }
 
 FlattenOptions FlattenOptionsFromFlags(const Flags& flags) {
@@ -163,13 +190,19 @@ FlattenOptions FlattenOptionsFromFlags(const Flags& flags) {
   return options;
 }
 
-RestoreOptions RestoreOptionsFromFlags(const Flags& flags) {
-  RestoreOptions options;
-  if (!ParseRestoreView(flags.Get("view"), &options.view)) {
+void RestoreGroupFromFlags(const Flags& flags, PipelineOptions* options) {
+  RestoreOptions& r = options->restore;
+  if (!ParseRestoreView(flags.Get("view"), &r.view)) {
     throw UsageError("--view must be orthographic or camera, got '" + flags.Get("view") + "'");
   }
-  options.dpi = flags.GetDouble("dpi", 0, 4800);
-  return options;
+  r.dpi = flags.GetDouble("dpi", 0, 4800);
+  r.deskew = flags.GetBool("deskew");
+  r.crop_to_leaf = flags.GetBool("crop");
+  r.margin_mm = flags.GetDouble("margin", 0, 1000);
+  if (!flags.Get("leaf-size").empty()) {
+    const cv::Size size = flags.GetSize("leaf-size");
+    options->limits.expected_leaf_mm = cv::Size2d(size.width, size.height);
+  }
 }
 
 std::vector<Flags::Spec> PipelineFlagSpecs() {
@@ -185,9 +218,8 @@ PipelineOptions PipelineOptionsFromFlags(const Flags& flags) {
   PipelineOptions options;
   options.decode = DecodeOptionsFromFlags(flags);
   options.triangulate = TriangulateOptionsFromFlags(flags);
-  options.mesh = MeshOptionsFromFlags(flags);
-  options.flatten = FlattenOptionsFromFlags(flags);
-  options.restore = RestoreOptionsFromFlags(flags);
+  FlattenGroupFromFlags(flags, &options);
+  RestoreGroupFromFlags(flags, &options);
   return options;
 }
 

@@ -35,15 +35,19 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
 
 std::vector<Flags::Spec> DecodeFlagSpecs();       // --decoder, --smooth-radius
 std::vector<Flags::Spec> TriangulateFlagSpecs();  // --max-epipolar
-std::vector<Flags::Spec> FlattenFlagSpecs();      // --grid, --solver
-std::vector<Flags::Spec> RestoreFlagSpecs();      // --view, --dpi
+// The flattener's: --grid, --max-warp-error, --solver, --leaf-hint.
+std::vector<Flags::Spec> FlattenFlagSpecs();
+// The restorer's: --view, --dpi, --deskew, --crop, --margin, --leaf-size.
+std::vector<Flags::Spec> RestoreFlagSpecs();
 
 // Each throws UsageError naming the flag when a value is bad.
 DecodeOptions DecodeOptionsFromFlags(const Flags& flags);
 TriangulateOptions TriangulateOptionsFromFlags(const Flags& flags);
-MeshOptions MeshOptionsFromFlags(const Flags& flags);
 FlattenOptions FlattenOptionsFromFlags(const Flags& flags);
-RestoreOptions RestoreOptionsFromFlags(const Flags& flags);
+// The outline, sheet and flattening options of FlattenFlagSpecs().
+void FlattenGroupFromFlags(const Flags& flags, PipelineOptions* options);
+// The restoration options and the expected leaf size of RestoreFlagSpecs().
+void RestoreGroupFromFlags(const Flags& flags, PipelineOptions* options);
 
 // The flags of every stage (`vellum process`), and the options they give.
 std::vector<Flags::Spec> PipelineFlagSpecs();

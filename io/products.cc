@@ -65,6 +65,10 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored) {
                    cv::IMWRITE_TIFF_YDPI,    dpi};
   }
   const std::string tif = (fs::path(dir) / "restored.tif").string();
+  if (!restored.mask.empty()) {
+    const Status s = WriteImage((fs::path(dir) / "restored_mask.png").string(), restored.mask);
+    if (!s.ok()) return s;
+  }
   try {
     if (!cv::imwrite(tif, restored.image, tiff_params)) {
       return Status::Error(tif + ": cannot write image");
@@ -75,12 +79,14 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored) {
   Json r;
   r["view"] = ToString(restored.view);
   r["image"] = "restored.tif";
+  if (!restored.mask.empty()) r["mask"] = "restored_mask.png";
   r["width"] = restored.image.cols;
   r["height"] = restored.image.rows;
   if (restored.view == RestoreView::kOrthographic) {
     const cv::Matx23d& a = restored.pixel_from_flat;
     r["dpi"] = JsonNumber(restored.dpi);
     r["flat_frame"] = "the x, y of flat.ply, mm";
+    r["rotation_deg"] = JsonNumber(restored.rotation_deg);
     Json rows = Json::array();
     for (int row = 0; row < 2; ++row) {
       Json cols = Json::array();
@@ -88,7 +94,9 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored) {
       rows.push_back(cols);
     }
     r["pixel_from_flat_mm"] = rows;
-    r["pixel_convention"] = "pixel centres at integer coordinates; column = x, row = -y";
+    r["pixel_convention"] =
+        "pixel centres at integer coordinates; the flat page turned counter-clockwise by "
+        "rotation_deg, then column = x, row = -y, cropped to the leaf plus a margin";
   } else {
     r["flat_frame"] = "the x, y of flat.ply, mm, on the table plane z = 0";
     r["pixel_from_flat_mm"] = "the calibrated camera's projection of (x, y, 0)";

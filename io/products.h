@@ -23,7 +23,8 @@ Status WritePointProducts(const std::string& dir, const cv::Mat& points, double*
                           double* z_max_mm);
 // mesh.ply (3D) and flat.ply (z = 0): the sheet's active nodes in the same order, quad faces.
 Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat);
-// restored.tif (TIFF dpi tags in orthographic view) and restored.json.
+// restored.tif (TIFF dpi tags in orthographic view), restored_mask.png (when the leaf's mask was
+// restored: 255 on the leaf) and restored.json (the map from flat mm to pixels, the turn).
 Status WriteRestored(const std::string& dir, const RestoreResult& restored);
 
 }  // namespace vellum

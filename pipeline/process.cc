@@ -63,17 +63,35 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
            false)) {
     return out;
   }
-  next("mesh", 0.7);
-  if (!ran(MeshStage(out.map.points, input.scan.texture, camera, options.mesh, &out.mesh), true)) {
-    return out;
-  }
-  next("flatten", 0.75);
-  if (!ran(FlattenStage(out.mesh, options.flatten, results, &out.flat), true)) return out;
-  next("restore", slow ? 0.95 : 0.8);
-  if (!ran(RestoreStage(input.scan.texture, out.mesh, out.flat.flat, camera, options.restore,
-                        results, &out.restored),
+  next("outline", 0.65);
+  if (!ran(OutlineStage(out.map.points, input.scan.texture, options.outline, options.limits,
+                        results, &out.outline),
            true)) {
     return out;
+  }
+  const size_t pages = out.outline.pages.size();
+  for (size_t k = 0; k < pages; ++k) {
+    PageResult page;
+    page.name = PageName(out.outline, k);
+    const cv::Mat& mask = out.outline.pages[k];
+    const double done = 0.7 + 0.25 * k / pages, share = 0.25 / pages;
+    next("mesh", done);
+    if (!ran(MeshStage(out.map.points, mask, camera, options, page.name, &page.mesh), true)) {
+      return out;
+    }
+    next("flatten", done + 0.1 * share);
+    if (!ran(FlattenStage(page.mesh, options.flatten, options.limits, results, page.name,
+                          &page.flat),
+             true)) {
+      return out;
+    }
+    next("restore", done + (slow ? 0.8 : 0.3) * share);
+    if (!ran(RestoreStage(input.scan.texture, mask, page.mesh, page.flat.flat, camera,
+                          options.restore, options.limits, results, page.name, &page.restored),
+             true)) {
+      return out;
+    }
+    out.pages.push_back(std::move(page));
   }
   next("report", 0.97);
   out.status = WriteReports(results, input.scan_dir, &report);

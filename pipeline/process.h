@@ -24,20 +24,28 @@ struct ProcessInput {
 Status ReadProcessInput(const std::string& scan_dir, const std::string& calibration_path,
                         ProcessInput* input);
 
-struct ProcessResult {
-  Status status = Status::Error("pipeline not run");
-  ProcessReport report;  // The stages that ran, and the files written.
-  PointMap map;          // The products, for a caller's summary.
+// One page of the scan: the leaf, or a page of a spread.
+struct PageResult {
+  std::string name;  // "" for a single leaf; "left", "right".
   Mesh mesh;
   FlattenResult flat;
   RestoreResult restored;
 };
 
+struct ProcessResult {
+  Status status = Status::Error("pipeline not run");
+  ProcessReport report;  // The stages that ran, their warnings, and the files written.
+  PointMap map;          // The products, for a caller's summary.
+  Outline outline;
+  std::vector<PageResult> pages;
+};
+
 // Called before each stage with its name and the share of the whole run done so far.
 using PipelineProgress = std::function<void(const std::string& stage, double done)>;
 
-// Runs decode, triangulate, mesh, flatten and restore into `results` (created), then writes
-// report.html and report.json. Errors name the scan directory, or the file that failed.
+// Runs decode, triangulate and outline, then mesh, flatten and restore for each page, into
+// `results` (created), then writes report.html and report.json. Errors name the scan directory,
+// or the file that failed.
 ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& options,
                           const std::string& results, const PipelineProgress& progress = nullptr);
 

@@ -34,28 +34,40 @@ std::string Number(double v, int precision = 3) {
   return o.str();
 }
 
-// The pictures a report can show (written by the stages to report/), in the order shown.
+// The pictures a report can show (written by the stages to report/; a page of a spread has its
+// own, named <stem>-<page>.png), in the order shown.
 struct Picture {
-  const char* file;
+  const char* stem;
   const char* caption;
 };
 constexpr Picture kPictures[] = {
-    {"report/texture.png", "Texture: the page under studio light, as the camera saw it."},
-    {"report/valid.png",
+    {"report/texture", "Texture: the page under studio light, as the camera saw it."},
+    {"report/outline",
+     "The leaf found: its outline (and holes) over the texture; on a spread, each page in its "
+     "own colour."},
+    {"report/valid",
      "Valid pixels: white where a 3D point was measured (black: ink, shadow, table beyond the "
      "projector, rejected)."},
-    {"report/depth.png", "Height above the table, mm (colour bar on the right)."},
-    {"report/grid.png", "The restored page with the flattened sheet's grid (every 4th line)."},
-    {"report/strain.png",
+    {"report/depth", "Height above the table, mm (colour bar on the right)."},
+    {"report/grid", "The restored page with the flattened sheet's grid (every 4th line)."},
+    {"report/strain",
      "Residual strain of each quad after flattening (mean relative spring-length error); high "
      "values mark stretch or creases the flat page cannot keep."},
-    {"report/before_after.png",
+    {"report/before_after",
      "The centre of the page before (left, camera) and after (right, restored)."},
 };
 
 // report.json's sections in their order; a section no stage fills is left out.
-constexpr const char* kSections[] = {"options",   "sizes", "stages_seconds", "pixels",
-                                     "height_mm", "sheet", "flattening",     "restored"};
+constexpr const char* kSections[] = {"options", "sizes", "stages_seconds", "pixels",  "height_mm",
+                                     "outline", "sheet", "flattening",     "restored"};
+
+std::string PictureFile(const Picture& p, const std::string& page) {
+  return std::string(p.stem) + (page.empty() ? "" : "-" + page) + ".png";
+}
+
+std::string StageKey(const StageReport& stage) {
+  return stage.page.empty() ? stage.stage : stage.stage + " " + stage.page;
+}
 
 Json ToJson(const ReportValue& v) { return v.is_text ? Json(v.text) : JsonNumber(v.number); }
 
@@ -66,27 +78,50 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
     << "body{font-family:sans-serif;margin:2em;max-width:1500px;color:#222}\n"
     << "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px "
        "10px;text-align:left}\nfigure{margin:1.5em 0}img{max-width:100%;border:1px solid "
-       "#ccc}\nfigcaption{color:#555;margin-top:4px}.warn{color:#a40}\n</style></head><body>\n";
+       "#ccc}\nfigcaption{color:#555;margin-top:4px}.warn{color:#a40}\n"
+       ".warnings{border:2px solid #a40;padding:0.5em 1em;background:#fff6f0}\n"
+       "</style></head><body>\n";
   h << "<h1>vellum: " << Escape(title) << "</h1>\n";
+  const std::vector<Warning> warnings = r.Warnings();
+  if (!warnings.empty()) {
+    h << "<div class=warnings><h2 class=warn>Warnings: check this scan before it is "
+         "delivered</h2>\n<ul>\n";
+    for (const Warning& w : warnings) {
+      h << "<li><b>" << Escape(w.code) << "</b>: " << Escape(w.message) << "</li>\n";
+    }
+    h << "</ul></div>\n";
+  }
   const double pixels = r.Number("pixels", "camera"), valid = r.Number("pixels", "valid");
-  const double folded = r.Number("flattening", "folded_quads");
   h << "<h2>Key figures</h2>\n<table>\n";
   h << "<tr><th>Valid pixels</th><td>" << valid << " of " << pixels << " ("
-    << Number(pixels > 0 ? 100.0 * valid / pixels : 0) << "%); page " << r.Number("pixels", "page")
-    << "</td></tr>\n";
-  h << "<tr><th>Residual strain</th><td>mean " << Number(r.Number("flattening", "mean_strain"))
-    << ", max " << Number(r.Number("flattening", "max_strain"))
-    << (folded > 0 ? ", <span class=warn>" : ", ") << folded << " folded quads"
-    << (folded > 0 ? "</span>" : "") << "</td></tr>\n";
-  h << "<tr><th>Solver</th><td>" << Escape(r.Text("flattening", "solver")) << ", "
-    << r.Number("flattening", "iterations") << " iterations</td></tr>\n";
-  if (r.Find("restored", "width")) {
-    h << "<tr><th>Restored</th><td>" << r.Number("restored", "width") << " x "
-      << r.Number("restored", "height") << " px, "
-      << (r.Text("options", "view") == "orthographic"
-              ? Number(r.Number("options", "dpi"), 4) + " dpi (orthographic)"
-              : std::string("camera view"))
-      << "</td></tr>\n";
+    << Number(pixels > 0 ? 100.0 * valid / pixels : 0) << "%); leaf "
+    << r.Number("outline", "leaf_pixels") << "</td></tr>\n";
+  if (r.Find("outline", "method")) {
+    h << "<tr><th>Leaf found by</th><td>" << Escape(r.Text("outline", "method")) << ", rim "
+      << Number(100 * r.Number("outline", "confidence")) << "% set apart, "
+      << r.Number("outline", "holes") << " holes, " << r.Number("outline", "pages")
+      << " page(s)</td></tr>\n";
+  }
+  for (const std::string& page : r.Pages()) {
+    const std::string of = page.empty() ? "" : " (" + page + ")";
+    const double folded = r.Number("flattening", "folded_quads", page);
+    h << "<tr><th>Residual strain" << of << "</th><td>mean "
+      << Number(r.Number("flattening", "mean_strain", page)) << ", max "
+      << Number(r.Number("flattening", "max_strain", page))
+      << (folded > 0 ? ", <span class=warn>" : ", ") << folded << " folded quads"
+      << (folded > 0 ? "</span>" : "") << "</td></tr>\n";
+    h << "<tr><th>Sheet" << of << "</th><td>" << Escape(r.Text("sheet", "grid", page)) << ", "
+      << Escape(r.Text("flattening", "solver", page)) << ", "
+      << r.Number("flattening", "iterations", page) << " iterations</td></tr>\n";
+    if (r.Find("restored", "width", page)) {
+      h << "<tr><th>Restored" << of << "</th><td>" << r.Number("restored", "width", page) << " x "
+        << r.Number("restored", "height", page) << " px, "
+        << (r.Text("options", "view") == "orthographic"
+                ? Number(r.Number("restored", "dpi", page), 4) + " dpi (orthographic), turned " +
+                      Number(r.Number("restored", "rotation_deg", page)) + " degrees"
+                : std::string("camera view"))
+        << "</td></tr>\n";
+    }
   }
   h << "<tr><th>Height</th><td>" << Number(r.Number("height_mm", "min")) << " .. "
     << Number(r.Number("height_mm", "max")) << " mm</td></tr>\n";
@@ -96,22 +131,29 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
   h << "</table>\n<h2>Stage timings</h2>\n<table>\n";
   double total = 0;
   for (const StageReport& stage : r.stages) {
-    h << "<tr><th>" << Escape(stage.stage) << "</th><td>" << Number(stage.seconds)
+    h << "<tr><th>" << Escape(StageKey(stage)) << "</th><td>" << Number(stage.seconds)
       << " s</td></tr>\n";
     total += stage.seconds;
   }
   h << "<tr><th>total</th><td>" << Number(total) << " s</td></tr>\n</table>\n";
   h << "<h2>Pictures</h2>\n";
   const std::vector<std::string> outputs = r.Outputs();
-  for (const Picture& p : kPictures) {
-    if (std::find(outputs.begin(), outputs.end(), p.file) == outputs.end()) continue;
-    h << "<figure><img src=\"" << p.file << "\" alt=\"" << Escape(p.caption) << "\"><figcaption>"
-      << Escape(p.caption) << "</figcaption></figure>\n";
+  std::vector<std::string> pages = r.Pages();
+  if (pages.size() > 1) pages.insert(pages.begin(), "");  // The scan's own pictures first.
+  for (const std::string& page : pages) {
+    for (const Picture& p : kPictures) {
+      const std::string file = PictureFile(p, page);
+      if (std::find(outputs.begin(), outputs.end(), file) == outputs.end()) continue;
+      const std::string caption = (page.empty() ? "" : "The " + page + " page. ") + p.caption;
+      h << "<figure><img src=\"" << file << "\" alt=\"" << Escape(caption) << "\"><figcaption>"
+        << Escape(caption) << "</figcaption></figure>\n";
+    }
   }
   h << "<h2>Configuration</h2>\n<table>\n";
   h << "<tr><th>scan</th><td>" << Escape(r.scan) << "</td></tr>\n";
   h << "<tr><th>calibration</th><td>" << Escape(r.calibration) << "</td></tr>\n";
   for (const StageReport& stage : r.stages) {
+    if (!stage.page.empty()) continue;
     for (const ReportValue& v : stage.values) {
       if (v.section != "options") continue;
       h << "<tr><th>" << Escape(v.key) << "</th><td>"
@@ -127,21 +169,25 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
   return WriteTextFile((fs::path(dir) / "report.html").string(), h.str());
 }
 
-Status WriteJson(const std::string& dir, const ProcessReport& r) {
-  Json j;
-  j["scan"] = r.scan;
-  j["calibration"] = r.calibration;
+// The sections of the stages of one page ("" the scan's own), in report.json's order.
+Json Sections(const ProcessReport& r, const std::string& page) {
+  Json j = Json::object();
+  auto section_of = [&](const ReportValue& v) {
+    return std::find_if(std::begin(kSections), std::end(kSections),
+                        [&](const char* k) { return v.section == k; }) != std::end(kSections);
+  };
   for (const char* section : kSections) {
     Json s = Json::object();
-    if (std::string(section) == "stages_seconds") {
+    if (std::string(section) == "stages_seconds" && page.empty()) {
       double total = 0;
       for (const StageReport& stage : r.stages) {
-        s[stage.stage] = JsonNumber(stage.seconds);
+        s[StageKey(stage)] = JsonNumber(stage.seconds);
         total += stage.seconds;
       }
       s["total"] = JsonNumber(total);
     }
     for (const StageReport& stage : r.stages) {
+      if (stage.page != page) continue;
       for (const ReportValue& v : stage.values) {
         if (v.section == section) s[v.key] = ToJson(v);
       }
@@ -150,13 +196,36 @@ Status WriteJson(const std::string& dir, const ProcessReport& r) {
   }
   // Sections outside the usual ones, in the order the stages set them.
   for (const StageReport& stage : r.stages) {
+    if (stage.page != page) continue;
     for (const ReportValue& v : stage.values) {
-      if (std::find_if(std::begin(kSections), std::end(kSections),
-                       [&](const char* k) { return v.section == k; }) == std::end(kSections)) {
-        j[v.section][v.key] = ToJson(v);
-      }
+      if (!section_of(v)) j[v.section][v.key] = ToJson(v);
     }
   }
+  return j;
+}
+
+Status WriteJson(const std::string& dir, const ProcessReport& r) {
+  Json j;
+  j["scan"] = r.scan;
+  j["calibration"] = r.calibration;
+  const Json scan_sections = Sections(r, "");
+  for (const auto& [key, value] : scan_sections.items()) j[key] = value;
+  const std::vector<std::string> pages = r.Pages();
+  if (pages.size() > 1 || !pages.front().empty()) {
+    Json list = Json::array();
+    for (const std::string& page : pages) {
+      Json entry;
+      entry["page"] = page;
+      const Json page_sections = Sections(r, page);
+      for (const auto& [key, value] : page_sections.items()) entry[key] = value;
+      list.push_back(entry);
+    }
+    j["pages"] = list;
+  }
+  Json warnings = Json::array();
+  for (const Warning& w : r.Warnings())
+    warnings.push_back({{"code", w.code}, {"message", w.message}});
+  j["warnings"] = warnings;
   j["outputs"] = r.Outputs();
   return WriteJsonFile((fs::path(dir) / "report.json").string(), j);
 }
@@ -181,9 +250,15 @@ void StageReport::Number(const std::string& section, const std::string& key, dou
   values.push_back(std::move(v));
 }
 
-const ReportValue* ProcessReport::Find(const std::string& section, const std::string& key) const {
+void StageReport::Warn(const std::string& code, const std::string& message) {
+  warnings.push_back({code, message});
+}
+
+const ReportValue* ProcessReport::Find(const std::string& section, const std::string& key,
+                                       const std::string& page) const {
   const ReportValue* found = nullptr;
   for (const StageReport& stage : stages) {
+    if (stage.page != page) continue;
     for (const ReportValue& v : stage.values) {
       if (v.section == section && v.key == key) found = &v;
     }
@@ -191,14 +266,38 @@ const ReportValue* ProcessReport::Find(const std::string& section, const std::st
   return found;
 }
 
-double ProcessReport::Number(const std::string& section, const std::string& key) const {
-  const ReportValue* v = Find(section, key);
+double ProcessReport::Number(const std::string& section, const std::string& key,
+                             const std::string& page) const {
+  const ReportValue* v = Find(section, key, page);
   return v && !v->is_text ? v->number : 0.0;
 }
 
-std::string ProcessReport::Text(const std::string& section, const std::string& key) const {
-  const ReportValue* v = Find(section, key);
+std::string ProcessReport::Text(const std::string& section, const std::string& key,
+                                const std::string& page) const {
+  const ReportValue* v = Find(section, key, page);
   return v && v->is_text ? v->text : std::string();
+}
+
+std::vector<std::string> ProcessReport::Pages() const {
+  std::vector<std::string> pages;
+  for (const StageReport& stage : stages) {
+    if (!stage.page.empty() && std::find(pages.begin(), pages.end(), stage.page) == pages.end()) {
+      pages.push_back(stage.page);
+    }
+  }
+  if (pages.empty()) pages.push_back("");
+  return pages;
+}
+
+std::vector<Warning> ProcessReport::Warnings() const {
+  std::vector<Warning> all;
+  for (const StageReport& stage : stages) {
+    for (const Warning& w : stage.warnings) {
+      all.push_back(
+          {w.code, stage.page.empty() ? w.message : "the " + stage.page + " page: " + w.message});
+    }
+  }
+  return all;
 }
 
 std::vector<std::string> ProcessReport::Outputs() const {

@@ -21,15 +21,25 @@ struct ReportValue {
   double number = 0;  // Otherwise.
 };
 
+// Something that makes the result doubtful (DESIGN.md's `warnings`): a code a program can test
+// and a sentence for the operator.
+struct Warning {
+  std::string code;  // page_cut_off, outline_uncertain, strain_high, fold_over, size_unexpected
+  std::string message;
+};
+
 struct StageReport {
   Status status = Status::Error("stage not run");
-  std::string stage;                 // decode, triangulate, mesh, flatten, restore
+  std::string stage;                 // decode, triangulate, outline, mesh, flatten, restore
+  std::string page;                  // "" for the scan (or its one leaf); "left", "right".
   double seconds = 0;                // Wall time, writing the stage's products included.
   std::vector<ReportValue> values;   // In the order they were set.
   std::vector<std::string> outputs;  // Files written, relative to the results folder.
+  std::vector<Warning> warnings;     // What makes its product doubtful.
 
   void Text(const std::string& section, const std::string& key, const std::string& value);
   void Number(const std::string& section, const std::string& key, double value);
+  void Warn(const std::string& code, const std::string& message);
 };
 
 struct ProcessReport {
@@ -37,17 +47,25 @@ struct ProcessReport {
   std::vector<StageReport> stages;   // In pipeline order.
   std::vector<std::string> outputs;  // The report's own files (report.html, report.json).
 
-  // The value of section/key (the last stage that set it), or nullptr.
-  const ReportValue* Find(const std::string& section, const std::string& key) const;
-  double Number(const std::string& section, const std::string& key) const;     // 0 if absent.
-  std::string Text(const std::string& section, const std::string& key) const;  // "" if absent.
+  // The value of section/key for `page` (the last stage that set it), or nullptr.
+  const ReportValue* Find(const std::string& section, const std::string& key,
+                          const std::string& page = "") const;
+  double Number(const std::string& section, const std::string& key,
+                const std::string& page = "") const;  // 0 if absent.
+  std::string Text(const std::string& section, const std::string& key,
+                   const std::string& page = "") const;  // "" if absent.
+  // The pages, in order ({""} for a single leaf; "left", "right" for a spread).
+  std::vector<std::string> Pages() const;
+  // Every warning, each message naming its page on a spread.
+  std::vector<Warning> Warnings() const;
   // Every file written for the scan: the stages' outputs, in order, then the report's own.
   std::vector<std::string> Outputs() const;
 };
 
-// Writes report.html (the key figures, the pictures the stages wrote to report/, the options)
-// and then report.json (every section, and `outputs`: the files actually written, itself
-// included). `title` heads the page.
+// Writes report.html (the warnings, the key figures, the pictures the stages wrote to report/,
+// the options) and then report.json (every section; on a spread, `pages` holds each page's
+// sections; `warnings`; and `outputs`: the files actually written, itself included). `title`
+// heads the page.
 Status WriteReports(const std::string& dir, const std::string& title, ProcessReport* report);
 
 }  // namespace vellum

@@ -1,6 +1,7 @@
 #include "pipeline/stages.h"
 
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <opencv2/imgproc.hpp>
 
@@ -16,8 +17,9 @@ namespace {
 // Starts the clock of a stage's report; Finish sets the status and the wall time.
 class Stage {
  public:
-  explicit Stage(const char* name) : start_(std::chrono::steady_clock::now()) {
+  Stage(const char* name, const std::string& page = "") : start_(std::chrono::steady_clock::now()) {
     report_.stage = name;
+    report_.page = page;
   }
   StageReport& report() { return report_; }
   StageReport Finish(const Status& status) {
@@ -26,13 +28,14 @@ class Stage {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     return report_;
   }
-  // Writes one of the stage's files; records it in the outputs when written.
+  // Records one of the stage's files (relative to the results folder) when it was written.
   Status Output(const std::string& name, const Status& written) {
     if (written.ok()) report_.outputs.push_back(name);
     return written;
   }
-  // A picture for report.html in <results>/report/: at most 1400 pixels across, 8-bit.
-  Status Picture(const std::string& results, const std::string& name, const cv::Mat& image) {
+  // A picture for report.html in <results>/report/ (<stem>-<page>.png for a page of a
+  // spread): at most 1400 pixels across, 8-bit.
+  Status Picture(const std::string& results, const std::string& stem, const cv::Mat& image) {
     Status s = MakeDirectories((fs::path(results) / "report").string());
     if (!s.ok()) return s;
     cv::Mat out = image;
@@ -41,7 +44,8 @@ class Stage {
       const double scale = 1400.0 / out.cols;
       cv::resize(out, out, cv::Size(), scale, scale, cv::INTER_AREA);
     }
-    const std::string file = "report/" + name;
+    const std::string file =
+        "report/" + stem + (report_.page.empty() ? "" : "-" + report_.page) + ".png";
     return Output(file, WriteImage((fs::path(results) / file).string(), out));
   }
 
@@ -50,11 +54,35 @@ class Stage {
   StageReport report_;
 };
 
+// A page's file name relative to the results folder.
+std::string PageFile(const std::string& page, const std::string& name) {
+  return page.empty() ? name : "pages/" + page + "/" + name;
+}
+
+std::string Fixed(double value, int digits) {
+  char text[64];
+  std::snprintf(text, sizeof(text), "%.*f", digits, value);
+  return text;
+}
+
 }  // namespace
 
 bool PipelineOptions::Check(std::string* why) const {
-  return decode.Check(why) && triangulate.Check(why) && mesh.Check(why) && flatten.Check(why) &&
-         restore.Check(why);
+  if (!(max_warp_error_px > 0)) {
+    *why = "max_warp_error_px must be > 0";
+    return false;
+  }
+  return decode.Check(why) && triangulate.Check(why) && outline.Check(why) && mesh.Check(why) &&
+         flatten.Check(why) && restore.Check(why);
+}
+
+std::string PageName(const Outline& outline, size_t page) {
+  if (outline.pages.size() <= 1) return "";
+  return page == 0 ? "left" : "right";
+}
+
+std::string PageDir(const std::string& results, const std::string& page) {
+  return page.empty() ? results : (fs::path(results) / "pages" / page).string();
 }
 
 StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded) {
@@ -101,27 +129,64 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   r.outputs.push_back("depth.png");
   r.Number("height_mm", "min", z_min);
   r.Number("height_mm", "max", z_max);
-  s = stage.Picture(results, "valid.png", ValidMask(map->points));
+  s = stage.Picture(results, "valid", ValidMask(map->points));
   double bar_min = 0, bar_max = 0;
   if (s.ok()) {
-    s = stage.Picture(results, "depth.png", DepthWithColourBar(map->points, &bar_min, &bar_max));
+    s = stage.Picture(results, "depth", DepthWithColourBar(map->points, &bar_min, &bar_max));
   }
   return stage.Finish(s);
 }
 
-StageReport MeshStage(const cv::Mat& points, const cv::Mat& texture, const CameraModel& camera,
-                      const MeshOptions& options, Mesh* mesh) {
-  Stage stage("mesh");
+StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
+                         const OutlineOptions& options, const WarningLimits& limits,
+                         const std::string& results, Outline* outline) {
+  Stage stage("outline");
   StageReport& r = stage.report();
-  r.Text("options", "grid", SizeText(options.grid));
-  if (texture.size() != points.size()) {
-    return stage.Finish(Status::Error("the texture is " + SizeText(texture.size()) +
-                                      ", the point map " + SizeText(points.size())));
+  r.Number("options", "outline_step_mm", options.step_mm);
+  *outline = FindLeaf(points, texture, options);
+  if (!outline->status.ok()) return stage.Finish(outline->status);
+  r.Text("outline", "method", outline->method);
+  r.Number("outline", "confidence", outline->confidence);
+  r.Number("outline", "leaf_pixels", cv::countNonZero(outline->mask));
+  r.Number("outline", "holes", outline->holes);
+  r.Number("outline", "pages", static_cast<double>(outline->pages.size()));
+  r.Number("outline", "touches_border", outline->touches_border ? 1 : 0);
+  if (outline->touches_border) {
+    r.Warn("page_cut_off",
+           "the leaf runs off the camera's view: what lies outside it is missing from the "
+           "restored page; move the leaf into the view and scan again");
   }
-  const cv::Mat page = SegmentPage(texture);
-  *mesh = BuildMesh(points, page, options, [&](const cv::Vec3d& x) { return camera.Project(x); });
+  if (outline->confidence < limits.min_outline_confidence) {
+    r.Warn("outline_uncertain",
+           "only " + Fixed(100 * outline->confidence, 0) +
+               "% of the leaf's rim is set apart from what surrounds it (found by " +
+               outline->method + "); check the outline in the report, or give a hint");
+  }
+  Status s = stage.Picture(results, "texture", texture);
+  if (s.ok()) s = stage.Picture(results, "outline", DrawOutline(texture, *outline));
+  return stage.Finish(s);
+}
+
+StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const CameraModel& camera,
+                      const PipelineOptions& options, const std::string& page, Mesh* mesh) {
+  Stage stage("mesh", page);
+  StageReport& r = stage.report();
+  const auto project = [&](const cv::Vec3d& x) { return camera.Project(x); };
+  r.Text("options", "grid", options.auto_grid ? "auto" : SizeText(options.mesh.grid));
+  if (options.auto_grid) r.Number("options", "max_warp_error_px", options.max_warp_error_px);
+  MeshOptions mesh_options = options.mesh;
+  *mesh = BuildMesh(points, page_mask, mesh_options, project);
+  if (mesh->status.ok() && options.auto_grid) {
+    // The sheet's density from the page's shape: finer until the warp's error is small.
+    const cv::Size grid = GridForError(*mesh, options.max_warp_error_px);
+    if (grid != mesh_options.grid) {
+      mesh_options.grid = grid;
+      *mesh = BuildMesh(points, page_mask, mesh_options, project);
+    }
+  }
   if (!mesh->status.ok()) return stage.Finish(mesh->status);
-  r.Number("pixels", "page", cv::countNonZero(page));
+  r.Text("sheet", "grid", SizeText(mesh_options.grid));
+  r.Number("sheet", "warp_error_px", WarpError(*mesh));
   r.Number("sheet", "measured_nodes", mesh->measured);
   r.Number("sheet", "filled_nodes", mesh->filled);
   r.Number("sheet", "skirt_nodes", mesh->skirt);
@@ -131,8 +196,9 @@ StageReport MeshStage(const cv::Mat& points, const cv::Mat& texture, const Camer
 }
 
 StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
-                         const std::string& results, FlattenResult* flat) {
-  Stage stage("flatten");
+                         const WarningLimits& limits, const std::string& results,
+                         const std::string& page, FlattenResult* flat) {
+  Stage stage("flatten", page);
   StageReport& r = stage.report();
   r.Text("options", "solver", ToString(options.solver));
   *flat = Flatten(mesh, options);
@@ -142,35 +208,73 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
   r.Number("flattening", "mean_strain", flat->mean_strain);
   r.Number("flattening", "max_strain", flat->max_strain);
   r.Number("flattening", "folded_quads", flat->folded_quads);
-  const Status s = WriteSheets(results, mesh, flat->flat);
-  if (s.ok()) r.outputs = {"mesh.ply", "flat.ply"};
+  if (flat->mean_strain > limits.max_mean_strain || flat->max_strain > limits.max_strain) {
+    r.Warn("strain_high", "the flattened sheet keeps a strain of " +
+                              Fixed(100 * flat->mean_strain, 2) + "% on average and " +
+                              Fixed(100 * flat->max_strain, 2) +
+                              "% at most: the sheet may hold more than the leaf (a support or "
+                              "frame), or the leaf was stretched or creased");
+  }
+  if (flat->folded_quads > 0) {
+    r.Warn("fold_over", std::to_string(flat->folded_quads) +
+                            " cells of the sheet folded over as it flattened: the restored page "
+                            "is wrong there");
+  }
+  const std::string dir = PageDir(results, page);
+  Status s = MakeDirectories(dir);
+  if (s.ok()) s = WriteSheets(dir, mesh, flat->flat);
+  if (s.ok()) r.outputs = {PageFile(page, "mesh.ply"), PageFile(page, "flat.ply")};
   return stage.Finish(s);
 }
 
-StageReport RestoreStage(const cv::Mat& texture, const Mesh& mesh,
+StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
-                         const RestoreOptions& options, const std::string& results,
+                         const RestoreOptions& options, const WarningLimits& limits,
+                         const std::string& results, const std::string& page,
                          RestoreResult* restored) {
-  Stage stage("restore");
+  Stage stage("restore", page);
   StageReport& r = stage.report();
   r.Text("options", "view", ToString(options.view));
-  *restored = Restore(texture, mesh, flat, camera, options);
+  *restored = Restore(texture, mesh, flat, camera, options, page_mask);
   if (!restored->status.ok()) return stage.Finish(restored->status);
-  r.Number("options", "dpi", restored->dpi);
+  if (page.empty()) r.Number("options", "dpi", restored->dpi);
   r.Number("restored", "width", restored->image.cols);
   r.Number("restored", "height", restored->image.rows);
-  Status s = WriteRestored(results, *restored);
+  r.Number("restored", "dpi", restored->dpi);
+  r.Number("restored", "rotation_deg", restored->rotation_deg);
+  if (restored->view == RestoreView::kOrthographic && !restored->mask.empty()) {
+    const cv::Rect leaf = cv::boundingRect(restored->mask);
+    const double mm = 25.4 / restored->dpi;
+    const cv::Size2d size(leaf.width * mm, leaf.height * mm);
+    r.Number("restored", "leaf_width_mm", size.width);
+    r.Number("restored", "leaf_height_mm", size.height);
+    const cv::Size2d& want = limits.expected_leaf_mm;
+    if (want.width > 0 && want.height > 0) {
+      // Either way round: the operator may not know how the leaf lies.
+      auto off = [&](double a, double b) { return std::fabs(a / b - 1); };
+      const double as_is = std::max(off(size.width, want.width), off(size.height, want.height));
+      const double turned = std::max(off(size.width, want.height), off(size.height, want.width));
+      if (std::min(as_is, turned) > limits.size_tolerance) {
+        r.Warn("size_unexpected", "the leaf measures " + Fixed(size.width, 0) + " x " +
+                                      Fixed(size.height, 0) + " mm flat, not the " +
+                                      Fixed(want.width, 0) + " x " + Fixed(want.height, 0) +
+                                      " mm expected");
+      }
+    }
+  }
+  const std::string dir = PageDir(results, page);
+  Status s = MakeDirectories(dir);
+  if (s.ok()) s = WriteRestored(dir, *restored);
   if (!s.ok()) return stage.Finish(s);
-  r.outputs.push_back("restored.tif");
-  r.outputs.push_back("restored.json");
-  s = stage.Picture(results, "texture.png", texture);
-  if (s.ok()) s = stage.Picture(results, "grid.png", GridOverPage(mesh, flat, *restored, camera));
+  r.outputs.push_back(PageFile(page, "restored.tif"));
+  if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));
+  r.outputs.push_back(PageFile(page, "restored.json"));
+  s = stage.Picture(results, "grid", GridOverPage(mesh, flat, *restored, camera));
   if (s.ok()) {
-    s = stage.Picture(results, "strain.png", StrainPicture(mesh, flat, *restored, camera));
+    s = stage.Picture(results, "strain", StrainPicture(mesh, flat, *restored, camera));
   }
   if (s.ok()) {
-    s = stage.Picture(results, "before_after.png",
-                      BeforeAfter(texture, mesh, flat, *restored, camera));
+    s = stage.Picture(results, "before_after", BeforeAfter(texture, mesh, flat, *restored, camera));
   }
   return stage.Finish(s);
 }

@@ -1,9 +1,10 @@
-// The processing of a scan as five stages (Brown & Seales 2004, sections 3.2-3.10): decode,
-// triangulate, mesh (find the page and build the sheet), flatten, restore. Each stage takes
-// typed options, computes its product, writes its files to the scan's results folder and
-// returns a StageReport (its status, options, figures and outputs). `vellum process` runs them
-// in a row (RunPipeline, pipeline/process.h); each processing daemon runs its own and carries
-// the reports on with its product. One function per stage, so both give the same files.
+// The processing of a scan as stages (Brown & Seales 2004, sections 3.2-3.10): decode,
+// triangulate, outline (find the leaf, or the two pages of a spread), then for each page mesh
+// (build the sheet), flatten and restore. Each stage takes typed options, computes its
+// product, writes its files to the scan's results folder and returns a StageReport (its status,
+// options, figures, outputs and warnings). `vellum process` runs them in a row (RunPipeline,
+// pipeline/process.h); each processing daemon runs its own and carries the reports on with its
+// product. One function per stage, so both give the same files.
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -15,22 +16,48 @@
 #include "core/geometry/calibration.h"
 #include "core/geometry/triangulate.h"
 #include "core/mesh/mesh.h"
+#include "core/outline/outline.h"
 #include "core/patterns/scan.h"
 #include "core/restore/restore.h"
 #include "pipeline/report.h"
 
 namespace vellum {
 
+// When a result is doubtful (a warning in report.json, the report and on the status channel,
+// and `vellum process` exits with status 3).
+struct WarningLimits {
+  double min_outline_confidence = 0.9;  // Share of the leaf's rim set apart from its surround.
+  double max_mean_strain = 0.002;       // Mean relative spring-length error after flattening.
+  double max_strain = 0.05;             // Largest relative spring-length error.
+  cv::Size2d expected_leaf_mm{0, 0};    // The leaf's size as the operator expects it (0: none).
+  double size_tolerance = 0.1;          // Relative difference from it that is doubtful.
+};
+
 // Every stage's options: what `vellum process` takes, and each daemon its own part of.
 struct PipelineOptions {
+  // The stages' defaults, and the restored page cropped to the leaf and set upright.
+  PipelineOptions() {
+    restore.deskew = true;
+    restore.crop_to_leaf = true;
+  }
+
   DecodeOptions decode;
   TriangulateOptions triangulate;
+  OutlineOptions outline;
   MeshOptions mesh;
+  bool auto_grid = true;            // Choose each sheet's grid from its shape (mesh.grid at least).
+  double max_warp_error_px = 0.05;  // The chosen grid keeps the warp this close, camera pixels.
   FlattenOptions flatten;
   RestoreOptions restore;
+  WarningLimits limits;
 
   bool Check(std::string* why) const;
 };
+
+// A page's name ("" for a single leaf; "left", "right" for the pages of a spread) and the
+// folder its files go to (the results folder, or results/pages/<name>).
+std::string PageName(const Outline& outline, size_t page);
+std::string PageDir(const std::string& results, const std::string& page);
 
 // Decode (3.2): the frames of `scan` -> projector coordinates per camera pixel, by `decoder`
 // (which keeps its buffers between scans). Writes nothing.
@@ -42,20 +69,33 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
                              const TriangulateOptions& options, const std::string& results,
                              PointMap* map);
 
-// Mesh (3.5-3.6): the page found in the texture, and the sheet built over the point map there.
-// Writes nothing (the sheet is written with its flattened twin).
-StageReport MeshStage(const cv::Mat& points, const cv::Mat& texture, const CameraModel& camera,
-                      const MeshOptions& options, Mesh* mesh);
+// Outline: the leaf (or a spread's two pages) in the point map and the texture
+// (core/outline). Writes report/texture.png and report/outline.png. Warns of a leaf that runs off
+// the view and of an outline of low confidence.
+StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
+                         const OutlineOptions& options, const WarningLimits& limits,
+                         const std::string& results, Outline* outline);
 
-// Flatten (3.7-3.8): the sheet onto the plane. Writes mesh.ply and flat.ply.
+// Mesh (3.5-3.6): the sheet over one page (`page_mask`, camera pixels) of the point map, its
+// grid chosen from the page's shape when `options.auto_grid`. Writes nothing (the sheet is
+// written with its flattened twin).
+StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const CameraModel& camera,
+                      const PipelineOptions& options, const std::string& page, Mesh* mesh);
+
+// Flatten (3.7-3.8): the sheet onto the plane. Writes mesh.ply and flat.ply in the page's
+// folder. Warns of strain and fold-over above the limits.
 StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
-                         const std::string& results, FlattenResult* flat);
+                         const WarningLimits& limits, const std::string& results,
+                         const std::string& page, FlattenResult* flat);
 
-// Restore (3.10): the texture through the flattened sheet. Writes restored.tif,
-// restored.json and the report's pictures of the page (texture, grid, strain, before/after).
-StageReport RestoreStage(const cv::Mat& texture, const Mesh& mesh,
+// Restore (3.10): the texture through the flattened sheet, with the page's mask (cropped to the
+// leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
+// restored.json in the page's folder and the report's pictures of the page (grid, strain,
+// before/after). Warns of a leaf whose size is not the one expected.
+StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
-                         const RestoreOptions& options, const std::string& results,
+                         const RestoreOptions& options, const WarningLimits& limits,
+                         const std::string& results, const std::string& page,
                          RestoreResult* restored);
 
 }  // namespace vellum

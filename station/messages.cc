@@ -235,6 +235,7 @@ std::string ChunkSet::Missing() const {
 stage_report_t ToMessage(const StageReport& report) {
   stage_report_t m;
   m.stage = report.stage;
+  m.page = report.page;
   m.seconds = report.seconds;
   for (const ReportValue& v : report.values) {
     m.sections.push_back(v.section);
@@ -246,6 +247,11 @@ stage_report_t ToMessage(const StageReport& report) {
   m.nvalues = static_cast<int32_t>(m.keys.size());
   m.outputs = report.outputs;
   m.noutputs = static_cast<int32_t>(m.outputs.size());
+  for (const Warning& w : report.warnings) {
+    m.warning_codes.push_back(w.code);
+    m.warning_messages.push_back(w.message);
+  }
+  m.nwarnings = static_cast<int32_t>(m.warning_codes.size());
   return m;
 }
 
@@ -256,6 +262,7 @@ Status FromMessage(const stage_report_t& m, StageReport* report) {
     return Status::Error("stage report " + m.stage + ": bad time");
   }
   r.stage = m.stage;
+  r.page = m.page;
   r.seconds = m.seconds;
   for (int k = 0; k < m.nvalues; ++k) {
     if (m.sections[k].empty() || m.keys[k].empty()) {
@@ -271,6 +278,12 @@ Status FromMessage(const stage_report_t& m, StageReport* report) {
     r.values.push_back(std::move(v));
   }
   r.outputs = m.outputs;
+  for (int k = 0; k < m.nwarnings; ++k) {
+    if (m.warning_codes[k].empty()) {
+      return Status::Error("stage report " + m.stage + ": a warning without a code");
+    }
+    r.warnings.push_back({m.warning_codes[k], m.warning_messages[k]});
+  }
   r.status = Status::Ok();
   *report = std::move(r);
   return Status::Ok();
@@ -444,7 +457,21 @@ Status AddChunk(const point_cloud_t& m, cv::Mat* points) {
 
 std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
                                const std::vector<cv::Point2d>& flat,
-                               const std::vector<StageReport>& stages) {
+                               const std::vector<StageReport>& stages, const SheetPage& page) {
+  // The mask's runs of page pixels: row, first column, length.
+  std::vector<int32_t> runs;
+  for (int v = 0; v < page.mask.rows; ++v) {
+    const uint8_t* row = page.mask.ptr<uint8_t>(v);
+    for (int u = 0; u < page.mask.cols;) {
+      if (!row[u]) {
+        ++u;
+        continue;
+      }
+      const int first = u;
+      while (u < page.mask.cols && row[u]) ++u;
+      runs.insert(runs.end(), {v, first, u - first});
+    }
+  }
   const auto chunks = RowChunks(mesh.rows, static_cast<size_t>(mesh.cols) * 41);
   std::vector<mesh_t> out(chunks.size());
   for (size_t c = 0; c < chunks.size(); ++c) {
@@ -471,12 +498,19 @@ std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_spri
       m.flat[2 * k] = flat[node].x;
       m.flat[2 * k + 1] = flat[node].y;
     }
+    m.page = page.name;
+    m.page_index = page.index;
+    m.page_count = page.count;
+    m.mask_width = page.mask.cols;
+    m.mask_height = page.mask.rows;
+    if (c == 0) m.runs = runs;
+    m.nruns = static_cast<int32_t>(m.runs.size());
     SetStages(stages, &m);
   }
   return out;
 }
 
-Status AddChunk(const mesh_t& m, Mesh* mesh, std::vector<cv::Point2d>* flat) {
+Status AddChunk(const mesh_t& m, Mesh* mesh, std::vector<cv::Point2d>* flat, SheetPage* page) {
   Status s = CheckRows("FLAT_MESH", m.cols, m.rows, m.row_begin, m.row_count, m.n, m.chunk_index,
                        m.chunk_count);
   if (!s.ok()) return s;
@@ -511,6 +545,34 @@ Status AddChunk(const mesh_t& m, Mesh* mesh, std::vector<cv::Point2d>* flat) {
       return Status::Error("FLAT_MESH: node " + std::to_string(node) +
                            " has a non-finite flat position");
     }
+  }
+  if (m.page_count < 1 || m.page_count > 2 || m.page_index < 0 || m.page_index >= m.page_count) {
+    return Status::Error("FLAT_MESH: page " + std::to_string(m.page_index) + " of " +
+                         std::to_string(m.page_count));
+  }
+  if (m.mask_width <= 0 || m.mask_height <= 0 || m.mask_width > 65535 || m.mask_height > 65535 ||
+      m.nruns % 3 != 0) {
+    return Status::Error("FLAT_MESH: bad page mask (" + std::to_string(m.mask_width) + "x" +
+                         std::to_string(m.mask_height) + ", " + std::to_string(m.nruns) +
+                         " run values)");
+  }
+  if (page->mask.empty()) {
+    page->mask = cv::Mat::zeros(m.mask_height, m.mask_width, CV_8U);
+  } else if (page->mask.size() != cv::Size(m.mask_width, m.mask_height)) {
+    return Status::Error("FLAT_MESH: chunk " + std::to_string(m.chunk_index) +
+                         " disagrees with the first chunk on the page mask's size");
+  }
+  page->name = m.page;
+  page->index = m.page_index;
+  page->count = m.page_count;
+  for (int k = 0; k < m.nruns; k += 3) {
+    const int v = m.runs[k], first = m.runs[k + 1], length = m.runs[k + 2];
+    if (v < 0 || v >= m.mask_height || first < 0 || length <= 0 || length > m.mask_width - first) {
+      return Status::Error("FLAT_MESH: page mask run " + std::to_string(k / 3) +
+                           " lies outside the " + std::to_string(m.mask_width) + "x" +
+                           std::to_string(m.mask_height) + " mask");
+    }
+    page->mask(cv::Rect(first, v, length, 1)).setTo(255);
   }
   return Status::Ok();
 }

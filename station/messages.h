@@ -92,12 +92,20 @@ std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
                                       const std::vector<StageReport>& stages);
 Status AddChunk(const point_cloud_t& msg, cv::Mat* points);
 
-// The flattened sheet as nodes (kind, point, flat); the receiver rebuilds springs and quads
-// with ConnectSheet.
+// Which page of its scan a sheet is, and the page's mask (CV_8U, camera pixels).
+struct SheetPage {
+  std::string name;  // "" for a single leaf; "left", "right" on a spread.
+  int index = 0, count = 1;
+  cv::Mat mask;
+};
+
+// The flattened sheet of one page as nodes (kind, point, flat), with the page's mask as runs;
+// the receiver rebuilds springs and quads with ConnectSheet.
 std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
                                const std::vector<cv::Point2d>& flat,
-                               const std::vector<StageReport>& stages);
-// Copies a chunk's nodes into *mesh (cols, rows, kind, point) and *flat.
-Status AddChunk(const mesh_t& msg, Mesh* mesh, std::vector<cv::Point2d>* flat);
+                               const std::vector<StageReport>& stages, const SheetPage& page);
+// Copies a chunk's nodes into *mesh (cols, rows, kind, point) and *flat, and its page (the
+// mask from chunk 0) into *page.
+Status AddChunk(const mesh_t& msg, Mesh* mesh, std::vector<cv::Point2d>* flat, SheetPage* page);
 
 }  // namespace vellum::station

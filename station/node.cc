@@ -198,6 +198,10 @@ bool Node::Post(std::function<void()> work, const std::string& what) {
 
 size_t Node::Pending() const { return pending_; }
 
+void Node::Drain() const {
+  while (pending_ > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+}
+
 void Node::WorkerLoop() {
   for (;;) {
     std::function<void()> work;
@@ -239,7 +243,7 @@ int Node::Run(const std::function<void()>& tick, int tick_ms) {
   NotifySystemd("STOPPING=1");
   Log("stopping: finishing " + std::to_string(Pending()) + " posted job(s)");
   SetState("stopping");
-  while (Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  Drain();
   Log("stopped");
   return 0;
 }

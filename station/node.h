@@ -138,6 +138,9 @@ class Node {
   bool Post(std::function<void()> work, const std::string& what = "a job");
   // Work posted and not yet finished.
   size_t Pending() const;
+  // Waits until every job posted so far has run. A daemon's node class calls it as it is
+  // destroyed, so that no job of it runs after its members are gone.
+  void Drain() const;
 
   // Handles LCM messages and calls `tick` about every tick_ms until SIGTERM/SIGINT or Stop();
   // then finishes the posted work and returns 0.

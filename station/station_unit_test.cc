@@ -160,11 +160,23 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   auto project = [&](const cv::Vec3d& x) { return rig.camera.Project(x); };
   ConnectSheet(true, project, &mesh);
   ASSERT_TRUE(mesh.status.ok()) << mesh.status.message();
+  SheetPage page;
+  page.name = "right";
+  page.index = 1;
+  page.count = 2;
+  page.mask = cv::Mat::zeros(120, 160, CV_8U);
+  cv::circle(page.mask, {70, 60}, 40, cv::Scalar(255), cv::FILLED);
+  cv::circle(page.mask, {70, 60}, 10, cv::Scalar(0), cv::FILLED);  // A hole.
   Mesh received;
   std::vector<cv::Point2d> received_flat;
-  for (const mesh_t& m : ToMessages(9, mesh, true, flat, {})) {
-    ASSERT_TRUE(AddChunk(m, &received, &received_flat).ok());
+  SheetPage received_page;
+  for (const mesh_t& m : ToMessages(9, mesh, true, flat, {}, page)) {
+    ASSERT_TRUE(AddChunk(m, &received, &received_flat, &received_page).ok());
   }
+  EXPECT_EQ(received_page.name, "right");
+  EXPECT_EQ(received_page.index, 1);
+  EXPECT_EQ(received_page.count, 2);
+  EXPECT_TRUE(SameBits(received_page.mask, page.mask));
   ConnectSheet(true, project, &received);
   ASSERT_TRUE(received.status.ok());
   EXPECT_EQ(received.springs.size(), mesh.springs.size());
@@ -172,11 +184,17 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   EXPECT_EQ(received.pixel, mesh.pixel);
   EXPECT_EQ(received_flat, flat);
 
-  mesh_t bad = ToMessages(9, mesh, true, flat, {})[0];
+  mesh_t bad = ToMessages(9, mesh, true, flat, {}, page)[0];
   bad.kind[3] = 9;
   Mesh m2;
   std::vector<cv::Point2d> f2;
-  EXPECT_NE(AddChunk(bad, &m2, &f2).message().find("unknown kind 9"), std::string::npos);
+  SheetPage p2;
+  EXPECT_NE(AddChunk(bad, &m2, &f2, &p2).message().find("unknown kind 9"), std::string::npos);
+  bad = ToMessages(9, mesh, true, flat, {}, page)[0];
+  bad.runs[2] = 1000;  // A run past the mask's edge.
+  Mesh m3;
+  SheetPage p3;
+  EXPECT_NE(AddChunk(bad, &m3, &f2, &p3).message().find("lies outside"), std::string::npos);
 }
 
 TEST(Messages, CalibrationRoundTripsAndNaNIsRejected) {

@@ -125,10 +125,11 @@ struct SmallProducts {
   std::string results;  // Where the stages wrote their files.
   DecodeResult decoded;
   PointMap map;
+  Outline outline;
   Mesh mesh;
   FlattenResult flat;
   RestoreResult restored;
-  std::vector<StageReport> stages;  // decode, triangulate, mesh, flatten, restore.
+  std::vector<StageReport> stages;  // decode, triangulate, outline, mesh, flatten, restore.
 };
 inline const SmallProducts& SmallScanProducts() {
   static const SmallProducts products = [] {
@@ -138,15 +139,17 @@ inline const SmallProducts& SmallScanProducts() {
                     .string();
     std::filesystem::create_directories(p.results);
     const Calibration rig = QuickRig();
+    const PipelineOptions o;
     Decoder decoder;
     p.stages.push_back(DecodeStage(SmallScan(), &decoder, &p.decoded));
     p.stages.push_back(
-        TriangulateStage(p.decoded, Triangulator(rig), TriangulateOptions(), p.results, &p.map));
-    p.stages.push_back(
-        MeshStage(p.map.points, SmallScan().texture, rig.camera, MeshOptions(), &p.mesh));
-    p.stages.push_back(FlattenStage(p.mesh, FlattenOptions(), p.results, &p.flat));
-    p.stages.push_back(RestoreStage(SmallScan().texture, p.mesh, p.flat.flat, rig.camera,
-                                    RestoreOptions(), p.results, &p.restored));
+        TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, p.results, &p.map));
+    p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, o.outline, o.limits,
+                                    p.results, &p.outline));
+    p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));
+    p.stages.push_back(FlattenStage(p.mesh, o.flatten, o.limits, p.results, "", &p.flat));
+    p.stages.push_back(RestoreStage(SmallScan().texture, p.outline.pages[0], p.mesh, p.flat.flat,
+                                    rig.camera, o.restore, o.limits, p.results, "", &p.restored));
     for (const StageReport& stage : p.stages) {
       if (!stage.status.ok()) throw std::runtime_error(stage.stage + ": " + stage.status.message());
     }

@@ -131,14 +131,14 @@ class StationTest : public ::testing::Test {
                       &out),
               0)
         << out;
-    for (const char* file :
-         {"restored.tif", "flat.ply", "mesh.ply", "points.ply", "restored.json", "depth.png"}) {
+    for (const char* file : {"restored.tif", "restored_mask.png", "flat.ply", "mesh.ply",
+                             "points.ply", "restored.json", "depth.png"}) {
       EXPECT_EQ(ReadText(results + "/" + file), ReadText(dir_ + "/process/" + file))
           << file << " differs between the daemons and vellum process";
     }
     // The restorer's report has every picture, the depth map from the bus's POINT_CLOUD too.
-    for (const char* picture :
-         {"texture.png", "valid.png", "depth.png", "grid.png", "strain.png", "before_after.png"}) {
+    for (const char* picture : {"texture.png", "outline.png", "valid.png", "depth.png", "grid.png",
+                                "strain.png", "before_after.png"}) {
       EXPECT_TRUE(fs::exists(results + "/report/" + picture)) << picture;
     }
     EXPECT_TRUE(fs::exists(results + "/report.html"));

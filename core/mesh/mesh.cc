@@ -217,6 +217,43 @@ void ConnectSheet(bool bend_springs, const std::function<cv::Point2d(const cv::V
   mesh.status = Status::Ok();
 }
 
+double WarpError(const Mesh& mesh) {
+  std::vector<double> errors;
+  auto measured = [&](int i, int j) {
+    return i >= 0 && j >= 0 && i < mesh.cols && j < mesh.rows &&
+           mesh.kind[mesh.Index(i, j)] == NodeKind::kMeasured;
+  };
+  for (int j = 0; j < mesh.rows; ++j) {
+    for (int i = 0; i < mesh.cols; ++i) {
+      if (!measured(i, j)) continue;
+      const cv::Point2d c = mesh.pixel[mesh.Index(i, j)];
+      double worst = 0;
+      if (measured(i - 1, j) && measured(i + 1, j)) {
+        worst = std::max(worst, cv::norm(mesh.pixel[mesh.Index(i - 1, j)] +
+                                         mesh.pixel[mesh.Index(i + 1, j)] - 2 * c));
+      }
+      if (measured(i, j - 1) && measured(i, j + 1)) {
+        worst = std::max(worst, cv::norm(mesh.pixel[mesh.Index(i, j - 1)] +
+                                         mesh.pixel[mesh.Index(i, j + 1)] - 2 * c));
+      }
+      errors.push_back(worst / 8);
+    }
+  }
+  if (errors.empty()) return 0;
+  const size_t k = std::min(errors.size() - 1, errors.size() * 99 / 100);
+  std::nth_element(errors.begin(), errors.begin() + k, errors.end());
+  return errors[k];
+}
+
+cv::Size GridForError(const Mesh& mesh, double max_error_px, int max_nodes) {
+  const double error = WarpError(mesh);
+  const double scale = error > max_error_px ? std::sqrt(error / max_error_px) : 1.0;
+  auto finer = [&](int n) {
+    return std::clamp(static_cast<int>(std::ceil((n - 1) * scale)) + 1, n, max_nodes);
+  };
+  return {finer(mesh.cols), finer(mesh.rows)};
+}
+
 Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
                const std::function<cv::Point2d(const cv::Vec3d&)>& project) {
   Mesh mesh;

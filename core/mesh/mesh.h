@@ -60,6 +60,16 @@ cv::Mat SegmentPage(const cv::Mat& texture, double fraction = 0.6);
 Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
                const std::function<cv::Point2d(const cv::Vec3d&)>& project);
 
+// How far the sheet's piecewise-bilinear warp strays from the surface, in camera pixels: the
+// interpolation error between nodes is an eighth of the second difference of the nodes' camera
+// pixels (along rows and columns of the grid); the 99th percentile over the page's nodes.
+double WarpError(const Mesh& mesh);
+
+// The grid that brings the warp error of `mesh` (built at its grid) to `max_error_px`: the
+// error falls as the square of the node spacing. Never coarser than the mesh's grid; at most
+// `max_nodes` each way.
+cv::Size GridForError(const Mesh& mesh, double max_error_px, int max_nodes = 400);
+
 // The sheet's topology from its nodes: given cols, rows, kind and point, sets pixel (the
 // projection of each active node), the node counts, the springs (rest lengths from the 3D
 // distances) and the quads, and the status. BuildMesh ends with it; a receiver of a sheet

@@ -6,6 +6,7 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/text.h"
 #include "core/mesh/mesh.h"
 
 namespace vellum {
@@ -338,8 +339,13 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     out.status = Status::Error("outline options: " + why);
     return out;
   }
-  if (points.type() != CV_32FC3 || points.empty() || texture.size() != points.size()) {
-    out.status = Status::Error("outline input: a CV_32FC3 point map and a texture of its size");
+  if (points.type() != CV_32FC3 || points.empty()) {
+    out.status = Status::Error("outline input: the point map must be CV_32FC3");
+    return out;
+  }
+  if (texture.size() != points.size()) {
+    out.status = Status::Error("the texture is " + SizeText(texture.size()) + ", the point map " +
+                               SizeText(points.size()));
     return out;
   }
   const cv::Size size = points.size();

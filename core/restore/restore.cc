@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace vellum {
 namespace {
@@ -119,9 +120,58 @@ double NativeDpi(const CameraModel& camera) {
   return std::max(1.0, std::round(25.4 / mm_per_px));
 }
 
+double UprightAngle(const cv::Mat& mask) {
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  if (contours.empty()) return 0;
+  const auto& outline = *std::max_element(
+      contours.begin(), contours.end(),
+      [](const auto& a, const auto& b) { return cv::contourArea(a) < cv::contourArea(b); });
+  // The outline's segments, their directions folded into [0, 90) degrees, weighted by length.
+  std::vector<cv::Point> poly;
+  cv::approxPolyDP(outline, poly, 1.5, true);
+  constexpr int kBins = 180;  // Half-degree bins.
+  std::vector<double> weight(kBins, 0);
+  double perimeter = 0;
+  std::vector<std::pair<double, double>> segments;  // (direction, length)
+  for (size_t k = 0; k < poly.size(); ++k) {
+    const cv::Point d = poly[(k + 1) % poly.size()] - poly[k];
+    const double length = std::hypot(d.x, d.y);
+    double angle = std::atan2(d.y, d.x) * 180 / M_PI;
+    angle = std::fmod(angle + 360.0, 90.0);
+    segments.emplace_back(angle, length);
+    weight[std::min(kBins - 1, static_cast<int>(angle * 2))] += length;
+    perimeter += length;
+  }
+  // The strongest direction, within 2 degrees (a circular window over the folded angles).
+  int best = 0;
+  double best_weight = -1;
+  for (int b = 0; b < kBins; ++b) {
+    double w = 0;
+    for (int k = -4; k <= 4; ++k) w += weight[(b + k + kBins) % kBins];
+    if (w > best_weight) best_weight = w, best = b;
+  }
+  double angle;
+  if (best_weight >= 0.5 * perimeter) {
+    // Straight edges: their length-weighted mean direction about the peak.
+    const double peak = (best + 0.5) / 2;
+    double sum = 0, total = 0;
+    for (const auto& [a, l] : segments) {
+      double d = a - peak;
+      d -= 90.0 * std::round(d / 90.0);
+      if (std::fabs(d) <= 2.0) sum += d * l, total += l;
+    }
+    angle = peak + (total > 0 ? sum / total : 0);
+  } else {
+    angle = cv::minAreaRect(outline).angle;
+  }
+  angle -= 90.0 * std::round(angle / 90.0);  // Into [-45, 45].
+  return angle;
+}
+
 RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
                       const std::vector<cv::Point2d>& flat, const CameraModel& camera,
-                      const RestoreOptions& options) {
+                      const RestoreOptions& options, const cv::Mat& leaf) {
   RestoreResult result;
   std::string why;
   if (!options.Check(&why)) {
@@ -137,6 +187,10 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     result.status = Status::Error("restore needs a built mesh and its flattened positions");
     return result;
   }
+  if (!leaf.empty() && (leaf.type() != CV_8U || leaf.size() != texture.size())) {
+    result.status = Status::Error("the leaf mask must be CV_8U of the texture's size");
+    return result;
+  }
   result.view = options.view;
   // Destination pixel of every node.
   std::vector<cv::Point2d> dest(flat.size());
@@ -144,17 +198,32 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   if (options.view == RestoreView::kOrthographic) {
     result.dpi = options.dpi > 0 ? options.dpi : NativeDpi(camera);
     const double s = result.dpi / 25.4;  // Pixels per mm.
+    if (options.deskew && !leaf.empty()) {
+      // The leaf's outline, flat: its mask restored alone at 2 pixels per mm (cheap), turned
+      // upright. In that image rows run along -y, so a turn of theta there is -theta flat.
+      RestoreOptions probe;
+      probe.dpi = 50.8;
+      probe.margin_mm = 2;
+      const RestoreResult low = Restore(leaf, mesh, flat, camera, probe);
+      if (low.status.ok()) result.rotation_deg = UprightAngle(low.image > 127);
+    }
+    // The flat page turned by rotation_deg (counter-clockwise), then laid out.
+    const double r = result.rotation_deg * M_PI / 180, c = std::cos(r), n = std::sin(r);
+    auto turned = [&](const cv::Point2d& p) {
+      return cv::Point2d(c * p.x - n * p.y, n * p.x + c * p.y);
+    };
     double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
     for (size_t k = 0; k < flat.size(); ++k) {
       if (!mesh.Active(static_cast<int>(k))) continue;
-      x0 = std::min(x0, flat[k].x);
-      x1 = std::max(x1, flat[k].x);
-      y0 = std::min(y0, flat[k].y);
-      y1 = std::max(y1, flat[k].y);
+      const cv::Point2d p = turned(flat[k]);
+      x0 = std::min(x0, p.x);
+      x1 = std::max(x1, p.x);
+      y0 = std::min(y0, p.y);
+      y1 = std::max(y1, p.y);
     }
     // Columns along +x, rows along -y: the camera's view from above, never mirrored.
     const double m = options.margin_mm;
-    result.pixel_from_flat = cv::Matx23d(s, 0, s * (m - x0), 0, -s, s * (y1 + m));
+    result.pixel_from_flat = cv::Matx23d(s * c, -s * n, s * (m - x0), -s * n, -s * c, s * (y1 + m));
     size = cv::Size(static_cast<int>(std::ceil(s * (x1 - x0 + 2 * m))) + 1,
                     static_cast<int>(std::ceil(s * (y1 - y0 + 2 * m))) + 1);
     if (static_cast<double>(size.width) * size.height > 400e6) {
@@ -199,6 +268,12 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     }
   }
   result.image = cv::Mat::zeros(size, texture.type());
+  if (!leaf.empty()) {
+    cv::Mat restored_leaf = cv::Mat::zeros(size, CV_8U);
+    const cv::Mat leaf255 = leaf != 0;
+    Render<uint8_t, 1>(leaf255, tris, &restored_leaf);
+    result.mask = restored_leaf >= 128;
+  }
   switch (texture.type()) {
     case CV_8UC1:
       Render<uint8_t, 1>(texture, tris, &result.image);
@@ -212,6 +287,18 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     case CV_16UC3:
       Render<uint16_t, 3>(texture, tris, &result.image);
       break;
+  }
+  if (options.crop_to_leaf && options.view == RestoreView::kOrthographic && !result.mask.empty() &&
+      cv::countNonZero(result.mask) > 0) {
+    // The leaf plus the margin: the map to pixels moves with the crop.
+    const int m = static_cast<int>(std::ceil(options.margin_mm * result.dpi / 25.4));
+    cv::Rect box = cv::boundingRect(result.mask);
+    box = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) &
+          cv::Rect(0, 0, size.width, size.height);
+    result.image = result.image(box).clone();
+    result.mask = result.mask(box).clone();
+    result.pixel_from_flat(0, 2) -= box.x;
+    result.pixel_from_flat(1, 2) -= box.y;
   }
   result.status = Status::Ok();
   return result;

@@ -23,8 +23,13 @@ bool ParseRestoreView(const std::string& text, RestoreView* view);
 struct RestoreOptions {
   RestoreView view = RestoreView::kOrthographic;
   double dpi = 0;             // Orthographic resolution, dots per inch; 0 = NativeDpi(camera).
-  double margin_mm = 3.0;     // Orthographic: border around the flattened sheet, mm.
+  double margin_mm = 3.0;     // Orthographic: border around the flattened sheet (or leaf), mm.
   int max_supersampling = 8;  // Samples per pixel side where the warp shrinks, at most.
+  // Orthographic, with the leaf's mask (Restore's `leaf`): turn the page so the leaf stands
+  // upright (its straight edges along the image's axes, else its minimum-area rectangle's), and
+  // crop to the leaf plus margin_mm.
+  bool deskew = false;
+  bool crop_to_leaf = false;
 
   bool Check(std::string* why) const;
 };
@@ -32,9 +37,11 @@ struct RestoreOptions {
 struct RestoreResult {
   Status status = Status::Error("restoration not run");
   cv::Mat image;  // Same type as the texture (8 or 16 bit, gray or BGR); 0 outside.
+  cv::Mat mask;   // With a leaf mask: CV_8U, 255 where the restored pixel is leaf.
   RestoreView view = RestoreView::kOrthographic;
   double dpi = 0;                                      // Orthographic: the resolution used.
   cv::Matx23d pixel_from_flat = cv::Matx23d::zeros();  // Orthographic: flat mm -> pixel.
+  double rotation_deg = 0;  // Orthographic: the turn applied to the flat page (deskew), degrees.
 };
 
 // The camera's sampling of the table plane at the image centre, rounded to a whole dpi (so
@@ -42,9 +49,16 @@ struct RestoreResult {
 double NativeDpi(const CameraModel& camera);
 
 // `flat` holds the flattened (x, y) of every node, in mm, aligned to the page's original
-// position (as Flatten returns it).
+// position (as Flatten returns it). `leaf` (optional, CV_8U of the texture's size, nonzero on
+// the leaf) is restored alongside into RestoreResult::mask.
 RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
                       const std::vector<cv::Point2d>& flat, const CameraModel& camera,
-                      const RestoreOptions& options = RestoreOptions());
+                      const RestoreOptions& options = RestoreOptions(),
+                      const cv::Mat& leaf = cv::Mat());
+
+// The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the
+// direction of its straight edges when they make up most of its outline, else the sides of its
+// minimum-area rectangle.
+double UprightAngle(const cv::Mat& mask);
 
 }  // namespace vellum

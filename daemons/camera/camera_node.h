@@ -19,6 +19,8 @@ struct CameraNodeOptions {
 class CameraNode {
  public:
   CameraNode(Node* node, std::unique_ptr<Camera> camera, const CameraNodeOptions& options);
+  // Waits for the jobs it posted: none runs after it is gone.
+  ~CameraNode() { node_->Drain(); }
   // On the LCM thread, often: posts a live preview frame when it is time and no scan runs.
   void Tick();
 

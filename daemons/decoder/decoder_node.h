@@ -28,6 +28,8 @@ struct DecoderNodeOptions {
 class DecoderNode {
  public:
   DecoderNode(Node* node, const DecoderNodeOptions& options);
+  // Waits for the jobs it posted: none runs after it is gone.
+  ~DecoderNode() { node_->Drain(); }
 
   // On the LCM thread, about every tick: gives up an incomplete scan whose captures stopped.
   void Tick();

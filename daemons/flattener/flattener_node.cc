@@ -23,7 +23,7 @@ FlattenerNode::FlattenerNode(Node* node, const FlattenerNodeOptions& options)
           }) {}
 
 void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
-  node_->SetState("busy", id, "building the sheet");
+  node_->SetState("busy", id, "finding the leaf");
   std::vector<StageReport> stages;
   Status s = FromMessages(last.stages, &stages);
   if (!s.ok()) return node_->FailScan(id, "POINT_CLOUD: " + s.message());
@@ -33,23 +33,40 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   cv::Mat texture;
   s = textures_.Get(id, &texture);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  Mesh mesh;
-  stages.push_back(MeshStage(points_, texture, calibration.camera, options_.mesh, &mesh));
-  if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-  node_->SetState("busy", id, "flattening");
+  const PipelineOptions& o = options_.pipeline;
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  FlattenResult flat;
-  stages.push_back(FlattenStage(mesh, options_.flatten, results, &flat));
+  Outline outline;
+  stages.push_back(OutlineStage(points_, texture, o.outline, o.limits, results, &outline));
   if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-  std::vector<mesh_t> chunks = ToMessages(id, mesh, options_.mesh.bend_springs, flat.flat, stages);
-  node_->PublishChunks(channel::kFlatMesh, &chunks);
+  const size_t common = stages.size();  // Every page's sheet carries the scan's reports.
+  for (size_t k = 0; k < outline.pages.size(); ++k) {
+    SheetPage page;
+    page.name = PageName(outline, k);
+    page.index = static_cast<int>(k);
+    page.count = static_cast<int>(outline.pages.size());
+    page.mask = outline.pages[k];
+    const std::string of = page.name.empty() ? "" : " of the " + page.name + " page";
+    node_->SetState("busy", id, "building the sheet" + of);
+    stages.resize(common);
+    Mesh mesh;
+    stages.push_back(MeshStage(points_, page.mask, calibration.camera, o, page.name, &mesh));
+    if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
+    node_->SetState("busy", id, "flattening the sheet" + of);
+    FlattenResult flat;
+    stages.push_back(FlattenStage(mesh, o.flatten, o.limits, results, page.name, &flat));
+    if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
+    std::vector<mesh_t> chunks = ToMessages(id, mesh, o.mesh.bend_springs, flat.flat, stages, page);
+    node_->PublishChunks(channel::kFlatMesh, &chunks);
+    const std::string what = page.name.empty() ? "the leaf" : "the " + page.name + " page";
+    node_->Log("scan " + std::to_string(id) + ": flattened " + what + " on a " +
+               SizeText(cv::Size(mesh.cols, mesh.rows)) + " sheet in " +
+               std::to_string(stages.back().seconds) + " s, strain mean " +
+               std::to_string(flat.mean_strain) + " max " + std::to_string(flat.max_strain));
+  }
   node_->Count("scans flattened");
   AnnounceHandedOn(node_, id, channel::kFlatMesh);
-  node_->Log("scan " + std::to_string(id) + ": flattened " + SizeText(options_.mesh.grid) + " in " +
-             std::to_string(stages.back().seconds) + " s, strain mean " +
-             std::to_string(flat.mean_strain) + " max " + std::to_string(flat.max_strain));
   node_->SetState("idle");
 }
 

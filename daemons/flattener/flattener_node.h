@@ -1,13 +1,13 @@
-// vellum-flattener's node: POINT_CLOUD chunks + the scan's texture (where the page is) and
-// calibration -> the mass-spring sheet over the page, flattened (mesh.ply, flat.ply in the
-// scan's results) -> FLAT_MESH chunks, with the reports of the stages so far.
+// vellum-flattener's node: POINT_CLOUD chunks + the scan's texture and calibration -> the leaf
+// found (or a spread's two pages; report/outline.png) -> for each page the mass-spring sheet,
+// flattened (mesh.ply, flat.ply in the page's results) -> FLAT_MESH chunks, page after page,
+// with the reports of the stages so far.
 #pragma once
 
 #include <optional>
 #include <string>
 
-#include "core/flatten/flatten.h"
-#include "core/mesh/mesh.h"
+#include "pipeline/stages.h"
 #include "station/assembler.h"
 #include "station/books.h"
 #include "station/messages.h"
@@ -17,14 +17,15 @@ namespace vellum::station {
 
 struct FlattenerNodeOptions {
   std::string data_dir = "scans";  // Station data folder: results go to <data_dir>/scan-<id>.
-  MeshOptions mesh;
-  FlattenOptions flatten;
+  PipelineOptions pipeline;        // Its outline, mesh, flatten and limits parts.
   std::optional<Calibration> fallback_calibration;  // For a scan without CALIBRATION.
 };
 
 class FlattenerNode {
  public:
   FlattenerNode(Node* node, const FlattenerNodeOptions& options);
+  // Waits for the jobs it posted: none runs after it is gone.
+  ~FlattenerNode() { node_->Drain(); }
   // About once a second: gives up a product whose chunks stopped coming.
   void Tick() {
     textures_.Tick();

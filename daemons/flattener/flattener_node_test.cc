@@ -57,14 +57,18 @@ TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
   EXPECT_EQ(progress->back().product, "FLAT_MESH");
   Mesh mesh;
   std::vector<cv::Point2d> flat;
-  for (const mesh_t& m : *sheets) ASSERT_TRUE(AddChunk(m, &mesh, &flat).ok());
+  SheetPage page;
+  for (const mesh_t& m : *sheets) ASSERT_TRUE(AddChunk(m, &mesh, &flat, &page).ok());
   EXPECT_EQ(flat, SmallScanProducts().flat.flat);
   EXPECT_EQ(mesh.point, SmallScanProducts().mesh.point);
+  EXPECT_EQ(cv::norm(page.mask, SmallScanProducts().outline.pages[0], cv::NORM_INF), 0);
+  EXPECT_EQ(page.count, 1);
   std::vector<StageReport> stages;
   ASSERT_TRUE(FromMessages(sheets->back().stages, &stages).ok());
-  ASSERT_EQ(stages.size(), 4u);
-  EXPECT_EQ(stages[2].stage, "mesh");
-  EXPECT_EQ(stages[3].stage, "flatten");
+  ASSERT_EQ(stages.size(), 5u);
+  EXPECT_EQ(stages[2].stage, "outline");
+  EXPECT_EQ(stages[3].stage, "mesh");
+  EXPECT_EQ(stages[4].stage, "flatten");
   EXPECT_TRUE(fs::exists(ScanFolder::For(options_.data_dir, 5).results() + "/flat.ply"));
   EXPECT_EQ(node.Counter("scans flattened"), 1);
 }

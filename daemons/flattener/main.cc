@@ -10,14 +10,14 @@ int main(int argc, char** argv) {
   std::vector<Flags::Spec> specs = Join(DaemonFlagSpecs(true), FlattenFlagSpecs());
   specs.push_back(FallbackCalibrationSpec());
   return DaemonMain(argc, argv, "vellum-flattener",
-                    "Builds the mass-spring sheet over each scan's POINT_CLOUD (the page found in\n"
-                    "its TEXTURE), flattens it, writes mesh.ply and flat.ply to\n"
-                    "<data>/scan-<id>/results and publishes FLAT_MESH.",
+                    "Finds the leaf (or a spread's two pages) in each scan's POINT_CLOUD and\n"
+                    "TEXTURE, builds the mass-spring sheet over each page, flattens it, writes\n"
+                    "mesh.ply and flat.ply to <data>/scan-<id>/results (pages/<page>/ on a\n"
+                    "spread) and publishes FLAT_MESH, page after page.",
                     specs, [](const Flags& flags, Node& node) {
                       FlattenerNodeOptions options;
                       options.data_dir = flags.Get("data");
-                      options.mesh = MeshOptionsFromFlags(flags);
-                      options.flatten = FlattenOptionsFromFlags(flags);
+                      FlattenGroupFromFlags(flags, &options.pipeline);
                       options.fallback_calibration = FallbackCalibrationFromFlags(flags);
                       FlattenerNode flattener(&node, options);
                       return node.Run(EverySecond([&] { flattener.Tick(); }));

@@ -16,7 +16,7 @@ int main(int argc, char** argv) {
                     specs, [](const Flags& flags, Node& node) {
                       RestorerNodeOptions options;
                       options.data_dir = flags.Get("data");
-                      options.restore = RestoreOptionsFromFlags(flags);
+                      RestoreGroupFromFlags(flags, &options.pipeline);
                       options.fallback_calibration = FallbackCalibrationFromFlags(flags);
                       RestorerNode restorer(&node, options);
                       return node.Run(EverySecond([&] { restorer.Tick(); }));

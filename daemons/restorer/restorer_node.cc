@@ -21,16 +21,20 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
       textures_(node, options.data_dir),
       sheets_(
           node, channel::kFlatMesh,
-          [](const mesh_t& m, Sheet* sheet) { return AddChunk(m, &sheet->mesh, &sheet->flat); },
+          [](const mesh_t& m, Sheet* sheet) {
+            return AddChunk(m, &sheet->mesh, &sheet->flat, &sheet->page);
+          },
           [this](int64_t id, Sheet* sheet, const mesh_t& last) {
             std::swap(sheet_, *sheet);
             Process(id, last);
           }) {}
 
 void RestorerNode::Process(int64_t id, const mesh_t& last) {
-  node_->SetState("busy", id, "restoring");
-  ProcessReport report;
-  Status s = FromMessages(last.stages, &report.stages);
+  const SheetPage& sheet_page = sheet_.page;
+  const std::string& name = sheet_page.name;
+  node_->SetState("busy", id, "restoring" + (name.empty() ? "" : " the " + name + " page"));
+  std::vector<StageReport> stages;
+  Status s = FromMessages(last.stages, &stages);
   if (!s.ok()) return node_->FailScan(id, "FLAT_MESH: " + s.message());
   Calibration calibration;
   s = calibrations_.Get(id, &calibration);
@@ -38,46 +42,98 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   cv::Mat texture;
   s = textures_.Get(id, &texture);
   if (!s.ok()) return node_->FailScan(id, s.message());
+  if (sheet_page.mask.size() != texture.size()) {
+    return node_->FailScan(id, "FLAT_MESH: the page mask is " + SizeText(sheet_page.mask.size()) +
+                                   ", the texture " + SizeText(texture.size()));
+  }
   const CameraModel& camera = calibration.camera;
   ConnectSheet(
       last.bend_springs, [&](const cv::Vec3d& x) { return camera.Project(x); }, &sheet_.mesh);
-  if (!sheet_.mesh.status.ok())
+  if (!sheet_.mesh.status.ok()) {
     return node_->FailScan(id, "FLAT_MESH: " + sheet_.mesh.status.message());
+  }
   const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
   s = MakeDirectories(folder.results());
   if (!s.ok()) return node_->FailScan(id, s.message());
+  const PipelineOptions& o = options_.pipeline;
   RestoreResult restored;
-  report.stages.push_back(RestoreStage(texture, sheet_.mesh, sheet_.flat, camera, options_.restore,
-                                       folder.results(), &restored));
-  if (!report.stages.back().status.ok())
-    return node_->FailScan(id, report.stages.back().status.message());
+  StageReport restore = RestoreStage(texture, sheet_page.mask, sheet_.mesh, sheet_.flat, camera,
+                                     o.restore, o.limits, folder.results(), name, &restored);
+  if (!restore.status.ok()) {
+    scans_.erase(id);
+    return node_->FailScan(id, restore.status.message());
+  }
+  Pages& pages = scans_[id];
+  pages.common.clear();
+  std::vector<StageReport>& mine = pages.per_page[sheet_page.index];
+  mine.clear();
+  for (StageReport& stage : stages) (stage.page.empty() ? pages.common : mine).push_back(stage);
+  mine.push_back(restore);
+  pages.restored[sheet_page.index] = std::move(restored);
+  if (static_cast<int>(pages.names.size()) < sheet_page.count) pages.names.resize(sheet_page.count);
+  pages.names[sheet_page.index] = name;
+  while (scans_.size() > 8) scans_.erase(scans_.begin());  // Scans whose pages stopped.
+  if (static_cast<int>(pages.restored.size()) == sheet_page.count) Finish(id, &pages);
+}
+
+void RestorerNode::Finish(int64_t id, Pages* pages) {
+  const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
+  ProcessReport report;
+  report.stages = pages->common;
+  for (const auto& [index, stages] : pages->per_page) {
+    report.stages.insert(report.stages.end(), stages.begin(), stages.end());
+  }
   report.scan = folder.raw();
   report.calibration = folder.calibration();
-  s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
-  if (!s.ok()) return node_->FailScan(id, s.message());
-
+  const Status s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
+  if (!s.ok()) {
+    scans_.erase(id);
+    return node_->FailScan(id, s.message());
+  }
+  const RestoreResult& first = pages->restored.begin()->second;
   restored_t out{};
   out.scan_id = id;
-  out.view = ToString(restored.view);
-  out.dpi = restored.view == RestoreView::kOrthographic ? restored.dpi : 0;
-  out.width = restored.image.cols;
-  out.height = restored.image.rows;
-  for (int k = 0; k < 6; ++k) out.pixel_from_flat[k] = restored.pixel_from_flat.val[k];
-  out.path = folder.results() + "/restored.tif";
+  out.view = ToString(first.view);
+  out.dpi = first.view == RestoreView::kOrthographic ? first.dpi : 0;
+  out.width = first.image.cols;
+  out.height = first.image.rows;
+  for (int k = 0; k < 6; ++k) out.pixel_from_flat[k] = first.pixel_from_flat.val[k];
+  out.path = (PageDir(folder.results(), pages->names.front()) + "/restored.tif");
   out.results = folder.results();
-  cv::Mat preview = restored.image;
-  if (preview.depth() != CV_8U) preview.convertTo(preview, CV_8U, 1.0 / 257);
+  out.pages = pages->names;
+  out.npages = static_cast<int32_t>(out.pages.size());
+  for (const Warning& w : report.Warnings()) out.warnings.push_back(w.code + ": " + w.message);
+  out.nwarnings = static_cast<int32_t>(out.warnings.size());
+  // The preview: the pages side by side, scaled to at most preview_pixels.
+  std::vector<cv::Mat> previews;
+  int height = 0;
+  for (const auto& [index, restored] : pages->restored) {
+    cv::Mat p = restored.image;
+    if (p.depth() != CV_8U) p.convertTo(p, CV_8U, 1.0 / 257);
+    if (p.channels() == 1) cv::cvtColor(p, p, cv::COLOR_GRAY2BGR);
+    height = std::max(height, p.rows);
+    previews.push_back(p);
+  }
+  for (cv::Mat& p : previews) {
+    if (p.rows < height) cv::copyMakeBorder(p, p, 0, height - p.rows, 0, 0, cv::BORDER_CONSTANT);
+  }
+  cv::Mat preview;
+  cv::hconcat(previews, preview);
+  if (first.image.channels() == 1) cv::cvtColor(preview, preview, cv::COLOR_BGR2GRAY);
   const double scale = std::min(1.0, std::sqrt(options_.preview_pixels / preview.total()));
   if (scale < 1) cv::resize(preview, preview, cv::Size(), scale, scale, cv::INTER_AREA);
   ToMessage(preview, &out.preview);
   out.preview.utime = NowUtime();
   out.preview.scan_id = id;
   out.preview.pattern_index = -1;
+  scans_.erase(id);
   node_->Count("scans restored");
   node_->Publish(channel::kRestored, &out);
   AnnounceHandedOn(node_, id, channel::kRestored);
-  node_->Log("scan " + std::to_string(id) + ": restored " + SizeText(restored.image.size()) +
-             " in " + std::to_string(report.stages.back().seconds) + " s -> " + out.path);
+  for (const std::string& w : out.warnings)
+    node_->Log("scan " + std::to_string(id) + ": warning: " + w);
+  node_->Log("scan " + std::to_string(id) + ": restored " + std::to_string(out.npages) +
+             " page(s) -> " + folder.results());
   node_->SetState("idle", id, "restored " + out.path);
 }
 

@@ -1,15 +1,15 @@
-// vellum-restorer's node: FLAT_MESH chunks + the scan's texture and calibration -> the restored
-// page (restored.tif, restored.json and the report's pictures), then the scan's report
-// (report.html, report.json: every stage's report, as `vellum process` writes them) -> RESTORED
-// with a preview of the page.
+// vellum-restorer's node: FLAT_MESH chunks + the scan's texture and calibration -> each page
+// restored (restored.tif, restored_mask.png, restored.json and the report's pictures), then,
+// once every page of the scan is in, the scan's report (report.html, report.json: every stage's
+// report, as `vellum process` writes them) -> RESTORED with a preview and the warnings.
 #pragma once
 
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "core/mesh/mesh.h"
-#include "core/restore/restore.h"
+#include "pipeline/stages.h"
 #include "station/assembler.h"
 #include "station/books.h"
 #include "station/messages.h"
@@ -19,7 +19,7 @@ namespace vellum::station {
 
 struct RestorerNodeOptions {
   std::string data_dir = "scans";  // Station data folder: results go to <data_dir>/scan-<id>.
-  RestoreOptions restore;
+  PipelineOptions pipeline;        // Its restore options and limits.
   std::optional<Calibration> fallback_calibration;  // For a scan without CALIBRATION.
   double preview_pixels = 1 << 20;  // RESTORED's preview is scaled down to at most this many.
 };
@@ -27,6 +27,8 @@ struct RestorerNodeOptions {
 class RestorerNode {
  public:
   RestorerNode(Node* node, const RestorerNodeOptions& options);
+  // Waits for the jobs it posted: none runs after it is gone.
+  ~RestorerNode() { node_->Drain(); }
   // About once a second: gives up a product whose chunks stopped coming.
   void Tick() {
     textures_.Tick();
@@ -34,12 +36,21 @@ class RestorerNode {
   }
 
  private:
-  // The flattened sheet under reassembly.
+  // The flattened sheet of a page under reassembly.
   struct Sheet {
     Mesh mesh;
     std::vector<cv::Point2d> flat;
+    SheetPage page;
+  };
+  // The pages of a scan restored so far.
+  struct Pages {
+    std::vector<StageReport> common;                   // The scan's stages (page "").
+    std::map<int, std::vector<StageReport>> per_page;  // Mesh, flatten, restore of each page.
+    std::map<int, RestoreResult> restored;
+    std::vector<std::string> names;
   };
   void Process(int64_t id, const mesh_t& last);  // Worker thread.
+  void Finish(int64_t id, Pages* pages);         // Every page is in: the report, RESTORED.
 
   Node* node_;
   RestorerNodeOptions options_;
@@ -48,6 +59,7 @@ class RestorerNode {
   Assembler<mesh_t, Sheet> sheets_;
   // Worker thread only:
   Sheet sheet_;
+  std::map<int64_t, Pages> scans_;  // Scans with pages still to come.
 };
 
 }  // namespace vellum::station

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "core/common/text.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
 #include "vellum/restored_t.hpp"
@@ -37,7 +38,9 @@ class RestorerNodeTest : public ::testing::Test {
   }
   std::vector<mesh_t> Sheet(int64_t id) {
     const auto& p = SmallScanProducts();
-    return ToMessages(id, p.mesh, MeshOptions().bend_springs, p.flat.flat, FirstStages(4));
+    SheetPage page;
+    page.mask = p.outline.pages[0];
+    return ToMessages(id, p.mesh, MeshOptions().bend_springs, p.flat.flat, FirstStages(5), page);
   }
   void Publish(int64_t id, std::vector<mesh_t> sheet) {
     for (texture_t& m : ToMessages(id, SmallScan().texture)) {
@@ -58,18 +61,20 @@ TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
   ASSERT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
   const std::string results = ScanFolder::For(options_.data_dir, 5).results();
   EXPECT_EQ(restored->back().results, results);
-  for (const char* file : {"restored.tif", "restored.json"}) {
+  for (const char* file : {"restored.tif", "restored_mask.png", "restored.json"}) {
     EXPECT_EQ(ReadBytes(results + "/" + file), ReadBytes(SmallScanProducts().results + "/" + file))
         << file;
   }
   EXPECT_GT(restored->back().preview.width, 100);
   std::ifstream in(results + "/report.json");
   const nlohmann::json report = nlohmann::json::parse(in);
-  for (const char* stage : {"decode", "triangulate", "mesh", "flatten", "restore"}) {
+  for (const char* stage : {"decode", "triangulate", "outline", "mesh", "flatten", "restore"}) {
     EXPECT_TRUE(report["stages_seconds"].contains(stage)) << stage;
   }
   EXPECT_EQ(report["options"]["decoder"], "phase");
-  EXPECT_EQ(report["options"]["grid"], "45x45");
+  EXPECT_EQ(report["options"]["grid"], "auto");
+  EXPECT_EQ(report["sheet"]["grid"],
+            SizeText(cv::Size(SmallScanProducts().mesh.cols, SmallScanProducts().mesh.rows)));
   EXPECT_EQ(report["scan"], ScanFolder::For(options_.data_dir, 5).raw());
   // Every file it lists was written, the report's own included.
   ASSERT_TRUE(report["outputs"].is_array());
@@ -78,7 +83,8 @@ TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
     const bool here = fs::exists(results + "/" + name);
     const bool upstream = name == "points.ply" || name == "depth.png" || name == "mesh.ply" ||
                           name == "flat.ply" || name == "report/valid.png" ||
-                          name == "report/depth.png";  // Written by the stages before it.
+                          name == "report/depth.png" || name == "report/texture.png" ||
+                          name == "report/outline.png";  // Written by the stages before it.
     EXPECT_TRUE(here || upstream) << name;
   }
   EXPECT_NE(std::find(report["outputs"].begin(), report["outputs"].end(), "report.html"),

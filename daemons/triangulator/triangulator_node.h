@@ -25,6 +25,8 @@ struct TriangulatorNodeOptions {
 class TriangulatorNode {
  public:
   TriangulatorNode(Node* node, const TriangulatorNodeOptions& options);
+  // Waits for the jobs it posted: none runs after it is gone.
+  ~TriangulatorNode() { node_->Drain(); }
   // About once a second: gives up a product whose chunks stopped coming.
   void Tick() { assembler_.Tick(); }
 
