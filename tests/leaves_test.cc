@@ -35,12 +35,12 @@ struct Scene {
   OutlineKind outline = OutlineKind::kRectangle;
 };
 
-struct Run {
+struct Scanned {
   SimulatedScan scan;
   ProcessResult result;
 };
 
-Run Process(const Scene& scene, uint64_t seed) {
+Scanned Process(const Scene& scene, uint64_t seed) {
   PageOptions page;
   page.shape = scene.shape;
   page.outline = scene.outline;
@@ -49,7 +49,7 @@ Run Process(const Scene& scene, uint64_t seed) {
   s.support = scene.support;
   s.frame = scene.frame;
   s.spread = scene.spread;
-  Run run;
+  Scanned run;
   run.scan = SimulateScan(DefaultRig(), page, TextureOptions(), s, seed);
   ProcessInput input;
   input.scan_dir = scene.name;
@@ -176,10 +176,10 @@ const std::vector<cv::Point2f>& Control(cv::Size2d page_mm) {
   static std::map<double, std::vector<cv::Point2f>> cache;
   auto it = cache.find(page_mm.width);
   if (it != cache.end()) return it->second;
-  Run run = [&] {
+  Scanned run = [&] {
     PageOptions page;
     page.size_mm = page_mm;
-    Run r;
+    Scanned r;
     r.scan = SimulateScan(DefaultRig(), page, TextureOptions(), SceneOptions(), 77);
     ProcessInput input;
     input.scan.sequence = r.scan.sequence;
@@ -204,7 +204,7 @@ class Leaves : public ::testing::TestWithParam<Scene> {};
 
 TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
   const Scene& scene = GetParam();
-  const Run run = Process(scene, 31);
+  const Scanned run = Process(scene, 31);
   ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
   const GroundTruth& truth = run.scan.gantry->truth();
   const auto& pages = run.scan.gantry->pages();

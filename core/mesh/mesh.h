@@ -60,9 +60,10 @@ cv::Mat SegmentPage(const cv::Mat& texture, double fraction = 0.6);
 Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
                const std::function<cv::Point2d(const cv::Vec3d&)>& project);
 
-// How far the sheet's piecewise-bilinear warp strays from the surface, in camera pixels: the
-// interpolation error between nodes is an eighth of the second difference of the nodes' camera
-// pixels (along rows and columns of the grid); the 99th percentile over the page's nodes.
+// How far the sheet's piecewise-linear warp strays from the surface, in camera pixels: nodes
+// are evenly spaced in the image but not on the surface, and the interpolation between them
+// strays by about an eighth of a cell's pixels times the relative change of the cells' 3D
+// lengths from one to the next (along rows and columns); the 90th percentile over the page.
 double WarpError(const Mesh& mesh);
 
 // The grid that brings the warp error of `mesh` (built at its grid) to `max_error_px`: the

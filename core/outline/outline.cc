@@ -91,14 +91,53 @@ cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& z, int scale, double m
   return strength;
 }
 
-// Labels `label` (1 leaf, 2 surround) spread from their seeds over the pixels with a height,
-// lowest rim strength first (a watershed: two floods meet on the rim's crest, even where the
+// The height step that counts as a rim at each pixel, mm: `step` over paper, more where dark ink
+// lies within the decoder's fit window of it (its heights are noisier as its signal is weaker:
+// the decoder's noise goes as 1 / brightness, and its fit is biased at the edges of ink).
+// Brightness relative to the texture's bright level.
+// The height step that counts as a rim at each pixel: `step` where the surface is at least half
+// as bright as paper, step * 0.5 / brightness below it (heights over dark ink are as noisy as its
+// signal is weak). `darkest` takes the darkest brightness the decoder's fit reaches (a cautious
+// threshold, for deciding whether a hole is real); otherwise the mean brightness there (a
+// sensitive one, for finding rims across lines of text).
+cv::Mat StepThreshold(const cv::Mat& gray, double step, int scale, bool darkest) {
+  int hist[256] = {0};
+  for (int v = 0; v < gray.rows; v += 2) {
+    const uint8_t* row = gray.ptr<uint8_t>(v);
+    for (int u = 0; u < gray.cols; u += 2) ++hist[row[u]];
+  }
+  long total = 0, acc = 0;
+  for (int h : hist) total += h;
+  int bright = 255;
+  for (int i = 0; i < 256; ++i) {
+    acc += hist[i];
+    if (acc >= 0.95 * total) {
+      bright = std::max(i, 1);
+      break;
+    }
+  }
+  cv::Mat around;
+  const int reach = 2 * scale + 1;
+  if (darkest) {
+    cv::erode(gray, around, cv::getStructuringElement(cv::MORPH_RECT, {reach, reach}));
+  } else {
+    cv::blur(gray, around, {2 * reach + 1, 2 * reach + 1});
+  }
+  cv::Mat threshold;
+  around.convertTo(threshold, CV_32F, 1.0 / bright);
+  threshold = cv::max(threshold, 0.05);
+  threshold = static_cast<float>(0.5 * step) / threshold;
+  threshold = cv::max(threshold, step);
+  return threshold;
+}
+
+// Labels (1 leaf, 2 surround) spread from their seeds over the pixels with a height, lowest rim
+// strength (in rim-threshold units) first (a watershed: two floods meet on the rim's crest, even where the
 // rim is faint). `labels` holds the seeds on input; pixels without a height stay 0.
-void Flood(const cv::Mat& strength, const cv::Mat& z, double step, cv::Mat* labels) {
+void Flood(const cv::Mat& strength, const cv::Mat& z, cv::Mat* labels) {
   constexpr int kLevels = 256;
   auto level = [&](int v, int u) {
-    return std::min(kLevels - 1,
-                    static_cast<int>(strength.at<float>(v, u) / static_cast<float>(step) * 32));
+    return std::min(kLevels - 1, static_cast<int>(strength.at<float>(v, u) * 32));
   };
   std::vector<std::vector<int>> buckets(kLevels);
   const int w = z.cols, h = z.rows;
@@ -148,25 +187,38 @@ double Median(std::vector<float>* values) {
   return (*values)[values->size() / 2];
 }
 
-// Whether the heights `inside` continue the surface `around` them: within `step` (median) of
-// the plane fitted to the surrounding heights (a leaf may slope steeply around a hole).
+// Whether the heights `inside` a hole lie on the surface the leaf makes `around` it (a quadric
+// fitted to the leaf around it, so a curled leaf's bend does not pass for a step): their median
+// distance from it is under `step`.
 bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Point3f>& inside,
                double step) {
-  if (around.size() < 3 || inside.empty()) return false;
-  cv::Mat a(static_cast<int>(around.size()), 3, CV_64F), b(a.rows, 1, CV_64F);
+  if (around.size() < 12 || inside.empty()) return false;
+  // Centred and scaled, for a well-conditioned fit.
+  cv::Point2f centre(0, 0);
+  for (const cv::Point3f& p : around) centre += cv::Point2f(p.x, p.y);
+  centre *= 1.0f / around.size();
+  float scale = 1;
+  for (const cv::Point3f& p : around) {
+    scale = std::max({scale, std::fabs(p.x - centre.x), std::fabs(p.y - centre.y)});
+  }
+  auto terms = [&](const cv::Point3f& p, double* row) {
+    const double x = (p.x - centre.x) / scale, y = (p.y - centre.y) / scale;
+    row[0] = 1, row[1] = x, row[2] = y, row[3] = x * x, row[4] = x * y, row[5] = y * y;
+  };
+  cv::Mat a(static_cast<int>(around.size()), 6, CV_64F), b(a.rows, 1, CV_64F);
   for (int k = 0; k < a.rows; ++k) {
-    a.at<double>(k, 0) = 1;
-    a.at<double>(k, 1) = around[k].x;
-    a.at<double>(k, 2) = around[k].y;
+    terms(around[k], a.ptr<double>(k));
     b.at<double>(k) = around[k].z;
   }
-  cv::Mat plane;
-  if (!cv::solve(a, b, plane, cv::DECOMP_SVD)) return false;
+  cv::Mat quadric;
+  if (!cv::solve(a, b, quadric, cv::DECOMP_SVD)) return false;
   std::vector<float> off;
+  double row[6];
   for (const cv::Point3f& p : inside) {
-    off.push_back(
-        std::fabs(p.z - static_cast<float>(plane.at<double>(0) + plane.at<double>(1) * p.x +
-                                           plane.at<double>(2) * p.y)));
+    terms(p, row);
+    double fit = 0;
+    for (int t = 0; t < 6; ++t) fit += row[t] * quadric.at<double>(t);
+    off.push_back(static_cast<float>(std::fabs(p.z - fit)));
   }
   return Median(&off) < step;
 }
@@ -177,65 +229,64 @@ bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Poi
 // (the projector's light did not reach it: a shadow on the leaf, or what lies under a raised
 // leaf) is kept when it looks unlike the leaf around it in the texture (by more than 3% of the
 // leaf's brightness), filled otherwise.
-int FillHoles(const cv::Mat& z, const cv::Mat& gray, double step, cv::Mat* leaf) {
+int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, cv::Mat* leaf) {
   cv::Mat outside = ~*leaf, labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(outside, labels, stats, centroids, 4, CV_32S);
-  // Heights (u, v, z) inside each hole and on the leaf around it; brightness likewise.
-  std::vector<std::vector<cv::Point3f>> inside(n), around(n);
-  std::vector<std::vector<float>> look_in(n), look_around(n);
-  std::vector<int> touches(n, 0), valid(n, 0);
+  const cv::Rect all(0, 0, z.cols, z.rows);
   constexpr size_t kSamples = 20000;
-  for (int v = 0; v < z.rows; ++v) {
-    const int* lab = labels.ptr<int>(v);
-    for (int u = 0; u < z.cols; ++u) {
-      const int l = lab[u];
-      if (l == 0) continue;
-      if (u == 0 || v == 0 || u == z.cols - 1 || v == z.rows - 1) touches[l] = 1;
-      const float h = z.at<float>(v, u);
-      if (Valid(h)) {
-        ++valid[l];
-        if (inside[l].size() < kSamples) inside[l].emplace_back(u, v, h);
-      }
-      if (look_in[l].size() < kSamples) look_in[l].push_back(gray.at<uint8_t>(v, u));
-    }
-  }
-  // The leaf around each hole: leaf pixels within two of it.
-  cv::Mat grown;
-  cv::dilate(outside, grown, cv::getStructuringElement(cv::MORPH_RECT, {5, 5}));
-  const cv::Mat band = grown & *leaf;
-  for (int v = 0; v < z.rows; ++v) {
-    const uint8_t* in = band.ptr<uint8_t>(v);
-    for (int u = 0; u < z.cols; ++u) {
-      if (!in[u]) continue;
-      const float h = z.at<float>(v, u);
-      int last = 0;
-      for (int dv = -2; dv <= 2; ++dv) {
-        for (int du = -2; du <= 2; ++du) {
-          const int uu = u + du, vv = v + dv;
-          if (uu < 0 || vv < 0 || uu >= z.cols || vv >= z.rows) continue;
-          const int l = labels.at<int>(vv, uu);
-          if (l == 0 || l == last) continue;
-          last = l;
-          if (Valid(h) && around[l].size() < kSamples) around[l].emplace_back(u, v, h);
-          if (look_around[l].size() < kSamples) look_around[l].push_back(gray.at<uint8_t>(v, u));
-        }
-      }
-    }
-  }
+  // The leaf around a hole: within this of it (a ring wide enough that a curved fit across the
+  // hole is determined by it, not free to bow into the hole).
+  constexpr int kRing = 12;
+  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * kRing + 1, 2 * kRing + 1});
   std::vector<uint8_t> fill(n, 0);
   int kept = 0;
   for (int l = 1; l < n; ++l) {
-    if (touches[l]) continue;  // The surround, not a hole.
+    const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
+                       stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
     const int area = stats.at<int>(l, cv::CC_STAT_AREA);
-    bool island;
-    if (valid[l] >= area / 2) {
-      island = OnSurface(around[l], inside[l], step);
-    } else {
-      const double leaf_look = Median(&look_around[l]);
-      island = std::fabs(Median(&look_in[l]) - leaf_look) <= 0.03 * std::max(leaf_look, 1.0);
+    if (box.x == 0 || box.y == 0 || box.br().x == z.cols || box.br().y == z.rows) continue;  // The surround.
+    if (area < 9) {
+      fill[l] = 1;
+      continue;
     }
-    fill[l] = island || area < 9;
-    kept += !fill[l];
+    // Heights (u, v, z) inside the hole and on the leaf around it; brightness likewise.
+    const cv::Rect near = (box + cv::Size(2 * kRing, 2 * kRing) - cv::Point(kRing, kRing)) & all;
+    const cv::Mat hole = labels(near) == l;
+    cv::Mat ring;
+    cv::dilate(hole, ring, disc);
+    ring &= (*leaf)(near);
+    std::vector<cv::Point3f> inside, around;
+    std::vector<float> look_in, look_around;
+    int valid = 0;
+    for (int v = 0; v < near.height; ++v) {
+      const uint8_t* in_hole = hole.ptr<uint8_t>(v);
+      const uint8_t* in_ring = ring.ptr<uint8_t>(v);
+      for (int u = 0; u < near.width; ++u) {
+        if (!in_hole[u] && !in_ring[u]) continue;
+        const int uu = u + near.x, vv = v + near.y;
+        const float h = z.at<float>(vv, uu);
+        auto& heights = in_hole[u] ? inside : around;
+        auto& looks = in_hole[u] ? look_in : look_around;
+        if (Valid(h)) {
+          valid += in_hole[u] ? 1 : 0;
+          if (heights.size() < kSamples) heights.emplace_back(uu, vv, h);
+        }
+        if (looks.size() < kSamples) looks.push_back(gray.at<uint8_t>(vv, uu));
+      }
+    }
+    bool island;
+    if (valid >= area / 2) {
+      // Within the step that counts as a rim there (more over dark ink; the median over the
+      // hole).
+      std::vector<float> steps;
+      for (const cv::Point3f& p : inside) steps.push_back(threshold.at<float>(cvRound(p.y), cvRound(p.x)));
+      island = OnSurface(around, inside, Median(&steps));
+    } else {
+      const double leaf_look = Median(&look_around);
+      island = std::fabs(Median(&look_in) - leaf_look) <= 0.03 * std::max(leaf_look, 1.0);
+    }
+    fill[l] = island;
+    kept += !island;
   }
   for (int v = 0; v < z.rows; ++v) {
     const int* lab = labels.ptr<int>(v);
@@ -250,11 +301,11 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, double step, cv::Mat* leaf)
 // Share of the leaf's rim pixels that are set apart from what is beside them: on a rim (a
 // step or a silhouette), beside pixels without a height (shadow, or the leaf seen edge-on), or
 // at the image border.
-double RimConfidence(const cv::Mat& leaf, const cv::Mat& strength, const cv::Mat& z, double step) {
+double RimConfidence(const cv::Mat& leaf, const cv::Mat& strength, const cv::Mat& z) {
   cv::Mat eroded;
   cv::erode(leaf, eroded, cv::Mat());
   const cv::Mat rim = leaf & ~eroded;
-  cv::Mat apart = strength > step / 2;
+  cv::Mat apart = strength > 0.5f;
   cv::dilate(apart, apart, cv::Mat(), cv::Point(-1, -1), 3);
   cv::Mat no_data = z < -1e3f;
   cv::dilate(no_data, no_data, cv::Mat(), cv::Point(-1, -1), 2);
@@ -350,11 +401,17 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   const cv::Size size = points.size();
   const double step = options.step_mm;
+  cv::Mat gray = texture;
+  if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+  if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 257);
   const cv::Mat z = SmoothHeights(points);
-  const cv::Mat strength = RimStrength(points, z, options.scale_px, options.max_slope_deg);
+  // Rim strength in units of the step that counts as a rim there: `step` where the surface is
+  // bright (paper), more over dark ink, whose heights are as noisy as its signal is weak.
+  cv::Mat strength = RimStrength(points, z, options.scale_px, options.max_slope_deg);
+  strength /= StepThreshold(gray, step, options.scale_px, /*darkest=*/false);
   // Surfaces: pixels with a height, away from every rim (gaps in a rim closed), as components.
   cv::Mat rims;
-  cv::dilate(strength > step, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),
+  cv::dilate(strength > 1, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),
              cv::Point(-1, -1), options.gap_px);
   const cv::Mat surface = (z > -1e3f) & ~rims;
   // Labelled at half resolution (a 2 x 2 block is surface when all of it is; rims are several
@@ -414,17 +471,15 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
         cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
         cv::Rect(0, 0, size.width, size.height);
     cv::Mat box_labels = labels(box).clone();
-    Flood(strength(box), z(box), step, &box_labels);
+    Flood(strength(box), z(box), &box_labels);
     leaf = cv::Mat::zeros(size, CV_8U);
     leaf(box).setTo(255, box_labels == 1);
-    cv::Mat gray = texture;
-    if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-    if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 257);
     const cv::Rect holes_box = (cv::boundingRect(leaf) + cv::Size(4, 4) - cv::Point(2, 2)) &
                                cv::Rect(0, 0, size.width, size.height);
     cv::Mat box_leaf = leaf(holes_box);
-    out.holes = FillHoles(z(holes_box), gray(holes_box), step, &box_leaf);
-    out.confidence = RimConfidence(leaf(holes_box), strength(holes_box), z(holes_box), step);
+    const cv::Mat cautious = StepThreshold(gray(holes_box), step, options.scale_px, /*darkest=*/true);
+    out.holes = FillHoles(z(holes_box), gray(holes_box), cautious, &box_leaf);
+    out.confidence = RimConfidence(leaf(holes_box), strength(holes_box), z(holes_box));
     out.touches_border = TouchesBorder(leaf, options.border_px);
     out.method = "shape";
   }
@@ -436,7 +491,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
       leaf = bright.clone();
       out.method = "brightness";
       out.holes = 0;
-      out.confidence = RimConfidence(leaf, strength, z, step);
+      out.confidence = RimConfidence(leaf, strength, z);
       out.touches_border = false;
     } else if (leaf.empty()) {
       out.status = Status::Error(

@@ -21,6 +21,7 @@ struct Scene {
   PageShape shape;
   bool support, frame, spread;
   OutlineKind outline;
+  TextureKind texture = TextureKind::kText;
 };
 
 struct Found {
@@ -41,7 +42,7 @@ Found FindIn(const Scene& scene) {
   s.frame = scene.frame;
   s.spread = scene.spread;
   TextureOptions texture;
-  texture.kind = TextureKind::kText;
+  texture.kind = scene.texture;
   const SimulatedScan scan = SimulateScan(DefaultRig(), page, texture, s, 11);
   const Triangulator triangulator(scan.gantry->rig());
   const PointMap map = triangulator.Triangulate(Decode(scan.sequence, scan.frames));
@@ -86,6 +87,10 @@ TEST_P(LeafScenes, TheLeafIsFoundByItsShape) {
   EXPECT_LE(f.farthest_px, 5.0);
   EXPECT_FALSE(f.outline.touches_border);
   EXPECT_GE(f.outline.confidence, 0.9);
+  // Every burnt hole kept (the table or support shows through), and no false one (a checkerboard's
+  // dark squares give noisier heights than its light ones, which must not pass for a step).
+  EXPECT_EQ(f.outline.holes, GetParam().outline == OutlineKind::kBurnt ? PageOptions().holes : 0);
+  EXPECT_EQ(f.outline.pages.size(), GetParam().spread ? 2u : 1u);
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -97,7 +102,11 @@ INSTANTIATE_TEST_SUITE_P(
         Scene{"paper frame, curl", PageShape::kCurl, false, true, false, OutlineKind::kRectangle},
         Scene{"burnt, on support", PageShape::kCurl, true, false, false, OutlineKind::kBurnt},
         Scene{"burnt, dark table", PageShape::kFold, false, false, false, OutlineKind::kBurnt},
-        Scene{"spread", PageShape::kFlat, false, false, true, OutlineKind::kRectangle}),
+        Scene{"spread", PageShape::kFlat, false, false, true, OutlineKind::kRectangle},
+        Scene{"checkerboard, light support", PageShape::kCurl, true, false, false,
+              OutlineKind::kRectangle, TextureKind::kCheckerboard},
+        Scene{"checkerboard, paper frame", PageShape::kCurl, false, true, false,
+              OutlineKind::kRectangle, TextureKind::kCheckerboard}),
     [](const ::testing::TestParamInfo<Scene>& info) {
       std::string name = info.param.name;
       for (char& c : name) {

@@ -42,7 +42,7 @@ struct PageOptions {
   double cone_apex_distance_mm = 250.0;  // kCone: apex distance below the page's t = 0 edge.
   double bump_height_mm = 3.0;           // kBump: peak height, mm.
   double bump_sigma_mm = 25.0;           // kBump: Gaussian sigma, mm.
-  double ripple_period_mm = 40.0;        // kRipple: one ripple every this much across, mm.
+  double ripple_period_mm = 60.0;        // kRipple: one ripple every this much across, mm.
   double ripple_slope_deg = 50.0;        // kRipple: steepest slope, degrees.
   bool gutter_left = false;              // kGutter: the gutter is at the s = 0 edge (else s = w).
   double gutter_radius_mm = 45.0;        // kGutter: radius of the bend into the gutter, mm.
