@@ -16,17 +16,46 @@ constexpr float kNoData = -1e4f;  // Heights below -1e3 mean "no point".
 
 bool Valid(float z) { return z > -1e3f; }
 
-// Heights of the point map with a 3x3 median (which removes the decoder's isolated outliers and
-// keeps steps sharp); kNoData where fewer than half the window has a point.
+// Heights of the point map, each the median of its own and the means of its opposite
+// neighbours (left-right, up-down and both diagonals) where both have a point: an isolated
+// outlier is dropped, a step stays sharp, and a steep slope with missing points is not biased (a
+// plain 3 x 3 median over the points present picks a lower or higher neighbour where points are
+// missing on one side: on a 50 degree ripple, a third of a millimetre, a false rim). kNoData
+// where the pixel has no point and fewer than two pairs do.
 cv::Mat SmoothHeights(const cv::Mat& points) {
-  cv::Mat z(points.size(), CV_32F);
-  for (int v = 0; v < points.rows; ++v) {
+  const int w = points.cols, h = points.rows;
+  cv::Mat raw(points.size(), CV_32F);
+  for (int v = 0; v < h; ++v) {
     const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    float* out = z.ptr<float>(v);
-    for (int u = 0; u < points.cols; ++u) out[u] = std::isfinite(p[u][2]) ? p[u][2] : kNoData;
+    float* out = raw.ptr<float>(v);
+    for (int u = 0; u < w; ++u) out[u] = std::isfinite(p[u][2]) ? p[u][2] : kNoData;
   }
-  cv::Mat smooth;
-  cv::medianBlur(z, smooth, 3);
+  cv::Mat smooth(points.size(), CV_32F, cv::Scalar(kNoData));
+  cv::parallel_for_(cv::Range(1, h - 1), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      const float *up = raw.ptr<float>(v - 1), *row = raw.ptr<float>(v),
+                  *down = raw.ptr<float>(v + 1);
+      float* out = smooth.ptr<float>(v);
+      for (int u = 1; u < w - 1; ++u) {
+        float values[5];
+        int n = 0;
+        auto pair = [&](float a, float b) {
+          if (Valid(a) && Valid(b)) values[n++] = 0.5f * (a + b);
+        };
+        pair(row[u - 1], row[u + 1]);
+        pair(up[u], down[u]);
+        pair(up[u - 1], down[u + 1]);
+        pair(up[u + 1], down[u - 1]);
+        if (Valid(row[u])) {
+          values[n++] = row[u];
+        } else if (n < 2) {
+          continue;
+        }
+        std::sort(values, values + n);
+        out[u] = n % 2 ? values[n / 2] : 0.5f * (values[n / 2 - 1] + values[n / 2]);
+      }
+    }
+  });
   return smooth;
 }
 
@@ -91,16 +120,8 @@ cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& z, int scale, double m
   return strength;
 }
 
-// The height step that counts as a rim at each pixel, mm: `step` over paper, more where dark ink
-// lies within the decoder's fit window of it (its heights are noisier as its signal is weaker:
-// the decoder's noise goes as 1 / brightness, and its fit is biased at the edges of ink).
-// Brightness relative to the texture's bright level.
-// The height step that counts as a rim at each pixel: `step` where the surface is at least half
-// as bright as paper, step * 0.5 / brightness below it (heights over dark ink are as noisy as its
-// signal is weak). `darkest` takes the darkest brightness the decoder's fit reaches (a cautious
-// threshold, for deciding whether a hole is real); otherwise the mean brightness there (a
-// sensitive one, for finding rims across lines of text).
-cv::Mat StepThreshold(const cv::Mat& gray, double step, int scale, bool darkest) {
+// The texture's paper brightness: the level 95% of its pixels are at or below (gray levels).
+double BrightLevel(const cv::Mat& gray) {
   int hist[256] = {0};
   for (int v = 0; v < gray.rows; v += 2) {
     const uint8_t* row = gray.ptr<uint8_t>(v);
@@ -108,14 +129,20 @@ cv::Mat StepThreshold(const cv::Mat& gray, double step, int scale, bool darkest)
   }
   long total = 0, acc = 0;
   for (int h : hist) total += h;
-  int bright = 255;
   for (int i = 0; i < 256; ++i) {
     acc += hist[i];
-    if (acc >= 0.95 * total) {
-      bright = std::max(i, 1);
-      break;
-    }
+    if (acc >= 0.95 * total) return std::max(i, 1);
   }
+  return 255;
+}
+
+// The height step that counts as a rim at each pixel, mm: `step` where the surface is at least
+// half as bright as paper, step * 0.5 / brightness below it (the decoder's noise goes as
+// 1 / brightness over dark ink, and its fit is biased at the edges of ink). `darkest` takes the
+// darkest brightness the decoder's fit reaches (a cautious threshold, for deciding whether a hole
+// is real); otherwise the mean brightness there (a sensitive one, for finding rims across lines
+// of text). Brightness is relative to the texture's bright level.
+cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale, bool darkest) {
   cv::Mat around;
   const int reach = 2 * scale + 1;
   if (darkest) {
@@ -225,18 +252,19 @@ bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Poi
 
 // Fills the holes of `leaf` that show no other surface, and returns how many it keeps. A hole
 // with heights is kept when they differ from the leaf's around it (another surface shows
-// through), filled when they do not (an island the rim test cut out). A hole without heights
-// (the projector's light did not reach it: a shadow on the leaf, or what lies under a raised
-// leaf) is kept when it looks unlike the leaf around it in the texture (by more than 3% of the
-// leaf's brightness), filled otherwise.
-int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, cv::Mat* leaf) {
+// through), filled when they do not (an island the rim test cut out). The two are compared
+// piece by piece along the hole's edge (32 px tiles: the leaf within 12 px outside the edge, a
+// quadric, against the hole 3 to 10 px inside it, past the decoder's blur of the step), so a
+// hole across a ripple is judged by the surface beside each part of it; the hole is kept when
+// most pieces stand off. A hole without heights (the projector's light did not reach it: a
+// shadow on the leaf, or what lies under a raised leaf) is kept when it looks unlike the leaf
+// around it in the texture (by more than 3% of the paper's brightness), filled otherwise.
+int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
+              cv::Mat* leaf) {
   cv::Mat outside = ~*leaf, labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(outside, labels, stats, centroids, 4, CV_32S);
   const cv::Rect all(0, 0, z.cols, z.rows);
-  constexpr size_t kSamples = 20000;
-  // The leaf around a hole: within this of it (a ring wide enough that a curved fit across the
-  // hole is determined by it, not free to bow into the hole).
-  constexpr int kRing = 12;
+  constexpr int kRing = 12, kTile = 32, kNear = 3, kFar = 10;
   const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * kRing + 1, 2 * kRing + 1});
   std::vector<uint8_t> fill(n, 0);
   int kept = 0;
@@ -244,46 +272,65 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, c
     const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
                        stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
     const int area = stats.at<int>(l, cv::CC_STAT_AREA);
-    if (box.x == 0 || box.y == 0 || box.br().x == z.cols || box.br().y == z.rows) continue;  // The surround.
+    if (box.x == 0 || box.y == 0 || box.br().x == z.cols || box.br().y == z.rows) continue;
     if (area < 9) {
       fill[l] = 1;
       continue;
     }
-    // Heights (u, v, z) inside the hole and on the leaf around it; brightness likewise.
     const cv::Rect near = (box + cv::Size(2 * kRing, 2 * kRing) - cv::Point(kRing, kRing)) & all;
     const cv::Mat hole = labels(near) == l;
-    cv::Mat ring;
+    cv::Mat ring, depth;
     cv::dilate(hole, ring, disc);
     ring &= (*leaf)(near);
-    std::vector<cv::Point3f> inside, around;
+    cv::distanceTransform(hole, depth, cv::DIST_L2, 3);
+    double deepest = 0;
+    cv::minMaxLoc(depth, nullptr, &deepest);
+    // A hole too narrow for the band: all of it.
+    const float lo = deepest >= kFar ? kNear : 0, hi = deepest >= kFar ? kFar : 1e9f;
+    const int tiles_x = (near.width + kTile - 1) / kTile, tiles_y = (near.height + kTile - 1) / kTile;
+    std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
+    std::vector<std::vector<float>> steps(tiles_x * tiles_y);
     std::vector<float> look_in, look_around;
     int valid = 0;
     for (int v = 0; v < near.height; ++v) {
       const uint8_t* in_hole = hole.ptr<uint8_t>(v);
       const uint8_t* in_ring = ring.ptr<uint8_t>(v);
+      const float* d = depth.ptr<float>(v);
       for (int u = 0; u < near.width; ++u) {
         if (!in_hole[u] && !in_ring[u]) continue;
         const int uu = u + near.x, vv = v + near.y;
         const float h = z.at<float>(vv, uu);
-        auto& heights = in_hole[u] ? inside : around;
-        auto& looks = in_hole[u] ? look_in : look_around;
-        if (Valid(h)) {
-          valid += in_hole[u] ? 1 : 0;
-          if (heights.size() < kSamples) heights.emplace_back(uu, vv, h);
+        (in_hole[u] ? look_in : look_around).push_back(gray.at<uint8_t>(vv, uu));
+        if (!Valid(h)) continue;
+        if (in_hole[u]) {
+          ++valid;
+          if (d[u] < lo || d[u] > hi) continue;
+          const int t = (v / kTile) * tiles_x + u / kTile;
+          inside[t].emplace_back(uu, vv, h);
+          steps[t].push_back(threshold.at<float>(vv, uu));
+          continue;
         }
-        if (looks.size() < kSamples) looks.push_back(gray.at<uint8_t>(vv, uu));
+        // A ring pixel serves its own tile and those within a quarter tile of it.
+        for (int ty = std::max(0, (v - kTile / 4) / kTile);
+             ty <= std::min(tiles_y - 1, (v + kTile / 4) / kTile); ++ty) {
+          for (int tx = std::max(0, (u - kTile / 4) / kTile);
+               tx <= std::min(tiles_x - 1, (u + kTile / 4) / kTile); ++tx) {
+            around[ty * tiles_x + tx].emplace_back(uu, vv, h);
+          }
+        }
       }
     }
     bool island;
     if (valid >= area / 2) {
-      // Within the step that counts as a rim there (more over dark ink; the median over the
-      // hole).
-      std::vector<float> steps;
-      for (const cv::Point3f& p : inside) steps.push_back(threshold.at<float>(cvRound(p.y), cvRound(p.x)));
-      island = OnSurface(around, inside, Median(&steps));
+      int judged = 0, off = 0;
+      for (size_t t = 0; t < inside.size(); ++t) {
+        if (inside[t].size() < 8 || around[t].size() < 24) continue;
+        ++judged;
+        off += !OnSurface(around[t], inside[t], Median(&steps[t]));
+      }
+      island = 2 * off <= judged;
     } else {
-      const double leaf_look = Median(&look_around);
-      island = std::fabs(Median(&look_in) - leaf_look) <= 0.03 * std::max(leaf_look, 1.0);
+      island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;
     }
     fill[l] = island;
     kept += !island;
@@ -408,7 +455,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // Rim strength in units of the step that counts as a rim there: `step` where the surface is
   // bright (paper), more over dark ink, whose heights are as noisy as its signal is weak.
   cv::Mat strength = RimStrength(points, z, options.scale_px, options.max_slope_deg);
-  strength /= StepThreshold(gray, step, options.scale_px, /*darkest=*/false);
+  const double bright = BrightLevel(gray);
+  strength /= StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false);
+  if (getenv("OUTLINE_DEBUG")) { cv::Mat s8; cv::Mat(cv::min(strength, 2.0f) * 120).convertTo(s8, CV_8U); static int dbg_n = 0; FILE* f = fopen(("/tmp/strength" + std::to_string(dbg_n++) + ".pgm").c_str(), "wb"); fprintf(f, "P5 %d %d 255\n", s8.cols, s8.rows); fwrite(s8.data, 1, s8.total(), f); fclose(f); }
   // Surfaces: pixels with a height, away from every rim (gaps in a rim closed), as components.
   cv::Mat rims;
   cv::dilate(strength > 1, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),
@@ -477,8 +526,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     const cv::Rect holes_box = (cv::boundingRect(leaf) + cv::Size(4, 4) - cv::Point(2, 2)) &
                                cv::Rect(0, 0, size.width, size.height);
     cv::Mat box_leaf = leaf(holes_box);
-    const cv::Mat cautious = StepThreshold(gray(holes_box), step, options.scale_px, /*darkest=*/true);
-    out.holes = FillHoles(z(holes_box), gray(holes_box), cautious, &box_leaf);
+    const cv::Mat cautious =
+        StepThreshold(gray(holes_box), bright, step, options.scale_px, /*darkest=*/true);
+    out.holes = FillHoles(z(holes_box), gray(holes_box), cautious, bright, &box_leaf);
     out.confidence = RimConfidence(leaf(holes_box), strength(holes_box), z(holes_box));
     out.touches_border = TouchesBorder(leaf, options.border_px);
     out.method = "shape";
