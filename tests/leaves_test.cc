@@ -34,6 +34,7 @@ struct Scene {
   PageShape shape;
   bool support = false, frame = false, spread = false;
   OutlineKind outline = OutlineKind::kRectangle;
+  double ink_albedo = 0.08;
 };
 
 struct Scanned {
@@ -51,7 +52,9 @@ Scanned Process(const Scene& scene, uint64_t seed) {
   s.frame = scene.frame;
   s.spread = scene.spread;
   Scanned run;
-  run.scan = SimulateScan(DefaultRig(), page, TextureOptions(), s, seed);
+  TextureOptions texture;
+  texture.ink_albedo = scene.ink_albedo;
+  run.scan = SimulateScan(DefaultRig(), page, texture, s, seed);
   ProcessInput input;
   input.scan_dir = scene.name;
   input.calibration_path = "the default rig";
@@ -290,7 +293,7 @@ INSTANTIATE_TEST_SUITE_P(Scenes, Leaves,
                                            Scene{"support_fold", PageShape::kFold, true},
                                            Scene{"frame_curl", PageShape::kCurl, false, true},
                                            Scene{"burnt_support_curl", PageShape::kCurl, true,
-                                                 false, false, OutlineKind::kBurnt},
+                                                 false, false, OutlineKind::kBurnt, 0.3},
                                            Scene{"ripple", PageShape::kRipple},
                                            Scene{"spread", PageShape::kFlat, false, false, true}),
                          [](const ::testing::TestParamInfo<Scene>& info) {

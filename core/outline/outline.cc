@@ -266,7 +266,7 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
   const cv::Rect all(0, 0, z.cols, z.rows);
   constexpr int kRing = 12, kTile = 32, kNear = 3, kFar = 10;
   const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * kRing + 1, 2 * kRing + 1});
-  std::vector<uint8_t> fill(n, 0);
+  std::vector<uint8_t> fill(n, 0), kept_label(n, 0);
   int kept = 0;
   for (int l = 1; l < n; ++l) {
     const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
@@ -333,16 +333,27 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
       island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;
     }
     fill[l] = island;
+    kept_label[l] = !island;
     kept += !island;
   }
+  // The holes kept, closed over leaf bridges narrower than the rim's blur (4 px: two pieces of
+  // one hole the flood split are one hole), and counted.
+  cv::Mat holes = cv::Mat::zeros(z.size(), CV_8U);
   for (int v = 0; v < z.rows; ++v) {
     const int* lab = labels.ptr<int>(v);
     uint8_t* out = leaf->ptr<uint8_t>(v);
+    uint8_t* hole = holes.ptr<uint8_t>(v);
     for (int u = 0; u < z.cols; ++u) {
       if (fill[lab[u]]) out[u] = 255;
+      if (lab[u] > 0 && !fill[lab[u]] && kept_label[lab[u]]) hole[u] = 255;
     }
   }
-  return kept;
+  if (kept == 0) return 0;
+  cv::morphologyEx(holes, holes, cv::MORPH_CLOSE,
+                   cv::getStructuringElement(cv::MORPH_ELLIPSE, {5, 5}));
+  leaf->setTo(0, holes);
+  cv::Mat pieces;
+  return cv::connectedComponents(holes, pieces, 8, CV_32S) - 1;
 }
 
 // Share of the leaf's rim pixels that are set apart from what is beside them: on a rim (a
@@ -456,8 +467,8 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // bright (paper), more over dark ink, whose heights are as noisy as its signal is weak.
   cv::Mat strength = RimStrength(points, z, options.scale_px, options.max_slope_deg);
   const double bright = BrightLevel(gray);
-  strength /= StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false);
-  if (getenv("OUTLINE_DEBUG")) { cv::Mat s8; cv::Mat(cv::min(strength, 2.0f) * 120).convertTo(s8, CV_8U); static int dbg_n = 0; FILE* f = fopen(("/tmp/strength" + std::to_string(dbg_n++) + ".pgm").c_str(), "wb"); fprintf(f, "P5 %d %d 255\n", s8.cols, s8.rows); fwrite(s8.data, 1, s8.total(), f); fclose(f); }
+  cv::Mat threshold = StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false);
+  strength /= threshold;
   // Surfaces: pixels with a height, away from every rim (gaps in a rim closed), as components.
   cv::Mat rims;
   cv::dilate(strength > 1, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),

@@ -22,6 +22,7 @@ struct Scene {
   bool support, frame, spread;
   OutlineKind outline;
   TextureKind texture = TextureKind::kText;
+  double ink_albedo = 0.08;  // Iron-gall ink browns to about 0.3.
 };
 
 struct Found {
@@ -43,6 +44,7 @@ Found FindIn(const Scene& scene) {
   s.spread = scene.spread;
   TextureOptions texture;
   texture.kind = scene.texture;
+  texture.ink_albedo = scene.ink_albedo;
   const SimulatedScan scan = SimulateScan(DefaultRig(), page, texture, s, 11);
   const Triangulator triangulator(scan.gantry->rig());
   const PointMap map = triangulator.Triangulate(Decode(scan.sequence, scan.frames));
@@ -63,6 +65,7 @@ Found FindIn(const Scene& scene) {
       show.setTo(cv::Scalar(255, 0, 0), (f.truth != 0) & ~f.outline.mask);
       show.setTo(cv::Scalar(0, 255, 0), (f.truth == 0) & ~f.outline.mask & (f.outline.mask == 0));
       static int n = 0;
+      cv::imwrite(std::string(getenv("OUTLINE_DUMP")) + "/mask" + std::to_string(n) + ".png", f.outline.mask);
       cv::imwrite(std::string(getenv("OUTLINE_DUMP")) + "/off" + std::to_string(n++) + ".png",
                   show);
     }
@@ -106,7 +109,9 @@ INSTANTIATE_TEST_SUITE_P(
         Scene{"checkerboard, light support", PageShape::kCurl, true, false, false,
               OutlineKind::kRectangle, TextureKind::kCheckerboard},
         Scene{"checkerboard, paper frame", PageShape::kCurl, false, true, false,
-              OutlineKind::kRectangle, TextureKind::kCheckerboard}),
+              OutlineKind::kRectangle, TextureKind::kCheckerboard},
+        Scene{"brown checkerboard, burnt, on support", PageShape::kCurl, true, false, false,
+              OutlineKind::kBurnt, TextureKind::kCheckerboard, 0.3}),
     [](const ::testing::TestParamInfo<Scene>& info) {
       std::string name = info.param.name;
       for (char& c : name) {
