@@ -8,9 +8,6 @@
 
 namespace vellum {
 
-// The exit status of a scan restored with warnings: written, but not to be delivered unchecked.
-constexpr int kExitDoubtful = 3;
-
 int RunProcess(const std::vector<std::string>& args) {
   const std::vector<Flags::Spec> specs = Join(
       {

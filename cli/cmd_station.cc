@@ -57,13 +57,19 @@ class Follower {
                       ? (" at " + std::to_string(static_cast<int>(m.dpi)) + " dpi").c_str()
                       : " (camera view)",
                   m.results.c_str());
+      for (const std::string& w : m.warnings) {
+        std::fprintf(stderr, "scan %lld: warning %s\n", static_cast<long long>(m.scan_id),
+                     w.c_str());
+      }
       std::fflush(stdout);
       ++restored_;
+      warned_ += m.nwarnings > 0;
       results_ = m.results;
     });
   }
 
   int restored() const { return restored_; }
+  int warned() const { return warned_; }  // Scans restored with warnings.
   const std::string& failure() const { return failure_; }
   const std::string& results() const { return results_; }
 
@@ -98,7 +104,7 @@ class Follower {
   int64_t scan_id_;
   Progress progress_;
   std::string failure_, results_;
-  int restored_ = 0;
+  int restored_ = 0, warned_ = 0;
   std::map<std::string, int64_t> errors_;
   std::map<std::string, bool> first_seen_;
 };
@@ -124,7 +130,9 @@ int RunScan(const std::vector<std::string>& args) {
   Flags flags("vellum scan",
               "Asks the station for one scan (SCAN_REQUEST), shows its progress and prints\n"
               "where the results are once the page is restored. Exit status 1 when a daemon\n"
-              "reports the scan failed or nothing happens before the timeout.",
+              "reports the scan failed or nothing happens before the timeout; 3 when the page\n"
+              "was restored with warnings that make it doubtful (printed; the leaf runs off the\n"
+              "view, an uncertain outline, high strain): check its report.html.",
               specs);
   if (!flags.Parse(args)) return 0;
   const double timeout = flags.GetDouble("timeout", 1, 86400);
@@ -150,7 +158,7 @@ int RunScan(const std::vector<std::string>& args) {
                  timeout, flags.Get("url").c_str());
     return 1;
   }
-  return 0;
+  return follower.warned() > 0 ? kExitDoubtful : 0;
 }
 
 int RunWatch(const std::vector<std::string>& args) {

@@ -8,6 +8,9 @@
 
 namespace vellum {
 
+// The exit status of a scan restored with warnings: written, but not to be delivered unchecked.
+constexpr int kExitDoubtful = 3;
+
 int RunPatterns(const std::vector<std::string>& args);
 int RunRender(const std::vector<std::string>& args);
 int RunProcess(const std::vector<std::string>& args);

@@ -110,6 +110,14 @@ std::vector<Flags::Spec> DecodeFlagSpecs() {
 std::vector<Flags::Spec> TriangulateFlagSpecs() {
   return {
       {"max-epipolar", "PX", "reject points farther from their epipolar line, projector px", "1.5"},
+      {"volume", "LOW:HIGH",
+       "working volume, heights above the table, mm; points outside are rejected (default: the "
+       "calibration's working_volume_z, else -20:300)",
+       ""},
+      {"max-flying", "MM",
+       "reject flying points (mid-air mixed pixels at edges) off the surface on both sides by "
+       "more than this, mm; 0 keeps them",
+       "0.5"},
   };
 }
 
@@ -157,6 +165,18 @@ DecodeOptions DecodeOptionsFromFlags(const Flags& flags) {
 TriangulateOptions TriangulateOptionsFromFlags(const Flags& flags) {
   TriangulateOptions options;
   options.max_epipolar_error_px = flags.GetDouble("max-epipolar", 0.01, 100);
+  options.max_flying_mm = flags.GetDouble("max-flying", 0, 100);
+  const std::string volume = flags.Get("volume");
+  if (!volume.empty()) {
+    double low = 0, high = 0;
+    char colon = 0, extra = 0;
+    if (std::sscanf(volume.c_str(), "%lf %c %lf %c", &low, &colon, &high, &extra) != 3 ||
+        colon != ':' || !(low < high)) {
+      throw UsageError("--volume must be LOW:HIGH in mm with LOW < HIGH, got '" + volume + "'");
+    }
+    options.min_z_mm = low;
+    options.max_z_mm = high;
+  }
   return options;
 }
 

@@ -111,6 +111,26 @@ void WriteDevice(cv::FileStorage& fs, const std::string& prefix, const CameraMod
 
 }  // namespace
 
+// The optional working volume: `working_volume_z: [ low, high ]` (mm) or a 1x2 matrix.
+bool ReadVolume(const cv::FileNode& node, Calibration* calibration, std::string* why) {
+  if (node.empty() || node.isNone()) return true;
+  if (node.isSeq()) {
+    auto number = [](const cv::FileNode& n) { return n.isReal() || n.isInt(); };
+    if (node.size() != 2 || !number(node[0]) || !number(node[1])) {
+      *why = "must be a [ low, high ] sequence of two numbers, mm";
+      return false;
+    }
+    calibration->min_z_mm = static_cast<double>(node[0]);
+    calibration->max_z_mm = static_cast<double>(node[1]);
+    return true;
+  }
+  cv::Mat m;
+  if (!ReadMatrix(node, 1, 2, true, &m, why)) return false;
+  calibration->min_z_mm = m.at<double>(0);
+  calibration->max_z_mm = m.at<double>(1);
+  return true;
+}
+
 Status ReadCalibration(const std::string& path, Calibration* calibration) {
   const std::string problem = YamlTextProblem(path);
   if (!problem.empty()) return Status::Error(path + ": " + problem);
@@ -129,6 +149,10 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
   try {
     s = ReadDevice(fs, path, "camera_", &calibration->camera);
     if (s.ok()) s = ReadDevice(fs, path, "projector_", &calibration->projector);
+    std::string why;
+    if (s.ok() && !ReadVolume(fs["working_volume_z"], calibration, &why)) {
+      s = Status::Error(path + ": working_volume_z " + why);
+    }
   } catch (const std::exception& e) {
     s = Status::Error(path + ": malformed: " + e.what());
   }
@@ -144,6 +168,8 @@ Status WriteCalibration(const std::string& path, const Calibration& calibration)
     if (!fs.isOpened()) return Status::Error(path + ": cannot write the calibration file");
     WriteDevice(fs, "camera_", calibration.camera);
     WriteDevice(fs, "projector_", calibration.projector);
+    fs << "working_volume_z"
+       << "[" << calibration.min_z_mm << calibration.max_z_mm << "]";
   } catch (const cv::Exception& e) {
     return Status::Error(path + ": cannot write the calibration file: " + e.what());
   }

@@ -40,6 +40,36 @@ TEST_F(IoTest, CalibrationRoundTrip) {
   EXPECT_LT(cv::norm(r.projector.distortion - c.projector.distortion), 1e-12);
   EXPECT_LT(cv::norm(r.projector.rotation - c.projector.rotation), 1e-12);
   EXPECT_LT(cv::norm(r.camera.translation - c.camera.translation), 1e-9);
+  EXPECT_EQ(r.min_z_mm, c.min_z_mm);
+  EXPECT_EQ(r.max_z_mm, c.max_z_mm);
+}
+
+// The optional working volume: a sequence or a 1x2 matrix; absent, the default; wrong, named.
+TEST_F(IoTest, CalibrationWorkingVolume) {
+  ASSERT_TRUE(WriteCalibration(Path("c.yaml"), DefaultRig()).ok());
+  std::ifstream in(Path("c.yaml"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const size_t at = text.find("working_volume_z");
+  ASSERT_NE(at, std::string::npos);
+  const std::string without = text.substr(0, at);
+  Calibration r;
+  std::ofstream(Path("none.yaml")) << without;
+  ASSERT_TRUE(ReadCalibration(Path("none.yaml"), &r).ok());
+  EXPECT_EQ(r.min_z_mm, Calibration().min_z_mm);
+  std::ofstream(Path("seq.yaml")) << without << "working_volume_z: [ -5, 120.5 ]\n";
+  Status s = ReadCalibration(Path("seq.yaml"), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.min_z_mm, -5);
+  EXPECT_EQ(r.max_z_mm, 120.5);
+  std::ofstream(Path("upside.yaml")) << without << "working_volume_z: [ 50, 10 ]\n";
+  s = ReadCalibration(Path("upside.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("upside.yaml"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("working_volume_z"), std::string::npos) << s.message();
+  std::ofstream(Path("word.yaml")) << without << "working_volume_z: [ low, 10 ]\n";
+  s = ReadCalibration(Path("word.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("working_volume_z"), std::string::npos) << s.message();
 }
 
 // What Python's cv2.FileStorage writes: sizes as 1x2 integer matrices, float matrices, and a

@@ -117,11 +117,18 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   Stage stage("triangulate");
   StageReport& r = stage.report();
   r.Number("options", "max_epipolar_error_px", options.max_epipolar_error_px);
+  r.Number("options", "max_flying_mm", options.max_flying_mm);
+  const Calibration& c = triangulator.calibration();
+  r.Number("options", "volume_low_mm",
+           std::isnan(options.min_z_mm) ? c.min_z_mm : options.min_z_mm);
+  r.Number("options", "volume_high_mm",
+           std::isnan(options.max_z_mm) ? c.max_z_mm : options.max_z_mm);
   triangulator.Triangulate(decoded, options, map);
   if (!map->status.ok()) return stage.Finish(map->status);
   r.Number("pixels", "valid", map->valid);
   r.Number("pixels", "rejected_epipolar", map->rejected_epipolar);
   r.Number("pixels", "rejected_volume", map->rejected_volume);
+  r.Number("pixels", "rejected_flying", map->rejected_flying);
   double z_min = 0, z_max = 0;
   Status s = WritePointProducts(results, map->points, &z_min, &z_max);
   if (!s.ok()) return stage.Finish(s);

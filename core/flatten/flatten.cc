@@ -494,9 +494,15 @@ void MeasureStrain(const Mesh& mesh, const std::vector<cv::Point2d>& flat, Flatt
   }
   result->mean_strain = mesh.springs.empty() ? 0 : sum / mesh.springs.size();
   result->max_strain = worst;
-  // A fold flips a quad's orientation relative to how the camera saw it.
+  // A fold flips a quad's orientation relative to how the camera saw it. Cells with two or
+  // more skirt nodes lie mostly past the page's data, extrapolated: beyond a steep edge (a curl's
+  // corner seen edge on) their camera image may turn over while the page's own cells do not;
+  // they are not counted.
   int folded = 0;
   for (const cv::Vec4i& q : mesh.quads) {
+    int skirt = 0;
+    for (int c = 0; c < 4; ++c) skirt += mesh.kind[q[c]] == NodeKind::kSkirt;
+    if (skirt >= 2) continue;
     auto area = [](cv::Point2d a, cv::Point2d b, cv::Point2d c) {
       return (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
     };

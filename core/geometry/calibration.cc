@@ -105,6 +105,10 @@ bool Calibration::Check(std::string* why) const {
     *why = "camera and projector share one centre: no baseline to triangulate";
     return false;
   }
+  if (!(min_z_mm < max_z_mm) || !std::isfinite(min_z_mm) || !std::isfinite(max_z_mm)) {
+    *why = "working_volume_z: the lower height must be below the upper";
+    return false;
+  }
   return true;
 }
 

@@ -30,6 +30,9 @@ struct CameraModel {
 struct Calibration {
   CameraModel camera;
   CameraModel projector;
+  // The heights a scanned object may have, mm (world z, the table at 0): points outside are
+  // rejected as mistriangulated. Calibration key `working_volume_z` (optional).
+  double min_z_mm = -20.0, max_z_mm = 300.0;
 
   bool Check(std::string* why) const;
 };

@@ -104,6 +104,62 @@ TEST(Triangulate, RejectsPointsOffTheirEpipolarLine) {
   EXPECT_EQ(map.rejected_epipolar, 1);
 }
 
+// A decode of the tilted plane z = 20 + 0.1 x + 0.05 y, every 7th pixel.
+DecodeResult PlaneDecode(const Calibration& calib) {
+  const CameraModel& cam = calib.camera;
+  DecodeResult d;
+  d.status = Status::Ok();
+  d.has_columns = d.has_rows = true;
+  d.projector_x = cv::Mat(cam.size, CV_32F, cv::Scalar(NAN));
+  d.projector_y = d.projector_x.clone();
+  d.valid = cv::Mat::zeros(cam.size, CV_8U);
+  const cv::Vec3d c = cam.Center();
+  for (int v = 0; v < cam.size.height; v += 7) {
+    for (int u = 0; u < cam.size.width; u += 7) {
+      const cv::Vec3d r = cam.RayDirection(cv::Point2d(u, v));
+      const double t = (20 - c[2] + 0.1 * c[0] + 0.05 * c[1]) / (r[2] - 0.1 * r[0] - 0.05 * r[1]);
+      const cv::Point2d p = calib.projector.Project(c + t * r);
+      if (!(p.x >= 0 && p.y >= 0 && p.x < 1023 && p.y < 767)) continue;
+      d.projector_x.at<float>(v, u) = static_cast<float>(p.x);
+      d.projector_y.at<float>(v, u) = static_cast<float>(p.y);
+      d.valid.at<uint8_t>(v, u) = 255;
+    }
+  }
+  return d;
+}
+
+// The working volume comes from the calibration, a flag overrides it, and a scan with every
+// point outside it is an error that says where they fell (not an empty page).
+TEST(Triangulate, SaysWhenEveryPointFallsOutsideTheWorkingVolume) {
+  Calibration calib = DefaultRig();
+  const DecodeResult d = PlaneDecode(calib);
+  const int decoded = cv::countNonZero(d.valid);
+  ASSERT_GT(decoded, 1000);
+  TriangulateOptions keep;
+  keep.max_flying_mm = 0;  // Every 7th pixel: no neighbours to judge flying points by.
+  calib.min_z_mm = 60;     // The plane lies within 20 +- 30 mm in the view: all of it below.
+  calib.max_z_mm = 200;
+  PointMap map = Triangulator(calib).Triangulate(d, keep);
+  ASSERT_FALSE(map.status.ok());
+  EXPECT_EQ(map.rejected_volume, decoded);
+  EXPECT_EQ(map.rejected_below, decoded);
+  const std::string& m = map.status.message();
+  EXPECT_NE(m.find("outside the working volume (heights 60 to 200 mm"), std::string::npos) << m;
+  EXPECT_NE(m.find(std::to_string(decoded) + " below it, 0 above"), std::string::npos) << m;
+  // The flag's volume wins over the calibration's.
+  keep.min_z_mm = -40;
+  keep.max_z_mm = 80;
+  map = Triangulator(calib).Triangulate(d, keep);
+  ASSERT_TRUE(map.status.ok()) << map.status.message();
+  EXPECT_EQ(map.valid, decoded);
+  // Half outside: not an error, counted.
+  keep.min_z_mm = 20;
+  map = Triangulator(calib).Triangulate(d, keep);
+  ASSERT_TRUE(map.status.ok()) << map.status.message();
+  EXPECT_GT(map.rejected_below, 0);
+  EXPECT_EQ(map.valid + map.rejected_volume, decoded);
+}
+
 TEST(Triangulate, RejectsAMismatchedCameraSize) {
   DecodeResult d;
   d.status = Status::Ok();

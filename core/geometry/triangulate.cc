@@ -2,10 +2,12 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <opencv2/core/utility.hpp>
 
 #include "core/common/check.h"
+#include "core/geometry/flying.h"
 
 namespace vellum {
 namespace {
@@ -43,8 +45,12 @@ bool TriangulateOptions::Check(std::string* why) const {
     *why = "max_epipolar_error_px must be positive";
     return false;
   }
-  if (!(min_z_mm < max_z_mm)) {
-    *why = "min_z_mm must be below max_z_mm";
+  if (std::isnan(min_z_mm) != std::isnan(max_z_mm) || min_z_mm >= max_z_mm) {
+    *why = "the working volume needs a lower height below the upper";
+    return false;
+  }
+  if (!(max_flying_mm >= 0) || flying_reach_px < 1 || flying_reach_px > 32) {
+    *why = "max_flying_mm must be >= 0 and flying_reach_px in [1, 32]";
     return false;
   }
   return true;
@@ -74,7 +80,8 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
                                PointMap* result) const {
   PointMap& out = *result;
   out.status = Status::Error("triangulation not run");
-  out.valid = out.rejected_epipolar = out.rejected_volume = 0;
+  out.valid = out.rejected_epipolar = out.rejected_volume = out.rejected_below = 0;
+  out.rejected_flying = 0;
   std::string why;
   if (!options.Check(&why)) {
     out.status = Status::Error("triangulation options: " + why);
@@ -102,9 +109,11 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
   const double nan = std::numeric_limits<double>::quiet_NaN();
   out.points.create(size, CV_32FC3);
   out.residual.create(size, CV_32F);
-  std::atomic<int> n_valid{0}, n_epi{0}, n_vol{0};
+  const double low = std::isnan(options.min_z_mm) ? calibration_.min_z_mm : options.min_z_mm;
+  const double high = std::isnan(options.max_z_mm) ? calibration_.max_z_mm : options.max_z_mm;
+  std::atomic<int> n_valid{0}, n_epi{0}, n_vol{0}, n_below{0};
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
-    int valid = 0, epi = 0, vol = 0;
+    int valid = 0, epi = 0, vol = 0, below = 0;
     for (int v = range.start; v < range.end; ++v) {
       const uint8_t* ok = decoded.valid.ptr<uint8_t>(v);
       const float* px = decoded.projector_x.ptr<float>(v);
@@ -118,12 +127,12 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
         float* pf = reinterpret_cast<float*>(point);
         // Invariants as locals, so the compiler keeps them in registers.
         const double max_r = options.max_epipolar_error_px;
-        const double zmin = options.min_z_mm, zmax = options.max_z_mm;
+        const double zmin = low, zmax = high;
         const double k00 = kr(0, 0), k01 = kr(0, 1), k02 = kr(0, 2), k10 = kr(1, 0), k11 = kr(1, 1),
                      k12 = kr(1, 2), k20 = kr(2, 0), k21 = kr(2, 1), k22 = kr(2, 2);
         const double a0 = a[0], a1 = a[1], a2 = a[2];
         const double cx = c_world[0], cy = c_world[1], cz = c_world[2];
-        int n_valid = 0, n_epi = 0, n_vol = 0;
+        int n_valid = 0, n_epi = 0, n_vol = 0, n_low = 0;
         for (int u = 0; u < size.width; ++u) {
           const double dx = rf[3 * u], dy = rf[3 * u + 1], dz = rf[3 * u + 2];
           const double b0 = k00 * dx + k01 * dy + k02 * dz;
@@ -138,6 +147,7 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
           const int good = decoded_ok & on_line & in_volume;
           n_epi += decoded_ok & (1 - on_line);
           n_vol += decoded_ok & on_line & (1 - in_volume);
+          n_low += decoded_ok & on_line & (t > 0) & (z < zmin);
           n_valid += good;
           pf[3 * u] = good ? static_cast<float>(x) : NAN;
           pf[3 * u + 1] = good ? static_cast<float>(y) : NAN;
@@ -147,6 +157,7 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
         valid += n_valid;
         epi += n_epi;
         vol += n_vol;
+        below += n_low;
         continue;
       }
       for (int u = 0; u < size.width; ++u) {
@@ -180,8 +191,9 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
           continue;
         }
         const cv::Vec3d m = c_world + t * d;
-        if (!(t > 0) || !(m[2] >= options.min_z_mm && m[2] <= options.max_z_mm)) {
+        if (!(t > 0) || !(m[2] >= low && m[2] <= high)) {
           ++vol;
+          below += t > 0 && m[2] < low;
           continue;
         }
         point[u] =
@@ -193,10 +205,31 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
     n_valid += valid;
     n_epi += epi;
     n_vol += vol;
+    n_below += below;
   });
   out.valid = n_valid;
   out.rejected_epipolar = n_epi;
   out.rejected_volume = n_vol;
+  out.rejected_below = n_below;
+  if (out.valid == 0 && out.rejected_volume > 0) {
+    char text[320];
+    std::snprintf(text, sizeof text,
+                  "all %d triangulated points fall outside the working volume (heights %g to %g "
+                  "mm above the table): %d below it, %d above; check the calibration's table "
+                  "plane, or the volume (--volume, or working_volume_z in the calibration)",
+                  out.rejected_volume, low, high, out.rejected_below,
+                  out.rejected_volume - out.rejected_below);
+    out.status = Status::Error(text);
+    return;
+  }
+  if (options.max_flying_mm > 0) {
+    out.rejected_flying =
+        RejectFlyingPoints(&out.points, options.max_flying_mm, options.flying_reach_px);
+    cv::Mat z;
+    cv::extractChannel(out.points, z, 2);
+    out.residual.setTo(nan, z != z);
+    out.valid -= out.rejected_flying;
+  }
   out.status = Status::Ok();
 }
 

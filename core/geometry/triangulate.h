@@ -5,6 +5,7 @@
 // (the epipolar line) is the point's residual; inconsistent points are rejected.
 #pragma once
 
+#include <limits>
 #include <opencv2/core.hpp>
 #include <string>
 
@@ -16,8 +17,12 @@ namespace vellum {
 
 struct TriangulateOptions {
   double max_epipolar_error_px = 1.5;  // Max residual, projector pixels (when rows are decoded).
-  double min_z_mm = -20.0;             // Working volume: lowest accepted height above table, mm.
-  double max_z_mm = 300.0;             // Highest accepted height, mm.
+  // Working volume, heights above the table, mm; NaN: the calibration's (Calibration::min_z_mm).
+  double min_z_mm = std::numeric_limits<double>::quiet_NaN();
+  double max_z_mm = std::numeric_limits<double>::quiet_NaN();
+  // Flying points (flying.h): off the surface on both sides by more than this, mm (0: kept).
+  double max_flying_mm = 0.5;
+  int flying_reach_px = 4;  // Past the decoder's window (7 x 7: 3 px each side).
 
   bool Check(std::string* why) const;
 };
@@ -28,7 +33,9 @@ struct PointMap {
   cv::Mat residual;  // CV_32F epipolar residual, projector px; NaN where invalid.
   int valid = 0;
   int rejected_epipolar = 0;
-  int rejected_volume = 0;
+  int rejected_volume = 0;  // Outside the working volume (of which below it:)
+  int rejected_below = 0;
+  int rejected_flying = 0;
 };
 
 // Holds a calibration and the camera's per-pixel rays (computed once), and triangulates scans.

@@ -233,15 +233,14 @@ double WarpError(const Mesh& mesh) {
     const int a = mesh.Index(i0, j0), b = mesh.Index(i1, j1), c = mesh.Index(i2, j2);
     const double d0 = cv::norm(mesh.point[b] - mesh.point[a]);
     const double d1 = cv::norm(mesh.point[c] - mesh.point[b]);
-    const double cell_px = 0.5 * (cv::norm(mesh.pixel[b] - mesh.pixel[a]) +
-                                  cv::norm(mesh.pixel[c] - mesh.pixel[b]));
+    const double cell_px =
+        0.5 * (cv::norm(mesh.pixel[b] - mesh.pixel[a]) + cv::norm(mesh.pixel[c] - mesh.pixel[b]));
     return d0 + d1 > 0 ? cell_px / 8 * std::fabs(d1 - d0) / (0.5 * (d0 + d1)) : 0.0;
   };
   for (int j = 0; j < mesh.rows; ++j) {
     for (int i = 0; i < mesh.cols; ++i) {
       if (!measured(i, j)) continue;
-      errors.push_back(
-          std::max(along(i - 1, j, i, j, i + 1, j), along(i, j - 1, i, j, i, j + 1)));
+      errors.push_back(std::max(along(i - 1, j, i, j, i + 1, j), along(i, j - 1, i, j, i, j + 1)));
     }
   }
   if (errors.empty()) return 0;
@@ -317,6 +316,29 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     mesh.status = Status::Error("no valid 3D points on the page: nothing to flatten");
     return mesh;
   }
+  // A hole node held by fewer than two sheet nodes (a page's corner whose points are gone) has
+  // nothing to interpolate between: it would copy its one neighbour and the two coincide. Such
+  // nodes are peeled off until every hole node is held on two sides. The skirt does not
+  // extend over them either: extrapolated from a corner whose points are gone (a curl's corner
+  // seen edge on), it folds; the sheet loses the corner's cell instead.
+  std::vector<uint8_t> peeled_off(n, 0);
+  for (bool peeled = true; peeled;) {
+    peeled = false;
+    for (int k = 0; k < n; ++k) {
+      if (mesh.kind[k] != NodeKind::kFilled) continue;
+      const int i = k % g, j = k / g;
+      int held = 0;
+      if (i > 0) held += mesh.kind[k - 1] != NodeKind::kOff;
+      if (i + 1 < g) held += mesh.kind[k + 1] != NodeKind::kOff;
+      if (j > 0) held += mesh.kind[k - g] != NodeKind::kOff;
+      if (j + 1 < h) held += mesh.kind[k + g] != NodeKind::kOff;
+      if (held < 2) {
+        mesh.kind[k] = NodeKind::kOff;
+        peeled_off[k] = 1;
+        peeled = true;
+      }
+    }
+  }
   // Holes: harmonic interpolation (Jacobi) from the measured nodes around them.
   std::vector<int> holes;
   for (int k = 0; k < n; ++k) {
@@ -373,7 +395,7 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     for (int j = 0; j < h; ++j) {
       for (int i = 0; i < g; ++i) {
         const int k = mesh.Index(i, j);
-        if (mesh.Active(k)) continue;
+        if (mesh.Active(k) || peeled_off[k]) continue;
         cv::Vec3d sum(0, 0, 0);
         int c = 0;
         for (int dj2 = -1; dj2 <= 1; ++dj2) {

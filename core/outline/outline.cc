@@ -159,8 +159,8 @@ cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale
 }
 
 // Labels (1 leaf, 2 surround) spread from their seeds over the pixels with a height, lowest rim
-// strength (in rim-threshold units) first (a watershed: two floods meet on the rim's crest, even where the
-// rim is faint). `labels` holds the seeds on input; pixels without a height stay 0.
+// strength (in rim-threshold units) first (a watershed: two floods meet on the rim's crest, even
+// where the rim is faint). `labels` holds the seeds on input; pixels without a height stay 0.
 void Flood(const cv::Mat& strength, const cv::Mat& z, cv::Mat* labels) {
   constexpr int kLevels = 256;
   auto level = [&](int v, int u) {
@@ -287,7 +287,8 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
     cv::minMaxLoc(depth, nullptr, &deepest);
     // A hole too narrow for the band: all of it.
     const float lo = deepest >= kFar ? kNear : 0, hi = deepest >= kFar ? kFar : 1e9f;
-    const int tiles_x = (near.width + kTile - 1) / kTile, tiles_y = (near.height + kTile - 1) / kTile;
+    const int tiles_x = (near.width + kTile - 1) / kTile,
+              tiles_y = (near.height + kTile - 1) / kTile;
     std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
     std::vector<std::vector<float>> steps(tiles_x * tiles_y);
     std::vector<float> look_in, look_around;

@@ -56,7 +56,7 @@ Found FindIn(const Scene& scene) {
     const cv::Mat off = f.outline.mask & (f.truth == 0);
     f.background_inside = cv::countNonZero(off);
     cv::Mat distance;
-    cv::distanceTransform(f.truth == 0, distance, cv::DIST_L2, 3);
+    cv::distanceTransform(f.truth == 0, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
     cv::minMaxLoc(distance, nullptr, &f.farthest_px, nullptr, nullptr, off);
     if (getenv("OUTLINE_DUMP")) {
       cv::Mat show;
@@ -65,7 +65,8 @@ Found FindIn(const Scene& scene) {
       show.setTo(cv::Scalar(255, 0, 0), (f.truth != 0) & ~f.outline.mask);
       show.setTo(cv::Scalar(0, 255, 0), (f.truth == 0) & ~f.outline.mask & (f.outline.mask == 0));
       static int n = 0;
-      cv::imwrite(std::string(getenv("OUTLINE_DUMP")) + "/mask" + std::to_string(n) + ".png", f.outline.mask);
+      cv::imwrite(std::string(getenv("OUTLINE_DUMP")) + "/mask" + std::to_string(n) + ".png",
+                  f.outline.mask);
       cv::imwrite(std::string(getenv("OUTLINE_DUMP")) + "/off" + std::to_string(n++) + ".png",
                   show);
     }

@@ -17,6 +17,9 @@ struct PointErrorStats {
   int valid = 0;            // Of those, pixels with a measured point.
   double valid_fraction = 0;
   double median_mm = 0, rms_mm = 0, p99_mm = 0, max_mm = 0;  // 3D error over valid page pixels.
+  int beyond_1mm = 0;  // Valid page pixels more than 1 mm off.
+  int flying = 0;      // Points anywhere (page, table, support, lit or not) more than 1 mm from the
+                       // true surface within 2 px of their pixel: in mid-air.
 };
 
 // Compares a CV_32FC3 point map with the truth over page pixels lit by the projector.
