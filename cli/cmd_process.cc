@@ -14,6 +14,10 @@ int RunProcess(const std::vector<std::string>& args) {
           {"scan", "DIR", "scan directory (scan.yaml, texture.png, frame_000.png, ...)", ""},
           {"calibration", "FILE", "calibration YAML of camera and projector", ""},
           {"out", "DIR", "output directory", ""},
+          {"until", "STAGE",
+           "restored (every stage), or points: stop after the point cloud (points.ply, "
+           "depth.png, the report), for an object that is not a page",
+           "restored"},
       },
       PipelineFlagSpecs());
   Flags flags(
@@ -35,7 +39,12 @@ int RunProcess(const std::vector<std::string>& args) {
   const std::string scan_dir = flags.Require("scan");
   const std::string calibration = flags.Require("calibration");
   const std::string out = flags.Require("out");
-  const PipelineOptions options = PipelineOptionsFromFlags(flags);
+  PipelineOptions options = PipelineOptionsFromFlags(flags);
+  const std::string until = flags.Get("until");
+  if (until != "restored" && until != "points") {
+    throw UsageError("--until must be restored or points, got '" + until + "'");
+  }
+  options.points_only = until == "points";
 
   Progress progress;
   progress.Update("read", 0);
@@ -53,8 +62,13 @@ int RunProcess(const std::vector<std::string>& args) {
     std::fprintf(stderr, "vellum process: %s\n", s.message().c_str());
     return 1;
   }
-  std::printf("%d valid points; %s\n", result.map.valid,
-              result.outline.pages.size() > 1 ? "a spread of two pages" : "one leaf");
+  if (options.points_only) {
+    std::printf("%d valid points; stopped after the point cloud (--until points)\n",
+                result.map.valid);
+  } else {
+    std::printf("%d valid points; %s\n", result.map.valid,
+                result.outline.pages.size() > 1 ? "a spread of two pages" : "one leaf");
+  }
   for (const PageResult& page : result.pages) {
     const RestoreResult& restored = page.restored;
     std::printf("%s: sheet %dx%d, %s residual strain mean %.2e max %.2e; restored %dx%d%s\n",

@@ -63,6 +63,12 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
            false)) {
     return out;
   }
+  if (options.points_only) {
+    report.stages.back().Text("options", "until", "points");
+    next("report", 0.97);
+    out.status = WriteReports(results, input.scan_dir, &report);
+    return out;
+  }
   next("outline", 0.65);
   if (!ran(OutlineStage(out.map.points, input.scan.texture, options.outline, options.limits,
                         results, &out.outline),

@@ -50,6 +50,8 @@ struct PipelineOptions {
   FlattenOptions flatten;
   RestoreOptions restore;
   WarningLimits limits;
+  // Stop after the point cloud (points.ply, depth.png): an object that is not a page.
+  bool points_only = false;
 
   bool Check(std::string* why) const;
 };

@@ -110,6 +110,45 @@ TEST_F(CliTest, ProcessWritesPointsAndReport) {
   }
 }
 
+// A doubtful result is written, printed as a warning, recorded in report.json, and exits 3; a
+// clean one prints no warning and exits 0.
+TEST_F(CliTest, ADoubtfulResultExitsThreeWithItsWarning) {
+  const Result clean = RunVellum(Process((root_ / "scan").string(), Rig()));
+  ASSERT_EQ(clean.exit_code, 0) << clean.output;
+  EXPECT_EQ(clean.output.find("warning"), std::string::npos) << clean.output;
+  const Result r = RunVellum(Process((root_ / "scan").string(), Rig()) + " --leaf-size 100x100");
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("warning size_unexpected: the leaf measures"), std::string::npos)
+      << r.output;
+  EXPECT_TRUE(fs::exists(root_ / "out" / "restored.tif"));
+  std::ifstream report(root_ / "out" / "report.json");
+  const std::string text((std::istreambuf_iterator<char>(report)),
+                         std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("\"size_unexpected\""), std::string::npos) << text;
+}
+
+// An object that is not a page: --until points writes the point cloud and the report, and no
+// sheet or restored page.
+TEST_F(CliTest, UntilPointsStopsAfterThePointCloud) {
+  const std::string out = (root_ / "points_only").string();
+  const Result r = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " +
+                             Rig() + " --out " + out + " --until points");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("stopped after the point cloud"), std::string::npos) << r.output;
+  std::vector<PlyPoint> points;
+  ASSERT_TRUE(ReadPointsPly(out + "/points.ply", &points).ok());
+  EXPECT_GT(points.size(), 60000u);
+  EXPECT_TRUE(fs::exists(out + "/report.json"));
+  EXPECT_TRUE(fs::exists(out + "/report.html"));
+  for (const char* absent : {"mesh.ply", "flat.ply", "restored.tif", "restored.json"}) {
+    EXPECT_FALSE(fs::exists(out + "/" + absent)) << absent;
+  }
+  EXPECT_EQ(RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " + Rig() +
+                      " --out " + out + " --until mesh")
+                .exit_code,
+            2);
+}
+
 std::string FileBytes(const fs::path& path) {
   std::ifstream f(path, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());

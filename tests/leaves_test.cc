@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <opencv2/calib3d.hpp>
@@ -46,8 +47,11 @@ struct Scanned {
   ProcessResult result;
 };
 
-Scanned Process(const Scene& scene, uint64_t seed) {
+Scanned Process(const Scene& scene, uint64_t seed,
+                const PipelineOptions& options = PipelineOptions(),
+                cv::Vec2d centre_mm = {0.0, 0.0}) {
   PageOptions page;
+  page.centre_mm = centre_mm;
   page.shape = scene.shape;
   page.outline = scene.outline;
   if (scene.spread) page.size_mm = {170.0, 230.0};
@@ -69,7 +73,7 @@ Scanned Process(const Scene& scene, uint64_t seed) {
   input.calibration = DefaultRig();
   const std::string out =
       (fs::temp_directory_path() / ("vellum_leaves_" + std::to_string(getpid()))).string();
-  run.result = RunPipeline(input, PipelineOptions(), out);
+  run.result = RunPipeline(input, options, out);
   if (getenv("LEAVES_DUMP")) {
     fs::copy(out, std::string(getenv("LEAVES_DUMP")) + "/" + scene.name,
              fs::copy_options::recursive | fs::copy_options::overwrite_existing);
@@ -299,6 +303,55 @@ TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
   // A clean scan: no warning.
   for (const Warning& w : run.result.report.Warnings())
     ADD_FAILURE() << w.code << ": " << w.message;
+}
+
+std::vector<std::string> WarningCodes(const Scanned& run) {
+  std::vector<std::string> codes;
+  for (const Warning& w : run.result.report.Warnings()) codes.push_back(w.code);
+  return codes;
+}
+
+bool Has(const std::vector<std::string>& codes, const std::string& code) {
+  return std::find(codes.begin(), codes.end(), code) != codes.end();
+}
+
+// A doubtful result is written and flagged, never silent. The leaf runs off the view: its
+// centre 50 mm up puts its top edge 10 mm (40 px) past the camera's 150 mm half height.
+TEST(Doubtful, ALeafRunningOffTheViewIsFlagged) {
+  const Scanned run =
+      Process(Scene{"cut_off", PageShape::kCurl}, 31, PipelineOptions(), cv::Vec2d(0.0, 50.0));
+  ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
+  const std::vector<std::string> codes = WarningCodes(run);
+  EXPECT_TRUE(Has(codes, "page_cut_off")) << ::testing::PrintToString(codes);
+}
+
+// The operator's expected size: a 190 x 240 mm leaf is flagged against 150 x 240 mm (27% off)
+// either way round, and not against 240 x 190 mm (the leaf turned).
+TEST(Doubtful, ALeafOfAnotherSizeThanExpectedIsFlagged) {
+  PipelineOptions options;
+  options.limits.expected_leaf_mm = {150.0, 240.0};
+  const Scanned wrong = Process(Scene{"size", PageShape::kCurl}, 31, options);
+  ASSERT_TRUE(wrong.result.status.ok()) << wrong.result.status.message();
+  EXPECT_TRUE(Has(WarningCodes(wrong), "size_unexpected"))
+      << ::testing::PrintToString(WarningCodes(wrong));
+  options.limits.expected_leaf_mm = {240.0, 190.0};
+  const Scanned right = Process(Scene{"size", PageShape::kCurl}, 31, options);
+  ASSERT_TRUE(right.result.status.ok()) << right.result.status.message();
+  EXPECT_TRUE(WarningCodes(right).empty()) << ::testing::PrintToString(WarningCodes(right));
+}
+
+// A sheet held over more than the leaf: with no rim ever found (the step asked for is
+// absurd), the leaf found takes the support with it to the edges of the view: the strain and
+// the view's border say so.
+TEST(Doubtful, ASheetOverASupportIsFlagged) {
+  PipelineOptions options;
+  options.outline.step_mm = 1e3;
+  const Scanned run = Process(Scene{"support", PageShape::kCurl, true}, 31, options);
+  ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
+  const std::vector<std::string> codes = WarningCodes(run);
+  std::printf("[doubtful] sheet over a support: %s\n", ::testing::PrintToString(codes).c_str());
+  EXPECT_TRUE(Has(codes, "strain_high")) << ::testing::PrintToString(codes);
+  EXPECT_TRUE(Has(codes, "page_cut_off")) << ::testing::PrintToString(codes);
 }
 
 INSTANTIATE_TEST_SUITE_P(Scenes, Leaves,
