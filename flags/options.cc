@@ -15,6 +15,13 @@ std::vector<Flags::Spec> PatternFlagSpecs() {
   return {
       {"phase-steps", "N", "phase shifts per axis; 0 = Gray code only", "8"},
       {"period", "PX", "sinusoid period, projector pixels", "16"},
+      {"gray-inverses", "BOOL",
+       "each Gray bit with its inverse pattern (false: bits judged against white and black)",
+       "true"},
+      {"gray-skip-bits", "K",
+       "leave out the Gray code's K finest bits (stripes of 2^K px, as a rig whose projector is "
+       "wider than its code)",
+       "0"},
   };
 }
 
@@ -23,6 +30,8 @@ PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
   o.projector_size = projector;
   o.phase_steps = flags.GetInt("phase-steps", 0, 64);
   o.phase_period_px = flags.GetInt("period", 4, 4096);
+  o.gray_inverses = flags.GetBool("gray-inverses");
+  o.gray_skip_bits = flags.GetInt("gray-skip-bits", 0, 15);
   std::string why;
   if (!o.Check(&why)) throw UsageError(why);
   return o;

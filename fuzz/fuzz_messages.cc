@@ -68,7 +68,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (!Decode(data, size, &m)) break;
       Mesh mesh;
       std::vector<cv::Point2d> flat;
-      if (AddChunk(m, &mesh, &flat).ok() && m.chunk_count == 1) {
+      SheetPage page;
+      if (AddChunk(m, &mesh, &flat, &page).ok() && m.chunk_count == 1) {
         static const Calibration rig = DefaultRig();
         ConnectSheet(
             m.bend_springs, [](const cv::Vec3d& x) { return rig.camera.Project(x); }, &mesh);

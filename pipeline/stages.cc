@@ -97,6 +97,10 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   r.Text("sizes", "camera", SizeText(scan.camera_size));
   r.Text("sizes", "projector", SizeText(scan.sequence.projector_size));
   r.Number("sizes", "patterns", static_cast<double>(scan.sequence.patterns.size()));
+  r.Text("sizes", "gray_inverses",
+         scan.sequence.GrayInverses(Axis::kColumn) || scan.sequence.GrayInverses(Axis::kRow)
+             ? "yes"
+             : "no");
   decoder->Decode(scan.sequence, scan.frames, decoded);
   if (!decoded->status.ok()) return stage.Finish(decoded->status);
   const DecodeStats& d = decoded->stats;
@@ -108,6 +112,7 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   r.Number("pixels", "rejected_modulation", d.rejected_modulation);
   r.Number("pixels", "rejected_unwrap", d.rejected_unwrap);
   r.Number("pixels", "fit_fallbacks", d.fit_fallbacks);
+  r.Number("sizes", "gray_stripe_px", d.gray_stripe_px);
   return stage.Finish(Status::Ok());
 }
 

@@ -99,6 +99,76 @@ INSTANTIATE_TEST_SUITE_P(Shapes, PageAccuracy,
                                            PageShape::kCone),
                          [](const auto& info) { return std::string(ToString(info.param)); });
 
+// Scans from other rigs: a sequence made by the options below, rendered on the virtual gantry
+// (curled checkerboard page), decoded and triangulated as any scan.
+PointErrorStats MeasureSequence(const PatternOptions& patterns, bool phase, int* stripe_px) {
+  const SimulatedScan scan = SimulateScan(DefaultRig(), PageShape::kCurl, 11);
+  const PatternSequence seq = MakePatternSequence(patterns);
+  const std::vector<cv::Mat> frames = RenderSequence(*scan.gantry, seq, 11);
+  DecodeOptions options;
+  options.use_phase = phase;
+  const DecodeResult decoded = Decode(seq, frames, options);
+  EXPECT_TRUE(decoded.status.ok()) << decoded.status.message();
+  *stripe_px = decoded.stats.gray_stripe_px;
+  TriangulateOptions triangulate;
+  if (!phase) triangulate.max_flying_mm = 0;  // As the Gray-code baseline above.
+  const PointMap map = Triangulator(DefaultRig()).Triangulate(decoded, triangulate);
+  EXPECT_TRUE(map.status.ok()) << map.status.message();
+  return ComparePoints(scan.gantry->truth(), map.points);
+}
+
+// Without inverse patterns each Gray bit is judged against the middle of the white and black
+// frames instead of its inverse: half the frames, a noisier threshold (the white and black
+// frames' noise, sqrt(2) x a pattern's), and the phase still sets the coordinate: the same bar.
+// Without the finest bit (stripes of 2 px, as a projector wider than its code) the phase still
+// unwraps (a stripe is 1/8 of its 16 px period): the same bar. With the Gray code alone the
+// resolution lost is the stripe itself: coordinates step by 4 px for 2 bits left out (about
+// 1.5 mm on the table, 4 mm of depth at the 19 degree triangulation angle before the local fit),
+// so its error grows about with the stripe: at most 6 x the full code's median, and stated.
+TEST(OtherRigs, GrayCodeWithoutInversesOrFinestBitsDecodesWithinWhatItAllows) {
+  const PatternOptions full{DefaultRig().projector.size};
+  int stripe = 0;
+  const PointErrorStats reference = MeasureSequence(full, true, &stripe);
+  EXPECT_EQ(stripe, 1);
+  struct Case {
+    const char* name;
+    bool inverses;
+    int skip;
+  };
+  for (const Case c :
+       {Case{"no inverses", false, 0}, Case{"no finest bit", true, 1}, Case{"neither", false, 1}}) {
+    PatternOptions o = full;
+    o.gray_inverses = c.inverses;
+    o.gray_skip_bits = c.skip;
+    const PointErrorStats m = MeasureSequence(o, true, &stripe);
+    std::printf(
+        "[other rigs] %-14s phase: stripe %d px, valid %.4f, median %.4f mm, RMS %.4f mm, p99 "
+        "%.4f mm (full code: %.4f / %.4f / %.4f)\n",
+        c.name, stripe, m.valid_fraction, m.median_mm, m.rms_mm, m.p99_mm, reference.median_mm,
+        reference.rms_mm, reference.p99_mm);
+    EXPECT_EQ(stripe, 1 << c.skip);
+    EXPECT_GE(m.valid_fraction, 0.99);
+    EXPECT_LE(m.median_mm, 0.03);
+    EXPECT_LE(m.rms_mm, 0.06);
+    EXPECT_LE(m.p99_mm, 0.2);
+  }
+  PatternOptions gray = full;
+  gray.phase_steps = 0;
+  const PointErrorStats gray_full = MeasureSequence(gray, false, &stripe);
+  gray.gray_skip_bits = 2;
+  gray.gray_inverses = false;
+  const PointErrorStats gray_coarse = MeasureSequence(gray, false, &stripe);
+  std::printf(
+      "[other rigs] gray only, no inverses, 2 finest bits left out: stripe %d px, valid %.4f, "
+      "median %.4f mm, RMS %.4f mm (full Gray code: valid %.4f, median %.4f mm, RMS %.4f mm)\n",
+      stripe, gray_coarse.valid_fraction, gray_coarse.median_mm, gray_coarse.rms_mm,
+      gray_full.valid_fraction, gray_full.median_mm, gray_full.rms_mm);
+  EXPECT_EQ(stripe, 4);
+  EXPECT_GE(gray_coarse.valid_fraction, 0.99);
+  EXPECT_GT(gray_coarse.median_mm, gray_full.median_mm);
+  EXPECT_LE(gray_coarse.median_mm, 6 * gray_full.median_mm);
+}
+
 // The hard case as the issue states it: a board to the page's edges, half the page dark ink.
 TEST(FullBleedBoard, HalfThePageInkStillMeetsTheBar) {
   TextureOptions texture;

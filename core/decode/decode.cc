@@ -47,8 +47,11 @@ inline float Atan2Inline(float y, float x) {
 struct AxisPlan {
   bool present = false;
   int bits = 0;
-  std::vector<int> pattern, inverse;  // Frame indices per bit, index 0 = finest bit.
-  int steps = 0;                      // Phase steps, 0 if no phase patterns are used.
+  int first_bit = 0;  // The finest bit coded: stripes of 2^first_bit projector pixels.
+  // Frame indices per bit, index 0 = finest bit (-1 below first_bit; inverse -1 throughout for
+  // a code without inverses, whose bits are judged against the white and black frames).
+  std::vector<int> pattern, inverse;
+  int steps = 0;  // Phase steps, 0 if no phase patterns are used.
   int period = 0;
   std::vector<int> phase;  // Frame indices per step.
   std::vector<float> cos_k, sin_k;
@@ -59,6 +62,7 @@ AxisPlan PlanAxis(const PatternSequence& seq, Axis axis, const DecodeOptions& op
   AxisPlan plan;
   plan.bits = seq.GrayBits(axis);
   plan.present = plan.bits > 0;
+  plan.first_bit = seq.FirstGrayBit(axis);
   for (int b = 0; b < plan.bits; ++b) {
     plan.pattern.push_back(seq.Find(PatternKind::kGray, axis, b, false));
     plan.inverse.push_back(seq.Find(PatternKind::kGray, axis, b, true));
@@ -85,8 +89,16 @@ struct Counters {
 // Per-row scratch of the decode pass.
 struct RowScratch {
   explicit RowScratch(int width)
-      : code(width), uncertain(width), s(width), c(width), amp(width), coord(width), error(width) {}
+      : code(width),
+        uncertain(width),
+        inverse(width),
+        s(width),
+        c(width),
+        amp(width),
+        coord(width),
+        error(width) {}
   std::vector<uint16_t> code, uncertain;
+  std::vector<uint8_t> inverse;  // A Gray bit's inverse, where the sequence has none.
   std::vector<float> s, c, amp, coord, error;
 };
 
@@ -166,8 +178,8 @@ void EstimateLight(const std::vector<int>& high_frequency, const std::vector<cv:
 // Gray code alone). Pixels with lit[x] == 0 are skipped and not counted.
 void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int y,
                    const DecodeOptions& options, const uint8_t* lit, const float* half_contrast,
-                   const LightRow& light, RowScratch* sc, float* coordinate, float* modulation,
-                   Counters* count) {
+                   const uint8_t* white, const uint8_t* black, const LightRow& light,
+                   RowScratch* sc, float* coordinate, float* modulation, Counters* count) {
   const int width = frames[0].cols;
   uint16_t* __restrict code = sc->code.data();
   uint16_t* __restrict uncertain = sc->uncertain.data();
@@ -175,10 +187,22 @@ void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int
   std::fill(uncertain, uncertain + width, 0);
   const int16_t margin = static_cast<int16_t>(std::ceil(options.uncertain_bit_dn));
   const int16_t min_direct = static_cast<int16_t>(std::ceil(options.min_contrast_dn));
-  for (int b = plan.bits - 1; b >= 0; --b) {
-    ClassifyBit(frames[plan.pattern[b]].ptr<uint8_t>(y), frames[plan.inverse[b]].ptr<uint8_t>(y),
-                light.black.data(), light.direct.data(), light.global.data(), margin, min_direct,
-                b >= kFirstVotingBit ? 1 : 0, code, uncertain, width);
+  for (int b = plan.bits - 1; b >= plan.first_bit; --b) {
+    const uint8_t* p = frames[plan.pattern[b]].ptr<uint8_t>(y);
+    const uint8_t* q = nullptr;
+    if (plan.inverse[b] >= 0) {
+      q = frames[plan.inverse[b]].ptr<uint8_t>(y);
+    } else {
+      // No inverse pattern: the one it would have given, white + black - pattern, so the bit is
+      // judged against the middle of the white and black frames.
+      uint8_t* __restrict made = sc->inverse.data();
+      for (int x = 0; x < width; ++x) {
+        made[x] = static_cast<uint8_t>(std::clamp(white[x] + black[x] - p[x], 0, 255));
+      }
+      q = made;
+    }
+    ClassifyBit(p, q, light.black.data(), light.direct.data(), light.global.data(), margin,
+                min_direct, b >= kFirstVotingBit ? 1 : 0, code, uncertain, width);
   }
   for (int x = 0; x < width; ++x) {  // Reflected Gray code to binary.
     uint16_t v = code[x];
@@ -192,9 +216,12 @@ void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int
   float* coord = sc->coord.data();
   float* err = sc->error.data();
   float max_err = 0.0f, min_mod = 0.0f;
+  // The code numbers stripes of 2^first_bit projector pixels: the stripe's centre.
+  const float stripe = static_cast<float>(1 << plan.first_bit);
+  const float centre = 0.5f * (stripe - 1.0f);
   if (plan.steps == 0) {
     for (int x = 0; x < width; ++x) {
-      coord[x] = static_cast<float>(code[x]);
+      coord[x] = static_cast<float>(code[x]) * stripe + centre;
       amp[x] = half_contrast[x];
       err[x] = 0.0f;
     }
@@ -221,13 +248,14 @@ void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int
       float phase = Atan2Inline(s[x], c[x]);
       phase = phase < 0 ? phase + 2.0f * kPi : phase;
       const float wrapped = phase * to_px;  // In [0, period).
-      const float gray = static_cast<float>(code[x]);
-      // The Gray code picks the period: a boundary bit error (+-1 px) changes nothing.
+      const float gray = static_cast<float>(code[x]) * stripe + centre;
+      // The Gray code picks the period: a boundary bit error (+-1 stripe) changes nothing.
       const float n = std::floor((gray - wrapped) * inv_period + 0.5f);
       coord[x] = wrapped + n * period;
       err[x] = std::fabs(coord[x] - gray);
     }
-    max_err = static_cast<float>(options.max_unwrap_error) * period;
+    // Within a stripe the phase may lie anywhere: half a stripe more is allowed.
+    max_err = static_cast<float>(options.max_unwrap_error) * period + 0.5f * (stripe - 1.0f);
     min_mod = static_cast<float>(options.min_modulation_dn);
   }
   int n_bits = 0, n_mod = 0, n_unwrap = 0;
@@ -493,16 +521,25 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
   const cv::Mat& black = frames[sequence.Find(PatternKind::kBlack)];
   // High-frequency patterns for the direct/global estimate: Gray bits 1 and 2 (stripes of 4
   // and 8 projector pixels: fine, yet above the defocus) of each axis, with their inverses.
+  // A code without its finest bits uses its two finest; without inverses, no pattern pair lights
+  // every pixel once, and the white and black frames give the light (direct = white - black,
+  // no global light seen).
   std::vector<int> high_frequency;
   for (const AxisPlan* plan : {&col, &row}) {
-    for (int b = 1; b <= 2 && b < plan->bits; ++b) {
+    const int low = std::max(1, plan->first_bit);
+    for (int b = low; b <= low + 1 && b < plan->bits; ++b) {
+      if (plan->inverse[b] < 0) continue;
       high_frequency.push_back(plan->pattern[b]);
       high_frequency.push_back(plan->inverse[b]);
     }
   }
-  if (high_frequency.empty()) {  // A projector of 2 or 3 pixels: its only bit.
-    high_frequency = {col.present ? col.pattern[0] : row.pattern[0],
-                      col.present ? col.inverse[0] : row.inverse[0]};
+  const AxisPlan& first = col.present ? col : row;
+  if (high_frequency.empty() && first.inverse[first.first_bit] >= 0) {
+    // A projector of 2 or 3 pixels: its only bit.
+    high_frequency = {first.pattern[first.first_bit], first.inverse[first.first_bit]};
+  }
+  if (high_frequency.empty()) {
+    high_frequency = {sequence.Find(PatternKind::kWhite), sequence.Find(PatternKind::kBlack)};
   }
 
   cv::Mat& out_x = result->projector_x;
@@ -539,16 +576,16 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
       float* px = out_x.ptr<float>(y);
       float* py = out_y.ptr<float>(y);
       if (col.present) {
-        DecodeAxisRow(col, frames, y, options, on.data(), amp, light, &scratch, px, mod_x.data(),
-                      &count);
+        DecodeAxisRow(col, frames, y, options, on.data(), amp, wr, br, light, &scratch, px,
+                      mod_x.data(), &count);
         // A pixel rejected by the column code is not counted again by the row code.
         for (int x = 0; x < width; ++x) on[x] = on[x] & (px[x] == px[x]);
       } else {
         std::fill(px, px + width, kNaN);
       }
       if (row.present) {
-        DecodeAxisRow(row, frames, y, options, on.data(), amp, light, &scratch, py, mod_y.data(),
-                      &count);
+        DecodeAxisRow(row, frames, y, options, on.data(), amp, wr, br, light, &scratch, py,
+                      mod_y.data(), &count);
         for (int x = 0; x < width; ++x) px[x] = py[x] == py[x] ? px[x] : kNaN;
       } else {
         std::fill(py, py + width, kNaN);
@@ -567,7 +604,10 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
         } else {
           s = col.steps + row.steps > 0 ? s / b : s;
         }
-        if (col.steps + row.steps == 0) s = 0.5f;  // Gray code alone: its quantisation.
+        if (col.steps + row.steps == 0) {
+          // Gray code alone: its quantisation, half a stripe.
+          s = 0.5f * static_cast<float>(1 << std::max(col.first_bit, row.first_bit));
+        }
         const float rel = b / kReferenceAmplitudeDn;
         const bool valid = valid_axis[x] == valid_axis[x];
         w[x] = valid ? rel * rel : 0.0f;
@@ -650,6 +690,8 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
   st.valid = cv::countNonZero(result->valid);
   st.rejected_saturated = saturated;
   st.rejected_bits = bad_bits;
+  st.gray_stripe_px = 1 << std::max(col.first_bit, row.first_bit);
+  st.step_px = col.steps + row.steps == 0 ? st.gray_stripe_px : 0;
   st.rejected_modulation = bad_mod;
   st.rejected_unwrap = bad_unwrap;
   st.fit_fallbacks = fallbacks;

@@ -40,6 +40,12 @@ struct DecodeStats {
   int rejected_modulation = 0;  // Lit pixels whose sinusoid amplitude is too low.
   int rejected_unwrap = 0;      // Lit pixels whose Gray code and phase disagree.
   int fit_fallbacks = 0;        // Pixels where the local fit was inconsistent (depth step).
+  // The Gray code's stripe, projector pixels: 1, or 2^k for a code without its k finest bits.
+  // With the Gray code alone it is the decode's step; phase patterns interpolate within it.
+  int gray_stripe_px = 1;
+  // Where the Gray code alone sets the coordinates (no phase patterns), they step by the stripe:
+  // this is that step, projector pixels (0 with phase patterns).
+  int step_px = 0;
 };
 
 struct DecodeResult {

@@ -109,6 +109,10 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
   const double nan = std::numeric_limits<double>::quiet_NaN();
   out.points.create(size, CV_32FC3);
   out.residual.create(size, CV_32F);
+  // A Gray code alone that left out its finest bits steps by its stripe: a coordinate may lie
+  // half a stripe (less the half pixel a full code has) further from its epipolar line.
+  const double max_epipolar =
+      options.max_epipolar_error_px + 0.5 * std::max(0, decoded.stats.step_px - 1);
   const double low = std::isnan(options.min_z_mm) ? calibration_.min_z_mm : options.min_z_mm;
   const double high = std::isnan(options.max_z_mm) ? calibration_.max_z_mm : options.max_z_mm;
   std::atomic<int> n_valid{0}, n_epi{0}, n_vol{0}, n_below{0};
@@ -126,7 +130,7 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
         const float* rf = reinterpret_cast<const float*>(ray);
         float* pf = reinterpret_cast<float*>(point);
         // Invariants as locals, so the compiler keeps them in registers.
-        const double max_r = options.max_epipolar_error_px;
+        const double max_r = max_epipolar;
         const double zmin = low, zmax = high;
         const double k00 = kr(0, 0), k01 = kr(0, 1), k02 = kr(0, 2), k10 = kr(1, 0), k11 = kr(1, 1),
                      k12 = kr(1, 2), k20 = kr(2, 0), k21 = kr(2, 1), k22 = kr(2, 2);
@@ -186,7 +190,7 @@ void Triangulator::Triangulate(const DecodeResult& decoded, const TriangulateOpt
             guess_y = p.y;
           }
         }
-        if (r > options.max_epipolar_error_px) {
+        if (r > max_epipolar) {
           ++epi;
           continue;
         }

@@ -16,7 +16,9 @@
 namespace vellum {
 
 struct TriangulateOptions {
-  double max_epipolar_error_px = 1.5;  // Max residual, projector pixels (when rows are decoded).
+  // Max residual, projector pixels (when rows are decoded); widened by half the step of a Gray
+  // code alone that left out its finest bits (DecodeStats::step_px).
+  double max_epipolar_error_px = 1.5;
   // Working volume, heights above the table, mm; NaN: the calibration's (Calibration::min_z_mm).
   double min_z_mm = std::numeric_limits<double>::quiet_NaN();
   double max_z_mm = std::numeric_limits<double>::quiet_NaN();

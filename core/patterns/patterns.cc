@@ -1,6 +1,8 @@
 #include "core/patterns/patterns.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "core/common/check.h"
 
@@ -66,12 +68,27 @@ bool PatternOptions::Check(std::string* why) const {
     *why = "phase_period_px must be at least 4 projector pixels";
     return false;
   }
+  if (projector_size.width > kMaxProjectorExtent || projector_size.height > kMaxProjectorExtent) {
+    *why = "projector size above " + std::to_string(kMaxProjectorExtent) + " pixels";
+    return false;
+  }
+  const int bits = std::min(GrayBitsFor(projector_size.width), GrayBitsFor(projector_size.height));
+  if (gray_skip_bits < 0 || gray_skip_bits >= bits) {
+    *why = "gray_skip_bits must leave at least one Gray bit";
+    return false;
+  }
+  if (phase_steps != 0 && 5 * (1 << gray_skip_bits) > 2 * phase_period_px) {
+    *why =
+        "with phase patterns, the Gray code's stripes (2^gray_skip_bits px) must stay within "
+        "0.4 of the phase period to unwrap it";
+    return false;
+  }
   return true;
 }
 
 int GrayBitsFor(int extent) {
   int bits = 0;
-  while ((1 << bits) < extent) ++bits;
+  while (bits < 31 && (int64_t{1} << bits) < extent) ++bits;
   return bits;
 }
 
@@ -89,8 +106,9 @@ PatternSequence MakePatternSequence(const PatternOptions& options) {
     }
     const int extent =
         axis == Axis::kColumn ? options.projector_size.width : options.projector_size.height;
-    for (int bit = GrayBitsFor(extent) - 1; bit >= 0; --bit) {  // Coarse to fine.
-      for (bool inverted : {false, true}) {
+    for (int bit = GrayBitsFor(extent) - 1; bit >= options.gray_skip_bits; --bit) {
+      for (bool inverted : {false, true}) {  // Coarse to fine.
+        if (inverted && !options.gray_inverses) continue;
         PatternSpec s;
         s.kind = PatternKind::kGray;
         s.axis = axis;
@@ -124,6 +142,18 @@ bool PatternSequence::Check(std::string* why) const {
     *why = "projector size must be at least 2x2 pixels";
     return false;
   }
+  if (projector_size.width > kMaxProjectorExtent || projector_size.height > kMaxProjectorExtent) {
+    *why = "projector size " + std::to_string(projector_size.width) + "x" +
+           std::to_string(projector_size.height) + " is above " +
+           std::to_string(kMaxProjectorExtent) + " pixels";
+    return false;
+  }
+  for (const PatternSpec& s : patterns) {
+    if (s.kind == PatternKind::kGray && (s.bit < 0 || s.bit >= 31)) {
+      *why = "a Gray pattern's bit " + std::to_string(s.bit) + " is out of range";
+      return false;
+    }
+  }
   if (Find(PatternKind::kWhite) < 0 || Find(PatternKind::kBlack) < 0) {
     *why = "the pattern sequence needs a white and a black pattern";
     return false;
@@ -140,15 +170,29 @@ bool PatternSequence::Check(std::string* why) const {
              std::to_string(GrayBitsFor(extent));
       return false;
     }
-    for (int bit = 0; bit < bits; ++bit) {
+    // The bits from the finest coded one up, each with its inverse, or none with one.
+    const int first = FirstGrayBit(axis);
+    const bool inverses = Find(PatternKind::kGray, axis, bits - 1, true) >= 0;
+    for (int bit = first; bit < bits; ++bit) {
       if (Find(PatternKind::kGray, axis, bit, false) < 0 ||
-          Find(PatternKind::kGray, axis, bit, true) < 0) {
+          (inverses && Find(PatternKind::kGray, axis, bit, true) < 0)) {
         *why = std::string("the ") + ToString(axis) + " Gray code lacks bit " +
-               std::to_string(bit) + " or its inverse";
+               std::to_string(bit) + (inverses ? " or its inverse" : "");
+        return false;
+      }
+      if (!inverses && Find(PatternKind::kGray, axis, bit, true) >= 0) {
+        *why = std::string("the ") + ToString(axis) + " Gray code has an inverse for bit " +
+               std::to_string(bit) + " but not for its coarsest bit";
         return false;
       }
     }
     const int steps = PhaseSteps(axis);
+    if (steps > 0 && 5 * (1 << first) > 2 * PhasePeriod(axis)) {
+      *why = std::string("the ") + ToString(axis) + " Gray code leaves out bits below " +
+             std::to_string(first) + ": its stripes of " + std::to_string(1 << first) +
+             " px cannot unwrap a phase period of " + std::to_string(PhasePeriod(axis)) + " px";
+      return false;
+    }
     if (steps > 0) {
       if (steps < 3 || PhasePeriod(axis) < 4) {
         *why = std::string("the ") + ToString(axis) +
@@ -202,6 +246,21 @@ int PatternSequence::GrayBits(Axis axis) const {
     if (s.kind == PatternKind::kGray && s.axis == axis) bits = std::max(bits, s.bit + 1);
   }
   return bits;
+}
+
+int PatternSequence::FirstGrayBit(Axis axis) const {
+  int first = -1;
+  for (const PatternSpec& s : patterns) {
+    if (s.kind == PatternKind::kGray && s.axis == axis && (first < 0 || s.bit < first)) {
+      first = s.bit;
+    }
+  }
+  return std::max(first, 0);
+}
+
+bool PatternSequence::GrayInverses(Axis axis) const {
+  const int bits = GrayBits(axis);
+  return bits > 0 && Find(PatternKind::kGray, axis, bits - 1, true) >= 0;
 }
 
 int PatternSequence::PhaseSteps(Axis axis) const {

@@ -36,6 +36,10 @@ struct PatternOptions {
   bool rows = true;                    // Encode projector rows.
   int phase_steps = 8;                 // Phase shifts per axis; 0 = Gray code only.
   int phase_period_px = 16;            // Sinusoid period, projector pixels (>= 4).
+  // Other rigs' sequences: Gray code without inverse patterns (bits thresholded against the
+  // white and black frames), and one that leaves out its finest bits (stripes of 2^skip px).
+  bool gray_inverses = true;
+  int gray_skip_bits = 0;
 
   bool Check(std::string* why) const;
 };
@@ -49,12 +53,22 @@ struct PatternSequence {
   // Index of the first pattern matching the predicate fields, or -1.
   int Find(PatternKind kind, Axis axis = Axis::kColumn, int bit = 0, bool inverted = false,
            int step = 0) const;
-  // Number of Gray-code bits present for an axis (0 if the axis is not encoded).
+  // Number of Gray-code bits present for an axis (0 if the axis is not encoded): the finest
+  // coded bit is FirstGrayBit, the coarsest GrayBits - 1.
   int GrayBits(Axis axis) const;
+  // The finest Gray bit present (0 unless the sequence leaves out its finest bits): the code
+  // tells stripes of 2^FirstGrayBit projector pixels apart.
+  int FirstGrayBit(Axis axis) const;
+  // The Gray code of an axis comes with inverse patterns (all of its bits have one).
+  bool GrayInverses(Axis axis) const;
   // Phase steps and period for an axis; steps 0 if no phase patterns for it.
   int PhaseSteps(Axis axis) const;
   int PhasePeriod(Axis axis) const;
 };
+
+// The largest projector extent a sequence may describe (a 2^16-pixel-wide projector is far
+// beyond any made; larger claims are refused before any loop runs over them).
+constexpr int kMaxProjectorExtent = 1 << 16;
 
 // Bits needed to give every one of `extent` projector columns (or rows) its own code.
 int GrayBitsFor(int extent);

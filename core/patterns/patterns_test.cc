@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <set>
 
 namespace vellum {
@@ -92,6 +93,55 @@ TEST(Patterns, SequenceCheckFindsAMissingInverse) {
   std::string why;
   EXPECT_FALSE(seq.Check(&why));
   EXPECT_NE(why.find("bit 3"), std::string::npos) << why;
+}
+
+// Other rigs' sequences: without inverses, without the finest bits; what cannot decode is
+// refused with the reason.
+TEST(Patterns, SequencesWithoutInversesOrFinestBitsAreValid) {
+  PatternOptions o;
+  o.gray_inverses = false;
+  o.gray_skip_bits = 2;
+  std::string why;
+  ASSERT_TRUE(o.Check(&why)) << why;
+  const PatternSequence seq = MakePatternSequence(o);
+  ASSERT_TRUE(seq.Check(&why)) << why;
+  EXPECT_EQ(seq.GrayBits(Axis::kColumn), 10);
+  EXPECT_EQ(seq.FirstGrayBit(Axis::kColumn), 2);
+  EXPECT_FALSE(seq.GrayInverses(Axis::kColumn));
+  EXPECT_EQ(seq.Find(PatternKind::kGray, Axis::kColumn, 1, false), -1);
+  // White, black, 2 x 8 Gray bits, 2 x 8 phase.
+  EXPECT_EQ(seq.patterns.size(), 2u + 2 * 8 + 2 * 8);
+  // Stripes of 8 px cannot unwrap a 16 px period (the Gray code must place the phase within
+  // 0.4 of a period).
+  o.gray_skip_bits = 3;
+  EXPECT_FALSE(o.Check(&why));
+  PatternSequence coarse = MakePatternSequence(PatternOptions());
+  for (int bit : {0, 1, 2}) {
+    for (bool inverted : {false, true}) {
+      coarse.patterns.erase(coarse.patterns.begin() +
+                            coarse.Find(PatternKind::kGray, Axis::kColumn, bit, inverted));
+    }
+  }
+  EXPECT_FALSE(coarse.Check(&why));
+  EXPECT_NE(why.find("cannot unwrap"), std::string::npos) << why;
+}
+
+// A scan.yaml claiming an absurd projector is refused at once (GrayBitsFor and Check never loop
+// over it).
+TEST(Patterns, AnAbsurdProjectorIsRefusedAtOnce) {
+  EXPECT_EQ(GrayBitsFor(1 << 30), 30);
+  EXPECT_EQ(GrayBitsFor(std::numeric_limits<int>::max()), 31);
+  PatternSequence seq = MakePatternSequence(PatternOptions());
+  seq.projector_size = cv::Size(1 << 30, 768);
+  std::string why;
+  EXPECT_FALSE(seq.Check(&why));
+  EXPECT_NE(why.find("above 65536"), std::string::npos) << why;
+  seq.projector_size = cv::Size(std::numeric_limits<int>::max(), 768);
+  EXPECT_FALSE(seq.Check(&why));
+  seq = MakePatternSequence(PatternOptions());
+  seq.patterns[5].bit = 40;
+  EXPECT_FALSE(seq.Check(&why));
+  EXPECT_NE(why.find("out of range"), std::string::npos) << why;
 }
 
 }  // namespace
