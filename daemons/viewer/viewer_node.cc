@@ -116,18 +116,31 @@ void ViewerNode::OnRestored(const restored_t& m) {
     node_->Error("RESTORED of scan " + std::to_string(m.scan_id) + ": preview: " + s.message(),
                  m.scan_id);
   }
-  // The other pictures from the scan's report (the restorer writes it before RESTORED).
-  auto load = [&](const char* name) {
-    const fs::path p = fs::path(m.results) / "report" / name;
-    return fs::exists(p) ? cv::imread(p.string(), cv::IMREAD_COLOR) : cv::Mat();
+  r.warnings = m.warnings;
+  // The other pictures from the scan's report (the restorer writes it before RESTORED): the
+  // texture with the leaf's outline, and a spread's left page for its strain.
+  auto load = [&](std::initializer_list<const char*> names) {
+    for (const char* name : names) {
+      const fs::path p = fs::path(m.results) / "report" / name;
+      if (fs::exists(p)) return cv::imread(p.string(), cv::IMREAD_COLOR);
+    }
+    return cv::Mat();
   };
-  r.texture = load("texture.png");
-  r.depth = load("depth.png");
-  r.strain = load("strain.png");
+  r.texture = load({"outline.png", "texture.png"});
+  r.depth = load({"depth.png"});
+  r.strain = load({"strain.png", "strain-left.png"});
   results_.push_back(r);
   if (results_.size() > 50) results_.pop_front();
   shown_ = static_cast<int>(results_.size()) - 1;
-  progress_ = r.summary + " restored";
+  progress_ = r.summary + " restored" +
+              (r.warnings.empty() ? std::string()
+                                  : " with " + std::to_string(r.warnings.size()) +
+                                        " warning(s): check before delivering");
+}
+
+std::vector<std::string> ViewerNode::warnings() const {
+  if (shown_ < 0 || shown_ >= static_cast<int>(results_.size())) return {};
+  return results_[shown_].warnings;
 }
 
 cv::Mat ViewerNode::Draw() const {
@@ -136,8 +149,9 @@ cv::Mat ViewerNode::Draw() const {
   const int w = size.width, h = size.height, top = 44;
   cv::putText(canvas, "vellum station", cv::Point(12, 28), cv::FONT_HERSHEY_SIMPLEX, 0.8,
               cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
+  const bool doubtful = progress_.find("warning(s)") != std::string::npos;
   cv::putText(canvas, progress_, cv::Point(230, 28), cv::FONT_HERSHEY_SIMPLEX, 0.6,
-              cv::Scalar(120, 220, 255), 1, cv::LINE_AA);
+              doubtful ? cv::Scalar(0, 170, 255) : cv::Scalar(120, 220, 255), 1, cv::LINE_AA);
   cv::putText(canvas, "s: scan   left/right: results   q: quit", cv::Point(w - 330, 28),
               cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
   // Left: live preview and the daemons.
@@ -172,12 +186,24 @@ cv::Mat ViewerNode::Draw() const {
   const int mid_x = left_w, mid_w = w / 3, third = (h - top) / 3;
   static const Result kEmpty;
   const Result& show = r ? *r : kEmpty;
-  Panel(canvas, cv::Rect(mid_x, top, mid_w - 8, third - 4), show.texture, "texture");
+  Panel(canvas, cv::Rect(mid_x, top, mid_w - 8, third - 4), show.texture,
+        "texture and the leaf's outline");
   Panel(canvas, cv::Rect(mid_x, top + third, mid_w - 8, third - 4), show.depth, "depth (mm)");
   Panel(canvas, cv::Rect(mid_x, top + 2 * third, mid_w - 8, third - 4), show.strain,
         "flattening strain");
-  Panel(canvas, cv::Rect(mid_x + mid_w, top, w - mid_x - mid_w - 8, h - top - 8), show.restored,
-        "restored page");
+  // The restored page, and under it a doubtful result's warnings in amber, a line each.
+  const int lines = std::min<int>(static_cast<int>(show.warnings.size()), 6);
+  const int warn_h = lines > 0 ? 18 * lines + 8 : 0;
+  const cv::Rect page(mid_x + mid_w, top, w - mid_x - mid_w - 8, h - top - 8 - warn_h);
+  Panel(canvas, page, show.restored,
+        show.warnings.empty() ? "restored page" : "restored page: DOUBTFUL, see the warnings");
+  const size_t chars = static_cast<size_t>(std::max(20, page.width / 8));
+  for (int k = 0; k < lines; ++k) {
+    std::string line = "! " + show.warnings[k];
+    if (line.size() > chars) line = line.substr(0, chars - 3) + "...";
+    cv::putText(canvas, line, cv::Point(page.x + 4, page.y + page.height + 18 * (k + 1)),
+                cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(0, 170, 255), 1, cv::LINE_AA);
+  }
   return canvas;
 }
 

@@ -1,8 +1,9 @@
 // vellum-viewer's node: what the operator at the gantry watches. A window with the live camera
 // preview (PREVIEW, never full frames), the scan's progress, every daemon's status from its
 // heartbeat (alive, state, last error), and for each finished scan its texture, depth map,
-// strain map and the restored page side by side. Keys: s = start a scan, left/right = step
-// through the scans of this session, q or Esc = quit.
+// strain map and the restored page side by side, with the leaf's outline over the texture and
+// a doubtful result's warnings in amber under the restored page. Keys: s = start a scan, left/right
+// = step through the scans of this session, q or Esc = quit.
 #pragma once
 
 #include <chrono>
@@ -10,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "display/window.h"
 #include "station/node.h"
@@ -28,12 +30,15 @@ class ViewerNode {
   // Scans restored this session (the last 50 are kept).
   int results() const { return static_cast<int>(results_.size()); }
   const std::string& progress() const { return progress_; }
+  // The warnings of the scan shown (code: message each), empty for a clean one.
+  std::vector<std::string> warnings() const;
 
  private:
   struct Result {
     int64_t scan_id = 0;
     std::string summary, results;
-    cv::Mat texture, depth, strain, restored;
+    cv::Mat texture, depth, strain, restored;  // texture: with the leaf's outline drawn.
+    std::vector<std::string> warnings;
   };
   void OnKey(SDL_Keycode key);
   void OnRestored(const restored_t& m);

@@ -76,6 +76,44 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
   EXPECT_GT(requests->back().scan_id, 0);
 }
 
+// A doubtful result looks doubtful: its warnings are kept, the header says so, and they are
+// written in amber (B 0, G 170, R 255) under the restored page.
+TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
+  Node node("vellum-viewer", &bus_.lcm());
+  auto owned = Window();
+  display::Window* window = owned.get();
+  ViewerNode viewer(&node, std::move(owned));
+  bus_.AddTick([&] { viewer.Tick(); });
+  restored_t r = Restored(21);
+  r.warnings = {"page_cut_off: the leaf runs off the camera's view"};
+  r.nwarnings = 1;
+  bus_.probe().Publish(channel::kRestored, &r);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.results() == 1; }));
+  ASSERT_EQ(viewer.warnings().size(), 1u);
+  EXPECT_EQ(viewer.warnings()[0].rfind("page_cut_off", 0), 0u);
+  EXPECT_NE(viewer.progress().find("with 1 warning(s)"), std::string::npos) << viewer.progress();
+  auto amber = [](const cv::Mat& area) {
+    cv::Mat mask;
+    cv::inRange(area, cv::Scalar(0, 120, 200), cv::Scalar(60, 200, 255), mask);
+    return cv::countNonZero(mask);
+  };
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        if (screen.empty()) return false;
+        // The bottom of the right third, under the page.
+        const cv::Mat under =
+            screen(cv::Rect(screen.cols * 2 / 3, screen.rows - 40, screen.cols / 3, 40));
+        return amber(under) > 20;
+      },
+      10));
+  // A clean result afterwards shows none.
+  restored_t clean = Restored(22);
+  bus_.probe().Publish(channel::kRestored, &clean);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.results() == 2; }));
+  EXPECT_TRUE(viewer.warnings().empty());
+}
+
 TEST_F(ViewerNodeTest, AnUndecodablePreviewIsReportedAndTheViewerGoesOn) {
   Node node("vellum-viewer", &bus_.lcm());
   ViewerNode viewer(&node, Window());

@@ -1,0 +1,110 @@
+// Finding the leaf and building its sheet on a 1600x1200 scan (default rig, curled checkerboard
+// leaf on the dark table), beside the baseline in the same run: the paper's brightness
+// segmentation (SegmentPage) with the paper's 45 x 45 sheet. The bar: the shape's way
+// adds at most 50 ms.
+//
+//   ./build/bench/outline_bench
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+
+#include "bench/ratio_reporter.h"
+#include "core/decode/decode.h"
+#include "core/geometry/triangulate.h"
+#include "core/mesh/mesh.h"
+#include "core/outline/outline.h"
+#include "core/sim/evaluate.h"
+
+namespace vellum {
+namespace {
+
+struct Fixture {
+  Fixture() {
+    const SimulatedScan scan = SimulateScan(DefaultRig(), PageShape::kCurl, 5);
+    rig = scan.gantry->rig();
+    texture = scan.texture;
+    points = Triangulator(rig).Triangulate(Decode(scan.sequence, scan.frames)).points;
+  }
+  Calibration rig;
+  cv::Mat texture, points;
+};
+
+Fixture& Shared() {
+  static Fixture f;
+  return f;
+}
+
+Mesh Sheet(const Fixture& f, const cv::Mat& mask, bool auto_grid) {
+  auto project = [&](const cv::Vec3d& x) { return f.rig.camera.Project(x); };
+  MeshOptions options;
+  Mesh mesh = BuildMesh(f.points, mask, options, project);
+  if (auto_grid && mesh.status.ok()) {
+    // As the pipeline's mesh stage: finer where the warp would stray more than 0.05 px.
+    const cv::Size grid = GridForError(mesh, 0.05);
+    if (grid != options.grid) {
+      options.grid = grid;
+      mesh = BuildMesh(f.points, mask, options, project);
+    }
+  }
+  return mesh;
+}
+
+void BM_Baseline_SegmentPage(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) benchmark::DoNotOptimize(SegmentPage(f.texture).data);
+}
+
+void BM_Baseline_SegmentPage_Sheet45(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) {
+    const Mesh mesh = Sheet(f, SegmentPage(f.texture), false);
+    if (!mesh.status.ok()) state.SkipWithError(mesh.status.message().c_str());
+    benchmark::DoNotOptimize(mesh.point.data());
+  }
+}
+
+void BM_Vellum_FindLeaf(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) {
+    const Outline outline = FindLeaf(f.points, f.texture);
+    if (!outline.status.ok()) state.SkipWithError(outline.status.message().c_str());
+    benchmark::DoNotOptimize(outline.mask.data);
+  }
+}
+
+void BM_Vellum_FindLeaf_SheetAuto(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) {
+    const Outline outline = FindLeaf(f.points, f.texture);
+    const Mesh mesh = Sheet(f, outline.pages.at(0), true);
+    if (!mesh.status.ok()) state.SkipWithError(mesh.status.message().c_str());
+    benchmark::DoNotOptimize(mesh.point.data());
+  }
+}
+
+BENCHMARK(BM_Baseline_SegmentPage)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Baseline_SegmentPage_Sheet45)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(2.0);
+BENCHMARK(BM_Vellum_FindLeaf)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_FindLeaf_SheetAuto)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+
+}  // namespace
+}  // namespace vellum
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  vellum::RatioReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  const double base = reporter.Time("BM_Baseline_SegmentPage_Sheet45");
+  const double ours = reporter.Time("BM_Vellum_FindLeaf_SheetAuto");
+  if (base > 0 && ours > 0) {
+    std::printf(
+        "finding the leaf by its shape and its sheet: %.1f ms against %.1f ms for the brightness "
+        "rule and a 45x45 sheet: %.1f ms added (bar: 50 ms), ratio %.2fx\n",
+        ours, base, ours - base, ours / base);
+  }
+  benchmark::Shutdown();
+  return 0;
+}
