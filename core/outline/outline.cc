@@ -51,7 +51,12 @@ cv::Mat SmoothHeights(const cv::Mat& points) {
         } else if (n < 2) {
           continue;
         }
-        std::sort(values, values + n);
+        for (int i = 1; i < n; ++i) {  // Insertion sort: at most five values.
+          const float x = values[i];
+          int j = i;
+          for (; j > 0 && values[j - 1] > x; --j) values[j] = values[j - 1];
+          values[j] = x;
+        }
         out[u] = n % 2 ? values[n / 2] : 0.5f * (values[n / 2 - 1] + values[n / 2]);
       }
     }
