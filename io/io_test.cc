@@ -206,6 +206,35 @@ TEST_F(IoTest, ScanErrorsNameTheFileAndProblem) {
   EXPECT_NE(s.message().find("patterns"), std::string::npos) << s.message();
 }
 
+// A PNG whose header claims 32768 x 32768 16-bit RGBA (8 GiB decoded) is refused from its
+// header, before anything is allocated; so is a 16-bit frame of a sane size.
+TEST_F(IoTest, AnImageHeaderClaimingGigabytesIsRefusedBeforeDecoding) {
+  const Scan scan = SmallScan();
+  ASSERT_TRUE(WriteScan(Path("huge"), scan).ok());
+  // Signature, then the IHDR chunk: length 13, "IHDR", width, height, depth 16, colour type 6
+  // (RGBA), compression, filter, interlace, and a CRC (not checked by the header read).
+  const unsigned char header[] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0,
+                                  13,   'I', 'H', 'D', 'R',  0,    0,    0x80, 0, 0, 0,
+                                  0x80, 0,   16,  6,   0,    0,    0,    0,    0, 0, 0};
+  {
+    std::ofstream out(Path("huge/" + FrameName(3)), std::ios::binary);
+    out.write(reinterpret_cast<const char*>(header), sizeof header);
+  }
+  Scan r;
+  Status s = ReadScan(Path("huge"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_003.png: its header claims 32768x32768 pixels"),
+            std::string::npos)
+      << s.message();
+  ASSERT_TRUE(WriteScan(Path("deep"), scan).ok());
+  cv::imwrite(Path("deep/" + FrameName(4)), cv::Mat(24, 32, CV_16U, cv::Scalar(1000)));
+  s = ReadScan(Path("deep"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame_004.png: must be an 8-bit image (its header says 16-bit)"),
+            std::string::npos)
+      << s.message();
+}
+
 TEST_F(IoTest, PlyRoundTrip) {
   cv::Mat points(3, 4, CV_32FC3, cv::Scalar::all(NAN));
   points.at<cv::Vec3f>(1, 2) = cv::Vec3f(1.5f, -2.0f, 3.25f);

@@ -1,6 +1,8 @@
 #include "io/scan_io.h"
 
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
@@ -29,8 +31,47 @@ std::string Describe(const PatternSpec& s) {
   return d;
 }
 
+// The largest image a scan may hold, each side (a 24 MP camera is 6000 x 4000).
+constexpr uint32_t kMaxImageSide = 16384;
+
+// A PNG's size and sample depth from its header (the IHDR chunk that follows the signature),
+// read before the image is decoded: a header may claim gigabytes. False if the file is not a
+// PNG (OpenCV then judges it).
+bool PngHeader(const std::string& path, uint32_t* width, uint32_t* height, int* bit_depth) {
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  unsigned char b[26];
+  const size_t n = std::fread(b, 1, sizeof b, f);
+  std::fclose(f);
+  static const unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (n < sizeof b || std::memcmp(b, kSignature, 8) != 0 || std::memcmp(b + 12, "IHDR", 4) != 0) {
+    return false;
+  }
+  auto be32 = [&](int at) {
+    return (uint32_t{b[at]} << 24) | (uint32_t{b[at + 1]} << 16) | (uint32_t{b[at + 2]} << 8) |
+           uint32_t{b[at + 3]};
+  };
+  *width = be32(16);
+  *height = be32(20);
+  *bit_depth = b[24];
+  return true;
+}
+
 Status ReadImageFile(const std::string& path, cv::Mat* image) {
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  uint32_t width = 0, height = 0;
+  int bit_depth = 0;
+  if (PngHeader(path, &width, &height, &bit_depth)) {
+    if (width == 0 || height == 0 || width > kMaxImageSide || height > kMaxImageSide) {
+      return Status::Error(path + ": its header claims " + std::to_string(width) + "x" +
+                           std::to_string(height) + " pixels (at most " +
+                           std::to_string(kMaxImageSide) + " each way); not read");
+    }
+    if (bit_depth > 8) {
+      return Status::Error(path + ": must be an 8-bit image (its header says " +
+                           std::to_string(bit_depth) + "-bit); not read");
+    }
+  }
   cv::Mat img;
   try {
     img = cv::imread(path, cv::IMREAD_UNCHANGED);

@@ -34,12 +34,18 @@ for target in fuzz_messages fuzz_files fuzz_ply_roundtrip; do
     echo "fuzz: $target for ${seconds} s"
   fi
   mkdir -p "$corpus"
+  log=build-fuzz/$target.log
+  # The fuzzer's own exit status decides (a crash, a leak, a timeout or an out-of-memory all
+  # exit non-zero); its log is kept and its summary shown.
+  status=0
   ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
     "build-fuzz/fuzz/$target" "${limit[@]}" -timeout=10 -rss_limit_mb=2048 \
     -artifact_prefix="build-fuzz/crashes/$target-" -print_final_stats=1 \
-    "$corpus" "tests/fuzz_corpus/$target" 2>&1 | grep -E "stat::number_of_executed_units|ERROR|SUMMARY|crash-|Done " || true
-  if ls build-fuzz/crashes/"$target"-* >/dev/null 2>&1; then
-    echo "fuzz: $target found a crash: $(ls build-fuzz/crashes/"$target"-*)" >&2
+    "$corpus" "tests/fuzz_corpus/$target" >"$log" 2>&1 || status=$?
+  grep -E "stat::number_of_executed_units|ERROR|SUMMARY|crash-|Done " "$log" || true
+  if [ "$status" -ne 0 ] || ls build-fuzz/crashes/"$target"-* >/dev/null 2>&1; then
+    echo "fuzz: $target failed (exit status $status; log $log):" \
+      "$(ls build-fuzz/crashes/"$target"-* 2>/dev/null)" >&2
     exit 1
   fi
 done
