@@ -235,6 +235,24 @@ TEST_F(IoTest, AnImageHeaderClaimingGigabytesIsRefusedBeforeDecoding) {
       << s.message();
 }
 
+// A scan.yaml claiming a projector 2^30 pixels wide is refused at once, naming the file (it
+// once sent the pattern check into an endless loop).
+TEST_F(IoTest, AScanClaimingAnAbsurdProjectorIsRefusedAtOnce) {
+  ASSERT_TRUE(WriteScan(Path("wide"), SmallScan()).ok());
+  std::ifstream in(Path("wide/scan.yaml"));
+  std::string yaml((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string from = "projector_size: [ 40, 30 ]";
+  const size_t at = yaml.find(from);
+  ASSERT_NE(at, std::string::npos) << yaml;
+  yaml.replace(at, from.size(), "projector_size: [ 1073741824, 30 ]");
+  std::ofstream(Path("wide/scan.yaml")) << yaml;
+  Scan r;
+  const Status s = ReadScan(Path("wide"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("scan.yaml"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("above 65536"), std::string::npos) << s.message();
+}
+
 TEST_F(IoTest, PlyRoundTrip) {
   cv::Mat points(3, 4, CV_32FC3, cv::Scalar::all(NAN));
   points.at<cv::Vec3f>(1, 2) = cv::Vec3f(1.5f, -2.0f, 3.25f);

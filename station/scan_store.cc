@@ -25,7 +25,7 @@ std::string ScanFolder::calibration() const {
 
 std::string ScanFolder::pending() const { return (fs::path(root) / "pending").string(); }
 
-Status CaptureSet::Add(const capture_t& c) {
+Status CheckCapture(const capture_t& c) {
   const std::string where =
       "scan " + std::to_string(c.scan_id) + ", pattern " + std::to_string(c.pattern_index);
   if (c.pattern_count <= 0 || c.pattern_count > 1000) {
@@ -36,8 +36,21 @@ Status CaptureSet::Add(const capture_t& c) {
     return Status::Error(where + ": pattern_index outside -1.." +
                          std::to_string(c.pattern_count - 1));
   }
+  if (c.projector_width < 2 || c.projector_height < 2 || c.projector_width > kMaxProjectorExtent ||
+      c.projector_height > kMaxProjectorExtent) {
+    return Status::Error(where + ": projector size " + std::to_string(c.projector_width) + "x" +
+                         std::to_string(c.projector_height) + " is not valid");
+  }
+  return Status::Ok();
+}
+
+Status CaptureSet::Add(const capture_t& c) {
+  const std::string where =
+      "scan " + std::to_string(c.scan_id) + ", pattern " + std::to_string(c.pattern_index);
+  Status s = CheckCapture(c);
+  if (!s.ok()) return s;
   cv::Mat image;
-  Status s = FromMessage(c.image, &image);
+  s = FromMessage(c.image, &image);
   if (!s.ok()) return Status::Error(where + ": " + s.message());
   PatternSpec spec;
   s = FromMessage(c.pattern, &spec);

@@ -37,6 +37,12 @@ struct ScanFolder {
   std::string pending() const;      // pending: the supervisor's ledger (station/supervisor.h)
 };
 
+// What a CAPTURE claims about itself, checked before anything is written: a pattern count of 1
+// to 1000, its index -1 (the texture) or within the count, a projector of 2 to 65536 pixels
+// each way. A capture that fails is refused whole (never recorded: a scan's log holds only
+// captures that belong in it).
+Status CheckCapture(const capture_t& c);
+
 // The captures of one scan, as they arrive.
 class CaptureSet {
  public:

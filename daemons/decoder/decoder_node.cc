@@ -17,6 +17,14 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
   // Each message goes to the scan's log at once, on the LCM thread (an append and a flush),
   // so that a crash loses nothing received; the rest is done on the worker.
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
+    // A capture that contradicts itself is refused before it reaches the scan's log (which
+    // would then no longer export).
+    const Status ok = CheckCapture(msg);
+    if (!ok.ok()) {
+      node_->Count("captures refused");
+      node_->Error("CAPTURE refused, not recorded: " + ok.message(), msg.scan_id);
+      return;
+    }
     if (!Log(channel::kCapture, msg.scan_id, msg.utime, Encode(msg))) return;
     auto copy = std::make_shared<capture_t>(msg);
     last_capture_ = std::chrono::steady_clock::now();

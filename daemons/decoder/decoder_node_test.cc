@@ -112,6 +112,14 @@ TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {
   bus_.probe().Publish(channel::kCapture, &beyond);
   EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "pattern_index outside"))
       << bus_.Status("vellum-decoder").last_error;
+  EXPECT_EQ(node.Counter("captures refused"), 1);
+  // Such captures are refused before the scan's log (counted), as is a projector of 2^30 px.
+  capture_t wide = MakeCapture(SmallScan(), 21, 1, NowUtime());
+  wide.projector_width = 1 << 30;
+  bus_.probe().Publish(channel::kCapture, &wide);
+  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "projector size 1073741824x"))
+      << bus_.Status("vellum-decoder").last_error;
+  EXPECT_EQ(node.Counter("captures refused"), 2);
   capture_t no_scan = MakeCapture(SmallScan(), 0, 1, NowUtime());
   bus_.probe().Publish(channel::kCapture, &no_scan);
   EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "scan_id 0 refused"));
