@@ -1,6 +1,8 @@
 #include "core/geometry/calibration.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 namespace vellum {
@@ -46,6 +48,31 @@ bool CameraModel::Check(std::string* why) const {
   if (cv::determinant(rotation) < 0) {
     *why = "the rotation matrix is a reflection (det = -1): a mirror left in the model";
     return false;
+  }
+  // A plausible lens: over the image (out to its farthest corner), radial distortion moves a
+  // point by at most 30% of its distance from the centre and keeps the order of radii (a wrong
+  // sign or a misplaced coefficient, k1 = 50, fails here rather than as a crumpled sheet).
+  const double k1 = distortion[0], k2 = distortion[1], k3 = distortion[4];
+  double r_max = 0;
+  for (const cv::Point2d corner :
+       {cv::Point2d(0, 0), cv::Point2d(size.width, 0), cv::Point2d(0, size.height),
+        cv::Point2d(size.width, size.height)}) {
+    r_max = std::max(r_max, std::hypot((corner.x - matrix(0, 2)) / matrix(0, 0),
+                                       (corner.y - matrix(1, 2)) / matrix(1, 1)));
+  }
+  for (int i = 1; i <= 20; ++i) {
+    const double r2 = std::pow(r_max * i / 20, 2);
+    const double moved = k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+    const double slope = 1 + 3 * k1 * r2 + 5 * k2 * r2 * r2 + 7 * k3 * r2 * r2 * r2;
+    if (std::fabs(moved) > 0.3 || slope <= 0) {
+      char text[200];
+      std::snprintf(text, sizeof text,
+                    "the lens distortion (k1 %g, k2 %g, k3 %g) moves the image's edge by %.0f%% "
+                    "of its distance from the centre: not a plausible lens",
+                    k1, k2, k3, 100 * std::fabs(moved));
+      *why = text;
+      return false;
+    }
   }
   return true;
 }
@@ -103,6 +130,20 @@ bool Calibration::Check(std::string* why) const {
   }
   if (cv::norm(camera.Center() - projector.Center()) < 1e-6) {
     *why = "camera and projector share one centre: no baseline to triangulate";
+    return false;
+  }
+  // Both look at the table: where the camera's optical axis meets it (z = 0) lies in front of
+  // the camera and of the projector.
+  const cv::Vec3d centre = camera.Center();
+  const cv::Vec3d axis = camera.rotation.t() * cv::Vec3d(0, 0, 1);
+  const double t = std::fabs(axis[2]) > 1e-9 ? -centre[2] / axis[2] : -1;
+  if (!(t > 0)) {
+    *why = "the camera does not look at the table (z = 0 is not in front of it)";
+    return false;
+  }
+  const cv::Vec3d on_table = centre + t * axis;
+  if (!((projector.rotation * on_table + projector.translation)[2] > 0)) {
+    *why = "the projector does not face the table the camera sees (it lies behind the projector)";
     return false;
   }
   if (!(min_z_mm < max_z_mm) || !std::isfinite(min_z_mm) || !std::isfinite(max_z_mm)) {

@@ -31,6 +31,27 @@ TEST(CameraModel, CheckRejectsAMirroredRotation) {
   EXPECT_NE(why.find("reflection"), std::string::npos) << why;
 }
 
+// Calibrations that are wrong but well formed are refused with what is wrong: a misplaced
+// distortion coefficient (k1 = 50 moves the image's edge by hundreds of percent), a projector
+// turned away from the table the camera sees. A real lens (k1 -0.08) passes.
+TEST(Calibration, CheckRefusesAnImplausibleLensAndAProjectorBehindTheTable) {
+  Calibration rig = DefaultRig();
+  std::string why;
+  ASSERT_TRUE(rig.Check(&why)) << why;
+  rig.camera.distortion = cv::Vec<double, 5>(-0.08, 0.03, 0.001, -0.0005, 0.002);
+  EXPECT_TRUE(rig.Check(&why)) << why;
+  rig.camera.distortion = cv::Vec<double, 5>(50, 0, 0, 0, 0);
+  EXPECT_FALSE(rig.Check(&why));
+  EXPECT_NE(why.find("not a plausible lens"), std::string::npos) << why;
+  rig = DefaultRig();
+  // Turned half round about its own centre: it now faces away from the table.
+  const cv::Vec3d centre = rig.projector.Center();
+  rig.projector.rotation = cv::Matx33d(1, 0, 0, 0, -1, 0, 0, 0, -1) * rig.projector.rotation;
+  rig.projector.translation = -(rig.projector.rotation * centre);
+  EXPECT_FALSE(rig.Check(&why));
+  EXPECT_NE(why.find("projector does not face the table"), std::string::npos) << why;
+}
+
 // Exact correspondences of a known surface triangulate back to it, with and without rows and
 // with projector distortion.
 class TriangulateExact : public ::testing::TestWithParam<std::tuple<bool, bool>> {};
