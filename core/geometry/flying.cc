@@ -63,7 +63,7 @@ int RejectFlyingPoints(cv::Mat* points, double max_off_mm, int reach) {
           // Off both sides' surfaces is enough. Where a side has no surface, the point must be
           // far off the other (three times the limit), or off along two directions: a mixed
           // pixel is off across its silhouette (straight and both diagonals), while a good point
-          // at a leaf's corner is off only along the diagonal that leaves the leaf there.
+          // at a leaf's corner is a little off only along the diagonal that leaves the leaf.
           const Side& seen = before.seen ? before : after;
           const bool sure = (before.seen && after.seen) || seen.miss.dot(seen.miss) > 9 * limit2;
           if (!sure && ++directions < 2) continue;

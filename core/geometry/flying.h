@@ -5,9 +5,11 @@
 // 2 * `reach` pixels away on each side (past the decoder's window), extrapolated linearly to the
 // point, misses it by more than `max_off_mm` plus that side's own bend (its second difference
 // one step further out, which is what a linear extrapolation misses on a curved surface: a
-// curl seen by a coarse camera keeps its points). Where one side has no points, the point must be
-// off along two directions (a good point at a leaf's corner is off along one). A true step (a
-// leaf's edge on its support) keeps its points: each lies on its own side's surface.
+// curl seen by a coarse camera keeps its points). Where one side has no points (a shadow, the
+// unseen background), the point must be far off the other side (three times the limit) or off
+// along two directions; a point a little off along one direction only is kept (a leaf's corner).
+// A steep curl's corner seen edge on can still lose a few good points. A true step (a leaf's
+// edge on its support) keeps its points: each lies on its own side's surface.
 #pragma once
 #include <opencv2/core.hpp>
 
