@@ -106,15 +106,7 @@ inline std::string ReadBytes(const std::string& path) {
 // A curled page scanned on the quick rig (QuickRig) by the virtual gantry (rendered once per
 // process).
 inline const Scan& SmallScan() {
-  static const Scan scan = [] {
-    SimulatedScan sim = SimulateScan(QuickRig(), PageShape::kCurl, 7);
-    Scan s;
-    s.sequence = sim.sequence;
-    s.camera_size = QuickRig().camera.size;
-    s.texture = sim.texture;
-    s.frames = sim.frames;
-    return s;
-  }();
+  static const Scan scan = AsScan(SimulateScan(QuickRig(), PageShape::kCurl, 7));
   return scan;
 }
 

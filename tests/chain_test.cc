@@ -56,13 +56,7 @@ Scan SceneScan(const Scene& scene) {
   SceneOptions options;
   options.spread = scene.spread;
   options.frame = scene.frame;
-  SimulatedScan sim = SimulateScan(QuickRig(), page, TextureOptions(), options, 7);
-  Scan s;
-  s.sequence = sim.sequence;
-  s.camera_size = QuickRig().camera.size;
-  s.texture = sim.texture;
-  s.frames = sim.frames;
-  return s;
+  return AsScan(SimulateScan(QuickRig(), page, TextureOptions(), options, 7));
 }
 
 // Every file under `root`, relative to it.

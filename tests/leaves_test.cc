@@ -67,10 +67,7 @@ Scanned Process(const Scene& scene, uint64_t seed,
   ProcessInput input;
   input.scan_dir = scene.name;
   input.calibration_path = "the default rig";
-  input.scan.sequence = run.scan.sequence;
-  input.scan.camera_size = DefaultRig().camera.size;
-  input.scan.texture = run.scan.texture;
-  input.scan.frames = run.scan.frames;
+  input.scan = AsScan(run.scan);
   input.calibration = DefaultRig();
   const std::string out =
       (fs::temp_directory_path() / ("vellum_leaves_" + std::to_string(getpid()))).string();
@@ -199,10 +196,7 @@ const std::vector<cv::Point2f>& Control(cv::Size2d page_mm) {
     Scanned r;
     r.scan = SimulateScan(DefaultRig(), page, TextureOptions(), SceneOptions(), 77);
     ProcessInput input;
-    input.scan.sequence = r.scan.sequence;
-    input.scan.camera_size = DefaultRig().camera.size;
-    input.scan.texture = r.scan.texture;
-    input.scan.frames = r.scan.frames;
+    input.scan = AsScan(r.scan);
     input.calibration = DefaultRig();
     const std::string out =
         (fs::temp_directory_path() / ("vellum_leaves_control_" + std::to_string(getpid())))
@@ -387,10 +381,7 @@ TEST(Orientation, APageImageReadsTheRightWayInTheTextureAndTheRestoredPage) {
   ProcessInput input;
   input.scan_dir = "markers";
   input.calibration_path = "the default rig";
-  input.scan.sequence = scan.sequence;
-  input.scan.camera_size = DefaultRig().camera.size;
-  input.scan.texture = scan.texture;
-  input.scan.frames = scan.frames;
+  input.scan = AsScan(scan);
   input.calibration = DefaultRig();
   const std::string out =
       (fs::temp_directory_path() / ("vellum_markers_" + std::to_string(getpid()))).string();

@@ -132,6 +132,15 @@ SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t see
   return SimulateScan(rig, page, texture, SceneOptions(), seed);
 }
 
+Scan AsScan(const SimulatedScan& sim) {
+  Scan scan;
+  scan.sequence = sim.sequence;
+  scan.camera_size = sim.gantry->rig().camera.size;
+  scan.texture = sim.texture;
+  scan.frames = sim.frames;
+  return scan;
+}
+
 double MaskIoU(const cv::Mat& a, const cv::Mat& b) {
   const cv::Mat in_a = a != 0, in_b = b != 0;
   const int both = cv::countNonZero(in_a & in_b), either = cv::countNonZero(in_a | in_b);

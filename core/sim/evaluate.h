@@ -8,6 +8,7 @@
 
 #include "core/mesh/mesh.h"
 #include "core/patterns/patterns.h"
+#include "core/patterns/scan.h"
 #include "core/sim/gantry.h"
 
 namespace vellum {
@@ -54,6 +55,9 @@ SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t see
 // The same for any page, in any scene.
 SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
                            const TextureOptions& texture, const SceneOptions& scene, uint64_t seed);
+// The simulated scan as a scan directory holds it (sequence, camera size, texture, frames), for
+// what processes scans.
+Scan AsScan(const SimulatedScan& sim);
 
 // Intersection over union of two masks (CV_8U, nonzero = in); 0 if both are empty.
 double MaskIoU(const cv::Mat& a, const cv::Mat& b);
