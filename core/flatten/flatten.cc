@@ -196,11 +196,21 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     }
     Eigen::MatrixXd step = g;
     solver.Solve(&step);
-    const Eigen::VectorXd delta = -step.col(0);
-    const Eigen::VectorXd next = x + delta;
-    const double e_next = energy(next);
+    Eigen::VectorXd delta = -step.col(0);
+    Eigen::VectorXd next = x + delta;
+    double e_next = energy(next);
+    // A step that overshoots along a soft mode (a flap turning about a hinge, where the
+    // linearised rotation moves nodes off their arc) is halved before the damping is raised.
+    for (int half = 0; half < 3 && !(e_next <= e) && e > 1e-24; ++half) {
+      delta *= 0.5;
+      next = x + delta;
+      e_next = energy(next);
+    }
     if (!(e_next <= e) && e > 1e-24) {
       // No descent: refactor at the current point, more damped if the factor was fresh.
+      // With a fresh factor and the last step already below the tolerance, this is
+      // round-off at the minimum, not a slope: done.
+      if (fresh && last_step < options.tolerance_mm) break;
       if (fresh) lambda *= 10;
       if (lambda > 1e6) break;
       refactor = true;
