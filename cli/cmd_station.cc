@@ -12,6 +12,7 @@
 #include "cli/progress.h"
 #include "io/calibration_io.h"
 #include "station/chain.h"
+#include "station/daemon.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_log.h"
@@ -119,7 +120,9 @@ bool Follow(Node& node, double timeout_s, const std::function<bool()>& done) {
   return true;
 }
 
-std::vector<Flags::Spec> BusSpecs() { return {{"url", "URL", "LCM bus", station::kDefaultUrl}}; }
+std::vector<Flags::Spec> BusSpecs() {
+  return {{"url", "URL", "LCM bus", station::kDefaultUrl}, station::StationSpec()};
+}
 
 }  // namespace
 
@@ -137,9 +140,10 @@ int RunScan(const std::vector<std::string>& args) {
   if (!flags.Parse(args)) return 0;
   const double timeout = flags.GetDouble("timeout", 1, 86400);
   Node node("vellum-scan", flags.Get("url"));
+  station::SetStationFromFlags(flags, &node);
   scan_request_t request{};
   request.scan_id = station::NowUtime();
-  request.label = flags.Get("label");
+  request.identity.label = flags.Get("label");
   Follower follower(&node, request.scan_id);
   node.Publish(channel::kScanRequest, &request);
   if (isatty(2))
@@ -172,6 +176,7 @@ int RunWatch(const std::vector<std::string>& args) {
   if (!flags.Parse(args)) return 0;
   const int count = flags.GetInt("count", 0, 1 << 30);
   Node node("vellum-watch", flags.Get("url"));
+  station::SetStationFromFlags(flags, &node);
   Follower follower(&node, 0);
   const bool finished = Follow(node, flags.GetDouble("timeout", 1, 1e9), [&] {
     return (count > 0 && follower.restored() >= count) || !follower.failure().empty();
@@ -201,9 +206,10 @@ int RunCalibrateCapture(const std::vector<std::string>& args) {
   const std::string out = flags.Require("out");
   const double timeout = flags.GetDouble("timeout", 1, 86400);
   Node node("vellum-calibrate", flags.Get("url"));
+  station::SetStationFromFlags(flags, &node);
   scan_request_t request{};
   request.scan_id = station::NowUtime();
-  request.label = flags.Get("label");
+  request.identity.label = flags.Get("label");
   station::CaptureSet set;
   std::string failure;
   node.Subscribe<capture_t>(station::channel::kCapture, [&](const capture_t& c) {
@@ -280,11 +286,13 @@ int RunExport(const std::vector<std::string>& args) {
 int RunImport(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = {
       {"scan-id", "ID", "scan id of the log's messages (0: the current time)", "0"},
+      station::StationSpec(),
       {"calibration", "FILE", "calibration to include (default: DIR/calibration.yaml if any)", ""}};
   Flags flags("vellum import DIR LOG",
-              "Writes a scan directory as an LCM log as the station records it: CALIBRATION,\n"
-              "then the texture and every frame on CAPTURE. lcm-logplayer of it drives the\n"
-              "processing daemons.",
+              "Writes a scan directory as an LCM log as station --station records it:\n"
+              "SCAN_STARTED, CALIBRATION, then the texture and every frame on CAPTURE.\n"
+              "lcm-logplayer of it drives the station's decoder and processing daemons (a scan id\n"
+              "the station has recorded before is refused: give each playback its own).",
               specs);
   std::vector<std::string> positional, rest;
   SplitPositional(args, &positional, &rest);
@@ -306,8 +314,12 @@ int RunImport(const std::vector<std::string>& args) {
   }
   int64_t id = static_cast<int64_t>(flags.GetDouble("scan-id", 0, 9.2e18));
   if (id <= 0) id = station::NowUtime();
+  const std::string station_id = flags.Get("station");
+  const std::string bad_station = station::CheckStationId(station_id);
+  if (!bad_station.empty()) throw UsageError("--station: " + bad_station);
   if (s.ok()) {
-    s = station::WriteScanLog(positional[1], scan, id, has_calibration ? &calibration : nullptr);
+    s = station::WriteScanLog(positional[1], scan, id, station_id,
+                              has_calibration ? &calibration : nullptr);
   }
   if (!s.ok()) {
     std::fprintf(stderr, "vellum import: %s\n", s.message().c_str());

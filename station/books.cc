@@ -2,6 +2,7 @@
 
 #include <filesystem>
 
+#include "core/common/text.h"
 #include "io/calibration_io.h"
 #include "io/scan_io.h"
 #include "station/messages.h"
@@ -27,6 +28,19 @@ CalibrationBook::CalibrationBook(Node* node, const Calibration* fallback,
     fallback_ = *fallback;
   }
   node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
+    if (msg.scan_id == 0) return;  // A station calibration: the projector's, for scans to come.
+    {
+      // A scan is processed with the calibration it started with (the one the decoder
+      // recorded): a later CALIBRATION for it is refused, never used.
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (by_scan_.count(msg.scan_id)) {
+        node_->Count("calibrations refused");
+        // Not an error of the scan (scan_id 0): the scan goes on, unchanged.
+        node_->Error("scan " + std::to_string(msg.scan_id) + ": a second CALIBRATION (from " +
+                     Printable(msg.source) + ") refused: the scan keeps the one it started with");
+        return;
+      }
+    }
     Calibration c;
     const Status s = FromMessage(msg, &c);
     if (!s.ok()) {

@@ -18,7 +18,8 @@
 
 namespace vellum::station {
 
-// The calibration of each scan, from CALIBRATION messages; for a scan whose message this
+// The calibration of each scan, from its first CALIBRATION message (a later one for the same
+// scan is refused, and scan_id 0 is the projector's business); for a scan whose message this
 // process has not seen (it restarted since), the one the decoder recorded in the scan's folder
 // under `data_dir`; else the fallback.
 class CalibrationBook {

@@ -5,6 +5,7 @@
 #include <memory>
 #include <opencv2/core/utility.hpp>
 
+#include "core/common/text.h"
 #include "io/calibration_io.h"
 
 namespace vellum::station {
@@ -12,6 +13,7 @@ namespace vellum::station {
 std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data) {
   std::vector<Flags::Spec> specs = {
       {"url", "URL", "LCM bus", kDefaultUrl},
+      StationSpec(),
       {"config", "FILE", "YAML file of flag: value (the command line wins)", ""},
   };
   if (with_data) {
@@ -23,6 +25,20 @@ std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data) {
                      "100"});
   }
   return specs;
+}
+
+Flags::Spec StationSpec() {
+  return {"station", "ID",
+          "this station's id: messages of other stations on the bus are ignored (and counted); "
+          "every process of a station has the same",
+          kDefaultStation};
+}
+
+void SetStationFromFlags(const Flags& flags, Node* node) {
+  const std::string id = flags.Get("station");
+  const std::string why = CheckStationId(id);
+  if (!why.empty()) throw UsageError("--station \"" + Printable(id, 80) + "\": " + why);
+  node->SetStation(id);
 }
 
 Flags::Spec FallbackCalibrationSpec() {
@@ -52,6 +68,7 @@ int DaemonMain(int argc, char** argv, const std::string& process, const std::str
   cv::setNumThreads(cv::getNumberOfCPUs());
   try {
     Node node(process, flags.Get("url"));
+    SetStationFromFlags(flags, &node);
     if (flags.Has("pace")) node.SetPace(flags.GetDouble("pace", 0.1, 10000) * 1e6);
     return body(flags, node);
   } catch (const UsageError& e) {

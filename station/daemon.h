@@ -1,4 +1,5 @@
-// What every daemon's main shares: the common flags (--url, --config, --data, --pace), and a
+// What every daemon's main shares: the common flags (--url, --station, --config, --data,
+// --pace), and a
 // main() wrapper that turns bad flags and config files into a clear message and exit status 2.
 #pragma once
 
@@ -15,8 +16,13 @@
 
 namespace vellum::station {
 
-// --url, --config, and (with_data) --data.
+// --url, --station, --config, and (with_data) --data and --pace.
 std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data);
+
+// --station ID, for every process on the bus (daemons and the CLI's bus commands).
+Flags::Spec StationSpec();
+// Sets the node's station from --station; an invalid id throws UsageError.
+void SetStationFromFlags(const Flags& flags, Node* node);
 
 // --calibration FILE of the processing daemons: used when a scan comes without CALIBRATION.
 Flags::Spec FallbackCalibrationSpec();

@@ -4,14 +4,17 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <random>
 #include <stdexcept>
 
+#include "core/common/text.h"
 #include "vellum/status_t.hpp"
 
 namespace vellum::station {
@@ -107,6 +110,40 @@ void Node::CheckSequence(const std::string& channel, int64_t seq) {
     Error(channel + ": " + std::to_string(lost) + " message(s) lost on the bus (seq " +
           std::to_string(last) + " then " + std::to_string(seq) + ")");
   }
+}
+
+void Node::OtherStation(const std::string& channel, const std::string& station) {
+  bool first = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    counters_["from other stations"] += 1;
+    if (others_logged_.size() < 8 &&
+        std::find(others_logged_.begin(), others_logged_.end(), station) == others_logged_.end()) {
+      others_logged_.push_back(station);
+      first = true;
+    }
+  }
+  if (first) {
+    Log(channel + ": messages of station \"" + Printable(station, 64) +
+        "\" are ignored (this is station \"" + station_ + "\"); counted as 'from other stations'");
+  }
+}
+
+int64_t NewSession() {
+  static std::mutex mutex;
+  static std::mt19937_64 random(std::random_device{}());
+  std::lock_guard<std::mutex> lock(mutex);
+  return static_cast<int64_t>(random() >> 2) + 1;
+}
+
+std::string CheckStationId(const std::string& id) {
+  if (id.empty() || id.size() > 64) return "a station id has 1 to 64 characters";
+  for (const char c : id) {
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_' && c != '.') {
+      return "a station id has only letters, digits, '-', '_' and '.'";
+    }
+  }
+  return "";
 }
 
 int64_t Node::NextSeq(const std::string& channel) {

@@ -18,6 +18,8 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace vellum::station {
@@ -28,6 +30,7 @@ int64_t NowUtime();
 // The channel names of DESIGN.md's process graph.
 namespace channel {
 inline constexpr char kScanRequest[] = "SCAN_REQUEST";
+inline constexpr char kScanStarted[] = "SCAN_STARTED";  // From the projector: a scan is on.
 inline constexpr char kPatternShown[] = "PATTERN_SHOWN";
 inline constexpr char kCapture[] = "CAPTURE";
 inline constexpr char kCalibration[] = "CALIBRATION";
@@ -54,6 +57,26 @@ bool SafeDecode(const void* data, int64_t size, Msg* msg) {
   }
 }
 
+// The station id when none is configured. Stations that share a network (and a multicast
+// group) need ids of their own (README, "Several gantries in one room").
+inline constexpr char kDefaultStation[] = "vellum";
+
+// A station id: 1 to 64 of letters, digits, '-', '_' and '.'. Empty when valid, else why not.
+std::string CheckStationId(const std::string& id);
+
+// A scan's session: a random positive number the projector draws for each scan, carried by
+// every message of the scan, so that a capture of another scan with the same id (a stale one,
+// another gantry's) is never taken for one of this scan.
+int64_t NewSession();
+
+// Whether a message type carries the station it belongs to.
+template <class Msg, class = void>
+struct HasStation : std::false_type {};
+template <class Msg>
+struct HasStation<Msg, std::void_t<decltype(std::declval<Msg&>().station)>> : std::true_type {};
+template <class Msg>
+inline constexpr bool kHasStation = HasStation<Msg>::value;
+
 // The status channel of a process: "vellum-camera" -> "STATUS_CAMERA".
 std::string StatusChannel(const std::string& process);
 
@@ -78,6 +101,11 @@ class Node {
   Node& operator=(const Node&) = delete;
 
   const std::string& process() const { return process_; }
+  // The station this process belongs to (kDefaultStation unless set before subscribing):
+  // messages of types that carry a station are stamped with it as they are published, and
+  // those of another station are dropped as they arrive and counted ("from other stations").
+  const std::string& station() const { return station_; }
+  void SetStation(const std::string& station) { station_ = station; }
   lcm::LCM& lcm() { return *lcm_; }
 
   // Calls handler with each decoded message of `channel`, on the LCM thread. Messages that do
@@ -93,15 +121,22 @@ class Node {
               " (corrupt, truncated or of another type); dropped");
         return;
       }
+      if constexpr (kHasStation<Msg>) {
+        if (msg.station != station_) {
+          OtherStation(channel, msg.station);
+          return;
+        }
+      }
       CheckSequence(channel, msg.seq);
       handler(msg);
     });
   }
 
-  // Sets msg->seq (this process's counter for the channel) and, when it is 0, msg->utime;
-  // then publishes.
+  // Sets msg->seq (this process's counter for the channel), msg->station where the type has
+  // one, and msg->utime when it is 0; then publishes.
   template <class Msg>
   void Publish(const std::string& channel, Msg* msg) {
+    if constexpr (kHasStation<Msg>) msg->station = station_;
     msg->seq = NextSeq(channel);
     if (msg->utime == 0) msg->utime = NowUtime();
     if (lcm_->publish(channel, msg) != 0) Error(channel + ": publish failed");
@@ -156,11 +191,14 @@ class Node {
   void SubscribeRaw(const std::string& channel,
                     std::function<void(const lcm::ReceiveBuffer*)> handler);
   void CheckSequence(const std::string& channel, int64_t seq);
+  // Counts a message of another station (and logs the first from each, a few at most).
+  void OtherStation(const std::string& channel, const std::string& station);
   int64_t NextSeq(const std::string& channel);
   void PublishStatus();
   void WorkerLoop();
 
   std::string process_;
+  std::string station_ = kDefaultStation;
   std::unique_ptr<lcm::LCM> own_lcm_;  // Null when the bus is shared.
   lcm::LCM* lcm_;
   std::vector<std::unique_ptr<RawHandler>> handlers_;
@@ -171,6 +209,7 @@ class Node {
   // the LCM thread and the worker both report.
   mutable std::mutex mutex_;
   std::map<std::string, int64_t> seq_out_, seq_in_;
+  std::vector<std::string> others_logged_;  // Other stations heard (the first few).
   std::string state_ = "starting", detail_, last_error_;
   int64_t scan_id_ = 0, errors_ = 0, last_error_utime_ = 0, last_error_scan_ = 0;
   std::map<std::string, int64_t> counters_;

@@ -9,8 +9,18 @@
 #include "station/scan_store.h"
 
 namespace vellum::station {
+scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t session) {
+  scan_started_t m{};
+  m.scan_id = scan_id;
+  m.session = session;
+  m.pattern_count = static_cast<int32_t>(scan.sequence.patterns.size());
+  m.projector_width = scan.sequence.projector_size.width;
+  m.projector_height = scan.sequence.projector_size.height;
+  return m;
+}
+
 capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime) {
-  capture_t c;
+  capture_t c{};
   c.utime = utime;
   c.seq = 0;
   c.scan_id = scan_id;
@@ -32,7 +42,8 @@ capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int6
 }
 
 Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_id,
-                    const calibration_t* calibration, int64_t interval_us) {
+                    const std::string& station, const calibration_t* calibration,
+                    int64_t interval_us) {
   lcm::LogFile log(log_path, "w");
   if (!log.good()) return Status::Error(log_path + ": cannot create");
   int64_t utime = NowUtime();
@@ -46,17 +57,28 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
     event.data = const_cast<uint8_t*>(bytes.data());
     return log.writeEvent(&event) == 0;
   };
+  const int64_t session = NewSession();
+  scan_started_t started = MakeScanStarted(scan, scan_id, session);
+  started.utime = utime;
+  started.station = station;
+  if (!write(channel::kScanStarted, Encode(started))) {
+    return Status::Error(log_path + ": write failed");
+  }
   if (calibration) {
     calibration_t c = *calibration;
     c.utime = utime;
     c.seq = 0;
+    c.station = station;
     c.scan_id = scan_id;
+    c.session = session;
     if (!write(channel::kCalibration, Encode(c))) return Status::Error(log_path + ": write failed");
   }
   for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
     utime += interval_us;
     capture_t c = MakeCapture(scan, scan_id, k, utime);
     c.seq = seq++;
+    c.station = station;
+    c.session = session;
     if (!write(channel::kCapture, Encode(c))) return Status::Error(log_path + ": write failed");
   }
   return Status::Ok();

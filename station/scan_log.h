@@ -1,5 +1,6 @@
 // Recorded scan logs <-> scan directories (`vellum export` / `vellum import`): a log as the
-// decoder records it (CALIBRATION, then the texture and every frame on CAPTURE) read as a scan,
+// decoder records it (SCAN_STARTED, CALIBRATION, then the texture and every frame on CAPTURE)
+// read as a scan,
 // and a scan directory written as such a log that lcm-logplayer can play into the station.
 #pragma once
 
@@ -10,6 +11,7 @@
 #include "core/patterns/scan.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 
@@ -17,12 +19,18 @@ namespace vellum::station {
 // scan) and its calibration, if any. Errors name the log and what is missing.
 Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, bool* has_calibration,
                    calibration_t* calibration, int64_t* found_scan_id);
-// Writes a scan directory as a log a station would have recorded: CALIBRATION (if given), then
-// the texture and every frame on CAPTURE, `interval_us` apart.
+// Writes a scan directory as a log station `station` would have recorded: SCAN_STARTED (with a
+// new session), CALIBRATION (if given), then the texture and every frame on CAPTURE,
+// `interval_us` apart.
 Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_id,
-                    const calibration_t* calibration, int64_t interval_us = 20000);
+                    const std::string& station, const calibration_t* calibration,
+                    int64_t interval_us = 20000);
 
-// The capture message of one image of a scan (pattern_index -1: the texture).
+// The SCAN_STARTED a projector publishes for `scan` (station and seq left to the publisher).
+scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t session);
+
+// The capture message of one image of a scan (pattern_index -1: the texture); its session is
+// left 0 (the caller's).
 capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime);
 
 }  // namespace vellum::station

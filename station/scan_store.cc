@@ -1,7 +1,13 @@
 #include "station/scan_store.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -24,11 +30,13 @@ std::string ScanFolder::calibration() const {
 }
 
 std::string ScanFolder::pending() const { return (fs::path(root) / "pending").string(); }
+std::string ScanFolder::failed() const { return (fs::path(raw()) / "failed.txt").string(); }
+std::string ScanFolder::scan_yaml() const { return (fs::path(raw()) / "scan.yaml").string(); }
 
 Status CheckCapture(const capture_t& c) {
   const std::string where =
       "scan " + std::to_string(c.scan_id) + ", pattern " + std::to_string(c.pattern_index);
-  if (c.pattern_count <= 0 || c.pattern_count > 1000) {
+  if (c.pattern_count <= 0 || c.pattern_count > kMaxPatterns) {
     return Status::Error(where + ": pattern_count " + std::to_string(c.pattern_count) +
                          " is not valid");
   }
@@ -113,6 +121,33 @@ Scan CaptureSet::ToScan() const {
   scan.texture = texture_;
   scan.frames = frames_;
   return scan;
+}
+
+DataLock::~DataLock() {
+  if (fd_ >= 0) close(fd_);  // Releases the flock.
+}
+
+Status DataLock::Take(const std::string& data_dir, const std::string& process) {
+  Status s = MakeDirectories(data_dir);
+  if (!s.ok()) return s;
+  const std::string path = (fs::path(data_dir) / ".vellum-decoder.lock").string();
+  const int fd = open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) return Status::Error(path + ": cannot open: " + std::strerror(errno));
+  if (flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    char holder[32] = {0};
+    const ssize_t n = pread(fd, holder, sizeof(holder) - 1, 0);
+    close(fd);
+    std::string pid = n > 0 ? std::string(holder, static_cast<size_t>(n)) : std::string("?");
+    while (!pid.empty() && (pid.back() == '\n' || pid.back() == ' ')) pid.pop_back();
+    return Status::Error(data_dir + " is being recorded into by another " + process + " (pid " +
+                         Printable(pid, 20) + ", holding " + path +
+                         "): one decoder per data folder; two stations need a folder each");
+  }
+  // The pid only makes another decoder's message clearer: the lock holds without it.
+  const std::string mine = std::to_string(getpid()) + "\n";
+  if (ftruncate(fd, 0) == 0) (void)!pwrite(fd, mine.data(), mine.size(), 0);
+  fd_ = fd;
+  return Status::Ok();
 }
 
 Status TrimTornTail(const std::string& path, int64_t* cut) {

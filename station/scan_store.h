@@ -35,10 +35,15 @@ struct ScanFolder {
   std::string log() const;          // raw/captures.lcmlog
   std::string calibration() const;  // raw/calibration.yaml
   std::string pending() const;      // pending: the supervisor's ledger (station/supervisor.h)
+  std::string failed() const;       // raw/failed.txt: the scan was given up, and why
+  std::string scan_yaml() const;    // raw/scan.yaml: written once the scan is recorded whole
 };
 
+// The most patterns a scan may have (a CAPTURE or SCAN_STARTED claiming more is refused).
+inline constexpr int kMaxPatterns = 1000;
+
 // What a CAPTURE claims about itself, checked before anything is written: a pattern count of 1
-// to 1000, its index -1 (the texture) or within the count, a projector of 2 to 65536 pixels
+// to kMaxPatterns, its index -1 (the texture) or within the count, a projector of 2 to 65536 pixels
 // each way. A capture that fails is refused whole (never recorded: a scan's log holds only
 // captures that belong in it).
 Status CheckCapture(const capture_t& c);
@@ -71,6 +76,22 @@ class CaptureSet {
   std::vector<cv::Mat> frames_;
   std::vector<PatternSpec> specs_;
   std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
+};
+
+// A data folder's lock (<data>/.vellum-decoder.lock, flock): one decoder records into a data
+// folder, or two stations sharing one by mistake would write every capture twice. The kernel
+// releases it when the holder dies, so a killed decoder never blocks its restart.
+class DataLock {
+ public:
+  DataLock() = default;
+  ~DataLock();
+  DataLock(const DataLock&) = delete;
+  DataLock& operator=(const DataLock&) = delete;
+  // Takes the lock; an error names the folder and the holder's pid when it is taken.
+  Status Take(const std::string& data_dir, const std::string& process);
+
+ private:
+  int fd_ = -1;
 };
 
 // Cuts a torn last event off an LCM log: a process killed in the middle of writing one, or a

@@ -257,7 +257,7 @@ TEST(ScanStore, ALogAndAScanDirectoryConvertBothWaysLosslessly) {
   calibration_t calibration;
   ToMessage(DefaultRig(), &calibration);
   const std::string log = (dir / "scan.lcmlog").string();
-  ASSERT_TRUE(WriteScanLog(log, scan, 77, &calibration).ok());
+  ASSERT_TRUE(WriteScanLog(log, scan, 77, kDefaultStation, &calibration).ok());
   Scan back;
   bool has_calibration = false;
   calibration_t calibration_back;
@@ -369,12 +369,18 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
   node.lcm().publish("SCAN_REQUEST", junk.data(), static_cast<unsigned>(junk.size()));
   // A string whose length field is 0 makes lcm-gen's decoder throw (found by fuzzing).
   scan_request_t bad{};
-  bad.label = "x";
+  bad.station = kDefaultStation;
   std::vector<uint8_t> bytes(bad.getEncodedSize());
   bad.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
-  std::fill(bytes.begin() + 32, bytes.begin() + 36, 0);  // label's length (after 4 int64s).
+  std::fill(bytes.begin() + 24, bytes.begin() + 28, 0);  // station's length (after 3 int64s).
   node.lcm().publish("SCAN_REQUEST", bytes.data(), static_cast<unsigned>(bytes.size()));
+  // Another station's messages are not this one's: dropped, counted, not an error.
+  scan_request_t other{};
+  other.station = "gantry-2";
+  other.seq = 40;
+  node.lcm().publish("SCAN_REQUEST", &other);
   scan_request_t r{};
+  r.station = kDefaultStation;
   for (int64_t seq : {0, 1, 5}) {
     r.seq = seq;
     node.lcm().publish("SCAN_REQUEST", &r);
@@ -388,6 +394,7 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
             std::string::npos)
       << statuses.back().last_error;
   EXPECT_EQ(node.Counter("lost messages"), 3);
+  EXPECT_EQ(node.Counter("from other stations"), 1);
   // Posted work runs in order, off the LCM thread.
   std::vector<int> order;
   for (int k = 0; k < 5; ++k) node.Post([&order, k] { order.push_back(k); });

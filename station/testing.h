@@ -23,6 +23,7 @@
 #include "core/sim/evaluate.h"
 #include "pipeline/stages.h"
 #include "station/node.h"
+#include "station/scan_log.h"
 #include "vellum/status_t.hpp"
 
 namespace vellum::station::testing {
@@ -84,6 +85,22 @@ class MemqBus {
   std::vector<std::function<void()>> ticks_;
   std::map<std::string, status_t> statuses_;
 };
+
+// Publishes `scan` from `probe` as scan `id`, as the station's projector and camera would:
+// SCAN_STARTED with a new session, then the texture and every frame on CAPTURE (of that
+// session), except pattern `skip`. Returns the session.
+inline int64_t PublishScan(Node& probe, const Scan& scan, int64_t id, int skip = -2) {
+  const int64_t session = NewSession();
+  scan_started_t started = MakeScanStarted(scan, id, session);
+  probe.Publish(channel::kScanStarted, &started);
+  for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
+    if (k == skip) continue;
+    capture_t c = MakeCapture(scan, id, k, NowUtime());
+    c.session = session;
+    probe.Publish(channel::kCapture, &c);
+  }
+  return session;
+}
 
 // A fresh folder for one test's files, named after the test: <tmp>/vellum_<what>_<pid>_<test>.
 inline std::string TestDir(const std::string& what) {

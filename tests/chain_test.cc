@@ -91,13 +91,18 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   FlattenerNode flattener(&flattener_node, f);
   RestorerNode restorer(&restorer_node, r);
   auto restored = bus.Record<restored_t>(channel::kRestored);
-  // The scan as the station receives it: its calibration, then the captures.
+  // The scan as the station receives it: SCAN_STARTED, its calibration, then the captures.
+  const int64_t session = NewSession();
+  scan_started_t started = MakeScanStarted(scan, 3, session);
+  bus.probe().Publish(channel::kScanStarted, &started);
   calibration_t calibration{};
   calibration.scan_id = 3;
+  calibration.session = session;
   ToMessage(QuickRig(), &calibration);
   bus.probe().Publish(channel::kCalibration, &calibration);
   for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
     capture_t c = MakeCapture(scan, 3, k, NowUtime());
+    c.session = session;
     bus.probe().Publish(channel::kCapture, &c);
   }
   ASSERT_TRUE(bus.RunUntil([&] { return !restored->empty(); }, 120))

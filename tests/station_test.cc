@@ -24,6 +24,7 @@
 #include "vellum/capture_t.hpp"
 #include "vellum/correspondence_t.hpp"
 #include "vellum/restored_t.hpp"
+#include "vellum/scan_started_t.hpp"
 #include "vellum/status_t.hpp"
 
 namespace vellum {
@@ -336,8 +337,18 @@ TEST_F(StationTest, CorruptAndWrongTypeMessagesAreReportedAndTheDaemonKeepsRunni
   other.process = "impostor";
   lcm_->publish("CAPTURE", &other);
   EXPECT_TRUE(wait_error("does not decode as vellum.capture_t"));
-  // A well-formed capture with an image whose data is too short.
+  // A well-formed capture of a scan in progress, with an image whose data is too short.
+  scan_started_t started{};
+  started.station = "vellum";
+  started.scan_id = 42;
+  started.session = 5;
+  started.pattern_count = 4;
+  started.projector_width = 512;
+  started.projector_height = 384;
+  lcm_->publish("SCAN_STARTED", &started);
   capture_t c{};
+  c.station = "vellum";
+  c.session = 5;
   c.scan_id = 42;
   c.pattern_index = 0;
   c.pattern_count = 4;
@@ -365,6 +376,7 @@ TEST_F(StationTest, LostChunksAndSequenceGapsAreReportedNotSilentlyUsed) {
                                [&](const status_t& m) { statuses.push_back(m); });
   auto chunk = [](int64_t scan, int index, int64_t seq) {
     correspondence_t m{};
+    m.station = "vellum";
     m.seq = seq;
     m.scan_id = scan;
     m.chunk_index = index;

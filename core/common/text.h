@@ -11,4 +11,16 @@ inline std::string SizeText(cv::Size size) {
   return std::to_string(size.width) + "x" + std::to_string(size.height);
 }
 
+// Untrusted text (from a message or a file) fit for a log line: control characters and bytes
+// outside printable ASCII become '?', and text longer than `max` is cut with "...".
+inline std::string Printable(const std::string& text, size_t max = 200) {
+  std::string out;
+  for (size_t k = 0; k < text.size() && k < max; ++k) {
+    const unsigned char c = static_cast<unsigned char>(text[k]);
+    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  if (text.size() > max) out += "...";
+  return out;
+}
+
 }  // namespace vellum

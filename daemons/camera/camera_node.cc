@@ -70,6 +70,7 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   }
   capture_t c{};
   c.scan_id = m.scan_id;
+  c.session = m.session;  // The station is stamped by Publish.
   c.pattern_index = m.pattern_index;
   c.pattern_count = m.pattern_count;
   c.projector_width = m.projector_width;

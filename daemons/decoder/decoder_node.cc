@@ -1,6 +1,7 @@
 #include "daemons/decoder/decoder_node.h"
 
 #include <memory>
+#include <stdexcept>
 
 #include "pipeline/stages.h"
 #include "station/chain.h"
@@ -8,33 +9,94 @@
 
 namespace vellum::station {
 
+namespace {
+
+// The data folder's lock, before anything reads or writes there; throws when another decoder
+// holds it.
+std::unique_ptr<DataLock> LockData(const std::string& data_dir) {
+  auto lock = std::make_unique<DataLock>();
+  const Status s = lock->Take(data_dir, "vellum-decoder");
+  if (!s.ok()) throw std::runtime_error(s.message());
+  return lock;
+}
+
+}  // namespace
+
 DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     : node_(node),
       options_(options),
+      lock_(LockData(options.data_dir)),
       decoder_(options.decode),
       supervisor_(node, options.data_dir,
-                  [this](int64_t id, const Scan& scan) { return Send(id, scan); }) {
-  // Each message goes to the scan's log at once, on the LCM thread (an append and a flush),
-  // so that a crash loses nothing received; the rest is done on the worker.
+                  [this](int64_t id, const Scan& scan) { return Send(id, scan); }),
+      gate_(options.data_dir) {
+  // Each message the gate admits goes to the scan's log at once, on the LCM thread (an append
+  // and a flush), so that a crash loses nothing received; the rest is done on the worker.
+  node->Subscribe<scan_started_t>(channel::kScanStarted, [this](const scan_started_t& msg) {
+    if (!Admitted(gate_.Start(msg), msg.scan_id)) return;
+    node_->Count("scans started");
+    last_capture_ = std::chrono::steady_clock::now();  // The texture is awaited from now.
+    if (!Log(channel::kScanStarted, msg.scan_id, msg.utime, Encode(msg))) return;
+    const int64_t id = msg.scan_id;
+    node_->Post([this, id] { Begin(id); }, "a SCAN_STARTED");
+  });
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
     // A capture that contradicts itself is refused before it reaches the scan's log (which
     // would then no longer export).
     const Status ok = CheckCapture(msg);
     if (!ok.ok()) {
       node_->Count("captures refused");
-      node_->Error("CAPTURE refused, not recorded: " + ok.message(), msg.scan_id);
+      if (!gate_.Holds(msg.scan_id, msg.session)) {
+        node_->Error("CAPTURE refused, not recorded: " + ok.message());
+        return;
+      }
+      // The scan in progress cannot be whole: it fails now, not at its timeout.
+      gate_.Close(msg.scan_id);
+      const int64_t id = msg.scan_id;
+      const std::string why = "CAPTURE refused, not recorded: " + ok.message();
+      node_->Post([this, id, why] {
+        if (recording_ == id) Abandon(why);
+      });
       return;
     }
+    const ScanGate::Decision d = gate_.Admit(msg);
+    if (d.verdict == ScanGate::Verdict::kDuplicate) {
+      node_->Count(d.counter);
+      const int64_t id = msg.scan_id;
+      const std::string why = d.why;
+      node_->Post([this, id, why] {
+        if (recording_ == id) Abandon(why);
+      });
+      return;
+    }
+    if (!Admitted(d, msg.scan_id)) return;
+    if (d.resumed)
+      node_->Log("scan " + std::to_string(msg.scan_id) + ": taken up again after a restart");
     if (!Log(channel::kCapture, msg.scan_id, msg.utime, Encode(msg))) return;
     auto copy = std::make_shared<capture_t>(msg);
     last_capture_ = std::chrono::steady_clock::now();
     node_->Post([this, copy] { OnCapture(*copy); }, "a CAPTURE");
   });
   node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
+    if (!Admitted(gate_.AdmitCalibration(msg), msg.scan_id)) return;
     if (!Log(channel::kCalibration, msg.scan_id, msg.utime, Encode(msg))) return;
     auto copy = std::make_shared<calibration_t>(msg);
     node_->Post([this, copy] { OnCalibration(*copy); }, "a CALIBRATION");
   });
+}
+
+bool DecoderNode::Admitted(const ScanGate::Decision& d, int64_t scan_id) {
+  if (d.verdict == ScanGate::Verdict::kRecord) return true;
+  if (d.why.empty()) return false;  // Nothing to record, nothing wrong.
+  node_->Count(d.counter);
+  // A flood of refusals for one scan is counted, and reported once. Not as an error of the
+  // scan (scan_id 0): a stray message must not fail the scan in progress.
+  if (scan_id != last_refused_ || d.counter != last_refused_counter_) {
+    last_refused_ = scan_id;
+    last_refused_counter_ = d.counter;
+    node_->Error(d.why);
+  }
+  return false;
 }
 
 void DecoderNode::Tick() {
@@ -44,7 +106,7 @@ void DecoderNode::Tick() {
   }
   waiting_ = false;
   node_->Post([this] {
-    if (set_.Started() && !set_.Complete()) {
+    if (recording_ != 0 && !set_.Complete()) {
       Abandon("no capture for " + std::to_string(static_cast<int>(options_.scan_timeout_s)) + " s");
     }
   });
@@ -52,10 +114,6 @@ void DecoderNode::Tick() {
 
 bool DecoderNode::Log(const char* channel, int64_t scan_id, int64_t utime,
                       const std::vector<uint8_t>& bytes) {
-  if (scan_id <= 0) {
-    node_->Error(std::string(channel) + ": scan_id " + std::to_string(scan_id) + " refused");
-    return false;
-  }
   const Status s =
       log_.Append(ScanFolder::For(options_.data_dir, scan_id), scan_id, channel, utime, bytes);
   if (log_.trimmed() > 0) {
@@ -77,35 +135,43 @@ void DecoderNode::Stop() {
 }
 
 void DecoderNode::Abandon(const std::string& why) {
+  Fail(recording_, why + (set_.Started() ? "; " + set_.Missing() : std::string()) +
+                       "; the captures received are kept in " +
+                       ScanFolder::For(options_.data_dir, recording_).raw());
+}
+
+void DecoderNode::Fail(int64_t id, const std::string& why) {
+  gate_.Close(id);  // Nothing more of it is recorded.
+  const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
+  const Status marked = MarkFailed(folder, why);
   node_->Count("scans failed");  // Before the error goes out with the count.
-  node_->Error("scan " + std::to_string(set_.scan_id()) + " failed: " + why + "; " +
-                   set_.Missing() + "; the captures received are kept in " +
-                   ScanFolder::For(options_.data_dir, set_.scan_id()).raw(),
-               set_.scan_id());
+  node_->Error(
+      "scan " + std::to_string(id) + " failed: " + why +
+          (marked.ok() ? "" : " (and it could not be marked failed: " + marked.message() + ")"),
+      id);
   Stop();
 }
 
 bool DecoderNode::Begin(int64_t scan_id) {
-  if (recording_ == scan_id && !set_.Complete()) return true;
-  if (recording_ == scan_id) {
-    node_->Log("scan " + std::to_string(scan_id) + " again: recording anew");
-  }
-  if (set_.Started() && !set_.Complete()) {
+  if (recording_ == scan_id) return !set_.Complete();
+  if (recording_ != 0 && !set_.Complete()) {
     Abandon("scan " + std::to_string(scan_id) + " started before it was complete");
   }
   set_ = CaptureSet();
   recording_ = scan_id;
   supervisor_.Recording(scan_id);
+  waiting_ = true;
   int resumed = 0;
   const ScanFolder folder = ScanFolder::For(options_.data_dir, scan_id);
   const Status s = recorder_.Open(folder, scan_id, &set_, &resumed);
   if (!s.ok()) {
-    node_->Error("scan " + std::to_string(scan_id) + ": cannot record: " + s.message(), scan_id);
+    Fail(scan_id, "cannot record: " + s.message());
     return false;
   }
   node_->Log(
       "scan " + std::to_string(scan_id) + ": recording to " + folder.raw() +
       (resumed ? " (continuing: " + std::to_string(resumed) + " captures already there)" : ""));
+  node_->SetState("recording", scan_id, "waiting for the texture");
   return true;
 }
 
@@ -122,17 +188,14 @@ void DecoderNode::OnCapture(const capture_t& msg) {
   if (!set_.Has(msg.pattern_index)) {
     Status s = set_.Add(msg);
     if (!s.ok()) {
-      node_->Error(s.message(), msg.scan_id);
+      Fail(msg.scan_id, s.message());
       return;
     }
     cv::Mat image;
     s = FromMessage(msg.image, &image);  // Checked by Add.
     if (s.ok()) s = recorder_.Write(msg, image);
     if (!s.ok()) {
-      node_->Count("scans failed");  // Before the error goes out with the count.
-      node_->Error("scan " + std::to_string(msg.scan_id) + " failed: recording: " + s.message(),
-                   msg.scan_id);
-      Stop();
+      Fail(msg.scan_id, "recording: " + s.message());
       return;
     }
   }
@@ -150,9 +213,10 @@ void DecoderNode::Complete() {
   const Scan scan = set_.ToScan();
   const Status s = recorder_.Finish(scan);
   if (!s.ok()) {
-    node_->Error("scan " + std::to_string(id) + ": " + s.message(), id);
+    Fail(id, s.message());
     return;
   }
+  Stop();
   node_->Count("scans recorded");
   supervisor_.Recorded(id, scan);
 }

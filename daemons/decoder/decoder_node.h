@@ -1,5 +1,7 @@
 // vellum-decoder's node: records each scan's captures to disk as they arrive (the scan's raw
-// folder: captures.lcmlog and the scan directory of DESIGN.md), and once a scan is complete
+// folder: captures.lcmlog and the scan directory of DESIGN.md): only the scans this station's
+// projector started, each pattern once, never a scan that is over (station/scan_gate.h). A scan
+// given up is marked so on disk (raw/failed.txt, with the reason). Once a scan is complete it
 // sends it down the chain: TEXTURE, then the decoded CORRESPONDENCE (in row chunks) with the
 // decode stage's report. It hosts the station's supervisor (station/supervisor.h), which sends
 // a scan again when a processing daemon died holding it.
@@ -7,11 +9,13 @@
 
 #include <atomic>
 #include <chrono>
+#include <memory>
 #include <string>
 
 #include "core/decode/decode.h"
 #include "core/patterns/scan.h"
 #include "station/node.h"
+#include "station/scan_gate.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
 #include "vellum/calibration_t.hpp"
@@ -27,6 +31,7 @@ struct DecoderNodeOptions {
 
 class DecoderNode {
  public:
+  // Throws std::runtime_error when another decoder records into options.data_dir (DataLock).
   DecoderNode(Node* node, const DecoderNodeOptions& options);
   // Waits for the jobs it posted: none runs after it is gone.
   ~DecoderNode() { node_->Drain(); }
@@ -35,20 +40,24 @@ class DecoderNode {
   void Tick();
 
  private:
-  // LCM thread: appends a message to its scan's log at once; false (reported) for a message
-  // of no scan (scan_id <= 0), which is dropped.
+  // LCM thread: whether the gate's decision is to record; a refusal is counted, and reported
+  // once per scan and reason.
+  bool Admitted(const ScanGate::Decision& d, int64_t scan_id);
+  // LCM thread: appends a message to its scan's log at once (a failure is reported).
   bool Log(const char* channel, int64_t scan_id, int64_t utime, const std::vector<uint8_t>& bytes);
   // Worker thread:
   void OnCalibration(const calibration_t& msg);
   void OnCapture(const capture_t& msg);
-  bool Begin(int64_t scan_id);  // Opens the scan's folder on its first message.
-  void Abandon(const std::string& why);
-  void Stop();  // No scan is being recorded.
+  bool Begin(int64_t scan_id);           // Opens the scan's folder on its first message.
+  void Abandon(const std::string& why);  // Gives up the scan being recorded.
+  void Fail(int64_t scan_id, const std::string& why);  // Marks it failed (raw/failed.txt).
+  void Stop();                                         // No scan is being recorded.
   void Complete();
   Status Send(int64_t id, const Scan& scan);  // Decodes and publishes (the supervisor's Send).
 
   Node* node_;
   DecoderNodeOptions options_;
+  std::unique_ptr<DataLock> lock_;  // Held for the node's life.
   // Worker thread only:
   Decoder decoder_;  // Keeps its buffers between scans.
   DecodeResult decoded_;
@@ -56,8 +65,11 @@ class DecoderNode {
   int64_t recording_ = 0;  // The scan whose folder is open.
   ScanRecorder recorder_;
   Supervisor supervisor_;
+  ScanGate gate_;  // Decides on the LCM thread; the worker closes scans it gives up.
   // LCM thread only:
   CaptureLog log_;
+  int64_t last_refused_ = -1;
+  std::string last_refused_counter_;
   std::chrono::steady_clock::time_point last_capture_;
   std::atomic<bool> waiting_{false};  // A scan is being captured (set by the worker).
 };

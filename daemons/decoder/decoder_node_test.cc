@@ -34,14 +34,20 @@ class DecoderNodeTest : public ::testing::Test {
   void TearDown() override {
     if (!HasFailure()) fs::remove_all(data_);
   }
-  // Publishes the captures of `scan` as scan `id` (texture first), except pattern `skip`.
-  void PublishScan(int64_t id, int skip = -2) {
-    const Scan& scan = SmallScan();
-    for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
-      if (k == skip) continue;
-      capture_t c = MakeCapture(scan, id, k, NowUtime());
-      bus_.probe().Publish(channel::kCapture, &c);
-    }
+  // Publishes SmallScan as scan `id` (SCAN_STARTED, texture first), except pattern `skip`;
+  // returns its session.
+  int64_t PublishScan(int64_t id, int skip = -2) {
+    return testing::PublishScan(bus_.probe(), SmallScan(), id, skip);
+  }
+  // One capture of SmallScan.
+  capture_t Capture(int64_t id, int64_t session, int pattern_index) {
+    capture_t c = MakeCapture(SmallScan(), id, pattern_index, NowUtime());
+    c.session = session;
+    return c;
+  }
+  void Start(int64_t id, int64_t session) {
+    scan_started_t m = MakeScanStarted(SmallScan(), id, session);
+    bus_.probe().Publish(channel::kScanStarted, &m);
   }
 
   std::string data_;
@@ -101,28 +107,32 @@ TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {
   Node node("vellum-decoder", &bus_.lcm());
   DecoderNode decoder(&node, options_);
   bus_.Watch("vellum-decoder");
-  capture_t short_image = MakeCapture(SmallScan(), 21, 0, NowUtime());
+  Start(21, 7);
+  capture_t short_image = Capture(21, 7, 0);
   short_image.image.size = 1000;
   short_image.image.data.resize(1000);
   bus_.probe().Publish(channel::kCapture, &short_image);
   EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "image data is 1000 bytes"))
       << bus_.Status("vellum-decoder").last_error;
-  capture_t beyond = MakeCapture(SmallScan(), 21, 1, NowUtime());
+  // A scan with a capture it cannot use is given up at once, and marked so on disk.
+  EXPECT_TRUE(fs::exists(ScanFolder::For(data_, 21).failed()));
+  capture_t beyond = Capture(21, 7, 1);
   beyond.pattern_index = beyond.pattern_count;  // One past the last pattern.
   bus_.probe().Publish(channel::kCapture, &beyond);
   EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "pattern_index outside"))
       << bus_.Status("vellum-decoder").last_error;
   EXPECT_EQ(node.Counter("captures refused"), 1);
   // Such captures are refused before the scan's log (counted), as is a projector of 2^30 px.
-  capture_t wide = MakeCapture(SmallScan(), 21, 1, NowUtime());
+  capture_t wide = Capture(21, 7, 1);
   wide.projector_width = 1 << 30;
   bus_.probe().Publish(channel::kCapture, &wide);
   EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "projector size 1073741824x"))
       << bus_.Status("vellum-decoder").last_error;
   EXPECT_EQ(node.Counter("captures refused"), 2);
-  capture_t no_scan = MakeCapture(SmallScan(), 0, 1, NowUtime());
+  capture_t no_scan = Capture(0, 7, 1);
   bus_.probe().Publish(channel::kCapture, &no_scan);
-  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "scan_id 0 refused"));
+  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "scan 0, pattern 1: CAPTURE refused"))
+      << bus_.Status("vellum-decoder").last_error;
   // The node goes on: a whole scan after the bad ones is recorded and decoded.
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
   PublishScan(22);
@@ -136,9 +146,6 @@ TEST_F(DecoderNodeTest, AnIncompleteScanIsGivenUpNamingWhatIsMissingAndTheNextIs
   bus_.AddTick([&] { decoder.Tick(); });
   bus_.Watch("vellum-decoder");
   PublishScan(31, /*skip=*/4);
-  // A capture sent twice is taken once.
-  capture_t again = MakeCapture(SmallScan(), 31, 2, NowUtime());
-  bus_.probe().Publish(channel::kCapture, &again);
   const int total = static_cast<int>(SmallScan().frames.size()) + 1;
   ASSERT_TRUE(bus_.WaitForError("vellum-decoder", "scan 31 failed: no capture for 1 s", 30))
       << bus_.Status("vellum-decoder").last_error;
@@ -148,6 +155,7 @@ TEST_F(DecoderNodeTest, AnIncompleteScanIsGivenUpNamingWhatIsMissingAndTheNextIs
       << error;
   EXPECT_NE(error.find(ScanFolder::For(data_, 31).raw()), std::string::npos) << error;
   EXPECT_FALSE(fs::exists(ScanFolder::For(data_, 31).pending()));
+  EXPECT_TRUE(fs::exists(ScanFolder::For(data_, 31).failed()));
   EXPECT_EQ(node.Counter("scans failed"), 1);
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
   PublishScan(32);

@@ -6,6 +6,7 @@
 #include "station/messages.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 
@@ -20,6 +21,8 @@ ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
   node->Subscribe<scan_request_t>(channel::kScanRequest,
                                   [this](const scan_request_t& m) { OnRequest(m); });
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& m) { OnCapture(m); });
+  node->Subscribe<calibration_t>(channel::kCalibration,
+                                 [this](const calibration_t& m) { OnCalibration(m); });
   node->Log("projector " + SizeText(projector_->size()) + ", " +
             std::to_string(sequence_.patterns.size()) + " patterns per scan");
 }
@@ -51,11 +54,24 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
     return;
   }
   scan_id_ = m.scan_id;
+  session_ = NewSession();
+  const std::string label = m.identity.label;
   node_->Log("scan " + std::to_string(scan_id_) + " started" +
-             (m.label.empty() ? "" : " (" + m.label + ")"));
+             (label.empty() ? "" : " (" + Printable(label) + ")"));
+  // The scan is announced first: the decoder records captures only of a scan this station's
+  // projector started, with this session.
+  scan_started_t started{};
+  started.scan_id = scan_id_;
+  started.session = session_;
+  started.pattern_count = static_cast<int32_t>(sequence_.patterns.size());
+  started.projector_width = sequence_.projector_size.width;
+  started.projector_height = sequence_.projector_size.height;
+  started.identity = m.identity;
+  node_->Publish(channel::kScanStarted, &started);
   if (options_.calibration) {
     calibration_t c{};
     c.scan_id = scan_id_;
+    c.session = session_;
     c.source = options_.calibration_source;
     ToMessage(*options_.calibration, &c);
     node_->Publish(channel::kCalibration, &c);
@@ -64,8 +80,27 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
   ShowPattern(-1);
 }
 
+void ProjectorNode::OnCalibration(const calibration_t& m) {
+  if (m.scan_id != 0) return;  // A scan's own (this projector's): nothing to do.
+  // A station calibration (scan_id 0): from the next scan on, never for the one in progress.
+  Calibration c;
+  const Status s = FromMessage(m, &c);
+  if (!s.ok()) {
+    node_->Error("CALIBRATION from " + Printable(m.source) + " refused: " + s.message());
+    return;
+  }
+  options_.calibration = c;
+  options_.calibration_source = m.source;
+  node_->Count("calibrations taken");
+  node_->Log("calibration from " + Printable(m.source) + " taken: it applies from the next scan" +
+             (scan_id_ != 0 ? " (scan " + std::to_string(scan_id_) + " keeps its own)" : ""));
+}
+
 void ProjectorNode::OnCapture(const capture_t& m) {
-  if (scan_id_ == 0 || m.scan_id != scan_id_ || m.pattern_index != index_) return;
+  if (scan_id_ == 0 || m.scan_id != scan_id_ || m.session != session_ ||
+      m.pattern_index != index_) {
+    return;
+  }
   if (index_ + 1 < static_cast<int>(sequence_.patterns.size())) {
     ShowPattern(index_ + 1);
     return;
@@ -90,6 +125,7 @@ void ProjectorNode::ShowPattern(int index) {
   std::this_thread::sleep_for(options_.settle);
   pattern_shown_t m{};
   m.scan_id = scan_id_;
+  m.session = session_;
   m.pattern_index = index;
   m.pattern_count = static_cast<int32_t>(sequence_.patterns.size());
   m.projector_width = sequence_.projector_size.width;

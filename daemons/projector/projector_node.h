@@ -1,7 +1,9 @@
-// vellum-projector's node: the scan's conductor. On SCAN_REQUEST it publishes the station's
-// CALIBRATION, then for the texture and each pattern k: shows it (projector black for the
-// texture), waits the settle time, publishes PATTERN_SHOWN(k) and waits for the camera's
-// CAPTURE(k) before the next. A capture that does not come fails the scan with a clear status.
+// vellum-projector's node: the scan's conductor. On SCAN_REQUEST it draws the scan's session
+// and publishes SCAN_STARTED and the station's CALIBRATION, then for the texture and each pattern
+// k: shows it (projector black for the texture), waits the settle time, publishes PATTERN_SHOWN(k)
+// and waits for the camera's CAPTURE(k) (of this station and session) before the next. A capture
+// that does not come fails the scan with a clear status. A CALIBRATION with scan_id 0 replaces the
+// station's calibration from the next scan on.
 #pragma once
 
 #include <chrono>
@@ -13,6 +15,7 @@
 #include "core/patterns/patterns.h"
 #include "daemons/projector/projector.h"
 #include "station/node.h"
+#include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 #include "vellum/scan_request_t.hpp"
 
@@ -41,6 +44,7 @@ class ProjectorNode {
   std::string What(int index) const;
   void OnRequest(const scan_request_t& m);
   void OnCapture(const capture_t& m);
+  void OnCalibration(const calibration_t& m);
   void ShowPattern(int index);
   void Fail(const std::string& why);
 
@@ -51,6 +55,7 @@ class ProjectorNode {
   cv::Mat black_;
   // LCM thread only (the projector runs its scans there, one message at a time):
   int64_t scan_id_ = 0;  // The scan in progress, 0 if none.
+  int64_t session_ = 0;  // Its session (SCAN_STARTED): captures of other sessions are not its.
   int index_ = -1;       // What is on screen: -1 the texture, k pattern k.
   std::chrono::steady_clock::time_point shown_at_, started_;
 };

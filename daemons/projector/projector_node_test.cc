@@ -62,6 +62,7 @@ class ProjectorNodeTest : public ::testing::Test {
       const pattern_shown_t& m = (*shown)[(*answered)++];
       capture_t c{};
       c.scan_id = m.scan_id;
+      c.session = m.session;
       c.pattern_index = m.pattern_index;
       c.pattern_count = m.pattern_count;
       bus_.probe().Publish(channel::kCapture, &c);

@@ -84,7 +84,7 @@ void ViewerNode::OnKey(SDL_Keycode key) {
     case SDLK_s: {
       scan_request_t r{};
       r.scan_id = NowUtime();
-      r.label = "from vellum-viewer";
+      r.identity.label = "from vellum-viewer";
       node_->Publish(channel::kScanRequest, &r);
       progress_ = "scan " + std::to_string(r.scan_id) + " requested";
       break;
