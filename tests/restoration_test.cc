@@ -92,9 +92,11 @@ TEST_P(FlattenFine, MeetsTheSameBar) {
   const Pipeline p = RunPipeline(PageShape::kCurl, FlattenSolver::kGaussNewton, 31, grid);
   ASSERT_TRUE(p.flat.status.ok()) << p.flat.status.message();
   const FlatErrorStats st = CompareFlat(p.gantry->truth(), p.mesh, p.flat.flat);
-  std::printf("[flatten] curl %dx%d nodes %d: RMS %.4f mm, mean edge error %.4f%%, %d folds, %d iterations\n",
-              grid.width, grid.height, st.nodes, st.rms_mm, 100 * st.mean_edge_error,
-              p.flat.folded_quads, p.flat.iterations);
+  std::printf(
+      "[flatten] curl %dx%d nodes %d: RMS %.4f mm, mean edge error %.4f%%, %d folds, %d "
+      "iterations\n",
+      grid.width, grid.height, st.nodes, st.rms_mm, 100 * st.mean_edge_error, p.flat.folded_quads,
+      p.flat.iterations);
   EXPECT_GT(st.nodes, GetParam().min_nodes);
   EXPECT_LE(st.rms_mm, 0.08);
   EXPECT_LE(st.mean_edge_error, 0.003);
