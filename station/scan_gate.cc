@@ -79,6 +79,10 @@ ScanGate::Decision ScanGate::Admit(const capture_t& c) {
   const std::string what =
       ScanText(c.scan_id) + ", " +
       (c.pattern_index < 0 ? std::string("texture") : "pattern " + std::to_string(c.pattern_index));
+  if (c.scan_id <= 0) {
+    return Refuse(what + ": CAPTURE refused: no scan (scan_id must be > 0)",
+                  "captures refused (unknown scan)");
+  }
   std::lock_guard<std::mutex> lock(mutex_);
   Decision d;
   if (c.scan_id != scan_id_ || c.session != session_) {

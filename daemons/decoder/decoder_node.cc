@@ -33,7 +33,7 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
   // Each message the gate admits goes to the scan's log at once, on the LCM thread (an append
   // and a flush), so that a crash loses nothing received; the rest is done on the worker.
   node->Subscribe<scan_started_t>(channel::kScanStarted, [this](const scan_started_t& msg) {
-    if (!Admitted(gate_.Start(msg), msg.scan_id)) return;
+    if (!Admitted(gate_.Start(msg), msg.scan_id)) return;  // That scan cannot be recorded.
     node_->Count("scans started");
     last_capture_ = std::chrono::steady_clock::now();  // The texture is awaited from now.
     if (!Log(channel::kScanStarted, msg.scan_id, msg.utime, Encode(msg))) return;
@@ -69,7 +69,8 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
       });
       return;
     }
-    if (!Admitted(d, msg.scan_id)) return;
+    // Not an error of the scan: a stray capture must not fail the scan in progress.
+    if (!Admitted(d, 0)) return;
     if (d.resumed)
       node_->Log("scan " + std::to_string(msg.scan_id) + ": taken up again after a restart");
     if (!Log(channel::kCapture, msg.scan_id, msg.utime, Encode(msg))) return;
@@ -78,23 +79,23 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     node_->Post([this, copy] { OnCapture(*copy); }, "a CAPTURE");
   });
   node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
-    if (!Admitted(gate_.AdmitCalibration(msg), msg.scan_id)) return;
+    if (!Admitted(gate_.AdmitCalibration(msg), 0)) return;
     if (!Log(channel::kCalibration, msg.scan_id, msg.utime, Encode(msg))) return;
     auto copy = std::make_shared<calibration_t>(msg);
     node_->Post([this, copy] { OnCalibration(*copy); }, "a CALIBRATION");
   });
 }
 
-bool DecoderNode::Admitted(const ScanGate::Decision& d, int64_t scan_id) {
+bool DecoderNode::Admitted(const ScanGate::Decision& d, int64_t error_scan_id) {
   if (d.verdict == ScanGate::Verdict::kRecord) return true;
   if (d.why.empty()) return false;  // Nothing to record, nothing wrong.
   node_->Count(d.counter);
-  // A flood of refusals for one scan is counted, and reported once. Not as an error of the
-  // scan (scan_id 0): a stray message must not fail the scan in progress.
-  if (scan_id != last_refused_ || d.counter != last_refused_counter_) {
-    last_refused_ = scan_id;
-    last_refused_counter_ = d.counter;
-    node_->Error(d.why);
+  // A flood of refusals is counted, and reported at most once a second per reason.
+  const auto now = std::chrono::steady_clock::now();
+  auto& last = refusal_reported_[d.counter];
+  if (last == std::chrono::steady_clock::time_point() || now - last >= std::chrono::seconds(1)) {
+    last = now;
+    node_->Error(d.why, error_scan_id);
   }
   return false;
 }

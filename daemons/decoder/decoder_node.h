@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -41,8 +42,8 @@ class DecoderNode {
 
  private:
   // LCM thread: whether the gate's decision is to record; a refusal is counted, and reported
-  // once per scan and reason.
-  bool Admitted(const ScanGate::Decision& d, int64_t scan_id);
+  // (as an error of error_scan_id, 0: of none) at most once a second per reason.
+  bool Admitted(const ScanGate::Decision& d, int64_t error_scan_id);
   // LCM thread: appends a message to its scan's log at once (a failure is reported).
   bool Log(const char* channel, int64_t scan_id, int64_t utime, const std::vector<uint8_t>& bytes);
   // Worker thread:
@@ -68,8 +69,7 @@ class DecoderNode {
   ScanGate gate_;  // Decides on the LCM thread; the worker closes scans it gives up.
   // LCM thread only:
   CaptureLog log_;
-  int64_t last_refused_ = -1;
-  std::string last_refused_counter_;
+  std::map<std::string, std::chrono::steady_clock::time_point> refusal_reported_;  // By reason.
   std::chrono::steady_clock::time_point last_capture_;
   std::atomic<bool> waiting_{false};  // A scan is being captured (set by the worker).
 };

@@ -7,9 +7,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <map>
 #include <set>
+#include <stdexcept>
 
+#include "io/calibration_io.h"
 #include "io/scan_io.h"
 #include "station/messages.h"
 #include "station/scan_log.h"
@@ -131,7 +135,7 @@ TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {
   EXPECT_EQ(node.Counter("captures refused"), 2);
   capture_t no_scan = Capture(0, 7, 1);
   bus_.probe().Publish(channel::kCapture, &no_scan);
-  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "scan 0, pattern 1: CAPTURE refused"))
+  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "scan 0, pattern 1: CAPTURE refused: no scan"))
       << bus_.Status("vellum-decoder").last_error;
   // The node goes on: a whole scan after the bad ones is recorded and decoded.
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
@@ -217,6 +221,141 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
   heartbeat("vellum-restorer", 302);
   ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("restarts seen") == 4; }));
   EXPECT_EQ(sent(41), 2);
+}
+
+// Every byte of every file under `dir`, by relative path.
+std::map<std::string, std::string> Snapshot(const std::string& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    if (e.is_regular_file())
+      files[fs::relative(e.path(), dir).string()] = testing::ReadBytes(e.path());
+  }
+  return files;
+}
+
+// Issue 14, scan identity: a capture is recorded only for a scan this station's projector
+// started, with its session; a finished scan is never reopened; unknown scans leave no folder.
+TEST_F(DecoderNodeTest, RecordsOnlyTheScansItsProjectorStartedAndNeverReopensOne) {
+  Node node("vellum-decoder", &bus_.lcm());
+  DecoderNode decoder(&node, options_);
+  bus_.Watch("vellum-decoder");
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  // 300 captures of scans never started: refused, counted, no folder, no disk used.
+  for (int k = 0; k < 300; ++k) {
+    capture_t c = Capture(1000 + k, 99, k % 4);
+    bus_.probe().Publish(channel::kCapture, &c);
+  }
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("captures refused (unknown scan)") == 300; }))
+      << bus_.Status("vellum-decoder").last_error;
+  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "no SCAN_STARTED"));
+  EXPECT_TRUE(fs::is_empty(data_) ||
+              std::none_of(fs::directory_iterator(data_), fs::directory_iterator(),
+                           [](const auto& e) { return e.is_directory(); }))
+      << "a refused capture made a folder";
+  const int64_t session = PublishScan(51);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  const ScanFolder folder = ScanFolder::For(data_, 51);
+  const auto archived = Snapshot(folder.raw());
+  // Stale captures of the finished scan, with its session or another, and the scan started
+  // again: all refused, the archive unchanged byte for byte, the scan not sent again.
+  capture_t stale = Capture(51, session, 3);
+  bus_.probe().Publish(channel::kCapture, &stale);
+  ASSERT_TRUE(bus_.WaitForError("vellum-decoder", "the scan is over"));
+  // Refused captures are not errors of a scan (none is reported against scan 51).
+  EXPECT_EQ(bus_.Status("vellum-decoder").last_error_scan_id, 0);
+  Start(51, session + 1);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("scans refused") == 1; }));
+  EXPECT_TRUE(bus_.WaitForError("vellum-decoder", "already exists"))
+      << bus_.Status("vellum-decoder").last_error;
+  capture_t again = Capture(51, session + 1, -1);
+  bus_.probe().Publish(channel::kCapture, &again);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("captures refused (scan over)") == 2; }));
+  EXPECT_EQ(Snapshot(folder.raw()), archived);
+  EXPECT_EQ(node.Counter("scans recorded"), 1);
+  EXPECT_EQ(progress->size(), 1u);
+  // Another station's scan on the same bus is not this station's: dropped and counted.
+  Node other_station("vellum-projector", &bus_.lcm());
+  other_station.SetStation("gantry-2");
+  testing::PublishScan(other_station, SmallScan(), 52);
+  // SCAN_STARTED, the texture and every frame.
+  const int64_t messages = 1 + 1 + static_cast<int64_t>(SmallScan().frames.size());
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("from other stations") == messages; }));
+  EXPECT_FALSE(fs::exists(ScanFolder::For(data_, 52).root));
+}
+
+TEST_F(DecoderNodeTest, ACaptureTwiceOrOfAnotherSessionIsNeverASilentChoice) {
+  Node node("vellum-decoder", &bus_.lcm());
+  DecoderNode decoder(&node, options_);
+  bus_.Watch("vellum-decoder");
+  // Scan 61 in progress: a capture of another session (another projector, a stale one) is
+  // refused and the scan goes on; a second capture of a pattern fails the scan, named.
+  Start(61, 1);
+  capture_t texture = Capture(61, 1, -1);
+  bus_.probe().Publish(channel::kCapture, &texture);
+  capture_t other = Capture(61, 2, 0);
+  bus_.probe().Publish(channel::kCapture, &other);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("captures refused (other session)") == 1; }));
+  capture_t first = Capture(61, 1, 0);
+  bus_.probe().Publish(channel::kCapture, &first);
+  capture_t second = Capture(61, 1, 0);
+  bus_.probe().Publish(channel::kCapture, &second);
+  ASSERT_TRUE(
+      bus_.WaitForError("vellum-decoder", "scan 61 failed: scan 61, pattern 0: captured twice"))
+      << bus_.Status("vellum-decoder").last_error;
+  EXPECT_EQ(bus_.Status("vellum-decoder").last_error_scan_id, 61);
+  EXPECT_TRUE(fs::exists(ScanFolder::For(data_, 61).failed()));
+  // The log holds the texture and the first capture only: it still exports as far as it goes.
+  Scan logged;
+  bool has_calibration = false;
+  calibration_t calibration;
+  int64_t id = 0;
+  const Status read = ReadScanLog(ScanFolder::For(data_, 61).log(), 61, &logged, &has_calibration,
+                                  &calibration, &id);
+  EXPECT_NE(read.message().find("incomplete"), std::string::npos) << read.message();
+  // A second decoder on the same data folder refuses to start, naming the first.
+  Node second_node("vellum-decoder", &bus_.lcm());
+  try {
+    DecoderNode two(&second_node, options_);
+    ADD_FAILURE() << "a second decoder started on " << data_;
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("another vellum-decoder (pid " + std::to_string(getpid())),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// Issue 14: a CALIBRATION arriving in the middle of a scan never applies to it; the scan's
+// raw/calibration.yaml is the one it started with.
+TEST_F(DecoderNodeTest, ACalibrationMidScanIsRefusedAndTheScanKeepsItsOwn) {
+  Node node("vellum-decoder", &bus_.lcm());
+  DecoderNode decoder(&node, options_);
+  bus_.Watch("vellum-decoder");
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  const Scan& scan = SmallScan();
+  Start(71, 3);
+  calibration_t own{};
+  own.scan_id = 71;
+  own.session = 3;
+  own.source = "own";
+  ToMessage(QuickRig(), &own);
+  bus_.probe().Publish(channel::kCalibration, &own);
+  for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
+    capture_t c = Capture(71, 3, k);
+    bus_.probe().Publish(channel::kCapture, &c);
+    if (k == 2) {
+      calibration_t later = own;
+      later.source = "later";
+      Calibration moved = QuickRig();
+      moved.camera.matrix(0, 0) *= 1.1;
+      ToMessage(moved, &later);
+      bus_.probe().Publish(channel::kCalibration, &later);
+    }
+  }
+  ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  EXPECT_EQ(node.Counter("calibrations refused"), 1);
+  Calibration recorded;
+  ASSERT_TRUE(ReadCalibration(ScanFolder::For(data_, 71).calibration(), &recorded).ok());
+  EXPECT_EQ(recorded.camera.matrix(0, 0), QuickRig().camera.matrix(0, 0));
 }
 
 }  // namespace
