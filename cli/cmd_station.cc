@@ -130,6 +130,10 @@ int RunScan(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = BusSpecs();
   specs.push_back({"label", "TEXT", "a note for the scan (shelfmark, folio)", ""});
   specs.push_back({"timeout", "S", "give up after this long", "600"});
+  specs.push_back({"scan-id", "ID",
+                   "the scan's id (0: this clock's microseconds); the station refuses an id it "
+                   "has recorded before",
+                   "0"});
   Flags flags("vellum scan",
               "Asks the station for one scan (SCAN_REQUEST), shows its progress and prints\n"
               "where the results are once the page is restored. Exit status 1 when a daemon\n"
@@ -142,7 +146,8 @@ int RunScan(const std::vector<std::string>& args) {
   Node node("vellum-scan", flags.Get("url"));
   station::SetStationFromFlags(flags, &node);
   scan_request_t request{};
-  request.scan_id = station::NowUtime();
+  request.scan_id = static_cast<int64_t>(flags.GetDouble("scan-id", 0, 9.2e18));
+  if (request.scan_id <= 0) request.scan_id = station::NowUtime();
   request.identity.label = flags.Get("label");
   Follower follower(&node, request.scan_id);
   node.Publish(channel::kScanRequest, &request);

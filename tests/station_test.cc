@@ -124,17 +124,19 @@ class StationTest : public ::testing::Test {
     ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return seen.size() == channels.size(); }))
         << "only " << seen.size() << " of " << channels.size() << " daemons sent a heartbeat";
   }
-  // The same scan through `vellum process`: the products must be identical.
-  void ExpectSameAsProcess(const std::string& scan_dir, const std::string& results) {
+  // The same scan through `vellum process` (into dir_/<out>): the products must be identical.
+  void ExpectSameAsProcess(const std::string& scan_dir, const std::string& results,
+                           const std::string& out_name = "process") {
     std::string out;
+    const std::string processed = dir_ + "/" + out_name;
     ASSERT_EQ(RunTool({"process", "--scan", scan_dir, "--calibration",
-                       scan_dir + "/calibration.yaml", "--out", dir_ + "/process"},
+                       scan_dir + "/calibration.yaml", "--out", processed},
                       &out),
               0)
         << out;
     for (const char* file : {"restored.tif", "restored_mask.png", "flat.ply", "mesh.ply",
                              "points.ply", "restored.json", "depth.png"}) {
-      EXPECT_EQ(ReadText(results + "/" + file), ReadText(dir_ + "/process/" + file))
+      EXPECT_EQ(ReadText(results + "/" + file), ReadText(processed + "/" + file))
           << file << " differs between the daemons and vellum process";
     }
     // The restorer's report has every picture, the depth map from the bus's POINT_CLOUD too.
@@ -145,7 +147,7 @@ class StationTest : public ::testing::Test {
     EXPECT_TRUE(fs::exists(results + "/report.html"));
     // report.json: the same keys, and the same options and figures (not the times or paths).
     const nlohmann::json station = nlohmann::json::parse(ReadText(results + "/report.json"));
-    const nlohmann::json process = nlohmann::json::parse(ReadText(dir_ + "/process/report.json"));
+    const nlohmann::json process = nlohmann::json::parse(ReadText(processed + "/report.json"));
     std::set<std::string> station_keys, process_keys;
     JsonKeys(station, "", &station_keys);
     JsonKeys(process, "", &process_keys);
@@ -155,7 +157,7 @@ class StationTest : public ::testing::Test {
     }
     EXPECT_GE(station_keys.count("options/max_epipolar_error_px"), 1u);
     const cv::Mat a = cv::imread(results + "/restored.tif", cv::IMREAD_UNCHANGED);
-    const cv::Mat b = cv::imread(dir_ + "/process/restored.tif", cv::IMREAD_UNCHANGED);
+    const cv::Mat b = cv::imread(processed + "/restored.tif", cv::IMREAD_UNCHANGED);
     ASSERT_FALSE(a.empty());
     ASSERT_EQ(a.size(), b.size());
     EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
@@ -263,7 +265,8 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
         "CORRESPONDENCE vellum.correspondence_t", "FLAT_MESH vellum.mesh_t",
         "PATTERN_SHOWN vellum.pattern_shown_t", "POINT_CLOUD vellum.point_cloud_t",
         "RESTORED vellum.restored_t", "SCAN_REQUEST vellum.scan_request_t",
-        "STATUS_CAMERA vellum.status_t", "STATUS_RESTORER vellum.status_t"}) {
+        "SCAN_STARTED vellum.scan_started_t", "STATUS_CAMERA vellum.status_t",
+        "STATUS_RESTORER vellum.status_t"}) {
     EXPECT_NE(decoded.find(line), std::string::npos) << line << " not decoded:\n" << decoded;
   }
 #endif
@@ -299,6 +302,153 @@ TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
   ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
   ExpectSameAsProcess(dir_ + "/exported", r.results);
   EXPECT_TRUE(fs::exists(fs::path(r.results).parent_path() / "raw" / "captures.lcmlog"));
+}
+
+// Issue 14: two gantries on one network, on the same multicast group and port, told apart by
+// their station ids. Both scans run at once under the same scan id; each station restores its
+// own page (a curl on one, a fold on the other), equal to `vellum process` of its own
+// recording, and counts the other station's traffic instead of using it.
+TEST_F(StationTest, TwoGantriesOnOneBusEachRestoreTheirOwnPage) {
+  const std::vector<std::pair<std::string, std::string>> stations = {{"gantry-a", "curl"},
+                                                                     {"gantry-b", "fold"}};
+  for (const auto& [station, page] : stations) {
+    Start(Daemon("vellum-camera"),
+          {"--station", station, "--backend", "sim", "--rig", kRig, "--page", page});
+    Start(Daemon("vellum-projector"),
+          {"--station", station, "--calibration", kRig, "--fullscreen", "false",
+           "--capture-timeout", kSimCaptureTimeout},
+          {"SDL_VIDEODRIVER=offscreen"});
+    for (const char* name :
+         {"vellum-decoder", "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+      Start(Daemon(name), {"--station", station, "--data", dir_ + "/" + station});
+    }
+  }
+  std::vector<std::string> channels = kProcessingStatus;
+  channels.push_back("STATUS_CAMERA");
+  channels.push_back("STATUS_PROJECTOR");
+  std::set<std::string> heard;
+  std::vector<std::unique_ptr<Listener<status_t>>> listeners;
+  for (const std::string& c : channels) {
+    listeners.push_back(std::make_unique<Listener<status_t>>(
+        *lcm_, c, [&heard, c](const status_t& m) { heard.insert(m.station + " " + c); }));
+  }
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return heard.size() == 2 * channels.size(); }))
+      << heard.size() << " of " << 2 * channels.size() << " daemons heard";
+  listeners.clear();
+  const std::string id = "7000000001";
+  Process a(
+      {Tool(), "scan", "--url", url_, "--station", "gantry-a", "--scan-id", id, "--timeout", "300"},
+      dir_ + "/scan_a.log");
+  Process b(
+      {Tool(), "scan", "--url", url_, "--station", "gantry-b", "--scan-id", id, "--timeout", "300"},
+      dir_ + "/scan_b.log");
+  ASSERT_EQ(a.Wait(400), 0) << a.Output();
+  ASSERT_EQ(b.Wait(400), 0) << b.Output();
+  cv::Mat restored[2];
+  for (size_t k = 0; k < stations.size(); ++k) {
+    const std::string folder = dir_ + "/" + stations[k].first + "/scan-" + id;
+    ExpectSameAsProcess(folder + "/raw", folder + "/results", "process_" + stations[k].first);
+    restored[k] = cv::imread(folder + "/results/restored.tif", cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(restored[k].empty());
+    // The station's own page: its log holds one session, its own station's.
+    lcm::LogFile log(folder + "/raw/captures.lcmlog", "r");
+    ASSERT_TRUE(log.good());
+    std::set<int64_t> sessions;
+    int captures = 0;
+    for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+      capture_t c;
+      if (e->channel != "CAPTURE" || c.decode(e->data, 0, e->datalen) < 0) continue;
+      ++captures;
+      sessions.insert(c.session);
+      EXPECT_EQ(c.station, stations[k].first);
+    }
+    EXPECT_EQ(captures, 55);
+    EXPECT_EQ(sessions.size(), 1u);
+  }
+  // A curl and a fold restore to different pages: neither station took the other's frames.
+  EXPECT_TRUE(restored[0].size() != restored[1].size() ||
+              cv::norm(restored[0], restored[1], cv::NORM_L1) > 0);
+}
+
+// Issue 14: a scan played again after it was restored (a stale replay of its captures), a
+// flood of captures for scans never started, and a second decoder on the same data folder:
+// the archive stays byte for byte as it was, no folder is made, the second decoder refuses.
+TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
+  StartProcessing();
+  WaitForHeartbeats(kProcessingStatus);
+  StatusBoard board(*lcm_, {"STATUS_DECODER"});
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  {
+    Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, kLog}, dir_ + "/player.log");
+    ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] { return !restored.empty(); }));
+    EXPECT_EQ(player.Wait(60), 0) << player.Output();
+  }
+  const std::string root = fs::path(restored[0].results).parent_path().string();
+  std::map<std::string, std::string> archived;
+  for (const auto& e : fs::recursive_directory_iterator(root + "/raw")) {
+    if (e.is_regular_file()) archived[e.path().string()] = ReadText(e.path().string());
+  }
+  // The same recording again: its SCAN_STARTED is refused, and all 55 captures.
+  {
+    Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, kLog}, dir_ + "/player2.log");
+    EXPECT_EQ(player.Wait(120), 0) << player.Output();
+  }
+  // 300 captures of scans nobody started (the log's texture capture with new ids, its image cut
+  // to 8 x 8 so that the burst fits the loopback's buffers).
+  capture_t texture;
+  {
+    lcm::LogFile log(kLog, "r");
+    for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+      if (e->channel == "CAPTURE" && texture.decode(e->data, 0, e->datalen) >= 0) break;
+    }
+  }
+  texture.image.width = texture.image.height = texture.image.row_stride = 8;
+  texture.image.pixelformat = image_t::PIXEL_FORMAT_GRAY;
+  texture.image.size = 64;
+  texture.image.data.assign(64, 0);
+  // In bursts of 25, each once the decoder has counted the last (a socket buffer holds about
+  // 90 datagrams by default: a burst of 300 would be lost on the bus, not refused).
+  for (int k = 0; k < 300; ++k) {
+    texture.scan_id = 9000 + k;
+    texture.seq = k;
+    lcm_->publish("CAPTURE", &texture);
+    if (k % 25 == 24) {
+      ASSERT_TRUE(HandleUntil(*lcm_, 60,
+                              [&] {
+                                return board.Counter("STATUS_DECODER",
+                                                     "captures refused (unknown scan)") == k + 1;
+                              }))
+          << board.Counter("STATUS_DECODER", "captures refused (unknown scan)") << " of " << k + 1;
+    }
+  }
+  ASSERT_TRUE(HandleUntil(
+      *lcm_, 60,
+      [&] {
+        return board.Counter("STATUS_DECODER", "scans refused") == 1 &&
+               board.Counter("STATUS_DECODER", "captures refused (scan over)") == 55 &&
+               board.Counter("STATUS_DECODER", "captures refused (unknown scan)") == 300;
+      }))
+      << "scans refused " << board.Counter("STATUS_DECODER", "scans refused") << ", scan over "
+      << board.Counter("STATUS_DECODER", "captures refused (scan over)") << ", unknown "
+      << board.Counter("STATUS_DECODER", "captures refused (unknown scan)");
+  std::map<std::string, std::string> now;
+  for (const auto& e : fs::recursive_directory_iterator(root + "/raw")) {
+    if (e.is_regular_file()) now[e.path().string()] = ReadText(e.path().string());
+  }
+  EXPECT_TRUE(now == archived) << "the archived scan changed";
+  int folders = 0;
+  for (const auto& e : fs::directory_iterator(dir_ + "/scans")) folders += e.is_directory();
+  EXPECT_EQ(folders, 1);
+  EXPECT_EQ(restored.size(), 1u);
+  // A second decoder on the same folder (a second station set up by mistake) refuses to start.
+  Process second({Daemon("vellum-decoder"), "--url", url_, "--data", dir_ + "/scans"},
+                 dir_ + "/second_decoder.log");
+  EXPECT_EQ(second.Wait(30), 1);
+  EXPECT_NE(second.Output().find("is being recorded into by another vellum-decoder"),
+            std::string::npos)
+      << second.Output();
 }
 
 TEST_F(StationTest, WithoutACameraTheScanFailsWithAClearStatusAndTheStationStaysReady) {

@@ -14,6 +14,7 @@
 #include "station/testing.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -81,6 +82,7 @@ TEST_F(ProjectorNodeTest, RunsTheWholeSequenceOnePatternPerCaptureWithTheMirrorF
   ProjectorNode conductor(&node, std::move(projector), options_);
   bus_.AddTick([&] { conductor.Tick(); });
   auto calibrations = bus_.Record<calibration_t>(channel::kCalibration);
+  auto started = bus_.Record<scan_started_t>(channel::kScanStarted);
   auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
   size_t answered = 0;
   bus_.AddTick([&] { AnswerEveryPattern(shown, &answered); });
@@ -91,6 +93,11 @@ TEST_F(ProjectorNodeTest, RunsTheWholeSequenceOnePatternPerCaptureWithTheMirrorF
   ASSERT_EQ(calibrations->size(), 1u);
   EXPECT_EQ(calibrations->front().scan_id, 77);
   EXPECT_EQ(calibrations->front().source, "small rig");
+  // One session for the whole scan, announced first.
+  ASSERT_EQ(started->size(), 1u);
+  EXPECT_GT(started->front().session, 0);
+  EXPECT_EQ(calibrations->front().session, started->front().session);
+  for (const pattern_shown_t& m : *shown) EXPECT_EQ(m.session, started->front().session);
   for (size_t k = 0; k < total; ++k) EXPECT_EQ((*shown)[k].pattern_index, int(k) - 1);
   EXPECT_EQ(node.Counter("scans captured"), 1);
   // Pattern k was on screen, mirrored left to right, when PATTERN_SHOWN(k) went out. (Shows:
@@ -131,6 +138,42 @@ TEST_F(ProjectorNodeTest, BadRequestsAndAMissingCaptureAreReportedAndTheNextScan
   Request(7);
   EXPECT_TRUE(bus_.RunUntil([&] { return node.Counter("scans captured") == 1; }));
   EXPECT_EQ(node.Counter("scans failed"), 1);
+}
+
+// Issue 14: a capture of another session (a stale one, another projector's) does not advance
+// the scan; a station calibration (scan_id 0) published mid-scan applies from the next scan.
+TEST_F(ProjectorNodeTest, OnlyItsSessionsCapturesAdvanceItAndANewCalibrationWaitsForTheNextScan) {
+  Node node("vellum-projector", &bus_.lcm());
+  ProjectorNode conductor(&node, std::make_unique<SdlProjector>(screen_), options_);
+  bus_.AddTick([&] { conductor.Tick(); });
+  auto calibrations = bus_.Record<calibration_t>(channel::kCalibration);
+  auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
+  Request(80);
+  ASSERT_TRUE(bus_.RunUntil([&] { return shown->size() == 1; }));
+  capture_t stray{};
+  stray.scan_id = 80;
+  stray.session = shown->front().session + 1;
+  stray.pattern_index = -1;
+  stray.pattern_count = shown->front().pattern_count;
+  bus_.probe().Publish(channel::kCapture, &stray);
+  calibration_t update{};
+  update.source = "recalibrated";
+  Calibration moved = QuickRig();
+  moved.camera.matrix(0, 0) *= 1.01;
+  ToMessage(moved, &update);
+  bus_.probe().Publish(channel::kCalibration, &update);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("calibrations taken") == 1; }));
+  EXPECT_EQ(shown->size(), 1u) << "a capture of another session advanced the scan";
+  size_t answered = 0;
+  bus_.AddTick([&] { AnswerEveryPattern(shown, &answered); });
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("scans captured") == 1; }));
+  Request(81);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("scans captured") == 2; }));
+  std::vector<std::string> sources;
+  for (const calibration_t& c : *calibrations) {
+    if (c.scan_id != 0) sources.push_back(c.source);
+  }
+  EXPECT_EQ(sources, (std::vector<std::string>{"small rig", "recalibrated"}));
 }
 
 }  // namespace
