@@ -9,7 +9,7 @@ packages=(
   libv4l-dev libsdl2-dev
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   libcgal-dev libsuitesparse-dev nlohmann-json3-dev clang-format
-  default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux
+  default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux nftables
   chromium xvfb clang libclang-rt-14-dev
 )
 missing=()

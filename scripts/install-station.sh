@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs the station on this machine (as root): the packages, a Release build, then
 # binaries in /usr/local/bin, systemd units in /usr/local/lib/systemd/system, the sysctl file
-# that raises net.core.rmem_max, the lcm-spy jar, and the configs in /etc/vellum (existing
-# ones are kept). Then: edit /etc/vellum/*.yaml, put the calibration in
+# that raises net.core.rmem_max, the lcm-spy jar, the configs in /etc/vellum (existing
+# ones are kept) and the bus's firewall rules (/etc/vellum/vellum-bus.nft, loaded by
+# vellum-bus-firewall.service with vellum.target). Then: edit /etc/vellum/*.yaml, put the calibration in
 # /etc/vellum/calibration.yaml and run
 #   systemctl enable --now vellum.target vellum-camera@video0 vellum-projector@0
 set -euo pipefail
@@ -12,7 +13,7 @@ bash scripts/install-deps.sh
 bash scripts/build.sh
 cmake --install build --prefix "$prefix"
 mkdir -p /etc/vellum /var/lib/vellum/scans
-for f in "$prefix"/share/vellum/config/vellum-*.yaml; do
+for f in "$prefix"/share/vellum/config/vellum-*.yaml "$prefix"/share/vellum/config/vellum-bus.nft; do
   [ -e "/etc/vellum/$(basename "$f")" ] || cp "$f" /etc/vellum/
 done
 if [ -d /run/systemd/system ]; then

@@ -15,6 +15,12 @@ std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data) {
       {"url", "URL", "LCM bus", kDefaultUrl},
       StationSpec(),
       {"config", "FILE", "YAML file of flag: value (the command line wins)", ""},
+      {"stuck-after", "S",
+       "a job on the worker running longer is a hung stage: reported, and systemd's watchdog "
+       "is no longer fed (systemd restarts the daemon)",
+       "600"},
+      {"stop-grace", "S",
+       "on SIGTERM, wait this long for the worker's jobs, then exit anyway (status 1)", "20"},
   };
   if (with_data) {
     specs.push_back(
@@ -69,7 +75,10 @@ int DaemonMain(int argc, char** argv, const std::string& process, const std::str
   try {
     Node node(process, flags.Get("url"));
     SetStationFromFlags(flags, &node);
+    node.SetWorkLimits(flags.GetDouble("stuck-after", 1, 86400),
+                       flags.GetDouble("stop-grace", 0.1, 3600));
     if (flags.Has("pace")) node.SetPace(flags.GetDouble("pace", 0.1, 10000) * 1e6);
+    node.ExitWhenHung();
     return body(flags, node);
   } catch (const UsageError& e) {
     std::fprintf(stderr, "%s: %s\n", process.c_str(), e.what());

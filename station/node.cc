@@ -77,7 +77,12 @@ Node::~Node() {
     work_done_ = true;
   }
   work_cv_.notify_all();
-  if (worker_.joinable()) worker_.join();
+  if (!worker_.joinable()) return;
+  if (abandoned_ && Pending() > 0) {
+    worker_.detach();  // Hung: the process is exiting (DaemonMain ends it at once).
+  } else {
+    worker_.join();
+  }
 }
 
 bool Node::Stopping() const { return stop_ || g_signalled; }
@@ -220,7 +225,7 @@ bool Node::Post(std::function<void()> work, const std::string& what) {
     full = work_.size() >= kMaxQueuedJobs;
     if (!full) {
       ++pending_;
-      work_.push_back(std::move(work));
+      work_.emplace_back(std::move(work), what);
     }
   }
   if (full) {
@@ -236,7 +241,7 @@ bool Node::Post(std::function<void()> work, const std::string& what) {
 size_t Node::Pending() const { return pending_; }
 
 void Node::Drain() const {
-  while (pending_ > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  while (pending_ > 0 && !abandoned_) std::this_thread::sleep_for(std::chrono::milliseconds(1));
 }
 
 void Node::WorkerLoop() {
@@ -246,7 +251,9 @@ void Node::WorkerLoop() {
       std::unique_lock<std::mutex> lock(work_mutex_);
       work_cv_.wait(lock, [&] { return work_done_ || !work_.empty(); });
       if (work_.empty()) return;
-      work = std::move(work_.front());
+      work = std::move(work_.front().first);
+      working_on_ = std::move(work_.front().second);
+      work_start_ = std::chrono::steady_clock::now();
       work_.pop_front();
     }
     try {
@@ -254,8 +261,21 @@ void Node::WorkerLoop() {
     } catch (const std::exception& e) {
       Error(std::string("internal error: ") + e.what());
     }
+    {
+      std::lock_guard<std::mutex> lock(work_mutex_);
+      working_on_.clear();
+    }
     --pending_;
   }
+}
+
+std::string Node::Working(double* seconds) const {
+  std::lock_guard<std::mutex> lock(work_mutex_);
+  *seconds =
+      working_on_.empty()
+          ? 0
+          : std::chrono::duration<double>(std::chrono::steady_clock::now() - work_start_).count();
+  return working_on_;
 }
 
 int Node::Run(const std::function<void()>& tick, int tick_ms) {
@@ -267,20 +287,59 @@ int Node::Run(const std::function<void()>& tick, int tick_ms) {
   NotifySystemd("READY=1\nSTATUS=" + process_ + " on the bus");
   Log("running (pid " + std::to_string(getpid()) + ")");
   auto next_beat = std::chrono::steady_clock::now();
+  bool stuck = false;
   while (!Stopping()) {
     lcm_->handleTimeout(tick_ms);
     if (tick) tick();
     const auto now = std::chrono::steady_clock::now();
     if (now >= next_beat) {
+      // A job past its limit is a hung stage: said once, and the watchdog starves, so that
+      // systemd restarts the process (the supervisor then takes the scan up from disk).
+      double seconds = 0;
+      const std::string job = Working(&seconds);
+      if (!job.empty() && seconds > stuck_after_s_) {
+        if (!stuck) {
+          Count("stuck");
+          Error("stuck: " + job + " has run for " + std::to_string(static_cast<int>(seconds)) +
+                " s (limit " + std::to_string(static_cast<int>(stuck_after_s_)) +
+                " s); systemd's watchdog is no longer fed");
+          int64_t scan = 0;
+          {
+            std::lock_guard<std::mutex> lock(mutex_);
+            scan = scan_id_;
+          }
+          SetState("stuck", scan, job);
+        }
+        stuck = true;
+      } else {
+        stuck = false;
+      }
       PublishStatus();
-      NotifySystemd("WATCHDOG=1");
+      if (!stuck) NotifySystemd("WATCHDOG=1");
       next_beat = now + std::chrono::seconds(1);
     }
   }
   NotifySystemd("STOPPING=1");
   Log("stopping: finishing " + std::to_string(Pending()) + " posted job(s)");
   SetState("stopping");
-  Drain();
+  const auto give_up =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(stop_grace_s_);
+  while (Pending() > 0) {
+    if (std::chrono::steady_clock::now() > give_up) {
+      double seconds = 0;
+      const std::string job = Working(&seconds);
+      Log("stopping: the worker is still in " + (job.empty() ? std::string("a job") : job) +
+          " after " + std::to_string(static_cast<int>(stop_grace_s_)) +
+          " s; leaving it (a scan it held is taken up again from disk on restart)");
+      abandoned_ = true;
+      if (exit_when_hung_) {
+        std::fflush(nullptr);
+        std::_Exit(1);
+      }
+      return 1;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
   Log("stopped");
   return 0;
 }

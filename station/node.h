@@ -177,9 +177,24 @@ class Node {
   // destroyed, so that no job of it runs after its members are gone.
   void Drain() const;
 
+  // The longest one job may run on the worker before the process is reported stuck (a hung
+  // stage): from then on its status says so and systemd's watchdog is no longer fed, so that
+  // systemd restarts it. And the longest Run waits, once stopped, for the worker to finish.
+  void SetWorkLimits(double stuck_after_s, double stop_grace_s) {
+    stuck_after_s_ = stuck_after_s;
+    stop_grace_s_ = stop_grace_s;
+  }
+  // What the worker is doing and for how long (seconds); "" and 0 when idle.
+  std::string Working(double* seconds) const;
+
   // Handles LCM messages and calls `tick` about every tick_ms until SIGTERM/SIGINT or Stop();
-  // then finishes the posted work and returns 0.
+  // then finishes the posted work and returns 0. When the worker has not finished within the
+  // stop grace (a hung job), leaves it: ends the process with status 1 at once when
+  // ExitWhenHung() was called (a daemon: no orderly teardown can wait for the job), else returns
+  // 1 (Abandoned(); Drain no longer waits).
   int Run(const std::function<void()>& tick = nullptr, int tick_ms = 50);
+  void ExitWhenHung() { exit_when_hung_ = true; }
+  bool Abandoned() const { return abandoned_; }
   void Stop() { stop_ = true; }
   bool Stopping() const;
 
@@ -214,9 +229,15 @@ class Node {
   int64_t scan_id_ = 0, errors_ = 0, last_error_utime_ = 0, last_error_scan_ = 0;
   std::map<std::string, int64_t> counters_;
 
-  std::mutex work_mutex_;  // Guards work_ and work_done_ (posted by any thread, run by the worker).
+  mutable std::mutex work_mutex_;  // Guards work_, working_on_, work_start_ and work_done_ (posted
+                                   // by any thread, run by the worker).
   std::condition_variable work_cv_;
-  std::deque<std::function<void()>> work_;
+  std::deque<std::pair<std::function<void()>, std::string>> work_;  // The job and what it is.
+  std::string working_on_;                            // The job running ("" when idle).
+  std::chrono::steady_clock::time_point work_start_;  // When it began.
+  double stuck_after_s_ = 600, stop_grace_s_ = 20;
+  std::atomic<bool> abandoned_{false};
+  bool exit_when_hung_ = false;
   std::atomic<size_t> pending_{0};
   bool work_done_ = false;
   std::thread worker_;

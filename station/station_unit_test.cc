@@ -2,11 +2,20 @@
 // chunking under the bus's size limit, reassembly that names what is missing, capture sets,
 // scan logs <-> scan directories, and the node shell on LCM's in-process memq:// bus.
 #include <gtest/gtest.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
+#include <mutex>
 #include <opencv2/imgproc.hpp>
 #include <thread>
 
@@ -109,8 +118,9 @@ TEST(Messages, ALengthFieldLargerThanTheMessageIsRefusedBeforeAllocating) {
   m.xyz = {1, 2, 3};
   std::vector<uint8_t> bytes(m.getEncodedSize());
   m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
-  // nxyz sits after the fingerprint, 3 int64 and 6 int32 fields: claim 10^9 floats.
-  const size_t at = 8 + 3 * 8 + 6 * 4;
+  // nxyz sits after the fingerprint, utime and seq, the station (an empty string: a 4-byte
+  // length and its NUL), scan_id and 6 int32 fields: claim 10^9 floats.
+  const size_t at = 8 + 2 * 8 + 5 + 8 + 6 * 4;
   const uint32_t huge = 1000000000u;
   for (int k = 0; k < 4; ++k) bytes[at + k] = static_cast<uint8_t>(huge >> (24 - 8 * k));
   point_cloud_t back;
@@ -400,6 +410,95 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
   for (int k = 0; k < 5; ++k) node.Post([&order, k] { order.push_back(k); });
   while (node.Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   EXPECT_EQ(order, (std::vector<int>{0, 1, 2, 3, 4}));
+}
+
+// Issue 14: a hung job on the worker (a stage that never returns) is reported as stuck and
+// systemd's watchdog is no longer fed, so systemd restarts the daemon; it is fed again once the
+// job ends. A stop while a job hangs returns after the stop grace instead of waiting forever.
+TEST(Node, AHungJobStarvesTheWatchdogAndAStopDoesNotWaitForItForever) {
+  // systemd's side of the notify protocol: a datagram socket named by $NOTIFY_SOCKET.
+  const std::string path =
+      (fs::temp_directory_path() / ("vellum_notify_" + std::to_string(getpid()))).string();
+  ::unlink(path.c_str());
+  const int sock = socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(sock, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  std::strcpy(addr.sun_path, path.c_str());
+  ASSERT_EQ(bind(sock, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+  setenv("NOTIFY_SOCKET", path.c_str(), 1);
+  // Watchdog pings received; waits up to timeout_s for one when `wait`.
+  auto pings = [&](bool wait) {
+    int n = 0;
+    for (;;) {
+      pollfd p{sock, POLLIN, 0};
+      if (poll(&p, 1, wait && n == 0 ? 30000 : 0) <= 0) return n;
+      char buf[256];
+      const ssize_t len = recv(sock, buf, sizeof(buf), 0);
+      if (len > 0 &&
+          std::string(buf, static_cast<size_t>(len)).find("WATCHDOG=1") != std::string::npos) {
+        ++n;
+      }
+    }
+  };
+
+  Node node("vellum-unit", "memq://");
+  node.SetWorkLimits(/*stuck_after_s=*/0.3, /*stop_grace_s=*/0.5);
+  std::mutex mutex;
+  std::vector<status_t> statuses;
+  node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) {
+    std::lock_guard<std::mutex> lock(mutex);
+    statuses.push_back(m);
+  });
+  auto count_status = [&](const std::string& state) {
+    std::lock_guard<std::mutex> lock(mutex);
+    return std::count_if(statuses.begin(), statuses.end(),
+                         [&](const status_t& m) { return m.state == state; });
+  };
+  auto wait_for = [&](const std::function<bool()>& done) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!done()) {
+      if (std::chrono::steady_clock::now() > end) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return true;
+  };
+  std::atomic<bool> release{false};
+  auto hang = [&] {
+    while (!release) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  };
+  int code = -1;
+  std::thread runner([&] { code = node.Run(); });
+  EXPECT_GE(pings(true), 1) << "no watchdog ping while healthy";
+  node.Post(hang, "a stage that never returns");
+  ASSERT_TRUE(wait_for([&] { return count_status("stuck") >= 1; }));
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    const status_t& stuck = statuses.back();
+    EXPECT_NE(stuck.last_error.find("stuck: a stage that never returns has run for"),
+              std::string::npos)
+        << stuck.last_error;
+  }
+  pings(false);  // Those sent before it was stuck.
+  // Two heartbeats later, still stuck: not one ping since.
+  const auto seen = count_status("stuck");
+  ASSERT_TRUE(wait_for([&] { return count_status("stuck") >= seen + 2; }));
+  EXPECT_EQ(pings(false), 0) << "the watchdog was fed while the worker hung";
+  EXPECT_EQ(node.Counter("stuck"), 1);
+  release = true;
+  EXPECT_GE(pings(true), 1) << "the watchdog was not fed again once the job ended";
+  // A stop while a job hangs: Run gives up after the grace and says so.
+  release = false;
+  node.Post(hang, "another hung stage");
+  node.Stop();
+  runner.join();
+  EXPECT_EQ(code, 1);
+  EXPECT_TRUE(node.Abandoned());
+  release = true;
+  while (node.Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  unsetenv("NOTIFY_SOCKET");
+  close(sock);
+  ::unlink(path.c_str());
 }
 
 }  // namespace

@@ -2,10 +2,16 @@
 // test's private network namespace), the virtual gantry as camera and SDL2's offscreen/dummy
 // video driver for the projector. Checks the scan handshake, recording, playback of a recorded
 // log, and that a scan through the daemons gives exactly what `vellum process` gives.
+#include <arpa/inet.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <csignal>
+#include <cstdio>
+#include <cstdlib>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -23,7 +29,9 @@
 #include "tests/xwd.h"
 #include "vellum/capture_t.hpp"
 #include "vellum/correspondence_t.hpp"
+#include "vellum/pattern_shown_t.hpp"
 #include "vellum/restored_t.hpp"
+#include "vellum/scan_request_t.hpp"
 #include "vellum/scan_started_t.hpp"
 #include "vellum/status_t.hpp"
 
@@ -449,6 +457,86 @@ TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
   EXPECT_NE(second.Output().find("is being recorded into by another vellum-decoder"),
             std::string::npos)
       << second.Output();
+}
+
+// Sends `msg` on `channel` as one LCM datagram ("LC02", a sequence number, the channel, the
+// message) unicast to 127.0.0.1:port, as any host that can reach the station could.
+template <class Msg>
+void SendUnicast(int port, const std::string& channel, const Msg& msg) {
+  std::vector<uint8_t> datagram = {'L', 'C', '0', '2', 0, 0, 0, 0};
+  datagram.insert(datagram.end(), channel.begin(), channel.end());
+  datagram.push_back(0);
+  const std::vector<uint8_t> bytes = station::Encode(msg);
+  datagram.insert(datagram.end(), bytes.begin(), bytes.end());
+  const int fd = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<uint16_t>(port));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  EXPECT_EQ(
+      sendto(fd, datagram.data(), datagram.size(), 0, reinterpret_cast<sockaddr*>(&to), sizeof(to)),
+      static_cast<ssize_t>(datagram.size()));
+  close(fd);
+}
+
+// Issue 14: LCM's udpm takes any datagram that reaches the bus port. Without the station's
+// firewall rules a unicast SCAN_REQUEST starts a scan; with systemd/vellum-bus.nft loaded (in
+// this test's own network namespace) the same datagram is dropped and counted, while the bus's
+// multicast traffic still flows.
+TEST_F(StationTest, TheFirewallDropsAUnicastDatagramToTheBusPort) {
+  // Rules go only into this test's own network namespace (main() below).
+  ASSERT_STREQ(std::getenv("VELLUM_IN_NETNS"), "1");
+  const int port = std::stoi(url_.substr(url_.rfind(':') + 1));
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", "600"},
+        {"SDL_VIDEODRIVER=dummy"});
+  WaitForHeartbeats({"STATUS_PROJECTOR"});
+  std::vector<pattern_shown_t> shown;
+  Listener<pattern_shown_t> on_shown(*lcm_, "PATTERN_SHOWN",
+                                     [&](const pattern_shown_t& m) { shown.push_back(m); });
+  auto request = [](int64_t id) {
+    scan_request_t r{};
+    r.station = "vellum";
+    r.scan_id = id;
+    return r;
+  };
+  auto started = [&](int64_t id) {
+    return std::any_of(shown.begin(), shown.end(),
+                       [&](const pattern_shown_t& m) { return m.scan_id == id; });
+  };
+  // The control: without the rules, a unicast datagram starts a scan.
+  SendUnicast(port, "SCAN_REQUEST", request(101));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return started(101); }))
+      << "a unicast datagram did not reach the projector even without the firewall";
+  // The station's rules, for this test's port.
+  std::string rules = ReadText(kSource + "/systemd/vellum-bus.nft");
+  const std::string define = "define vellum_port = 7667";
+  ASSERT_NE(rules.find(define), std::string::npos);
+  rules.replace(rules.find(define), define.size(), "define vellum_port = " + std::to_string(port));
+  std::ofstream(dir_ + "/bus.nft") << rules;
+  Process nft({"/usr/sbin/nft", "-f", dir_ + "/bus.nft"}, dir_ + "/nft.log");
+  ASSERT_EQ(nft.Wait(30), 0) << nft.Output();
+  // The projector is in scan 101 (no camera answers): a request that reaches it now is refused
+  // with an error naming it. The unicast one (102) must not reach it; the bus's own multicast
+  // (103) still does.
+  std::vector<status_t> statuses;
+  Listener<status_t> on_status(*lcm_, "STATUS_PROJECTOR",
+                               [&](const status_t& m) { statuses.push_back(m); });
+  SendUnicast(port, "SCAN_REQUEST", request(102));
+  scan_request_t r = request(103);
+  lcm_->publish("SCAN_REQUEST", &r);
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return std::any_of(statuses.begin(), statuses.end(), [](const status_t& m) {
+      return m.last_error.find("scan 103 refused: scan 101 is in progress") != std::string::npos;
+    });
+  })) << "the bus's own multicast was dropped too";
+  for (const status_t& m : statuses) {
+    EXPECT_EQ(m.last_error.find("scan 102"), std::string::npos) << m.last_error;
+  }
+  Process list({"/usr/sbin/nft", "list", "table", "inet", "vellum_bus"}, dir_ + "/nft_list.log");
+  ASSERT_EQ(list.Wait(30), 0);
+  EXPECT_NE(list.Output().find("counter packets 1 "), std::string::npos) << list.Output();
 }
 
 TEST_F(StationTest, WithoutACameraTheScanFailsWithAClearStatusAndTheStationStaysReady) {
@@ -961,3 +1049,20 @@ TEST_F(StationTest, EveryDaemonHasHelpAndRejectsABadConfigFile) {
 
 }  // namespace
 }  // namespace vellum
+
+// Every run of this binary (each test, and the test discovery at build time) happens inside a
+// private network namespace whose only interface is loopback (scripts/netns-run.sh): its udpm
+// bus, and the firewall rules one test loads, never touch the machine's own network.
+int main(int argc, char** argv) {
+  if (std::getenv("VELLUM_IN_NETNS") == nullptr) {
+    std::string script = std::string(VELLUM_SOURCE_DIR) + "/scripts/netns-run.sh";
+    std::vector<char*> args = {script.data()};
+    for (int k = 0; k < argc; ++k) args.push_back(argv[k]);
+    args.push_back(nullptr);
+    execv(script.c_str(), args.data());
+    std::perror(("station_test: cannot run " + script).c_str());
+    return 1;
+  }
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
