@@ -1,5 +1,6 @@
 // libFuzzer: the files outside tools write. The first byte picks the reader: scan.yaml of a
-// scan directory, a calibration YAML, points.ply, or a quad-mesh PLY. The input is written to
+// scan directory, a calibration YAML, points.ply, a quad-mesh PLY, or a scan's texture.png
+// (the image header checked before decoding). The input is written to
 // a scratch file and read back; bad files must give an error Status, never a crash.
 #include <unistd.h>
 
@@ -21,8 +22,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       fs::temp_directory_path() / ("vellum_fuzz_files_" + std::to_string(getpid()));
   static const bool made = fs::create_directories(dir) || fs::exists(dir);
   (void)made;
-  const uint8_t kind = data[0] % 4;
-  const char* names[] = {"scan.yaml", "calibration.yaml", "points.ply", "mesh.ply"};
+  const uint8_t kind = data[0] % 5;
+  const char* names[] = {"scan.yaml", "calibration.yaml", "points.ply", "mesh.ply", "texture.png"};
   const fs::path path = dir / names[kind];
   {
     std::ofstream out(path, std::ios::binary);
@@ -49,6 +50,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       std::vector<cv::Vec3f> vertices;
       std::vector<cv::Vec4i> quads;
       (void)ReadQuadMeshPly(path.string(), &vertices, &quads);
+      break;
+    }
+    case 4: {
+      cv::Mat texture;
+      (void)ReadTexture(dir.string(), &texture);
       break;
     }
   }

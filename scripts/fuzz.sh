@@ -19,11 +19,11 @@ fi
 CC=clang CXX=clang++ cmake -S . -B build-fuzz -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DVELLUM_FUZZ=ON -DVELLUM_SANITIZE=address,undefined -DVELLUM_BUILD_TESTS=OFF \
   -DVELLUM_BUILD_BENCH=OFF >/dev/null
-cmake --build build-fuzz -j2 --target fuzz_messages fuzz_files fuzz_ply_roundtrip
+cmake --build build-fuzz -j2 --target fuzz_messages fuzz_files fuzz_ply_roundtrip fuzz_scan_gate
 rm -rf build-fuzz/crashes
 mkdir -p build-fuzz/crashes
-declare -A runs=([fuzz_messages]=200000 [fuzz_files]=60000 [fuzz_ply_roundtrip]=40000)
-for target in fuzz_messages fuzz_files fuzz_ply_roundtrip; do
+declare -A runs=([fuzz_messages]=200000 [fuzz_files]=60000 [fuzz_ply_roundtrip]=40000 [fuzz_scan_gate]=100000)
+for target in fuzz_messages fuzz_files fuzz_ply_roundtrip fuzz_scan_gate; do
   corpus=build-fuzz/corpus/$target
   if [ "$mode" = ci ]; then
     rm -rf "$corpus"

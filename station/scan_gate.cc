@@ -59,6 +59,12 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
   }
   std::lock_guard<std::mutex> lock(mutex_);
   if (m.scan_id == scan_id_ && m.session == session_) return Refuse("", "");  // Heard again.
+  if (m.scan_id == scan_id_) {
+    return Refuse(what +
+                      ": SCAN_STARTED again with another session while it is recorded; "
+                      "refused (the scan keeps its first session)",
+                  "scans refused");
+  }
   const ScanFolder folder = ScanFolder::For(data_, m.scan_id);
   if (Closed(m.scan_id) || PathExists(folder.root)) {
     return Refuse(what + ": refused, its folder " + folder.root +
@@ -66,6 +72,7 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
                       "as it is)",
                   "scans refused");
   }
+  if (scan_id_ != 0) Bounded(&closed_, scan_id_);  // Superseded (the worker gives it up).
   scan_id_ = m.scan_id;
   session_ = m.session;
   count_ = m.pattern_count;
