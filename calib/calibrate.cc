@@ -151,11 +151,102 @@ BoardView DetectBoard(const Scan& scan, const BoardSpec& board, const std::strin
   return view;
 }
 
+namespace {
+
+// One solve from a set of poses: both devices' intrinsics, their relative pose, the world frame
+// from the table pose, and each pose's errors.
+struct PoseSolve {
+  Calibration calibration;
+  double camera_rms_px = 0, projector_rms_px = 0, stereo_rms_px = 0;
+  std::vector<double> camera_px, projector_px;  // Per pose, in the order given.
+};
+
+Status SolvePoses(const std::vector<cv::Point3f>& object,
+                  const std::vector<std::vector<cv::Point2f>>& cam,
+                  const std::vector<std::vector<cv::Point2f>>& proj, size_t table,
+                  cv::Size camera_size, cv::Size projector_size, PoseSolve* out) {
+  const std::vector<std::vector<cv::Point3f>> objects(cam.size(), object);
+  const int flags = cv::CALIB_FIX_K3;
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12);
+  cv::Mat kc, dc, kp, dp, std_in, std_ex, errors_c, errors_p;
+  std::vector<cv::Mat> rc, tc, rp, tp;
+  try {
+    out->camera_rms_px = cv::calibrateCamera(objects, cam, camera_size, kc, dc, rc, tc, std_in,
+                                             std_ex, errors_c, flags, criteria);
+    out->projector_rms_px = cv::calibrateCamera(objects, proj, projector_size, kp, dp, rp, tp,
+                                                std_in, std_ex, errors_p, flags, criteria);
+    cv::Mat r, t, e, f;
+    out->stereo_rms_px = cv::stereoCalibrate(objects, cam, proj, kc, dc, kp, dp, camera_size, r, t,
+                                             e, f, cv::CALIB_FIX_INTRINSIC, criteria);
+    // World frame from the table pose: the board's frame turned over (x kept, y and z
+    // reversed) when its z axis points away from the camera, so that +z is up.
+    cv::Matx33d rb;
+    cv::Rodrigues(rc[table], rb);
+    const cv::Vec3d tb(tc[table]);
+    const cv::Vec3d camera_in_board = -(rb.t() * tb);
+    const cv::Matx33d flip =
+        camera_in_board[2] < 0 ? cv::Matx33d(1, 0, 0, 0, -1, 0, 0, 0, -1) : cv::Matx33d::eye();
+    const cv::Matx33d r_cw = rb * flip;
+    const cv::Matx33d r_pc(r);
+    const cv::Vec3d t_pc(t);
+    out->calibration.camera = ToModel(camera_size, kc, dc, r_cw, tb);
+    out->calibration.projector = ToModel(projector_size, kp, dp, r_pc * r_cw, r_pc * tb + t_pc);
+    out->camera_px.clear();
+    out->projector_px.clear();
+    for (size_t n = 0; n < cam.size(); ++n) {
+      out->camera_px.push_back(ReprojectionRms(object, cam[n], kc, dc, rc[n], tc[n]));
+      out->projector_px.push_back(ReprojectionRms(object, proj[n], kp, dp, rp[n], tp[n]));
+    }
+  } catch (const cv::Exception& e) {
+    return Status::Error(std::string("calibration failed in OpenCV: ") + e.what());
+  }
+  return Status::Ok();
+}
+
+// The projector's pose relative to the camera: how far two calibrations differ, in degrees and
+// mm (independent of the world frame's gauge).
+void RelativePoseChange(const Calibration& a, const Calibration& b, double* deg, double* mm) {
+  const cv::Matx33d ra = a.projector.rotation * a.camera.rotation.t();
+  const cv::Matx33d rb = b.projector.rotation * b.camera.rotation.t();
+  const cv::Vec3d ta = a.projector.translation - ra * a.camera.translation;
+  const cv::Vec3d tb = b.projector.translation - rb * b.camera.translation;
+  const cv::Matx33d d = ra * rb.t();
+  *deg = std::acos(std::clamp((cv::trace(d) - 1) / 2, -1.0, 1.0)) * 180.0 / M_PI;
+  *mm = cv::norm(ta - tb);
+}
+
+// How well a solve without a pose predicts it: the board's pose from the pose's camera corners
+// (the solve's camera), carried to the projector by the solve's camera-to-projector motion,
+// against the pose's projector corners (RMS px). A pose that moved between its texture and its
+// patterns, or whose projector corners are off, is predicted badly even when each device alone
+// fits it (a uniform offset is absorbed by that pose's own extrinsics).
+double HeldOutError(const Calibration& without, const std::vector<cv::Point3f>& object,
+                    const std::vector<cv::Point2f>& cam, const std::vector<cv::Point2f>& proj) {
+  const cv::Mat kc(without.camera.matrix), dc(without.camera.distortion);
+  const cv::Mat kp(without.projector.matrix), dp(without.projector.distortion);
+  cv::Mat rvec, tvec;
+  if (!cv::solvePnP(object, cam, kc, dc.t(), rvec, tvec)) return 1e9;
+  cv::Matx33d rb;
+  cv::Rodrigues(rvec, rb);
+  const cv::Matx33d r_pc = without.projector.rotation * without.camera.rotation.t();
+  const cv::Vec3d t_pc = without.projector.translation - r_pc * without.camera.translation;
+  cv::Mat rp;
+  cv::Rodrigues(cv::Mat(r_pc * rb), rp);
+  const cv::Vec3d tp = r_pc * cv::Vec3d(tvec) + t_pc;
+  return ReprojectionRms(object, proj, kp, dp.t(), rp, cv::Mat(tp).clone());
+}
+
+double Median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
 CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
                                      const BoardSpec& board, const CalibrateOptions& options) {
   CalibrationSolution sol;
   const std::vector<cv::Point3f> object = BoardPoints(board);
-  std::vector<std::vector<cv::Point3f>> objects;
   std::vector<std::vector<cv::Point2f>> cam, proj;
   std::vector<size_t> used;
   cv::Size camera_size, projector_size;
@@ -178,9 +269,24 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
       r.status = Status::Error(v.name + ": camera or projector size differs from the first pose's");
       continue;
     }
+    // The same pose twice (one folder given twice, or a board not moved between captures)
+    // adds no constraint and biases the solve towards it: refused, naming the first.
+    const auto same = std::find_if(used.begin(), used.end(), [&](size_t u) {
+      double sum = 0;
+      for (size_t k = 0; k < object.size(); ++k) {
+        const cv::Point2f d = views[u].camera_corners[k] - v.camera_corners[k];
+        sum += d.dot(d);
+      }
+      return std::sqrt(sum / object.size()) < options.same_pose_px;
+    });
+    if (same != used.end()) {
+      r.status = Status::Error(v.name + ": the same pose as " + views[*same].name +
+                               " (its corners within " + Px(options.same_pose_px) +
+                               "); refused: move the board between poses");
+      continue;
+    }
     mirrored += Handedness(v.camera_corners, board) != Handedness(v.projector_corners, board);
     r.corners = static_cast<int>(object.size());
-    objects.push_back(object);
     cam.push_back(v.camera_corners);
     proj.push_back(v.projector_corners);
     used.push_back(i);
@@ -210,40 +316,132 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
         "describes the virtual, unmirrored projector, so fix --flip and capture again");
     return sol;
   }
-  const int flags = cv::CALIB_FIX_K3;
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT + cv::TermCriteria::EPS, 100, 1e-12);
-  cv::Mat kc, dc, kp, dp, std_in, std_ex, errors_c, errors_p;
-  std::vector<cv::Mat> rc, tc, rp, tp;
-  try {
-    sol.camera_rms_px = cv::calibrateCamera(objects, cam, camera_size, kc, dc, rc, tc, std_in,
-                                            std_ex, errors_c, flags, criteria);
-    sol.projector_rms_px = cv::calibrateCamera(objects, proj, projector_size, kp, dp, rp, tp,
-                                               std_in, std_ex, errors_p, flags, criteria);
-    cv::Mat r, t, e, f;
-    sol.stereo_rms_px = cv::stereoCalibrate(objects, cam, proj, kc, dc, kp, dp, camera_size, r, t,
-                                            e, f, cv::CALIB_FIX_INTRINSIC, criteria);
-    // World frame from the table pose: the board's frame turned over (x kept, y and z
-    // reversed) when its z axis points away from the camera, so that +z is up.
-    const size_t ti = static_cast<size_t>(table_at - used.begin());
-    cv::Matx33d rb;
-    cv::Rodrigues(rc[ti], rb);
-    const cv::Vec3d tb(tc[ti]);
-    const cv::Vec3d camera_in_board = -(rb.t() * tb);
-    const cv::Matx33d flip =
-        camera_in_board[2] < 0 ? cv::Matx33d(1, 0, 0, 0, -1, 0, 0, 0, -1) : cv::Matx33d::eye();
-    const cv::Matx33d r_cw = rb * flip;
-    const cv::Matx33d r_pc(r);
-    const cv::Vec3d t_pc(t);
-    sol.calibration.camera = ToModel(camera_size, kc, dc, r_cw, tb);
-    sol.calibration.projector = ToModel(projector_size, kp, dp, r_pc * r_cw, r_pc * tb + t_pc);
-    for (size_t n = 0; n < used.size(); ++n) {
-      ViewReport& rep = sol.views[used[n]];
-      rep.camera_rms_px = ReprojectionRms(object, cam[n], kc, dc, rc[n], tc[n]);
-      rep.projector_rms_px = ReprojectionRms(object, proj[n], kp, dp, rp[n], tp[n]);
-    }
-  } catch (const cv::Exception& e) {
-    sol.status = Status::Error(std::string("calibration failed in OpenCV: ") + e.what());
+  size_t ti = static_cast<size_t>(table_at - used.begin());
+  PoseSolve solved;
+  Status s = SolvePoses(object, cam, proj, ti, camera_size, projector_size, &solved);
+  if (!s.ok()) {
+    sol.status = s;
     return sol;
+  }
+  // Leave one pose out: each pose (but the table pose, which defines the world) is predicted
+  // by the solve without it (HeldOutError), and the projector's pose without it is compared.
+  // Returns false when a solve fails.
+  struct LeftOut {
+    size_t n;
+    double error_px, deg, mm;
+  };
+  auto leave_one_out = [&](const PoseSolve& all, std::vector<LeftOut>* out) {
+    out->clear();
+    for (size_t n = 0; n < used.size(); ++n) {
+      if (n == ti) continue;
+      std::vector<std::vector<cv::Point2f>> c2, p2;
+      for (size_t m = 0; m < used.size(); ++m) {
+        if (m == n) continue;
+        c2.push_back(cam[m]);
+        p2.push_back(proj[m]);
+      }
+      PoseSolve without;
+      if (!SolvePoses(object, c2, p2, ti < n ? ti : ti - 1, camera_size, projector_size, &without)
+               .ok()) {
+        continue;
+      }
+      LeftOut l{n, HeldOutError(without.calibration, object, cam[n], proj[n]), 0, 0};
+      RelativePoseChange(without.calibration, all.calibration, &l.deg, &l.mm);
+      out->push_back(l);
+    }
+  };
+  std::vector<LeftOut> left_out;
+  if (options.leave_one_out && static_cast<int>(used.size()) > options.min_views) {
+    leave_one_out(solved, &left_out);
+  }
+  // Outlier poses: predicted far worse than the others (a board that moved or bent, corners
+  // that are off). Dropped from the solve and named, as long as enough poses remain.
+  std::vector<double> held;
+  for (const LeftOut& l : left_out) held.push_back(l.error_px);
+  // Also a pose that one device alone fits far worse than the others (corners that are noisy).
+  std::vector<size_t> drop;
+  std::vector<std::string> named;
+  const double mc = Median(solved.camera_px), mp = Median(solved.projector_px);
+  for (size_t n = 0; n < used.size(); ++n) {
+    const double c = solved.camera_px[n], p = solved.projector_px[n];
+    if ((c > options.outlier_factor * mc && c > options.outlier_floor_px) ||
+        (p > options.outlier_factor * mp && p > options.outlier_floor_px)) {
+      drop.push_back(n);
+      named.push_back(views[used[n]].name + ": an outlier (camera " + Px(c) + ", projector " +
+                      Px(p) + " against medians " + Px(mc) + ", " + Px(mp) +
+                      "): did the board move or bend?");
+    }
+  }
+  if (!held.empty()) {
+    const double median = Median(held);
+    for (const LeftOut& l : left_out) {
+      if (l.error_px > options.outlier_factor * median && l.error_px > options.outlier_floor_px &&
+          std::find(drop.begin(), drop.end(), l.n) == drop.end()) {
+        drop.push_back(l.n);
+        named.push_back(views[used[l.n]].name +
+                        ": an outlier (the other poses predict its projector corners to " +
+                        Px(l.error_px) + ", the median pose to " + Px(median) +
+                        "): did the board move or bend?");
+      }
+    }
+  }
+  // The table pose defines the world frame: named, never dropped.
+  for (size_t k = 0; k < drop.size(); ++k) {
+    if (drop[k] != ti) continue;
+    sol.warnings.push_back(named[k] + " It is the table pose, so it is kept: capture it again");
+    drop.erase(drop.begin() + static_cast<long>(k));
+    named.erase(named.begin() + static_cast<long>(k));
+    break;
+  }
+  const bool can_drop = static_cast<int>(used.size() - drop.size()) >= options.min_views;
+  for (const std::string& w : named) {
+    sol.warnings.push_back(w + (can_drop ? " Dropped from the solve; capture it again"
+                                         : " Kept: too few poses to solve without it; "
+                                           "capture it again or add poses"));
+  }
+  if (!can_drop) drop.clear();
+  if (!drop.empty()) {
+    std::vector<std::vector<cv::Point2f>> kept_cam, kept_proj;
+    std::vector<size_t> kept;
+    for (size_t n = 0; n < used.size(); ++n) {
+      if (std::find(drop.begin(), drop.end(), n) != drop.end()) {
+        sol.views[used[n]].status = Status::Error(views[used[n]].name + ": dropped, an outlier");
+        sol.views[used[n]].camera_rms_px = solved.camera_px[n];
+        sol.views[used[n]].projector_rms_px = solved.projector_px[n];
+        continue;
+      }
+      if (n == ti) ti = kept.size();
+      kept.push_back(used[n]);
+      kept_cam.push_back(cam[n]);
+      kept_proj.push_back(proj[n]);
+    }
+    used = kept;
+    cam = kept_cam;
+    proj = kept_proj;
+    s = SolvePoses(object, cam, proj, ti, camera_size, projector_size, &solved);
+    if (!s.ok()) {
+      sol.status = s;
+      return sol;
+    }
+    left_out.clear();
+    if (options.leave_one_out && static_cast<int>(used.size()) > options.min_views) {
+      leave_one_out(solved, &left_out);
+    }
+  }
+  for (const LeftOut& l : left_out) {
+    sol.leave_one_out_deg = std::max(sol.leave_one_out_deg, l.deg);
+    if (l.mm >= sol.leave_one_out_mm) {
+      sol.leave_one_out_mm = l.mm;
+      sol.leave_one_out_pose = views[used[l.n]].name;
+    }
+  }
+  sol.calibration = solved.calibration;
+  sol.camera_rms_px = solved.camera_rms_px;
+  sol.projector_rms_px = solved.projector_rms_px;
+  sol.stereo_rms_px = solved.stereo_rms_px;
+  for (size_t n = 0; n < used.size(); ++n) {
+    sol.views[used[n]].camera_rms_px = solved.camera_px[n];
+    sol.views[used[n]].projector_rms_px = solved.projector_px[n];
   }
   std::string why;
   if (!sol.calibration.Check(&why)) {
@@ -264,23 +462,13 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
     check(views[n].name + ": camera", sol.views[n].camera_rms_px);
     check(views[n].name + ": projector", sol.views[n].projector_rms_px);
   }
-  // Outlier poses: far above the others' errors (a board that moved, or was bent).
-  auto median = [&](double ViewReport::*field) {
-    std::vector<double> v;
-    for (size_t n : used) v.push_back(sol.views[n].*field);
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    return v[v.size() / 2];
-  };
-  const double mc = median(&ViewReport::camera_rms_px), mp = median(&ViewReport::projector_rms_px);
-  for (size_t n : used) {
-    const ViewReport& r = sol.views[n];
-    constexpr double kFloor = 0.2;  // px: below this no pose is worth capturing again.
-    if ((r.camera_rms_px > 3 * mc && r.camera_rms_px > kFloor) ||
-        (r.projector_rms_px > 3 * mp && r.projector_rms_px > kFloor)) {
-      sol.warnings.push_back(views[n].name + ": an outlier (camera " + Px(r.camera_rms_px) +
-                             ", projector " + Px(r.projector_rms_px) + " against medians " +
-                             Px(mc) + ", " + Px(mp) +
-                             "): did the board move or bend? Capture it again or leave it out");
+  // The limits past which the calibration is not written (unless forced).
+  for (const auto& [what, rms] : {std::pair<const char*, double>{"camera", sol.camera_rms_px},
+                                  {"projector", sol.projector_rms_px},
+                                  {"stereo", sol.stereo_rms_px}}) {
+    if (rms > options.max_reprojection_px && sol.over_limits.empty()) {
+      sol.over_limits = std::string(what) + " reprojection error " + Px(rms) +
+                        " is above the limit of " + Px(options.max_reprojection_px);
     }
   }
   sol.status = Status::Ok();
@@ -316,6 +504,14 @@ std::string FormatCalibrationReport(const CalibrationSolution& s) {
                   p.matrix(0, 0), p.matrix(1, 1), p.matrix(0, 2), p.matrix(1, 2), p.Center()[0],
                   p.Center()[1], p.Center()[2]);
     out += line;
+    if (!s.leave_one_out_pose.empty()) {
+      std::snprintf(line, sizeof(line),
+                    "leave one pose out: the projector's pose moves by at most %.3f deg, %.3f mm "
+                    "(most without %s)\n",
+                    s.leave_one_out_deg, s.leave_one_out_mm, s.leave_one_out_pose.c_str());
+      out += line;
+    }
+    if (!s.over_limits.empty()) out += "over the limits: " + s.over_limits + "\n";
   } else {
     out += "not solved: " + s.status.message() + "\n";
   }

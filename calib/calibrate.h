@@ -39,6 +39,18 @@ struct CalibrateOptions {
   int min_window_points = 40;         // Decoded pixels a corner's homography needs.
   int min_views = 4;                  // Usable poses needed to solve.
   double warn_reprojection_px = 0.5;  // Errors above this are reported as warnings.
+  // Overall errors above this: the calibration is not written unless forced (`--force`).
+  double max_reprojection_px = 1.0;
+  // A pose whose camera corners lie within this of an earlier pose's (RMS) is the same pose
+  // given twice: refused.
+  double same_pose_px = 0.5;
+  // Leave one pose out: solve without each pose (but the table pose); report how far the
+  // projector's pose moves, and how well the others predict the pose's projector corners. A
+  // pose predicted worse than outlier_factor times the median and outlier_floor_px is an
+  // outlier: dropped from the solve (named) while min_views remain.
+  bool leave_one_out = true;
+  double outlier_factor = 3.0;
+  double outlier_floor_px = 0.3;
   DecodeOptions decode;
 };
 
@@ -68,9 +80,14 @@ struct CalibrationSolution {
   std::vector<ViewReport> views;  // One per input pose, in input order.
   int views_used = 0, corners_used = 0;
   double camera_rms_px = 0, projector_rms_px = 0, stereo_rms_px = 0;
-  // Errors above CalibrateOptions::warn_reprojection_px, and outlier poses (errors over three
-  // times the poses' median).
+  // Errors above CalibrateOptions::warn_reprojection_px, and outlier poses (dropped, named).
   std::vector<std::string> warnings;
+  // Why the calibration should not be written (errors above max_reprojection_px); "" if none.
+  std::string over_limits;
+  // Leave one pose out: the largest change of the projector's pose relative to the camera, and
+  // the pose whose absence moves it most.
+  double leave_one_out_deg = 0, leave_one_out_mm = 0;
+  std::string leave_one_out_pose;
 };
 
 // Solves from the detected poses; views[table] is the pose lying flat on the table.

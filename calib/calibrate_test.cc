@@ -201,6 +201,8 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
   ASSERT_TRUE(with_outlier.status.ok()) << with_outlier.status.message();
   const std::string warned = FormatCalibrationReport(with_outlier);
   EXPECT_NE(warned.find("warning: pose3: an outlier"), std::string::npos) << warned;
+  // Four poses are the fewest to solve from: the outlier is kept, and said so.
+  EXPECT_NE(warned.find("Kept: too few poses"), std::string::npos) << warned;
   EXPECT_NE(warned.find("above 0.500 px"), std::string::npos) << warned;
   // Too few poses.
   const CalibrationSolution few = SolveCalibration({views[0], views[1], views[4]}, 0, BoardSpec());
@@ -211,6 +213,90 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
   const CalibrationSolution no_table = SolveCalibration(views, 4, BoardSpec());
   EXPECT_FALSE(no_table.status.ok());
   EXPECT_NE(no_table.status.message().find("table pose is not usable"), std::string::npos);
+}
+
+// Issue 14: poses that would make a wrong calibration are not used silently. The same pose
+// given twice is refused (one folder given four times leaves one pose: no solve); a pose whose
+// projector corners are 2.3 px off is dropped by the outlier rule, so the solve equals the
+// clean solve (within 0.05 degrees and 0.3 mm, the issue's bar); a solve whose errors are over
+// the limit says so (the CLI then writes nothing without --force); the leave-one-pose-out check
+// is reported.
+TEST(Calibrate, DuplicateAndOutlierPosesAreRefusedOrDroppedAndNamed) {
+  const Calibration rig = SmallRig();
+  std::vector<BoardView> views;
+  for (size_t i = 0; i < 6; ++i) {
+    views.push_back(
+        DetectBoard(RenderPose(rig, kPoses[i], 30 + i), BoardSpec(), "pose" + std::to_string(i)));
+    ASSERT_TRUE(views.back().status.ok()) << views.back().status.message();
+  }
+  const CalibrationSolution clean = SolveCalibration(views, 0, BoardSpec());
+  ASSERT_TRUE(clean.status.ok()) << clean.status.message();
+  EXPECT_EQ(clean.views_used, 6);
+  EXPECT_TRUE(clean.over_limits.empty()) << clean.over_limits;
+  EXPECT_FALSE(clean.leave_one_out_pose.empty());
+  std::printf("[calib] leave one pose out: %.4f deg, %.3f mm (without %s)\n",
+              clean.leave_one_out_deg, clean.leave_one_out_mm, clean.leave_one_out_pose.c_str());
+  EXPECT_NE(FormatCalibrationReport(clean).find("leave one pose out"), std::string::npos);
+
+  // One pose folder given twice more.
+  std::vector<BoardView> twice = views;
+  BoardView copy = views[2];
+  copy.name = "pose2-again";
+  twice.push_back(copy);
+  const CalibrationSolution dup = SolveCalibration(twice, 0, BoardSpec());
+  ASSERT_TRUE(dup.status.ok()) << dup.status.message();
+  EXPECT_EQ(dup.views_used, 6);
+  EXPECT_NE(dup.views[6].status.message().find("pose2-again: the same pose as pose2"),
+            std::string::npos)
+      << dup.views[6].status.message();
+  // The same folder four times: one pose, no solve.
+  const CalibrationSolution four =
+      SolveCalibration({views[0], views[0], views[0], views[0]}, 0, BoardSpec());
+  EXPECT_FALSE(four.status.ok());
+  EXPECT_NE(four.status.message().find("only 1 usable board poses of 4"), std::string::npos)
+      << four.status.message();
+
+  // A seventh pose whose projector corners are 2.3 px off (a board that slipped between the
+  // texture and the patterns).
+  std::vector<BoardView> slipped = views;
+  BoardView bad = DetectBoard(RenderPose(rig, kPoses[6], 36), BoardSpec(), "slipped");
+  ASSERT_TRUE(bad.status.ok()) << bad.status.message();
+  for (cv::Point2f& c : bad.projector_corners) c += cv::Point2f(2.3f * 0.6f, 2.3f * 0.8f);
+  slipped.push_back(bad);
+  const CalibrationSolution dropped = SolveCalibration(slipped, 0, BoardSpec());
+  ASSERT_TRUE(dropped.status.ok()) << dropped.status.message();
+  EXPECT_EQ(dropped.views_used, 6);
+  EXPECT_NE(dropped.views[6].status.message().find("slipped: dropped, an outlier"),
+            std::string::npos)
+      << dropped.views[6].status.message();
+  const std::string report = FormatCalibrationReport(dropped);
+  EXPECT_NE(report.find("slipped: an outlier"), std::string::npos) << report;
+  EXPECT_NE(report.find("Dropped from the solve"), std::string::npos) << report;
+  const Calibration& a = clean.calibration;
+  const Calibration& b = dropped.calibration;
+  const cv::Matx33d ra = a.projector.rotation * a.camera.rotation.t();
+  const cv::Matx33d rb = b.projector.rotation * b.camera.rotation.t();
+  const double angle = AngleDeg(ra, rb);
+  const double offset = cv::norm((a.projector.translation - ra * a.camera.translation) -
+                                 (b.projector.translation - rb * b.camera.translation));
+  std::printf("[calib] with the slipped pose dropped vs clean: %.4f deg, %.4f mm\n", angle, offset);
+  EXPECT_LE(angle, 0.05);
+  EXPECT_LE(offset, 0.3);
+
+  // Every pose's projector corners 2 px noisy: over the 1 px limit, said so (not written by
+  // the CLI without --force).
+  std::vector<BoardView> noisy = views;
+  cv::RNG rng(9);
+  for (BoardView& v : noisy) {
+    for (cv::Point2f& c : v.projector_corners) {
+      c +=
+          cv::Point2f(static_cast<float>(rng.gaussian(2.0)), static_cast<float>(rng.gaussian(2.0)));
+    }
+  }
+  const CalibrationSolution over = SolveCalibration(noisy, 0, BoardSpec());
+  ASSERT_TRUE(over.status.ok()) << over.status.message();
+  EXPECT_NE(over.over_limits.find("projector reprojection error"), std::string::npos)
+      << over.over_limits;
 }
 
 TEST(Calibrate, AMirroredProjectorIsReportedNotAbsorbed) {

@@ -13,21 +13,26 @@ namespace vellum {
 namespace {
 
 int RunCalibrateSolve(const std::vector<std::string>& args) {
-  Flags flags("vellum calibrate solve DIR...",
-              "Calibrates the camera, the (virtual, unmirrored) projector and the table from\n"
-              "board poses, each DIR one pose's scan directory (from `vellum calibrate capture`,\n"
-              "or rendered or recorded by any tool in that form). Writes the calibration YAML\n"
-              "of DESIGN.md to --out and a report (per-pose and overall reprojection errors,\n"
-              "corners used, warnings above 0.5 px) beside it as FILE.report.txt. A pose that\n"
-              "cannot be used is named with the reason, and the others are used.",
-              {
-                  {"board", "COLSxROWS", "the board's inner corners, across x down", "16x21"},
-                  {"square", "MM", "the board's square side, mm", "10"},
-                  {"table", "DIR", "the pose lying flat on the table (defines z = 0)", ""},
-                  {"out", "FILE", "the calibration YAML to write", ""},
-              });
+  Flags flags(
+      "vellum calibrate solve DIR...",
+      "Calibrates the camera, the (virtual, unmirrored) projector and the table from\n"
+      "board poses, each DIR one pose's scan directory (from `vellum calibrate capture`,\n"
+      "or rendered or recorded by any tool in that form). Writes the calibration YAML\n"
+      "of DESIGN.md to --out and a report (per-pose and overall reprojection errors,\n"
+      "corners used, warnings above 0.5 px, a leave-one-pose-out check) beside it as\n"
+      "FILE.report.txt. A pose that cannot be used is named with the reason, and the\n"
+      "others are used; the same pose given twice is refused; an outlier pose (errors\n"
+      "over 3x the poses' median) is dropped from the solve and named. A calibration\n"
+      "whose overall error is above 1 px is not written (exit status 1) unless --force.",
+      {
+          {"board", "COLSxROWS", "the board's inner corners, across x down", "16x21"},
+          {"square", "MM", "the board's square side, mm", "10"},
+          {"table", "DIR", "the pose lying flat on the table (defines z = 0)", ""},
+          {"out", "FILE", "the calibration YAML to write", ""},
+          {"force", "", "write the calibration even when its errors are over the limits", "false"},
+      });
   std::vector<std::string> dirs, rest;
-  SplitPositional(args, &dirs, &rest);
+  SplitPositional(args, &dirs, &rest, {"--force"});
   if (!flags.Parse(rest)) return 0;
   BoardSpec board;
   board.inner_corners = flags.GetSize("board");
@@ -66,6 +71,13 @@ int RunCalibrateSolve(const std::vector<std::string>& args) {
   std::fputs(report.c_str(), stdout);
   if (!solution.status.ok()) {
     std::fprintf(stderr, "vellum calibrate solve: %s\n", solution.status.message().c_str());
+    return 1;
+  }
+  if (!solution.over_limits.empty() && !flags.GetBool("force")) {
+    std::fprintf(stderr,
+                 "vellum calibrate solve: not written: %s (check the board size, --board COLSxROWS,"
+                 " and the poses; --force writes it anyway)\n",
+                 solution.over_limits.c_str());
     return 1;
   }
   Status s = WriteCalibration(out, solution.calibration);

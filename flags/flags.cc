@@ -1,5 +1,6 @@
 #include "flags/flags.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <opencv2/core/persistence.hpp>
 #include <sstream>
@@ -158,11 +159,13 @@ cv::Size Flags::GetSize(const std::string& name) const {
 }
 
 void SplitPositional(const std::vector<std::string>& args, std::vector<std::string>* positional,
-                     std::vector<std::string>* flags) {
+                     std::vector<std::string>* flags, const std::vector<std::string>& switches) {
   for (size_t i = 0; i < args.size(); ++i) {
     if (args[i].rfind("--", 0) == 0) {
       flags->push_back(args[i]);
-      if (args[i].find('=') == std::string::npos && args[i] != "--help" && i + 1 < args.size()) {
+      const bool takes_value = args[i] != "--help" && std::find(switches.begin(), switches.end(),
+                                                                args[i]) == switches.end();
+      if (args[i].find('=') == std::string::npos && takes_value && i + 1 < args.size()) {
         flags->push_back(args[++i]);
       }
     } else {

@@ -52,8 +52,10 @@ class Flags {
 };
 
 // Splits a command's arguments into positional ones and flags with their values ("--name
-// value" or "--name=value"), for commands that take both (vellum export LOG DIR).
+// value" or "--name=value"), for commands that take both (vellum export LOG DIR). `switches`
+// are the flags that take no value ("--force").
 void SplitPositional(const std::vector<std::string>& args, std::vector<std::string>* positional,
-                     std::vector<std::string>* flags);
+                     std::vector<std::string>* flags,
+                     const std::vector<std::string>& switches = {});
 
 }  // namespace vellum
