@@ -1,12 +1,17 @@
 // The station from the command line: `scan` (ask for a scan and follow it to the restored
 // page), `watch` (follow the bus until scans are restored), `export` and `import` (recorded
 // scan log <-> scan directory).
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <set>
 
 #include "cli/commands.h"
 #include "cli/progress.h"
@@ -73,11 +78,13 @@ class Follower {
   int warned() const { return warned_; }  // Scans restored with warnings.
   const std::string& failure() const { return failure_; }
   const std::string& results() const { return results_; }
+  bool Heard(const std::string& process) const { return heard_.count(process) > 0; }
 
   void EndLine() { progress_.Clear(); }
 
  private:
   void OnStatus(const status_t& m) {
+    heard_.insert(m.process);
     int64_t& seen = errors_[m.process];
     if (!first_seen_.count(m.process)) {
       first_seen_[m.process] = true;
@@ -108,6 +115,7 @@ class Follower {
   int restored_ = 0, warned_ = 0;
   std::map<std::string, int64_t> errors_;
   std::map<std::string, bool> first_seen_;
+  std::set<std::string> heard_;  // Processes whose heartbeat came.
 };
 
 // Handles the bus until `done` or the timeout; returns false on timeout.
@@ -174,19 +182,62 @@ int RunWatch(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = BusSpecs();
   specs.push_back({"count", "N", "exit after this many restored scans (0: never)", "1"});
   specs.push_back({"timeout", "S", "give up after this long", "600"});
+  specs.push_back({"play", "LOG",
+                   "once every processing daemon's heartbeat is heard, play this recorded scan "
+                   "log into the bus (lcm-logplayer) and follow it",
+                   ""});
   Flags flags("vellum watch",
               "Follows the station's bus: daemon progress and errors, and each restored scan\n"
               "with its results folder. Exit status 1 on a daemon error or a timeout.",
               specs);
   if (!flags.Parse(args)) return 0;
   const int count = flags.GetInt("count", 0, 1 << 30);
+  const double timeout = flags.GetDouble("timeout", 1, 1e9);
   Node node("vellum-watch", flags.Get("url"));
   station::SetStationFromFlags(flags, &node);
   Follower follower(&node, 0);
-  const bool finished = Follow(node, flags.GetDouble("timeout", 1, 1e9), [&] {
+  pid_t player = -1;
+  const std::string log = flags.Get("play");
+  if (!log.empty()) {
+    // The log plays only once the daemons listen (and this watcher does): no capture of it is
+    // sent before the decoder is there to record it, however loaded the machine.
+    const bool ready = Follow(node, std::min(timeout, 120.0), [&] {
+      for (const station::ChainLink& link : station::kChain) {
+        if (!follower.Heard(link.process)) return false;
+      }
+      return true;
+    });
+    if (!ready) {
+      std::fprintf(stderr,
+                   "vellum watch: the processing daemons did not answer within %.0f s "
+                   "(are they running on %s?)\n",
+                   std::min(timeout, 120.0), flags.Get("url").c_str());
+      return 1;
+    }
+    const std::string url_arg = "--lcm-url=" + flags.Get("url");
+    std::vector<char*> argv = {const_cast<char*>("lcm-logplayer"),
+                               const_cast<char*>(url_arg.c_str()), const_cast<char*>(log.c_str()),
+                               nullptr};
+    posix_spawn_file_actions_t quiet;  // The player's chatter off this command's stdout.
+    posix_spawn_file_actions_init(&quiet);
+    posix_spawn_file_actions_addopen(&quiet, 1, "/dev/null", O_WRONLY, 0);
+    const int spawned =
+        posix_spawnp(&player, "lcm-logplayer", &quiet, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&quiet);
+    if (spawned != 0) {
+      std::fprintf(stderr, "vellum watch: cannot run lcm-logplayer (liblcm-bin)\n");
+      return 1;
+    }
+  }
+  const bool finished = Follow(node, timeout, [&] {
     return (count > 0 && follower.restored() >= count) || !follower.failure().empty();
   });
   follower.EndLine();
+  if (player > 0) {
+    int status = 0;
+    if (waitpid(player, &status, WNOHANG) == 0) kill(player, SIGTERM);
+    waitpid(player, &status, 0);
+  }
   if (!follower.failure().empty()) return 1;
   if (!finished && count > 0) {
     std::fprintf(stderr, "vellum watch: %d of %d scans restored before the timeout\n",

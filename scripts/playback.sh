@@ -19,9 +19,6 @@ for stage in decoder triangulator flattener restorer; do
   "$bin/daemons/vellum-$stage" --url "$url" --data "$data" >"$data/vellum-$stage.log" 2>&1 &
   pids+=($!)
 done
-# Follow the bus until the scan is restored (progress on stderr; the results line on stdout).
-"$bin/cli/vellum" watch --url "$url" --count 1 --timeout 600 &
-watcher=$!
-sleep 1  # Let the daemons and the watcher subscribe before the log starts.
-lcm-logplayer --lcm-url="$url" "$log" >/dev/null
-wait "$watcher"
+# Once every daemon's heartbeat is heard, play the log and follow the bus until the scan is
+# restored (progress on stderr; the results line on stdout).
+"$bin/cli/vellum" watch --url "$url" --count 1 --timeout 600 --play "$log"

@@ -290,15 +290,19 @@ TEST_F(StationTest, FullResolutionScanCrossesTheBusInChunks) {
 
 TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
   ASSERT_TRUE(fs::exists(kLog)) << kLog << " (made from tests/data at build time)";
-  StartProcessing();
-  WaitForHeartbeats(kProcessingStatus);
   std::vector<restored_t> restored;
   Listener<restored_t> on_restored(*lcm_, "RESTORED",
                                    [&](const restored_t& m) { restored.push_back(m); });
-  Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, kLog}, dir_ + "/player.log");
+  // As the demo plays it: `vellum watch --play` starts the player once every processing
+  // daemon's heartbeat is heard (the daemons are started after it, so it must wait).
+  Process player(
+      {Tool(), "watch", "--url", url_, "--count", "1", "--timeout", "300", "--play", kLog},
+      dir_ + "/watch.log");
+  StartProcessing();
   ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] { return !restored.empty(); }))
-      << "no RESTORED; player: " << player.Output();
+      << "no RESTORED; watch: " << player.Output();
   EXPECT_EQ(player.Wait(60), 0) << player.Output();
+  EXPECT_NE(player.Output().find("restored: "), std::string::npos) << player.Output();
   const restored_t& r = restored[0];
   EXPECT_EQ(r.view, "orthographic");
   EXPECT_GT(r.dpi, 30);
