@@ -136,7 +136,12 @@ std::vector<Flags::Spec> BusSpecs() {
 
 int RunScan(const std::vector<std::string>& args) {
   std::vector<Flags::Spec> specs = BusSpecs();
-  specs.push_back({"label", "TEXT", "a note for the scan (shelfmark, folio)", ""});
+  specs.push_back({"label", "TEXT", "a note for the scan, the operator's own words", ""});
+  specs.push_back({"shelfmark", "TEXT", "the object's shelfmark or call number (\"MS 12\")", ""});
+  specs.push_back({"folio", "TEXT", "the folio or page number (\"3\")", ""});
+  specs.push_back({"side", "SIDE", "recto, verso, left or right", ""});
+  specs.push_back({"operator", "NAME", "who scans", ""});
+  specs.push_back({"note", "TEXT", "anything else about the scan", ""});
   specs.push_back({"timeout", "S", "give up after this long", "600"});
   specs.push_back({"scan-id", "ID",
                    "the scan's id (0: this clock's microseconds); the station refuses an id it "
@@ -156,7 +161,20 @@ int RunScan(const std::vector<std::string>& args) {
   scan_request_t request{};
   request.scan_id = static_cast<int64_t>(flags.GetDouble("scan-id", 0, 9.2e18));
   if (request.scan_id <= 0) request.scan_id = station::NowUtime();
-  request.identity.label = flags.Get("label");
+  ScanIdentity identity;
+  identity.label = flags.Get("label");
+  identity.shelfmark = flags.Get("shelfmark");
+  identity.folio = flags.Get("folio");
+  identity.side = flags.Get("side");
+  identity.operator_name = flags.Get("operator");
+  identity.note = flags.Get("note");
+  std::string changed;
+  identity = SanitizedIdentity(identity, &changed);
+  if (!flags.Get("side").empty() && identity.side.empty()) {
+    throw UsageError("--side must be recto, verso, left or right, got '" + flags.Get("side") + "'");
+  }
+  if (!changed.empty()) std::fprintf(stderr, "vellum scan: %s\n", changed.c_str());
+  request.identity = station::ToMessage(identity);
   Follower follower(&node, request.scan_id);
   node.Publish(channel::kScanRequest, &request);
   if (isatty(2))

@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/sim/gantry.h"
@@ -172,6 +173,54 @@ TEST_F(IoTest, ScanRoundTrip) {
     EXPECT_TRUE(r.sequence.patterns[k] == scan.sequence.patterns[k]);
     EXPECT_EQ(cv::norm(r.frames[k], scan.frames[k], cv::NORM_INF), 0);
   }
+}
+
+// Issue 15: the catalogue identity in scan.yaml (DESIGN.md, "Identity"), kept through a round
+// trip, read as hand-written (a folio as a number), and made safe: control characters removed,
+// a field cut to 200 bytes, an unknown side dropped.
+TEST_F(IoTest, ScanIdentityRoundTripsAndIsSanitised) {
+  Scan scan = SmallScan();
+  scan.identity.shelfmark = "MS 12";
+  scan.identity.folio = "3";
+  scan.identity.side = "recto";
+  scan.identity.operator_name = "A. Scribe";
+  scan.identity.note = "burnt edge, Cotton fire 1731";
+  ASSERT_TRUE(WriteScan(Path("scan"), scan).ok());
+  Scan r;
+  ASSERT_TRUE(ReadScan(Path("scan"), &r).ok());
+  EXPECT_TRUE(r.identity == scan.identity);
+  PatternSequence sequence;
+  cv::Size camera;
+  ScanIdentity id;
+  ASSERT_TRUE(ReadScanYaml(Path("scan"), &sequence, &camera, &id).ok());
+  EXPECT_EQ(id.shelfmark, "MS 12");
+  // By hand: a folio written as a number, a side in capitals, a shelfmark with a control
+  // character and a note far too long.
+  std::string yaml;
+  {
+    std::ifstream in(Path("scan") + "/scan.yaml");
+    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const size_t at = yaml.find("shelfmark:");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  const size_t end = yaml.find("texture:");
+  yaml.replace(
+      at, end - at,
+      "shelfmark: \"MS\\t12\"\nfolio: 3\nside: Verso\nnote: \"" + std::string(300, 'x') + "\"\n");
+  std::ofstream(Path("scan") + "/scan.yaml") << yaml;
+  ASSERT_TRUE(ReadScanYaml(Path("scan"), &sequence, &camera, &id).ok());
+  EXPECT_EQ(id.shelfmark, "MS12");
+  EXPECT_EQ(id.folio, "3");
+  EXPECT_EQ(id.side, "verso");
+  EXPECT_EQ(id.note.size(), kMaxIdentityField);
+  EXPECT_TRUE(id.operator_name.empty());
+  std::string why;
+  ScanIdentity odd;
+  odd.side = "sideways";
+  odd.folio = "../../etc";
+  EXPECT_TRUE(SanitizedIdentity(odd, &why).side.empty());
+  EXPECT_NE(why.find("side 'sideways' is not recto, verso, left or right"), std::string::npos)
+      << why;
 }
 
 TEST_F(IoTest, ScanErrorsNameTheFileAndProblem) {

@@ -31,6 +31,16 @@ std::string Describe(const PatternSpec& s) {
   return d;
 }
 
+// scan.yaml's identity keys and the fields they hold.
+std::vector<std::pair<const char*, std::string*>> IdentityKeys(ScanIdentity& id) {
+  return {{"shelfmark", &id.shelfmark},    {"folio", &id.folio}, {"side", &id.side},
+          {"operator", &id.operator_name}, {"note", &id.note},   {"label", &id.label}};
+}
+std::vector<std::pair<const char*, const std::string*>> IdentityKeys(const ScanIdentity& id) {
+  return {{"shelfmark", &id.shelfmark},    {"folio", &id.folio}, {"side", &id.side},
+          {"operator", &id.operator_name}, {"note", &id.note},   {"label", &id.label}};
+}
+
 // The largest image a scan may hold, each side (a 24 MP camera is 6000 x 4000).
 constexpr uint32_t kMaxImageSide = 16384;
 
@@ -124,8 +134,8 @@ Status WriteImage(const std::string& path, const cv::Mat& image) {
   return ok ? Status::Ok() : Status::Error(path + ": cannot write image");
 }
 
-Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence,
-                     cv::Size camera_size) {
+Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
+                     const ScanIdentity& identity) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   try {
     cv::FileStorage out(path, cv::FileStorage::WRITE);
@@ -134,6 +144,9 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence,
     out << "version" << 1;
     out << "projector_size" << sequence.projector_size;
     if (camera_size.area() > 0) out << "camera_size" << camera_size;
+    for (const auto& [key, value] : IdentityKeys(identity)) {
+      if (!value->empty()) out << key << *value;
+    }
     out << "texture" << kTexture;
     out << "patterns"
         << "[";
@@ -155,7 +168,8 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence,
   return Status::Ok();
 }
 
-Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size) {
+Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
+                    ScanIdentity* identity) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
@@ -201,6 +215,21 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
     if (!s.ok()) return s;
     s = read_size("camera_size", camera_size, false);
     if (!s.ok()) return s;
+    if (identity) {
+      ScanIdentity read;
+      for (const auto& [key, value] : IdentityKeys(read)) {
+        const cv::FileNode n = in[key];
+        if (n.empty() || n.isNone()) continue;
+        if (n.isString()) {
+          *value = static_cast<std::string>(n);
+        } else if (n.isInt()) {
+          *value = std::to_string(static_cast<int>(n));  // folio: 3
+        } else {
+          return Status::Error(path + ": key '" + key + "' must be text");
+        }
+      }
+      *identity = SanitizedIdentity(read);
+    }
     const cv::FileNode list = in["patterns"];
     if (!list.isSeq() || list.size() == 0) {
       return Status::Error(path + ": key 'patterns' must be a non-empty sequence");
@@ -254,7 +283,7 @@ Status ReadTexture(const std::string& dir, cv::Mat* texture) {
 }
 
 Status ReadScan(const std::string& dir, Scan* scan) {
-  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size);
+  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture);
@@ -309,7 +338,7 @@ Status ReadScan(const std::string& dir, Scan* scan) {
 Status WriteScan(const std::string& dir, const Scan& scan) {
   Status s = MakeDirectories(dir);
   if (!s.ok()) return s;
-  s = WriteScanYaml(dir, scan.sequence, scan.camera_size);
+  s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = WriteImage((root / kTexture).string(), scan.texture);

@@ -15,10 +15,13 @@ namespace vellum {
 std::string FrameName(int index);    // "frame_007.png"
 std::string PatternName(int index);  // "pattern_007.png"
 
-// Reads scan.yaml only.
-Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size);
-// Writes scan.yaml; camera_size may be empty.
-Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size);
+// Reads scan.yaml only; its identity keys (shelfmark, folio, side, operator, note, label; any may
+// be absent) into *identity when given, sanitised (SanitizedIdentity).
+Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
+                    ScanIdentity* identity = nullptr);
+// Writes scan.yaml; camera_size may be empty; identity keys only when set.
+Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
+                     const ScanIdentity& identity = ScanIdentity());
 
 // Reads and validates a whole scan directory; errors name the file and the problem.
 Status ReadScan(const std::string& dir, Scan* scan);

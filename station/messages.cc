@@ -169,6 +169,28 @@ Status FromMessage(const pattern_spec_t& m, PatternSpec* spec) {
   return Status::Ok();
 }
 
+scan_identity_t ToMessage(const ScanIdentity& id) {
+  scan_identity_t m;
+  m.label = id.label;
+  m.shelfmark = id.shelfmark;
+  m.folio = id.folio;
+  m.side = id.side;
+  m.operator_name = id.operator_name;
+  m.note = id.note;
+  return m;
+}
+
+ScanIdentity FromMessage(const scan_identity_t& m) {
+  ScanIdentity id;
+  id.label = m.label;
+  id.shelfmark = m.shelfmark;
+  id.folio = m.folio;
+  id.side = m.side;
+  id.operator_name = m.operator_name;
+  id.note = m.note;
+  return SanitizedIdentity(id);
+}
+
 void ToMessage(const Calibration& calibration, calibration_t* msg) {
   ToModel(calibration.camera, &msg->camera);
   ToModel(calibration.projector, &msg->projector);

@@ -15,6 +15,7 @@
 #include "core/geometry/triangulate.h"
 #include "core/mesh/mesh.h"
 #include "core/patterns/patterns.h"
+#include "core/patterns/scan.h"
 #include "pipeline/report.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
@@ -23,6 +24,7 @@
 #include "vellum/mesh_t.hpp"
 #include "vellum/pattern_spec_t.hpp"
 #include "vellum/point_cloud_t.hpp"
+#include "vellum/scan_identity_t.hpp"
 #include "vellum/stage_report_t.hpp"
 #include "vellum/texture_t.hpp"
 
@@ -37,6 +39,9 @@ void ToMessage(const cv::Mat& image, image_t* msg);
 Status FromMessage(const image_t& msg, cv::Mat* image);  // A deep copy.
 
 pattern_spec_t ToMessage(const PatternSpec& spec);
+// A scan's identity on the bus and back (FromMessage sanitises: SanitizedIdentity).
+scan_identity_t ToMessage(const ScanIdentity& identity);
+ScanIdentity FromMessage(const scan_identity_t& msg);
 Status FromMessage(const pattern_spec_t& msg, PatternSpec* spec);
 
 void ToMessage(const Calibration& calibration, calibration_t* msg);

@@ -16,6 +16,7 @@ scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t sessio
   m.pattern_count = static_cast<int32_t>(scan.sequence.patterns.size());
   m.projector_width = scan.sequence.projector_size.width;
   m.projector_height = scan.sequence.projector_size.height;
+  m.identity = ToMessage(scan.identity);
   return m;
 }
 
@@ -90,6 +91,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
   lcm::LogFile log(log_path, "r");
   if (!log.good()) return Status::Error(log_path + ": cannot open as an LCM log");
   CaptureSet set;
+  ScanIdentity identity;
   *has_calibration = false;
   int64_t other = 0;
   int events = 0;
@@ -107,6 +109,11 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
       if (set.Has(c.pattern_index)) continue;  // A replay appended to the same log.
       Status s = set.Add(c);
       if (!s.ok()) return Status::Error(log_path + ": " + s.message());
+    } else if (e->channel == channel::kScanStarted) {
+      scan_started_t m;
+      if (SafeDecode(e->data, e->datalen, &m) && (scan_id == 0 || m.scan_id == scan_id)) {
+        identity = FromMessage(m.identity);
+      }
     } else if (e->channel == channel::kCalibration) {
       calibration_t c;
       if (!SafeDecode(e->data, e->datalen, &c)) {
@@ -132,6 +139,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
                          " is incomplete: " + set.Missing());
   }
   *scan = set.ToScan();
+  scan->identity = identity;
   *found_scan_id = set.scan_id();
   return Status::Ok();
 }

@@ -15,6 +15,7 @@
 #include "io/calibration_io.h"
 #include "station/messages.h"
 #include "station/node.h"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 namespace fs = std::filesystem;
@@ -226,7 +227,7 @@ static std::string ImageName(int pattern_index) {
 }
 
 Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed,
-                          int* count) {
+                          int* count, ScanIdentity* identity) {
   folder_ = folder;
   *count = 0;
   Status s = MakeDirectories(folder.raw());
@@ -238,6 +239,12 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
     lcm::LogFile old(folder.log(), "r");
     for (const lcm::LogEvent* e = old.good() ? old.readNextEvent() : nullptr; e;
          e = old.readNextEvent()) {
+      scan_started_t started;
+      if (e->channel == channel::kScanStarted && SafeDecode(e->data, e->datalen, &started) &&
+          started.scan_id == scan_id) {
+        *identity = FromMessage(started.identity);
+        continue;
+      }
       capture_t c;
       if (e->channel != channel::kCapture || !SafeDecode(e->data, e->datalen, &c) ||
           c.scan_id != scan_id || earlier.Has(c.pattern_index)) {
@@ -274,7 +281,7 @@ Status ScanRecorder::Write(const calibration_t& calibration) {
 }
 
 Status ScanRecorder::Finish(const Scan& scan) {
-  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size);
+  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity);
 }
 
 }  // namespace vellum::station

@@ -124,8 +124,10 @@ class ScanRecorder {
  public:
   // Opens the scan's folder. When its log already holds captures of this scan that were not
   // processed (the decoder restarted in the middle of the scan), they are taken up: added to
-  // *resumed (*count of them), their images written if missing.
-  Status Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed, int* count);
+  // *resumed (*count of them), their images written if missing; and the identity its
+  // SCAN_STARTED carried, into *identity.
+  Status Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed, int* count,
+              ScanIdentity* identity);
   Status Write(const capture_t& capture, const cv::Mat& image);
   Status Write(const calibration_t& calibration);
   Status Finish(const Scan& scan);

@@ -156,12 +156,17 @@ class StationTest : public ::testing::Test {
     // report.json: the same keys, and the same options and figures (not the times or paths).
     const nlohmann::json station = nlohmann::json::parse(ReadText(results + "/report.json"));
     const nlohmann::json process = nlohmann::json::parse(ReadText(processed + "/report.json"));
+    // A section absent from both (identity, for a scan without one) compares equal.
+    auto section_of = [](const nlohmann::json& j, const char* key) {
+      return j.contains(key) ? j[key] : nlohmann::json();
+    };
     std::set<std::string> station_keys, process_keys;
     JsonKeys(station, "", &station_keys);
     JsonKeys(process, "", &process_keys);
     EXPECT_EQ(station_keys, process_keys);
-    for (const char* section : {"options", "sizes", "pixels", "sheet", "flattening", "outputs"}) {
-      EXPECT_EQ(station[section], process[section]) << section;
+    for (const char* section :
+         {"identity", "options", "sizes", "pixels", "sheet", "flattening", "outputs"}) {
+      EXPECT_EQ(section_of(station, section), section_of(process, section)) << section;
     }
     EXPECT_GE(station_keys.count("options/max_epipolar_error_px"), 1u);
     const cv::Mat a = cv::imread(results + "/restored.tif", cv::IMREAD_UNCHANGED);
@@ -226,7 +231,11 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
                  dir_ + "/logger.log");
 
   std::string out;
-  ASSERT_EQ(RunTool({"scan", "--url", url_, "--label", "test leaf", "--timeout", "300"}, &out), 0)
+  ASSERT_EQ(
+      RunTool({"scan", "--url", url_, "--label", "test leaf", "--shelfmark", "MS 12", "--folio",
+               "3", "--side", "recto", "--operator", "A. Scribe", "--timeout", "300"},
+              &out),
+      0)
       << out;
   // "scan N restored: WxH at D dpi -> DIR/scans/scan-N/results"
   const size_t arrow = out.find("-> ");
@@ -258,6 +267,16 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
   }
   EXPECT_EQ(captures, patterns + 1);
   EXPECT_EQ(calibrations, 1);
+  // The catalogue identity given to `vellum scan` is in the scan's scan.yaml and its report.
+  Scan recorded;
+  ASSERT_TRUE(ReadScan(raw, &recorded).ok());
+  EXPECT_EQ(recorded.identity.shelfmark, "MS 12");
+  EXPECT_EQ(recorded.identity.side, "recto");
+  const nlohmann::json report = nlohmann::json::parse(ReadText(results + "/report.json"));
+  EXPECT_EQ(report["identity"]["shelfmark"], "MS 12") << report.dump();
+  EXPECT_EQ(report["identity"]["folio"], "3");
+  EXPECT_EQ(report["identity"]["operator"], "A. Scribe");
+  EXPECT_EQ(report["identity"]["label"], "test leaf");
 
   ExpectSameAsProcess(raw, results);
 

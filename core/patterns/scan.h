@@ -3,17 +3,48 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <string>
 #include <vector>
 
 #include "core/patterns/patterns.h"
 
 namespace vellum {
 
+// What the scanned object is, for the catalogue (DESIGN.md, "Identity"); every field may be
+// empty. In scan.yaml as shelfmark, folio, side, operator, note and label.
+struct ScanIdentity {
+  std::string shelfmark;  // Shelfmark or call number ("MS 12").
+  std::string folio;      // Folio or page number ("3").
+  std::string side;       // recto, verso, left, right, or empty.
+  std::string operator_name;
+  std::string note;
+  std::string label;  // The operator's own words.
+
+  bool empty() const {
+    return shelfmark.empty() && folio.empty() && side.empty() && operator_name.empty() &&
+           note.empty() && label.empty();
+  }
+  bool operator==(const ScanIdentity& o) const {
+    return shelfmark == o.shelfmark && folio == o.folio && side == o.side &&
+           operator_name == o.operator_name && note == o.note && label == o.label;
+  }
+};
+
+// The most bytes a field of ScanIdentity may hold.
+inline constexpr size_t kMaxIdentityField = 200;
+
+// Identity text from anyone (a flag, a message, a file) made safe to keep: control characters
+// removed, cut to kMaxIdentityField bytes (at a UTF-8 character boundary), spaces trimmed;
+// `side` lower-cased. Sets *why (if given) to what was wrong with the input: an unknown side
+// (then dropped), or text that had to be changed; empty when it was clean.
+ScanIdentity SanitizedIdentity(const ScanIdentity& identity, std::string* why = nullptr);
+
 struct Scan {
   PatternSequence sequence;
   cv::Size camera_size;         // 0x0 when unknown (a pattern set not yet captured).
   cv::Mat texture;              // 8-bit gray or BGR.
   std::vector<cv::Mat> frames;  // 8-bit gray, one per pattern.
+  ScanIdentity identity;
 };
 
 }  // namespace vellum

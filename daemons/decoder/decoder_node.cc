@@ -38,7 +38,12 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     last_capture_ = std::chrono::steady_clock::now();  // The texture is awaited from now.
     if (!Log(channel::kScanStarted, msg.scan_id, msg.utime, Encode(msg))) return;
     const int64_t id = msg.scan_id;
-    node_->Post([this, id] { Begin(id); }, "a SCAN_STARTED");
+    const ScanIdentity identity = FromMessage(msg.identity);
+    node_->Post(
+        [this, id, identity] {
+          if (Begin(id)) identity_ = identity;
+        },
+        "a SCAN_STARTED");
   });
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
     // A capture that contradicts itself is refused before it reaches the scan's log (which
@@ -163,8 +168,9 @@ bool DecoderNode::Begin(int64_t scan_id) {
   supervisor_.Recording(scan_id);
   waiting_ = true;
   int resumed = 0;
+  identity_ = ScanIdentity();
   const ScanFolder folder = ScanFolder::For(options_.data_dir, scan_id);
-  const Status s = recorder_.Open(folder, scan_id, &set_, &resumed);
+  const Status s = recorder_.Open(folder, scan_id, &set_, &resumed, &identity_);
   if (!s.ok()) {
     Fail(scan_id, "cannot record: " + s.message());
     return false;
@@ -211,7 +217,8 @@ void DecoderNode::Complete() {
   waiting_ = false;
   supervisor_.Recording(0);
   const int64_t id = set_.scan_id();
-  const Scan scan = set_.ToScan();
+  Scan scan = set_.ToScan();
+  scan.identity = identity_;
   const Status s = recorder_.Finish(scan);
   if (!s.ok()) {
     Fail(id, s.message());

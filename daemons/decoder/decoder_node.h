@@ -64,6 +64,7 @@ class DecoderNode {
   DecodeResult decoded_;
   CaptureSet set_;
   int64_t recording_ = 0;  // The scan whose folder is open.
+  ScanIdentity identity_;  // Its identity (SCAN_STARTED), for its scan.yaml and report.
   ScanRecorder recorder_;
   Supervisor supervisor_;
   ScanGate gate_;  // Decides on the LCM thread; the worker closes scans it gives up.
