@@ -31,16 +31,6 @@ std::string Describe(const PatternSpec& s) {
   return d;
 }
 
-// scan.yaml's identity keys and the fields they hold.
-std::vector<std::pair<const char*, std::string*>> IdentityKeys(ScanIdentity& id) {
-  return {{"shelfmark", &id.shelfmark},    {"folio", &id.folio}, {"side", &id.side},
-          {"operator", &id.operator_name}, {"note", &id.note},   {"label", &id.label}};
-}
-std::vector<std::pair<const char*, const std::string*>> IdentityKeys(const ScanIdentity& id) {
-  return {{"shelfmark", &id.shelfmark},    {"folio", &id.folio}, {"side", &id.side},
-          {"operator", &id.operator_name}, {"note", &id.note},   {"label", &id.label}};
-}
-
 // The largest image a scan may hold, each side (a 24 MP camera is 6000 x 4000).
 constexpr uint32_t kMaxImageSide = 16384;
 
@@ -144,9 +134,9 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
     out << "version" << 1;
     out << "projector_size" << sequence.projector_size;
     if (camera_size.area() > 0) out << "camera_size" << camera_size;
-    for (const auto& [key, value] : IdentityKeys(identity)) {
-      if (!value->empty()) out << key << *value;
-    }
+    ForEachIdentityField(identity, [&](const char* key, const std::string& value) {
+      if (!value.empty()) out << key << value;
+    });
     out << "texture" << kTexture;
     out << "patterns"
         << "[";
@@ -217,17 +207,19 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
     if (!s.ok()) return s;
     if (identity) {
       ScanIdentity read;
-      for (const auto& [key, value] : IdentityKeys(read)) {
+      std::string bad;  // The first key that is not text.
+      ForEachIdentityField(read, [&](const char* key, std::string& value) {
         const cv::FileNode n = in[key];
-        if (n.empty() || n.isNone()) continue;
+        if (n.empty() || n.isNone()) return;
         if (n.isString()) {
-          *value = static_cast<std::string>(n);
+          value = static_cast<std::string>(n);
         } else if (n.isInt()) {
-          *value = std::to_string(static_cast<int>(n));  // folio: 3
-        } else {
-          return Status::Error(path + ": key '" + key + "' must be text");
+          value = std::to_string(static_cast<int>(n));  // folio: 3
+        } else if (bad.empty()) {
+          bad = key;
         }
-      }
+      });
+      if (!bad.empty()) return Status::Error(path + ": key '" + bad + "' must be text");
       *identity = SanitizedIdentity(read);
     }
     const cv::FileNode list = in["patterns"];

@@ -95,15 +95,9 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   r.Number("options", "min_modulation_dn", o.min_modulation_dn);
   r.Number("options", "max_unwrap_error", o.max_unwrap_error);
   // What the object is (scan.yaml, or SCAN_STARTED at the station), for the report.
-  for (const auto& [key, value] :
-       {std::pair<const char*, const std::string*>{"shelfmark", &scan.identity.shelfmark},
-        {"folio", &scan.identity.folio},
-        {"side", &scan.identity.side},
-        {"operator", &scan.identity.operator_name},
-        {"note", &scan.identity.note},
-        {"label", &scan.identity.label}}) {
-    if (!value->empty()) r.Text("identity", key, *value);
-  }
+  ForEachIdentityField(scan.identity, [&](const char* key, const std::string& value) {
+    if (!value.empty()) r.Text("identity", key, value);
+  });
   r.Text("sizes", "camera", SizeText(scan.camera_size));
   r.Text("sizes", "projector", SizeText(scan.sequence.projector_size));
   r.Number("sizes", "patterns", static_cast<double>(scan.sequence.patterns.size()));

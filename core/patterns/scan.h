@@ -30,6 +30,18 @@ struct ScanIdentity {
   }
 };
 
+// Calls f(key, field) for each field of a ScanIdentity (const or not), under its key in
+// scan.yaml and in report.json's identity section.
+template <class Identity, class F>
+void ForEachIdentityField(Identity& id, F&& f) {
+  f("shelfmark", id.shelfmark);
+  f("folio", id.folio);
+  f("side", id.side);
+  f("operator", id.operator_name);
+  f("note", id.note);
+  f("label", id.label);
+}
+
 // The most bytes a field of ScanIdentity may hold.
 inline constexpr size_t kMaxIdentityField = 200;
 

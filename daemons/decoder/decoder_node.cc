@@ -38,12 +38,8 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     last_capture_ = std::chrono::steady_clock::now();  // The texture is awaited from now.
     if (!Log(channel::kScanStarted, msg.scan_id, msg.utime, Encode(msg))) return;
     const int64_t id = msg.scan_id;
-    const ScanIdentity identity = FromMessage(msg.identity);
-    node_->Post(
-        [this, id, identity] {
-          if (Begin(id)) identity_ = identity;
-        },
-        "a SCAN_STARTED");
+    // Begin takes the identity from the log, where this SCAN_STARTED now is.
+    node_->Post([this, id] { Begin(id); }, "a SCAN_STARTED");
   });
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& msg) {
     // A capture that contradicts itself is refused before it reaches the scan's log (which
