@@ -51,6 +51,42 @@ double ReprojectionRms(const std::vector<cv::Point3f>& object,
   return image.empty() ? 0 : std::sqrt(sum / image.size());
 }
 
+// The grid's corners renumbered as the grid turned by `turns` quarter turns: a W x H grid,
+// row-major, becomes H x W for odd turns. A turn keeps the board's handedness.
+std::vector<cv::Point2f> TurnGrid(const std::vector<cv::Point2f>& c, cv::Size size, int turns,
+                                  cv::Size* turned) {
+  const int w = size.width, h = size.height;
+  *turned = turns % 2 ? cv::Size(h, w) : size;
+  std::vector<cv::Point2f> out;
+  out.reserve(c.size());
+  for (int jn = 0; jn < turned->height; ++jn) {
+    for (int in = 0; in < turned->width; ++in) {
+      int i = in, j = jn;  // The corner's place in the grid as detected.
+      if (turns == 1) i = jn, j = h - 1 - in;
+      if (turns == 2) i = w - 1 - in, j = h - 1 - jn;
+      if (turns == 3) i = w - 1 - jn, j = in;
+      out.push_back(c[static_cast<size_t>(j) * w + i]);
+    }
+  }
+  return out;
+}
+
+// The quarter turns (of those with the parity `parity`, or any for -1) that make the grid's
+// first row run most nearly along the image's +x.
+int TurnsAlongImageX(const std::vector<cv::Point2f>& c, cv::Size size, int parity) {
+  int best = 0;
+  double best_cos = -2;
+  for (int turns = 0; turns < 4; ++turns) {
+    if (parity >= 0 && turns % 2 != parity) continue;
+    cv::Size turned;
+    const std::vector<cv::Point2f> t = TurnGrid(c, size, turns, &turned);
+    const cv::Point2f row = t[turned.width - 1] - t[0];
+    const double cos = row.x / std::max(1e-9, std::hypot(double{row.x}, double{row.y}));
+    if (cos > best_cos) best_cos = cos, best = turns;
+  }
+  return best;
+}
+
 CameraModel ToModel(cv::Size size, const cv::Mat& k, const cv::Mat& d, const cv::Matx33d& r,
                     const cv::Vec3d& t) {
   CameraModel m;
@@ -246,7 +282,7 @@ double Median(std::vector<double> v) {
 CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
                                      const BoardSpec& board, const CalibrateOptions& options) {
   CalibrationSolution sol;
-  const std::vector<cv::Point3f> object = BoardPoints(board);
+  std::vector<cv::Point3f> object = BoardPoints(board);
   std::vector<std::vector<cv::Point2f>> cam, proj;
   std::vector<size_t> used;
   cv::Size camera_size, projector_size;
@@ -317,6 +353,34 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
     return sol;
   }
   size_t ti = static_cast<size_t>(table_at - used.begin());
+  // The world's x runs along the camera's image rows on the table pose (as the rig's world
+  // does, and the restored page with it). Each pose's corners are renumbered by the quarter
+  // turns that make it so: a board size given transposed (COLSxROWS for ROWSxCOLS) solves just
+  // as well, but with the world, and every restored page, turned a quarter turn; so does a board
+  // laid on the table turned round. Then the board is taken at its size as it lies, and named.
+  const int table_turns = TurnsAlongImageX(cam[ti], board.inner_corners, -1);
+  cv::Size size = board.inner_corners;
+  for (size_t n = 0; n < cam.size(); ++n) {
+    const int turns =
+        n == ti ? table_turns : TurnsAlongImageX(cam[n], board.inner_corners, table_turns % 2);
+    cam[n] = TurnGrid(cam[n], board.inner_corners, turns, &size);
+    cv::Size same;
+    proj[n] = TurnGrid(proj[n], board.inner_corners, turns, &same);
+  }
+  if (size != board.inner_corners) {
+    const auto wxh = [](cv::Size s) {
+      return std::to_string(s.width) + "x" + std::to_string(s.height);
+    };
+    sol.warnings.push_back(
+        "the board was given as " + wxh(board.inner_corners) + " inner corners, but on the table "
+        "pose its rows run down the camera's image: it lies " + wxh(size) +
+        " (the size given transposed, or the board turned a quarter turn on the table); solved as " +
+        wxh(size) + ", so that the world's x runs along the camera's rows");
+    BoardSpec turned = board;
+    turned.inner_corners = size;
+    object = BoardPoints(turned);
+  }
+  sol.board = size;
   PoseSolve solved;
   Status s = SolvePoses(object, cam, proj, ti, camera_size, projector_size, &solved);
   if (!s.ok()) {

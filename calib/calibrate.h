@@ -79,6 +79,9 @@ struct CalibrationSolution {
   Calibration calibration;
   std::vector<ViewReport> views;  // One per input pose, in input order.
   int views_used = 0, corners_used = 0;
+  // The board's inner corners as it lies on the table pose, across the camera's rows and down
+  // (the size given, or transposed when it was given the wrong way round: see warnings).
+  cv::Size board;
   double camera_rms_px = 0, projector_rms_px = 0, stereo_rms_px = 0;
   // Errors above CalibrateOptions::warn_reprojection_px, and outlier poses (dropped, named).
   std::vector<std::string> warnings;

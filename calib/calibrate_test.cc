@@ -215,7 +215,8 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
   EXPECT_NE(no_table.status.message().find("table pose is not usable"), std::string::npos);
 }
 
-// Issue 14: poses that would make a wrong calibration are not used silently. The same pose
+// Issue 14: poses that would make a wrong calibration are not used silently. A board size given
+// transposed is detected and corrected. The same pose
 // given twice is refused (one folder given four times leaves one pose: no solve); a pose whose
 // projector corners are 2.3 px off is dropped by the outlier rule, so the solve equals the
 // clean solve (within 0.05 degrees and 0.3 mm, the issue's bar); a solve whose errors are over
@@ -223,15 +224,43 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
 // is reported.
 TEST(Calibrate, DuplicateAndOutlierPosesAreRefusedOrDroppedAndNamed) {
   const Calibration rig = SmallRig();
-  std::vector<BoardView> views;
+  std::vector<BoardView> views, transposed;
+  BoardSpec wrong_way;  // 21 x 16 given for the 16 x 21 board.
+  wrong_way.inner_corners = cv::Size(21, 16);
   for (size_t i = 0; i < 6; ++i) {
-    views.push_back(
-        DetectBoard(RenderPose(rig, kPoses[i], 30 + i), BoardSpec(), "pose" + std::to_string(i)));
+    const Scan scan = RenderPose(rig, kPoses[i], 30 + i);
+    views.push_back(DetectBoard(scan, BoardSpec(), "pose" + std::to_string(i)));
     ASSERT_TRUE(views.back().status.ok()) << views.back().status.message();
+    transposed.push_back(DetectBoard(scan, wrong_way, "pose" + std::to_string(i)));
+    ASSERT_TRUE(transposed.back().status.ok()) << transposed.back().status.message();
   }
   const CalibrationSolution clean = SolveCalibration(views, 0, BoardSpec());
   ASSERT_TRUE(clean.status.ok()) << clean.status.message();
   EXPECT_EQ(clean.views_used, 6);
+  EXPECT_EQ(clean.board, cv::Size(16, 21));
+  EXPECT_TRUE(clean.warnings.empty()) << FormatCalibrationReport(clean);
+
+  // The board size given transposed: the board is found either way, and would solve as well
+  // with the world turned a quarter turn (every restored page with it). It is detected from the
+  // table pose (its rows run down the camera's image), named, and corrected: the whole world
+  // frame equals the clean solve's (the same gauge: 0.05 degrees and 0.3 mm, the issue's bar).
+  const CalibrationSolution turned = SolveCalibration(transposed, 0, wrong_way);
+  ASSERT_TRUE(turned.status.ok()) << turned.status.message();
+  EXPECT_EQ(turned.board, cv::Size(16, 21));
+  const std::string turned_report = FormatCalibrationReport(turned);
+  EXPECT_NE(turned_report.find("given as 21x16 inner corners"), std::string::npos)
+      << turned_report;
+  EXPECT_NE(turned_report.find("it lies 16x21"), std::string::npos) << turned_report;
+  for (const auto& [name, a, b] :
+       {std::make_tuple("camera", clean.calibration.camera, turned.calibration.camera),
+        std::make_tuple("projector", clean.calibration.projector, turned.calibration.projector)}) {
+    const double deg = AngleDeg(a.rotation, b.rotation);
+    const double mm = cv::norm(a.Center() - b.Center());
+    std::printf("[calib] transposed board size, corrected: %s %.4f deg, %.4f mm from clean\n",
+                name, deg, mm);
+    EXPECT_LE(deg, 0.05) << name;
+    EXPECT_LE(mm, 0.3) << name;
+  }
   EXPECT_TRUE(clean.over_limits.empty()) << clean.over_limits;
   EXPECT_FALSE(clean.leave_one_out_pose.empty());
   std::printf("[calib] leave one pose out: %.4f deg, %.3f mm (without %s)\n",
