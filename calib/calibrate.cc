@@ -371,11 +371,13 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
     const auto wxh = [](cv::Size s) {
       return std::to_string(s.width) + "x" + std::to_string(s.height);
     };
-    sol.warnings.push_back(
-        "the board was given as " + wxh(board.inner_corners) + " inner corners, but on the table "
-        "pose its rows run down the camera's image: it lies " + wxh(size) +
-        " (the size given transposed, or the board turned a quarter turn on the table); solved as " +
-        wxh(size) + ", so that the world's x runs along the camera's rows");
+    sol.warnings.push_back("the board was given as " + wxh(board.inner_corners) +
+                           " inner corners, but on the table "
+                           "pose its rows run down the camera's image: it lies " +
+                           wxh(size) +
+                           " (the size given transposed, or the board turned a quarter turn on the "
+                           "table); solved as " +
+                           wxh(size) + ", so that the world's x runs along the camera's rows");
     BoardSpec turned = board;
     turned.inner_corners = size;
     object = BoardPoints(turned);

@@ -248,16 +248,15 @@ TEST(Calibrate, DuplicateAndOutlierPosesAreRefusedOrDroppedAndNamed) {
   ASSERT_TRUE(turned.status.ok()) << turned.status.message();
   EXPECT_EQ(turned.board, cv::Size(16, 21));
   const std::string turned_report = FormatCalibrationReport(turned);
-  EXPECT_NE(turned_report.find("given as 21x16 inner corners"), std::string::npos)
-      << turned_report;
+  EXPECT_NE(turned_report.find("given as 21x16 inner corners"), std::string::npos) << turned_report;
   EXPECT_NE(turned_report.find("it lies 16x21"), std::string::npos) << turned_report;
   for (const auto& [name, a, b] :
        {std::make_tuple("camera", clean.calibration.camera, turned.calibration.camera),
         std::make_tuple("projector", clean.calibration.projector, turned.calibration.projector)}) {
     const double deg = AngleDeg(a.rotation, b.rotation);
     const double mm = cv::norm(a.Center() - b.Center());
-    std::printf("[calib] transposed board size, corrected: %s %.4f deg, %.4f mm from clean\n",
-                name, deg, mm);
+    std::printf("[calib] transposed board size, corrected: %s %.4f deg, %.4f mm from clean\n", name,
+                deg, mm);
     EXPECT_LE(deg, 0.05) << name;
     EXPECT_LE(mm, 0.3) << name;
   }

@@ -5,6 +5,7 @@
 #include "core/common/text.h"
 #include "flags/options.h"
 #include "pipeline/process.h"
+#include "pipeline/qc.h"
 
 namespace vellum {
 
@@ -80,6 +81,13 @@ int RunProcess(const std::vector<std::string>& args) {
                     : " (camera view)");
   }
   std::printf("results in %s\n", out.c_str());
+  const QcResult qc = AssessQuality(result.report);
+  std::printf("quality: %s\n", VerdictName(qc.verdict));
+  for (const QcCheck& c : qc.checks) {
+    if (c.verdict != QcVerdict::kPass) {
+      std::printf("  %s: %s: %s\n", c.name.c_str(), VerdictName(c.verdict), c.detail.c_str());
+    }
+  }
   // A doubtful result is written, and said so: on stderr and in the exit status.
   const std::vector<Warning> warnings = result.report.Warnings();
   for (const Warning& w : warnings) {

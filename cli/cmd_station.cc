@@ -17,6 +17,7 @@
 #include "cli/progress.h"
 #include "io/calibration_io.h"
 #include "station/chain.h"
+#include "station/contact_sheet.h"
 #include "station/daemon.h"
 #include "station/messages.h"
 #include "station/node.h"
@@ -63,6 +64,8 @@ class Follower {
                       ? (" at " + std::to_string(static_cast<int>(m.dpi)) + " dpi").c_str()
                       : " (camera view)",
                   m.results.c_str());
+      std::printf("scan %lld quality: %s (%s/report.html)\n", static_cast<long long>(m.scan_id),
+                  m.qc.c_str(), m.results.c_str());
       for (const std::string& w : m.warnings) {
         std::fprintf(stderr, "scan %lld: warning %s\n", static_cast<long long>(m.scan_id),
                      w.c_str());
@@ -194,6 +197,30 @@ int RunScan(const std::vector<std::string>& args) {
     return 1;
   }
   return follower.warned() > 0 ? kExitDoubtful : 0;
+}
+
+int RunSheet(const std::vector<std::string>& args) {
+  Flags flags("vellum sheet",
+              "Writes DATA/index.html: a contact sheet of every scan in a station's data folder\n"
+              "(newest first, earlier attempts of retaken folios after), each with its restored\n"
+              "page, identity, quality verdict or failure, and links to its report and TIFF.\n"
+              "The restorer writes it after each scan; this writes it now.",
+              {{"data", "DIR", "the station's data folder", "scans"}});
+  if (!flags.Parse(args)) return 0;
+  const std::string data = flags.Get("data");
+  if (!PathExists(data)) throw UsageError("--data " + data + ": no such folder");
+  const std::vector<station::SheetEntry> entries = station::ReadSheet(data);
+  const Status s = station::WriteContactSheet(data);
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum sheet: %s\n", s.message().c_str());
+    return 1;
+  }
+  std::map<std::string, int> states;
+  for (const station::SheetEntry& e : entries) ++states[e.retaken ? "retaken" : e.state];
+  std::printf("%zu scan(s):", entries.size());
+  for (const auto& [state, n] : states) std::printf(" %d %s", n, state.c_str());
+  std::printf(" -> %s/index.html\n", data.c_str());
+  return 0;
 }
 
 int RunWatch(const std::vector<std::string>& args) {

@@ -20,6 +20,7 @@ constexpr char kUsage[] =
     "  process    process a scan directory into the restored page (and 3D products)\n"
     "  scan       ask the station for a scan and follow it to the restored page\n"
     "  watch      follow the station's bus until scans are restored\n"
+    "  sheet      write the contact sheet of a station's data folder (DATA/index.html)\n"
     "  export     write a recorded scan log as a scan directory (vellum export LOG DIR)\n"
     "  import     write a scan directory as a scan log (vellum import DIR LOG)\n"
     "  calibrate  calibrate camera, projector and table from board poses (capture | solve)\n"
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
     if (command == "process") return vellum::RunProcess(args);
     if (command == "scan") return vellum::RunScan(args);
     if (command == "watch") return vellum::RunWatch(args);
+    if (command == "sheet") return vellum::RunSheet(args);
     if (command == "export") return vellum::RunExport(args);
     if (command == "import") return vellum::RunImport(args);
     if (command == "calibrate") return vellum::RunCalibrate(args);

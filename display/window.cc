@@ -88,14 +88,24 @@ cv::Mat Window::Screen() const {
   return out;
 }
 
-bool Window::Poll(std::vector<SDL_Keycode>* keys) {
+bool Window::Poll(std::vector<Input>* input) {
   bool open = true;
   SDL_Event e;
   while (SDL_PollEvent(&e)) {
     if (e.type == SDL_QUIT) open = false;
-    if (e.type == SDL_KEYDOWN && keys) keys->push_back(e.key.keysym.sym);
+    if (!input) continue;
+    if (e.type == SDL_KEYDOWN) input->push_back({e.key.keysym.sym, ""});
+    if (e.type == SDL_TEXTINPUT) input->push_back({0, e.text.text});
   }
   return open;
+}
+
+void Window::TextInput(bool on) {
+  if (on) {
+    SDL_StartTextInput();
+  } else {
+    SDL_StopTextInput();
+  }
 }
 
 }  // namespace vellum::display

@@ -38,9 +38,16 @@ class Window {
   void Show(const cv::Mat& image, Flip flip = Flip::kNone);
   // What is on screen now, as BGR (read back from the renderer).
   cv::Mat Screen() const;
-  // Handles the window's events: keys pressed are appended to `keys` (if given); false once
+  // Handles the window's events: what the keyboard gave, in order, is appended to `input` (if
+  // given): each key pressed, and the text typed (UTF-8, while text input is on); false once
   // the window was closed.
-  bool Poll(std::vector<SDL_Keycode>* keys = nullptr);
+  struct Input {
+    SDL_Keycode key = 0;  // 0 for text.
+    std::string text;
+  };
+  bool Poll(std::vector<Input>* input = nullptr);
+  // Text input (an on-screen or input-method keyboard, and SDL_TEXTINPUT events) on or off.
+  void TextInput(bool on);
 
  private:
   cv::Size size_;

@@ -1,31 +1,17 @@
 #include "pipeline/report.h"
 
 #include <algorithm>
+#include <ctime>
 #include <filesystem>
 #include <sstream>
 
+#include "core/common/text.h"
 #include "io/json.h"
+#include "pipeline/qc.h"
 
 namespace vellum {
 namespace fs = std::filesystem;
 namespace {
-
-std::string Escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '<')
-      out += "&lt;";
-    else if (c == '>')
-      out += "&gt;";
-    else if (c == '&')
-      out += "&amp;";
-    else if (c == '"')
-      out += "&quot;";
-    else
-      out += c;
-  }
-  return out;
-}
 
 std::string Number(double v, int precision = 3) {
   std::ostringstream o;
@@ -74,20 +60,71 @@ Json ToJson(const ReportValue& v) { return v.is_text ? Json(v.text) : JsonNumber
 Status WriteHtml(const std::string& dir, const std::string& title, const ProcessReport& r) {
   std::ostringstream h;
   h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>vellum: "
-    << Escape(title) << "</title>\n<style>\n"
+    << HtmlEscape(title) << "</title>\n<style>\n"
     << "body{font-family:sans-serif;margin:2em;max-width:1500px;color:#222}\n"
     << "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px "
        "10px;text-align:left}\nfigure{margin:1.5em 0}img{max-width:100%;border:1px solid "
-       "#ccc}\nfigcaption{color:#555;margin-top:4px}.warn{color:#a40}\n"
+       "#ccc}\nfigcaption{color:#555;margin-top:4px}.identity{font-size:1.1em}\n"
+       "figure.restored img{max-height:90vh}.warn{color:#a40}\n"
        ".warnings{border:2px solid #a40;padding:0.5em 1em;background:#fff6f0}\n"
+       ".qc{border:3px solid;padding:0.2em 1em;margin:1em 0}.qc h2{margin:0.3em 0}\n"
+       ".qc-pass{border-color:#2a2;color:#161}.qc-warn{border-color:#d90;color:#850}"
+       ".qc-fail{border-color:#c22;color:#a11}tr.qc-pass td,tr.qc-warn td,tr.qc-fail td"
+       "{color:inherit}\n"
        "</style></head><body>\n";
-  h << "<h1>vellum: " << Escape(title) << "</h1>\n";
+  h << "<h1>vellum: " << HtmlEscape(title) << "</h1>\n";
+  // What was scanned (the scan's identity) and when this report was made.
+  std::string identity;
+  for (const char* key : {"shelfmark", "folio", "side", "label", "operator", "note"}) {
+    const std::string value = r.Text("identity", key);
+    if (value.empty()) continue;
+    identity += (identity.empty() ? "" : " &middot; ") + std::string("<b>") + key + "</b> " +
+                HtmlEscape(value);
+  }
+  const std::time_t now = std::time(nullptr);
+  char made[64];
+  std::strftime(made, sizeof(made), "%Y-%m-%d %H:%M:%S UTC", std::gmtime(&now));
+  h << "<p class=identity>" << (identity.empty() ? "No catalogue identity given." : identity)
+    << "<br>Report made " << made << ".</p>\n";
+  // Quality control first: the verdict in its colour, and each check.
+  const QcResult qc = AssessQuality(r);
+  h << "<div class=\"qc qc-" << VerdictName(qc.verdict)
+    << "\"><h2>Quality: " << VerdictName(qc.verdict) << "</h2>\n<table>\n";
+  for (const QcCheck& c : qc.checks) {
+    h << "<tr class=\"qc-" << VerdictName(c.verdict) << "\"><th>" << HtmlEscape(c.name)
+      << "</th><td>" << VerdictName(c.verdict) << "</td><td>" << HtmlEscape(c.detail)
+      << "</td></tr>\n";
+  }
+  h << "</table></div>\n";
+  // The restored page(s), whole, each linking to its full-resolution TIFF.
+  const std::vector<std::string> written = r.Outputs();
+  for (const std::string& page : r.Pages()) {
+    const std::string picture = "report/restored" + (page.empty() ? "" : "-" + page) + ".png";
+    if (std::find(written.begin(), written.end(), picture) == written.end()) continue;
+    const std::string tif = page.empty() ? "restored.tif" : "pages/" + page + "/restored.tif";
+    const double bar = r.Number("restored", "scale_bar_mm", page);
+    std::ostringstream caption;
+    caption << (page.empty() ? "The restored page" : "The " + page + " page, restored");
+    if (r.Find("restored", "leaf_width_mm", page)) {
+      caption << ": the leaf " << Number(r.Number("restored", "leaf_width_mm", page), 4) << " x "
+              << Number(r.Number("restored", "leaf_height_mm", page), 4) << " mm";
+    }
+    if (bar > 0) {
+      caption << ", " << Number(r.Number("restored", "dpi", page), 4) << " ppi; the scale bar is "
+              << Number(bar) << " mm";
+    } else {
+      caption << " (camera view: no true scale)";
+    }
+    h << "<figure class=restored><a href=\"" << tif << "\"><img src=\"" << picture << "\" alt=\""
+      << HtmlEscape(caption.str()) << "\"></a><figcaption>" << HtmlEscape(caption.str())
+      << ". Full resolution: <a href=\"" << tif << "\">" << tif << "</a></figcaption></figure>\n";
+  }
   const std::vector<Warning> warnings = r.Warnings();
   if (!warnings.empty()) {
     h << "<div class=warnings><h2 class=warn>Warnings: check this scan before it is "
          "delivered</h2>\n<ul>\n";
     for (const Warning& w : warnings) {
-      h << "<li><b>" << Escape(w.code) << "</b>: " << Escape(w.message) << "</li>\n";
+      h << "<li><b>" << HtmlEscape(w.code) << "</b>: " << HtmlEscape(w.message) << "</li>\n";
     }
     h << "</ul></div>\n";
   }
@@ -97,7 +134,7 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
     << Number(pixels > 0 ? 100.0 * valid / pixels : 0) << "%); leaf "
     << r.Number("outline", "leaf_pixels") << "</td></tr>\n";
   if (r.Find("outline", "method")) {
-    h << "<tr><th>Leaf found by</th><td>" << Escape(r.Text("outline", "method")) << ", rim "
+    h << "<tr><th>Leaf found by</th><td>" << HtmlEscape(r.Text("outline", "method")) << ", rim "
       << Number(100 * r.Number("outline", "confidence")) << "% set apart, "
       << r.Number("outline", "holes") << " holes, " << r.Number("outline", "pages")
       << " page(s)</td></tr>\n";
@@ -110,8 +147,8 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
       << Number(r.Number("flattening", "max_strain", page))
       << (folded > 0 ? ", <span class=warn>" : ", ") << folded << " folded quads"
       << (folded > 0 ? "</span>" : "") << "</td></tr>\n";
-    h << "<tr><th>Sheet" << of << "</th><td>" << Escape(r.Text("sheet", "grid", page)) << ", "
-      << Escape(r.Text("flattening", "solver", page)) << ", "
+    h << "<tr><th>Sheet" << of << "</th><td>" << HtmlEscape(r.Text("sheet", "grid", page)) << ", "
+      << HtmlEscape(r.Text("flattening", "solver", page)) << ", "
       << r.Number("flattening", "iterations", page) << " iterations</td></tr>\n";
     if (r.Find("restored", "width", page)) {
       h << "<tr><th>Restored" << of << "</th><td>" << r.Number("restored", "width", page) << " x "
@@ -122,16 +159,21 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
                 : std::string("camera view"))
         << "</td></tr>\n";
     }
+    if (r.Find("restored", "leaf_width_mm", page)) {
+      h << "<tr><th>Leaf size" << of << "</th><td>"
+        << Number(r.Number("restored", "leaf_width_mm", page), 4) << " x "
+        << Number(r.Number("restored", "leaf_height_mm", page), 4) << " mm</td></tr>\n";
+    }
   }
   h << "<tr><th>Height</th><td>" << Number(r.Number("height_mm", "min")) << " .. "
     << Number(r.Number("height_mm", "max")) << " mm</td></tr>\n";
-  h << "<tr><th>Sizes</th><td>camera " << Escape(r.Text("sizes", "camera")) << ", projector "
-    << Escape(r.Text("sizes", "projector")) << ", " << r.Number("sizes", "patterns")
+  h << "<tr><th>Sizes</th><td>camera " << HtmlEscape(r.Text("sizes", "camera")) << ", projector "
+    << HtmlEscape(r.Text("sizes", "projector")) << ", " << r.Number("sizes", "patterns")
     << " patterns</td></tr>\n";
   h << "</table>\n<h2>Stage timings</h2>\n<table>\n";
   double total = 0;
   for (const StageReport& stage : r.stages) {
-    h << "<tr><th>" << Escape(StageKey(stage)) << "</th><td>" << Number(stage.seconds)
+    h << "<tr><th>" << HtmlEscape(StageKey(stage)) << "</th><td>" << Number(stage.seconds)
       << " s</td></tr>\n";
     total += stage.seconds;
   }
@@ -145,19 +187,19 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
       const std::string file = PictureFile(p, page);
       if (std::find(outputs.begin(), outputs.end(), file) == outputs.end()) continue;
       const std::string caption = (page.empty() ? "" : "The " + page + " page. ") + p.caption;
-      h << "<figure><img src=\"" << file << "\" alt=\"" << Escape(caption) << "\"><figcaption>"
-        << Escape(caption) << "</figcaption></figure>\n";
+      h << "<figure><img src=\"" << file << "\" alt=\"" << HtmlEscape(caption) << "\"><figcaption>"
+        << HtmlEscape(caption) << "</figcaption></figure>\n";
     }
   }
   h << "<h2>Configuration</h2>\n<table>\n";
-  h << "<tr><th>scan</th><td>" << Escape(r.scan) << "</td></tr>\n";
-  h << "<tr><th>calibration</th><td>" << Escape(r.calibration) << "</td></tr>\n";
+  h << "<tr><th>scan</th><td>" << HtmlEscape(r.scan) << "</td></tr>\n";
+  h << "<tr><th>calibration</th><td>" << HtmlEscape(r.calibration) << "</td></tr>\n";
   for (const StageReport& stage : r.stages) {
     if (!stage.page.empty()) continue;
     for (const ReportValue& v : stage.values) {
       if (v.section != "options") continue;
-      h << "<tr><th>" << Escape(v.key) << "</th><td>"
-        << (v.is_text ? Escape(v.text) : Number(v.number, 6)) << "</td></tr>\n";
+      h << "<tr><th>" << HtmlEscape(v.key) << "</th><td>"
+        << (v.is_text ? HtmlEscape(v.text) : Number(v.number, 6)) << "</td></tr>\n";
     }
   }
   h << "</table>\n";
@@ -226,6 +268,12 @@ Status WriteJson(const std::string& dir, const ProcessReport& r) {
   for (const Warning& w : r.Warnings())
     warnings.push_back({{"code", w.code}, {"message", w.message}});
   j["warnings"] = warnings;
+  const QcResult qc = AssessQuality(r);
+  Json checks = Json::array();
+  for (const QcCheck& c : qc.checks) {
+    checks.push_back({{"name", c.name}, {"verdict", VerdictName(c.verdict)}, {"detail", c.detail}});
+  }
+  j["qc"] = {{"verdict", VerdictName(qc.verdict)}, {"checks", checks}};
   j["outputs"] = r.Outputs();
   return WriteJsonFile((fs::path(dir) / "report.json").string(), j);
 }

@@ -24,7 +24,9 @@ struct ReportValue {
 // Something that makes the result doubtful (DESIGN.md's `warnings`): a code a program can test
 // and a sentence for the operator.
 struct Warning {
-  std::string code;  // page_cut_off, outline_uncertain, strain_high, fold_over, size_unexpected
+  // page_cut_off, outline_uncertain, valid_low, exposure_clipped, strain_high, fold_over,
+  // size_unexpected
+  std::string code;
   std::string message;
 };
 

@@ -1,5 +1,6 @@
 #include "pipeline/stages.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -163,10 +164,51 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
   if (!outline->status.ok()) return stage.Finish(outline->status);
   r.Text("outline", "method", outline->method);
   r.Number("outline", "confidence", outline->confidence);
-  r.Number("outline", "leaf_pixels", cv::countNonZero(outline->mask));
+  const int leaf = cv::countNonZero(outline->mask);
+  r.Number("outline", "leaf_pixels", leaf);
   r.Number("outline", "holes", outline->holes);
   r.Number("outline", "pages", static_cast<double>(outline->pages.size()));
   r.Number("outline", "touches_border", outline->touches_border ? 1 : 0);
+  // How much of the leaf was measured, and how much of its texture is clipped.
+  int measured = 0, high = 0, low = 0;
+  const double top = texture.depth() == CV_16U ? 65535 : 255;
+  for (int v = 0; v < outline->mask.rows; ++v) {
+    const uint8_t* in = outline->mask.ptr<uint8_t>(v);
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < outline->mask.cols; ++u) {
+      if (!in[u]) continue;
+      measured += !std::isnan(p[u][0]);
+      double hi = 0, lo = top;
+      for (int c = 0; c < texture.channels(); ++c) {
+        const double value = texture.depth() == CV_16U
+                                 ? texture.ptr<uint16_t>(v)[u * texture.channels() + c]
+                                 : texture.ptr<uint8_t>(v)[u * texture.channels() + c];
+        hi = std::max(hi, value);
+        lo = std::min(lo, value);
+      }
+      high += hi >= top;
+      low += lo <= 0;
+    }
+  }
+  const double share_measured = leaf > 0 ? static_cast<double>(measured) / leaf : 0;
+  const double share_high = leaf > 0 ? static_cast<double>(high) / leaf : 0;
+  const double share_low = leaf > 0 ? static_cast<double>(low) / leaf : 0;
+  r.Number("outline", "valid_in_leaf", share_measured);
+  r.Number("exposure", "clipped_highlights", share_high);
+  r.Number("exposure", "clipped_shadows", share_low);
+  if (share_measured < limits.min_valid_in_leaf) {
+    r.Warn("valid_low", "only " + Fixed(100 * share_measured, 1) +
+                            "% of the leaf was measured in 3D (glare, the projector's light not "
+                            "reaching, or ink too dark to decode); the rest of the sheet is "
+                            "filled in");
+  }
+  if (std::max(share_high, share_low) > limits.max_clipped) {
+    r.Warn("exposure_clipped",
+           Fixed(100 * share_high, 1) + "% of the leaf's pixels are at the camera's maximum and " +
+               Fixed(100 * share_low, 1) +
+               "% at 0: detail is lost there; shorten or lengthen the exposure, or move the "
+               "lights (glare)");
+  }
   if (outline->touches_border) {
     r.Warn("page_cut_off",
            "the leaf runs off the camera's view: what lies outside it is missing from the "
@@ -285,7 +327,11 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   r.outputs.push_back(PageFile(page, "restored.tif"));
   if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));
   r.outputs.push_back(PageFile(page, "restored.json"));
-  s = stage.Picture(results, "grid", GridOverPage(mesh, flat, *restored, camera));
+  // The whole restored page for the report (1400 px wide at most), with its scale bar.
+  double bar_mm = 0;
+  s = stage.Picture(results, "restored", RestoredWithScaleBar(*restored, 1400, &bar_mm));
+  r.Number("restored", "scale_bar_mm", bar_mm);
+  if (s.ok()) s = stage.Picture(results, "grid", GridOverPage(mesh, flat, *restored, camera));
   if (s.ok()) {
     s = stage.Picture(results, "strain", StrainPicture(mesh, flat, *restored, camera));
   }

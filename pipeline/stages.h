@@ -31,6 +31,12 @@ struct WarningLimits {
   double max_strain = 0.05;             // Largest relative spring-length error.
   cv::Size2d expected_leaf_mm{0, 0};    // The leaf's size as the operator expects it (0: none).
   double size_tolerance = 0.1;          // Relative difference from it that is doubtful.
+  // Share of the leaf's pixels that may be clipped (at the camera's maximum, or 0): above it,
+  // the texture has lost detail there (glare, or an exposure too long or too short).
+  double max_clipped = 0.005;
+  // Share of the leaf's pixels that should have a 3D point: below it, parts of the leaf were
+  // not measured (glare, the projector's light not reaching, ink too dark to decode).
+  double min_valid_in_leaf = 0.9;
 };
 
 // Every stage's options: what `vellum process` takes, and each daemon its own part of.

@@ -10,7 +10,7 @@ packages=(
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   libcgal-dev libsuitesparse-dev nlohmann-json3-dev clang-format
   default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux nftables
-  chromium xvfb clang libclang-rt-14-dev
+  chromium xvfb xdotool clang libclang-rt-14-dev
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -72,6 +72,7 @@ Node::Node(std::string process, lcm::LCM* lcm) : process_(std::move(process)), l
 }
 
 Node::~Node() {
+  for (lcm::Subscription* s : subscriptions_) lcm_->unsubscribe(s);
   {
     std::lock_guard<std::mutex> lock(work_mutex_);
     work_done_ = true;
@@ -94,7 +95,7 @@ void Node::Log(const std::string& message) const {
 void Node::SubscribeRaw(const std::string& channel,
                         std::function<void(const lcm::ReceiveBuffer*)> handler) {
   handlers_.push_back(std::make_unique<RawHandler>(RawHandler{std::move(handler)}));
-  lcm_->subscribe(channel, &RawHandler::Handle, handlers_.back().get());
+  subscriptions_.push_back(lcm_->subscribe(channel, &RawHandler::Handle, handlers_.back().get()));
 }
 
 void Node::CheckSequence(const std::string& channel, int64_t seq) {

@@ -217,6 +217,8 @@ class Node {
   std::unique_ptr<lcm::LCM> own_lcm_;  // Null when the bus is shared.
   lcm::LCM* lcm_;
   std::vector<std::unique_ptr<RawHandler>> handlers_;
+  // Taken back when the node goes, so that a bus outliving it (a test's) never calls into it.
+  std::vector<lcm::Subscription*> subscriptions_;
   std::atomic<bool> stop_{false};
   double pace_ = 100e6;  // Bytes per second of chunked products.
 

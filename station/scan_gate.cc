@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <lcm/lcm-cpp.hpp>
 
-#include "io/json.h"
 #include "io/scan_io.h"
 #include "station/node.h"
 
@@ -38,10 +37,6 @@ bool Contains(const std::deque<int64_t>& q, int64_t id) {
 }
 
 }  // namespace
-
-Status MarkFailed(const ScanFolder& folder, const std::string& why) {
-  return WriteTextFile(folder.failed(), why + "\n");
-}
 
 bool ScanGate::Holds(int64_t scan_id, int64_t session) const {
   std::lock_guard<std::mutex> lock(mutex_);

@@ -73,8 +73,4 @@ class ScanGate {
   std::deque<int64_t> not_resumable_;  // Folders probed after a restart that were not.
 };
 
-// A scan given up (recording failed, captures stopped, a duplicate capture): raw/failed.txt
-// holds the reason, and the scan is never reopened.
-Status MarkFailed(const ScanFolder& folder, const std::string& why);
-
 }  // namespace vellum::station

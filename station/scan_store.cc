@@ -10,9 +10,13 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <mutex>
+#include <utility>
 
 #include "core/common/text.h"
 #include "io/calibration_io.h"
+#include "io/json.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "vellum/scan_started_t.hpp"
@@ -20,8 +24,71 @@
 namespace vellum::station {
 namespace fs = std::filesystem;
 
+ScanFolder ScanFolder::New(const std::string& data_dir, int64_t scan_id, const std::string& slug) {
+  const std::string name = "scan-" + std::to_string(scan_id) + (slug.empty() ? "" : "-" + slug);
+  return {(fs::path(data_dir) / name).string()};
+}
+
+int64_t ScanFolderId(const std::string& name, std::string* slug) {
+  if (name.rfind("scan-", 0) != 0) return 0;
+  char* stop = nullptr;
+  const long long id = std::strtoll(name.c_str() + 5, &stop, 10);
+  if (id <= 0 || (*stop != '\0' && *stop != '-')) return 0;
+  if (slug) *slug = *stop == '-' ? std::string(stop + 1) : std::string();
+  return id;
+}
+
+std::vector<std::string> SetAsideEarlierAttempts(const std::string& data_dir, int64_t scan_id,
+                                                 const std::string& slug) {
+  std::vector<std::string> moved;
+  if (slug.empty()) return moved;
+  std::error_code ec;
+  std::vector<fs::path> earlier;
+  for (fs::directory_iterator it(data_dir, ec), end; !ec && it != end; it.increment(ec)) {
+    std::string name_slug;
+    const int64_t id = ScanFolderId(it->path().filename().string(), &name_slug);
+    if (id == 0 || id == scan_id || name_slug != slug || !it->is_directory(ec)) continue;
+    if (PathExists((it->path() / "pending").string())) continue;  // Still on its way.
+    earlier.push_back(it->path());
+  }
+  const fs::path aside = fs::path(data_dir) / "retaken";
+  for (const fs::path& from : earlier) {
+    fs::create_directories(aside, ec);
+    const fs::path to = aside / from.filename();
+    if (fs::exists(to, ec)) continue;  // Never over another.
+    fs::rename(from, to, ec);
+    if (!ec) moved.push_back(to.string());
+  }
+  return moved;
+}
+
 ScanFolder ScanFolder::For(const std::string& data_dir, int64_t scan_id) {
-  return {(fs::path(data_dir) / ("scan-" + std::to_string(scan_id))).string()};
+  const ScanFolder plain = New(data_dir, scan_id, "");
+  std::error_code ec;
+  if (fs::is_directory(plain.root, ec)) return plain;
+  // A named folder: found by its prefix, and remembered (a scan's folder is looked up for each
+  // of its captures; a name, once given, does not change), checked to be there still.
+  static std::mutex mutex;
+  static std::map<std::pair<std::string, int64_t>, std::string> known;
+  const auto key = std::make_pair(data_dir, scan_id);
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    auto it = known.find(key);
+    if (it != known.end() && fs::is_directory(it->second, ec)) return {it->second};
+  }
+  for (const fs::path& dir : {fs::path(data_dir), fs::path(data_dir) / "retaken"}) {
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+      if (ScanFolderId(it->path().filename().string()) != scan_id || !it->is_directory(ec)) {
+        continue;
+      }
+      std::lock_guard<std::mutex> lock(mutex);
+      if (known.size() > 256) known.clear();
+      known[key] = it->path().string();
+      return {it->path().string()};
+    }
+    ec.clear();
+  }
+  return plain;
 }
 std::string ScanFolder::raw() const { return (fs::path(root) / "raw").string(); }
 std::string ScanFolder::results() const { return (fs::path(root) / "results").string(); }
@@ -33,6 +100,10 @@ std::string ScanFolder::calibration() const {
 std::string ScanFolder::pending() const { return (fs::path(root) / "pending").string(); }
 std::string ScanFolder::failed() const { return (fs::path(raw()) / "failed.txt").string(); }
 std::string ScanFolder::scan_yaml() const { return (fs::path(raw()) / "scan.yaml").string(); }
+
+Status MarkFailed(const ScanFolder& folder, const std::string& why) {
+  return WriteTextFile(folder.failed(), why + "\n");
+}
 
 Status CheckCapture(const capture_t& c) {
   const std::string where =

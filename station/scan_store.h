@@ -25,11 +25,17 @@ std::vector<uint8_t> Encode(const Msg& msg) {
   return bytes;
 }
 
-// <data>/scan-<id>/raw (the scan directory, captures.lcmlog, calibration.yaml) and
-// <data>/scan-<id>/results (what `vellum process` writes).
+// <data>/scan-<id>[-<slug>]/raw (the scan directory, captures.lcmlog, calibration.yaml) and
+// .../results (what `vellum process` writes). The slug is the scan's identity made a readable,
+// safe name (IdentitySlug: "scan-1732971234567890-MS-12_3_recto"); a scan without one is
+// "scan-<id>". The id alone finds the folder.
 struct ScanFolder {
   std::string root;
+  // The folder of scan `scan_id` that exists (with or without a slug; set aside in retaken/ or
+  // not), else where a scan without a slug would go.
   static ScanFolder For(const std::string& data_dir, int64_t scan_id);
+  // Where a new scan goes, named with `slug` ("" for none).
+  static ScanFolder New(const std::string& data_dir, int64_t scan_id, const std::string& slug);
   std::string raw() const;
   std::string results() const;
   std::string log() const;          // raw/captures.lcmlog
@@ -38,6 +44,22 @@ struct ScanFolder {
   std::string failed() const;       // raw/failed.txt: the scan was given up, and why
   std::string scan_yaml() const;    // raw/scan.yaml: written once the scan is recorded whole
 };
+
+// The scan id of a folder's name ("scan-<id>" or "scan-<id>-<slug>") and its slug (if asked);
+// 0 for a name that is not a scan folder's.
+int64_t ScanFolderId(const std::string& name, std::string* slug = nullptr);
+
+// A retake: the earlier attempts of the same folio (the folders named with `slug` under another
+// id, not pending) are moved into <data>/retaken/, kept whole and never deleted, so that the
+// newest attempt of each folio is the one in <data>. Returns the folders' new paths. A scan
+// without a slug has no earlier attempts.
+std::vector<std::string> SetAsideEarlierAttempts(const std::string& data_dir, int64_t scan_id,
+                                                 const std::string& slug);
+
+// A scan given up (recording failed, captures stopped, a duplicate capture, or parked by the
+// supervisor after failing twice): raw/failed.txt holds the reason, and the scan is never
+// reopened or sent down the chain again.
+Status MarkFailed(const ScanFolder& folder, const std::string& why);
 
 // The most patterns a scan may have (a CAPTURE or SCAN_STARTED claiming more is refused).
 inline constexpr int kMaxPatterns = 1000;

@@ -346,6 +346,57 @@ TEST(ScanStore, AppendingAfterATornEventKeepsEveryWholeEventReadable) {
   fs::remove_all(dir);
 }
 
+// A scan's folder may carry a readable slug after its id; the id alone finds it, and the ledger
+// reads it (issue 15).
+TEST(ScanStore, ANamedScanFolderIsFoundByItsIdAlone) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_named_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  EXPECT_EQ(ScanFolder::For(dir.string(), 7).root, (dir / "scan-7").string());  // None yet.
+  const ScanFolder named = ScanFolder::New(dir.string(), 7, "MS-12_3_recto");
+  EXPECT_EQ(named.root, (dir / "scan-7-MS-12_3_recto").string());
+  fs::create_directories(named.raw());
+  fs::create_directories(dir / "scan-70-MS-1");  // Another id with the same first digits.
+  EXPECT_EQ(ScanFolder::For(dir.string(), 7).root, named.root);
+  EXPECT_EQ(ScanFolder::For(dir.string(), 70).root, (dir / "scan-70-MS-1").string());
+  EXPECT_EQ(ScanFolder::For(dir.string(), 71).root, (dir / "scan-71").string());
+  ASSERT_TRUE(MarkPending(ScanFolder::For(dir.string(), 7), 1).ok());
+  EXPECT_EQ(FindPending(dir.string()), std::vector<int64_t>{7});
+  // Moved away: not found by a stale memory of it.
+  fs::rename(named.root, dir / "elsewhere");
+  EXPECT_EQ(ScanFolder::For(dir.string(), 7).root, (dir / "scan-7").string());
+  fs::remove_all(dir);
+}
+
+// A retake of a folio sets its earlier attempts aside in retaken/ (kept whole; found by id
+// still), but not one still pending, nor another folio's, nor a scan without a name.
+TEST(ScanStore, ARetakeSetsTheEarlierAttemptsAside) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_retake_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  for (const char* name : {"scan-10-MS-7_1_verso", "scan-11-MS-7_1_verso", "scan-12-MS-7_1_verso",
+                           "scan-13-MS-7_2_recto", "scan-14", "scan-15-MS-7_1_verso_x"}) {
+    fs::create_directories(dir / name / "raw");
+    std::ofstream(dir / name / "raw" / "scan.yaml") << name;
+  }
+  std::ofstream(dir / "scan-12-MS-7_1_verso" / "pending") << "1\n";
+  const std::vector<std::string> moved = SetAsideEarlierAttempts(dir.string(), 20, "MS-7_1_verso");
+  EXPECT_EQ(moved.size(), 2u);
+  for (const char* name : {"scan-10-MS-7_1_verso", "scan-11-MS-7_1_verso"}) {
+    EXPECT_TRUE(fs::exists(dir / "retaken" / name / "raw" / "scan.yaml")) << name;
+    EXPECT_FALSE(fs::exists(dir / name)) << name;
+  }
+  for (const char* name :
+       {"scan-12-MS-7_1_verso", "scan-13-MS-7_2_recto", "scan-14", "scan-15-MS-7_1_verso_x"}) {
+    EXPECT_TRUE(fs::exists(dir / name)) << name;
+  }
+  EXPECT_EQ(ScanFolder::For(dir.string(), 10).root,
+            (dir / "retaken" / "scan-10-MS-7_1_verso").string());
+  EXPECT_TRUE(SetAsideEarlierAttempts(dir.string(), 21, "").empty());
+  EXPECT_EQ(ScanFolderId("scan-15-MS-7_1_verso_x"), 15);
+  EXPECT_EQ(ScanFolderId("scan-x12"), 0);
+  EXPECT_EQ(ScanFolderId("scan-12x"), 0);
+  fs::remove_all(dir);
+}
+
 TEST(ScanStore, PendingScansAreFoundWithTheirAttemptsUntilCleared) {
   const fs::path dir = fs::temp_directory_path() / ("vellum_pending_" + std::to_string(getpid()));
   fs::remove_all(dir);

@@ -46,11 +46,8 @@ std::vector<int64_t> FindPending(const std::string& data_dir) {
   std::vector<int64_t> ids;
   std::error_code ec;
   for (fs::directory_iterator it(data_dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    if (name.rfind("scan-", 0) != 0) continue;
-    char* stop = nullptr;
-    const long long id = std::strtoll(name.c_str() + 5, &stop, 10);
-    if (id > 0 && *stop == '\0' && PathExists((it->path() / "pending").string())) {
+    const int64_t id = ScanFolderId(it->path().filename().string());
+    if (id > 0 && PathExists((it->path() / "pending").string())) {
       ids.push_back(id);
     }
   }
@@ -102,7 +99,11 @@ bool Supervisor::Recorded(int64_t scan_id, const Scan& scan) {
   return true;
 }
 
-void Supervisor::Failed(int64_t scan_id) { Finished(scan_id); }
+void Supervisor::Failed(int64_t scan_id, const std::string& why) {
+  Finished(scan_id);
+  const Status s = MarkFailed(ScanFolder::For(data_, scan_id), why);
+  if (!s.ok()) node_->Log("scan " + std::to_string(scan_id) + ": " + s.message());
+}
 
 void Supervisor::Finished(int64_t scan_id) {
   ClearPending(ScanFolder::For(data_, scan_id));
@@ -134,7 +135,12 @@ void Supervisor::OnStatus(const status_t& msg) {
   }
   if (msg.last_error_utime > seen.error_utime && msg.last_error_scan_id > 0 &&
       seen.error_utime != -1) {
-    Finished(msg.last_error_scan_id);  // Failed downstream, with a status the operator sees.
+    // Failed downstream, with a status the operator sees; marked so on disk, if it is ours.
+    if (PathExists(ScanFolder::For(data_, msg.last_error_scan_id).raw())) {
+      Failed(msg.last_error_scan_id, msg.process + ": " + msg.last_error);
+    } else {
+      Finished(msg.last_error_scan_id);
+    }
   }
   seen.error_utime = msg.last_error_utime;
 }
@@ -149,23 +155,15 @@ void Supervisor::SendAgain(const std::function<bool(int64_t)>& held, const std::
     }
     const int attempts = PendingAttempts(folder);
     if (attempts >= kMaxAttempts) {
-      Finished(id);
-      node_->Count("scans failed");  // Before the error goes out with the count.
-      node_->Error("scan " + std::to_string(id) + " failed: not restored after " +
-                       std::to_string(attempts) + " attempts (the last ended when " + why +
-                       "); its captures are kept in " + folder.raw() + " (`vellum process --scan " +
-                       folder.raw() + "` restores it by hand)",
-                   id);
+      Park(id, "not restored after " + std::to_string(attempts) +
+                   " attempts, the last ended when " + why);
       continue;
     }
     Scan scan;
     Status s = ReadScan(folder.raw(), &scan);
     if (s.ok()) s = MarkPending(folder, attempts + 1);
     if (!s.ok()) {
-      Finished(id);
-      node_->Count("scans failed");  // Before the error goes out with the count.
-      node_->Error(
-          "scan " + std::to_string(id) + " failed: cannot process it again: " + s.message(), id);
+      Park(id, "cannot process it again: " + s.message());
       continue;
     }
     node_->Log("scan " + std::to_string(id) + ": " + why + " before the scan was restored; " +
@@ -175,6 +173,20 @@ void Supervisor::SendAgain(const std::function<bool(int64_t)>& held, const std::
     reached_[id] = -1;
     if (send_(id, scan).ok()) reached_[id] = std::max(reached_[id], 0);
   }
+}
+
+void Supervisor::Park(int64_t id, const std::string& why) {
+  const ScanFolder folder = ScanFolder::For(data_, id);
+  Finished(id);
+  const Status marked = MarkFailed(folder, "parked: " + why);
+  node_->Count("scans parked");
+  node_->Count("scans failed");  // Before the error goes out with the count.
+  node_->Error(
+      "scan " + std::to_string(id) + " failed and is parked: " + why +
+          "; it is not sent again; its captures are kept in " + folder.raw() +
+          " (`vellum process --scan " + folder.raw() + "` runs it by hand)" +
+          (marked.ok() ? "" : " (and it could not be marked failed: " + marked.message() + ")"),
+      id);
 }
 
 // The restorer wrote the scan's results after the scan was last sent down the chain.

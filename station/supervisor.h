@@ -15,7 +15,10 @@
 // on by the daemon before it and not yet by itself), are sent again from disk: a scan already
 // past it is not. When the decoder itself starts, once every processing daemon is heard, every
 // scan in the ledger is sent again (the station stopped, or a daemon had not started). A scan is
-// sent at most kMaxAttempts times, then fails with a message naming its raw captures.
+// sent at most kMaxAttempts times: one that lost its daemon twice (a scan that crashes or hangs
+// a daemon), or whose captures cannot be read back, is parked: out of the ledger, marked failed
+// on disk (raw/failed.txt, with the reason), reported with a message naming its raw captures,
+// and never sent again, even after a restart.
 #pragma once
 
 #include <cstdint>
@@ -43,7 +46,7 @@ void AnnounceHandedOn(Node* node, int64_t scan_id, const std::string& product);
 
 class Supervisor {
  public:
-  static constexpr int kMaxAttempts = 3;
+  static constexpr int kMaxAttempts = 2;
 
   // Sends a scan down the chain (the decoder decodes it and publishes its products); called on
   // the worker thread. A failure is reported by the sender.
@@ -54,8 +57,9 @@ class Supervisor {
   // Worker thread. A scan is recorded whole: it enters the ledger, and is sent (first attempt).
   // False when it could not be marked (the error is reported).
   bool Recorded(int64_t scan_id, const Scan& scan);
-  // Worker thread. A scan failed with a reported error: it leaves the ledger.
-  void Failed(int64_t scan_id);
+  // Worker thread. A scan failed with a reported error (`why`): it leaves the ledger, and is
+  // marked failed on disk.
+  void Failed(int64_t scan_id, const std::string& why);
   // Worker thread. The scan being recorded (0: none): never sent again from under the recorder.
   void Recording(int64_t scan_id) { recording_ = scan_id; }
 
@@ -67,6 +71,8 @@ class Supervisor {
 
   void OnStatus(const status_t& msg);
   void Finished(int64_t scan_id);
+  // Gives a pending scan up for good (see above); `why` names what happened to it.
+  void Park(int64_t scan_id, const std::string& why);
   // Sends again every pending scan for which `held` holds; `why` ends up in the log.
   void SendAgain(const std::function<bool(int64_t)>& held, const std::string& why);
   bool RestoredSinceSent(const ScanFolder& folder) const;

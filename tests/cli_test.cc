@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/sim/gantry.h"
@@ -116,6 +117,7 @@ TEST_F(CliTest, ADoubtfulResultExitsThreeWithItsWarning) {
   const Result clean = RunVellum(Process((root_ / "scan").string(), Rig()));
   ASSERT_EQ(clean.exit_code, 0) << clean.output;
   EXPECT_EQ(clean.output.find("warning"), std::string::npos) << clean.output;
+  EXPECT_NE(clean.output.find("quality: pass"), std::string::npos) << clean.output;
   const Result r = RunVellum(Process((root_ / "scan").string(), Rig()) + " --leaf-size 100x100");
   EXPECT_EQ(r.exit_code, 3) << r.output;
   EXPECT_NE(r.output.find("warning size_unexpected: the leaf measures"), std::string::npos)
@@ -125,6 +127,14 @@ TEST_F(CliTest, ADoubtfulResultExitsThreeWithItsWarning) {
   const std::string text((std::istreambuf_iterator<char>(report)),
                          std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("\"size_unexpected\""), std::string::npos) << text;
+  // Quality control: a warning on scale, printed and in report.json.
+  EXPECT_NE(r.output.find("quality: warn"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("scale: warn: leaf"), std::string::npos) << r.output;
+  const nlohmann::json j = nlohmann::json::parse(text);
+  EXPECT_EQ(j["qc"]["verdict"], "warn") << j["qc"].dump();
+  std::ifstream html(root_ / "out" / "report.html");
+  const std::string page((std::istreambuf_iterator<char>(html)), std::istreambuf_iterator<char>());
+  EXPECT_NE(page.find("<div class=\"qc qc-warn\"><h2>Quality: warn</h2>"), std::string::npos);
 }
 
 // An object that is not a page: --until points writes the point cloud and the report, and no

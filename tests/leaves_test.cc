@@ -25,6 +25,7 @@
 #include "core/geometry/rigid2d.h"
 #include "core/sim/evaluate.h"
 #include "pipeline/process.h"
+#include "pipeline/qc.h"
 
 namespace vellum {
 namespace {
@@ -41,6 +42,7 @@ struct Scene {
   // there take the silhouette's last points and fold, about 150 restored pixels beyond the
   // leaf). The result must say so (a fold_over or strain_high warning); all else holds.
   bool flagged_edge = false;
+  double texture_gain = 1;  // The studio-light texture over-exposed by this factor (clipped).
 };
 
 struct Scanned {
@@ -68,6 +70,9 @@ Scanned Process(const Scene& scene, uint64_t seed,
   input.scan_dir = scene.name;
   input.calibration_path = "the default rig";
   input.scan = AsScan(run.scan);
+  if (scene.texture_gain != 1) {
+    input.scan.texture.convertTo(input.scan.texture, -1, scene.texture_gain);
+  }
   input.calibration = DefaultRig();
   const std::string out =
       (fs::temp_directory_path() / ("vellum_leaves_" + std::to_string(getpid()))).string();
@@ -318,6 +323,40 @@ TEST(Doubtful, ALeafRunningOffTheViewIsFlagged) {
   ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
   const std::vector<std::string> codes = WarningCodes(run);
   EXPECT_TRUE(Has(codes, "page_cut_off")) << ::testing::PrintToString(codes);
+  // Quality control fails it, on that check.
+  const QcResult qc = AssessQuality(run.result.report);
+  EXPECT_EQ(qc.verdict, QcVerdict::kFail);
+  EXPECT_EQ(qc.checks[0].name, "leaf in view");
+  EXPECT_EQ(qc.checks[0].verdict, QcVerdict::kFail);
+}
+
+// An over-exposed texture (the studio light's frame twice as bright: the paper clips at the
+// camera's maximum) is flagged, and fails quality control on exposure; the same scene at its
+// exposure passes it.
+TEST(Doubtful, AClippedTextureFailsQualityControl) {
+  const Scanned clean = Process(Scene{"exposed", PageShape::kCurl}, 31);
+  ASSERT_TRUE(clean.result.status.ok()) << clean.result.status.message();
+  const QcResult fine = AssessQuality(clean.result.report);
+  for (const QcCheck& c : fine.checks) {
+    EXPECT_EQ(c.verdict, QcVerdict::kPass) << c.name << ": " << c.detail;
+  }
+  EXPECT_EQ(fine.verdict, QcVerdict::kPass);
+  Scene bright{"exposed", PageShape::kCurl};
+  bright.texture_gain = 2;
+  const Scanned run = Process(bright, 31);
+  ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
+  EXPECT_TRUE(Has(WarningCodes(run), "exposure_clipped"))
+      << ::testing::PrintToString(WarningCodes(run));
+  const double clipped = run.result.report.Number("exposure", "clipped_highlights");
+  std::printf("[doubtful] texture at twice its exposure: %.1f%% of the leaf clipped\n",
+              100 * clipped);
+  EXPECT_GT(clipped, 0.05);
+  const QcResult qc = AssessQuality(run.result.report);
+  EXPECT_EQ(qc.verdict, QcVerdict::kFail);
+  const auto exposure = std::find_if(qc.checks.begin(), qc.checks.end(),
+                                     [](const QcCheck& c) { return c.name == "exposure"; });
+  ASSERT_NE(exposure, qc.checks.end());
+  EXPECT_EQ(exposure->verdict, QcVerdict::kFail) << exposure->detail;
 }
 
 // The operator's expected size: a 190 x 240 mm leaf is flagged against 150 x 240 mm (27% off)
@@ -329,6 +368,7 @@ TEST(Doubtful, ALeafOfAnotherSizeThanExpectedIsFlagged) {
   ASSERT_TRUE(wrong.result.status.ok()) << wrong.result.status.message();
   EXPECT_TRUE(Has(WarningCodes(wrong), "size_unexpected"))
       << ::testing::PrintToString(WarningCodes(wrong));
+  EXPECT_EQ(AssessQuality(wrong.result.report).verdict, QcVerdict::kWarn);  // Scale: a warning.
   options.limits.expected_leaf_mm = {240.0, 190.0};
   const Scanned right = Process(Scene{"size", PageShape::kCurl}, 31, options);
   ASSERT_TRUE(right.result.status.ok()) << right.result.status.message();

@@ -38,8 +38,8 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   ASSERT_EQ(status, 0) << out;
   const fs::path html = dir / "result" / "report.html";
   ASSERT_TRUE(fs::exists(html));
-  for (const char* picture : {"texture.png", "outline.png", "valid.png", "depth.png", "grid.png",
-                              "strain.png", "before_after.png"}) {
+  for (const char* picture : {"restored.png", "texture.png", "outline.png", "valid.png",
+                              "depth.png", "grid.png", "strain.png", "before_after.png"}) {
     const cv::Mat image = cv::imread((dir / "result" / "report" / picture).string());
     EXPECT_FALSE(image.empty()) << picture;
     EXPECT_GT(image.cols, 100) << picture;
@@ -54,11 +54,21 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   std::smatch m;
   ASSERT_TRUE(std::regex_search(out, m, std::regex("data-images=\"(\\d+)/(\\d+)\""))) << out;
   EXPECT_EQ(m[1], m[2]) << "only " << m[1] << " of " << m[2] << " pictures loaded";
-  EXPECT_EQ(m[2], "7");  // The six of before, and the leaf's outline (issue 13).
+  // The six of before, the leaf's outline (issue 13) and the whole restored page (issue 15).
+  EXPECT_EQ(m[2], "8");
   // Nothing in it reaches for the network.
   std::ifstream in(html);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_EQ(text.find("http://"), std::string::npos);
+  // Issue 15: the quality verdict first, the whole restored page linking to its TIFF, with the
+  // leaf's size and the scale bar's length; the report's date.
+  EXPECT_NE(text.find("<div class=\"qc qc-pass\"><h2>Quality: pass</h2>"), std::string::npos);
+  EXPECT_NE(text.find("<a href=\"restored.tif\"><img src=\"report/restored.png\""),
+            std::string::npos);
+  EXPECT_TRUE(std::regex_search(text, std::regex("the leaf [0-9.]+ x [0-9.]+ mm, [0-9.]+ ppi; "
+                                                 "the scale bar is [0-9]+ mm")))
+      << text.substr(0, 3000);
+  EXPECT_NE(text.find("Report made 20"), std::string::npos);
   EXPECT_EQ(text.find("https://"), std::string::npos);
   fs::remove_all(dir);
 }

@@ -9,9 +9,12 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
+#include <functional>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -27,6 +30,7 @@
 #include "station/scan_store.h"
 #include "tests/station_harness.h"
 #include "tests/xwd.h"
+#include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 #include "vellum/correspondence_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
@@ -178,9 +182,36 @@ class StationTest : public ::testing::Test {
 
   void RunFullScan(const std::string& rig, int patterns);
 
+  // An X server (Xvfb, 1280x720) for the viewer, its screen readable as an xwd file at
+  // *screen; returns the display.
+  std::string StartXvfb(std::string* screen) {
+    const std::string display = ":" + std::to_string(200 + std::hash<std::string>()(dir_) % 300);
+    fs::create_directories(dir_ + "/fb");
+    xvfb_ = std::make_unique<Process>(
+        std::vector<std::string>{"/usr/bin/Xvfb", display, "-screen", "0", "1280x720x24", "-fbdir",
+                                 dir_ + "/fb", "-nolisten", "tcp"},
+        dir_ + "/xvfb.log");
+    *screen = dir_ + "/fb/Xvfb_screen0";
+    for (int k = 0; k < 100 && !fs::exists(*screen); ++k) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    EXPECT_TRUE(fs::exists(*screen)) << xvfb_->Output();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    return display;
+  }
+  // Runs xdotool on `display` (keys and text as an operator types them); true when it worked.
+  bool Xdotool(const std::string& display, std::vector<std::string> args) {
+    args.insert(args.begin(), "/usr/bin/xdotool");
+    Process p(args, dir_ + "/xdotool.log", {"DISPLAY=" + display});
+    const int code = p.Wait(30);
+    EXPECT_EQ(code, 0) << p.Output();
+    return code == 0;
+  }
+
   std::string dir_, url_;
   std::unique_ptr<lcm::LCM> lcm_;
   std::vector<std::unique_ptr<Process>> processes_;
+  std::unique_ptr<Process> xvfb_;  // Stopped after the daemons (TearDown), as the fixture goes.
 };
 
 // The last status of each of some daemons, from their heartbeats, and their counters.
@@ -188,10 +219,24 @@ class StatusBoard {
  public:
   StatusBoard(lcm::LCM& lcm, const std::vector<std::string>& channels) {
     for (const std::string& c : channels) {
-      listeners_.push_back(std::make_unique<Listener<status_t>>(
-          lcm, c, [this, c](const status_t& m) { last_[c] = m; }));
+      listeners_.push_back(
+          std::make_unique<Listener<status_t>>(lcm, c, [this, c](const status_t& m) {
+            if (!m.last_error.empty() &&
+                (errors_[c].empty() || errors_[c].back() != m.last_error)) {
+              errors_[c].push_back(m.last_error);
+            }
+            last_[c] = m;
+          }));
     }
   }
+  // The error (of every one reported on `channel` so far) that holds `text`; "" if none.
+  std::string Error(const std::string& channel, const std::string& text) {
+    for (const std::string& e : errors_[channel]) {
+      if (e.find(text) != std::string::npos) return e;
+    }
+    return "";
+  }
+  std::string LastError(const std::string& channel) { return last_[channel].last_error; }
   // A counter of the last status on `channel` (0 if absent).
   int64_t Counter(const std::string& channel, const std::string& name) {
     const status_t& st = last_[channel];
@@ -203,6 +248,7 @@ class StatusBoard {
 
  private:
   std::map<std::string, status_t> last_;
+  std::map<std::string, std::vector<std::string>> errors_;
   std::vector<std::unique_ptr<Listener<status_t>>> listeners_;
 };
 
@@ -244,6 +290,8 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
   results = results.substr(0, results.find('\n'));
   ASSERT_TRUE(fs::exists(results + "/restored.tif")) << out;
   const std::string raw = fs::path(results).parent_path().string() + "/raw";
+  // The scan's folder is named after the folio: scan-<id>-MS-12_3_recto.
+  EXPECT_NE(results.find("-MS-12_3_recto/results"), std::string::npos) << results;
 
   // Nothing lost: the texture, every frame, the scan's log and its calibration are on disk.
   EXPECT_TRUE(fs::exists(raw + "/texture.png"));
@@ -482,6 +530,207 @@ TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
       << second.Output();
 }
 
+// Issue 14: poisoned input. A scan whose scan.yaml claims a projector 2^31 pixels wide, left
+// pending from before a restart, and a CAPTURE claiming a projector 2^30 pixels wide: each ends
+// in a clear error within 5 s (the issue's bar; before, both hung the decoder for good). The
+// poisoned pending scan is parked, the scan of the poisoned capture fails at once (each marked
+// in raw/failed.txt; the capture is never recorded); a restarted decoder takes neither up again.
+// Then a capture with a pattern index beyond the count, and a CALIBRATION of another rig, each
+// in the midst of a scan played through the real daemons (below).
+TEST_F(StationTest, PoisonedAndMidScanMessagesFailClearlyOrAreRefusedAndNothingIsLost) {
+  std::string out;
+  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
+  const std::string poisoned = dir_ + "/scans/scan-500";
+  fs::create_directories(poisoned);
+  fs::copy(dir_ + "/exported", poisoned + "/raw", fs::copy_options::recursive);
+  {
+    std::string yaml = ReadText(poisoned + "/raw/scan.yaml");
+    const std::string size = "projector_size: [ 512, 384 ]";
+    ASSERT_NE(yaml.find(size), std::string::npos) << yaml.substr(0, 200);
+    yaml.replace(yaml.find(size), size.size(), "projector_size: [ 2147483647, 384 ]");
+    std::ofstream(poisoned + "/raw/scan.yaml", std::ios::trunc) << yaml;
+    std::ofstream(poisoned + "/pending") << "1\n";  // Recorded, not yet restored.
+  }
+  StatusBoard board(*lcm_, kProcessingStatus);
+  using Clock = std::chrono::steady_clock;
+  auto seconds_since = [](Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+  };
+  Clock::time_point t0 = Clock::now();
+  StartProcessing();
+  WaitForHeartbeats(kProcessingStatus);
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] {
+    return !board.Error("STATUS_DECODER", "scan 500 failed and is parked").empty();
+  })) << board.LastError("STATUS_DECODER");
+  std::printf("[poison] scan.yaml: parked %.3f s after the daemons were started\n",
+              seconds_since(t0));
+  EXPECT_LE(seconds_since(t0), 5.0);
+  const std::string parked = board.Error("STATUS_DECODER", "scan 500 failed and is parked");
+  EXPECT_NE(parked.find("projector"), std::string::npos) << parked;
+  EXPECT_NE(parked.find(poisoned + "/raw"), std::string::npos) << parked;
+  EXPECT_FALSE(fs::exists(poisoned + "/pending"));
+  EXPECT_EQ(ReadText(poisoned + "/raw/failed.txt").rfind("parked: ", 0), 0u);
+
+  // A scan started as its projector starts one, whose first CAPTURE is poisoned.
+  scan_started_t started;
+  capture_t capture;
+  {
+    lcm::LogFile log(kLog, "r");
+    bool have_start = false, have_capture = false;
+    for (const lcm::LogEvent* e = log.readNextEvent(); e && !(have_start && have_capture);
+         e = log.readNextEvent()) {
+      if (e->channel == "SCAN_STARTED") have_start = started.decode(e->data, 0, e->datalen) >= 0;
+      if (e->channel == "CAPTURE" && !have_capture) {
+        have_capture = capture.decode(e->data, 0, e->datalen) >= 0;
+      }
+    }
+    ASSERT_TRUE(have_start && have_capture);
+  }
+  started.scan_id = capture.scan_id = 600;
+  started.session = capture.session = 6006;
+  capture.projector_width = 1 << 30;
+  lcm_->publish("SCAN_STARTED", &started);
+  t0 = Clock::now();
+  lcm_->publish("CAPTURE", &capture);
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] {
+    return !board.Error("STATUS_DECODER", "projector size 1073741824x").empty();
+  })) << board.LastError("STATUS_DECODER");
+  std::printf("[poison] CAPTURE: error %.3f s after it was sent\n", seconds_since(t0));
+  std::fflush(stdout);
+  EXPECT_LE(seconds_since(t0), 5.0);
+  // The scan in progress fails at once, marked so on disk; the capture is not in its log.
+  EXPECT_NE(board.Error("STATUS_DECODER", "projector size 1073741824x").find("scan 600 failed"),
+            std::string::npos);
+  const std::string raw600 = dir_ + "/scans/scan-600/raw";
+  EXPECT_TRUE(fs::exists(raw600 + "/failed.txt"));
+  {
+    lcm::LogFile log(raw600 + "/captures.lcmlog", "r");
+    ASSERT_TRUE(log.good());
+    for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+      EXPECT_NE(e->channel, "CAPTURE") << "the poisoned capture was recorded";
+    }
+  }
+
+  // The decoder is restarted (as systemd would restart a hung one): neither scan is taken up
+  // again.
+  Process* decoder = processes_[0].get();
+  ASSERT_NE(decoder->name().find("vellum-decoder"), std::string::npos);
+  decoder->Kill();
+  StatusBoard after(*lcm_, {"STATUS_DECODER"});
+  Start(Daemon("vellum-decoder"), {"--data", dir_ + "/scans"});
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] {
+    return after.Counter("STATUS_DECODER", "processing daemons heard") == 3;
+  })) << after.LastError("STATUS_DECODER");
+  EXPECT_EQ(after.Counter("STATUS_DECODER", "scans sent again"), 0);
+  EXPECT_EQ(after.Counter("STATUS_DECODER", "scans failed"), 0);
+  EXPECT_TRUE(after.Error("STATUS_DECODER", "scan 600").empty());
+
+  // Bad messages in the midst of a scan (issue 14), each after the scan's third capture. Each
+  // scan is the recorded one imported under a new id, its log rewritten with the bad message.
+  auto tampered = [&](int64_t id, const std::function<void(lcm::LogFile&, lcm::LogEvent)>& add) {
+    const std::string clean = dir_ + "/scan" + std::to_string(id) + ".lcmlog";
+    const std::string bad = dir_ + "/scan" + std::to_string(id) + "_bad.lcmlog";
+    std::string out;
+    EXPECT_EQ(RunTool({"import", dir_ + "/exported", clean, "--scan-id", std::to_string(id)}, &out),
+              0)
+        << out;
+    lcm::LogFile in(clean, "r"), log(bad, "w");
+    int captures = 0;
+    int64_t eventnum = 0;
+    for (const lcm::LogEvent* e = in.readNextEvent(); e; e = in.readNextEvent()) {
+      lcm::LogEvent copy = *e;
+      copy.eventnum = eventnum++;
+      log.writeEvent(&copy);
+      if (e->channel == "CAPTURE" && ++captures == 3) {
+        copy.eventnum = eventnum++;
+        add(log, copy);
+      }
+    }
+    return bad;
+  };
+  auto play = [&](const std::string& log) {
+    Process player({"/usr/bin/lcm-logplayer", "--lcm-url=" + url_, log}, dir_ + "/player.log");
+    EXPECT_EQ(player.Wait(120), 0) << player.Output();
+  };
+  // A CAPTURE with a pattern index beyond the count: the scan cannot be whole (its projector
+  // counts that capture as one of its own), so it fails at once, and the capture never reaches
+  // the scan's log, whose every capture stays within the count.
+  const std::string beyond_log = tampered(700, [&](lcm::LogFile& log, lcm::LogEvent event) {
+    capture_t beyond;
+    ASSERT_GE(beyond.decode(event.data, 0, event.datalen), 0);
+    beyond.pattern_index = beyond.pattern_count + 5;
+    beyond.image.pattern_index = beyond.pattern_index;
+    const std::vector<uint8_t> bytes = station::Encode(beyond);
+    event.data = const_cast<uint8_t*>(bytes.data());
+    event.datalen = static_cast<int32_t>(bytes.size());
+    log.writeEvent(&event);
+  });
+  play(beyond_log);
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return !after.Error("STATUS_DECODER", "scan 700 failed").empty();
+  })) << after.LastError("STATUS_DECODER");
+  EXPECT_NE(after.Error("STATUS_DECODER", "scan 700 failed").find("pattern_index outside"),
+            std::string::npos);
+  const std::string raw700 = dir_ + "/scans/scan-700/raw";
+  EXPECT_TRUE(fs::exists(raw700 + "/failed.txt"));
+  {
+    lcm::LogFile log(raw700 + "/captures.lcmlog", "r");
+    ASSERT_TRUE(log.good());
+    int captures = 0;
+    for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+      capture_t c;
+      if (e->channel != "CAPTURE") continue;
+      ASSERT_GE(c.decode(e->data, 0, e->datalen), 0);
+      EXPECT_LT(c.pattern_index, c.pattern_count);
+      ++captures;
+    }
+    EXPECT_EQ(captures, 3);
+  }
+  // A CALIBRATION of another rig: refused at the decoder and the processing daemons; the scan
+  // keeps the calibration it started with (its raw/calibration.yaml, and a result equal to
+  // `vellum process` of the scan as recorded); its log exports whole.
+  StatusBoard processing(*lcm_, kProcessingStatus);
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  const std::string other_log = tampered(701, [&](lcm::LogFile& log, lcm::LogEvent event) {
+    calibration_t other;
+    lcm::LogFile again(dir_ + "/scan701.lcmlog", "r");
+    for (const lcm::LogEvent* c = again.readNextEvent(); c; c = again.readNextEvent()) {
+      if (c->channel == "CALIBRATION") ASSERT_GE(other.decode(c->data, 0, c->datalen), 0);
+    }
+    other.camera.matrix[0] *= 1.1;  // Another camera's focal length.
+    other.source = "another rig";
+    const std::vector<uint8_t> bytes = station::Encode(other);
+    event.channel = "CALIBRATION";
+    event.data = const_cast<uint8_t*>(bytes.data());
+    event.datalen = static_cast<int32_t>(bytes.size());
+    log.writeEvent(&event);
+  });
+  play(other_log);
+  ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] { return !restored.empty(); }))
+      << after.LastError("STATUS_DECODER");
+  EXPECT_EQ(restored[0].scan_id, 701);
+  ExpectSameAsProcess(dir_ + "/exported", restored[0].results);
+  EXPECT_EQ(after.Counter("STATUS_DECODER", "scans sent again"), 0);
+  ASSERT_TRUE(HandleUntil(*lcm_, 10,
+                          [&] {
+                            return after.Counter("STATUS_DECODER", "calibrations refused") == 1 &&
+                                   processing.Counter("STATUS_TRIANGULATOR",
+                                                      "calibrations refused") == 1;
+                          }))
+      << "decoder " << after.Counter("STATUS_DECODER", "calibrations refused") << ", triangulator "
+      << processing.Counter("STATUS_TRIANGULATOR", "calibrations refused");
+  const std::string raw701 = dir_ + "/scans/scan-701/raw";
+  EXPECT_EQ(ReadText(raw701 + "/calibration.yaml"), ReadText(dir_ + "/exported/calibration.yaml"));
+  ASSERT_EQ(RunTool({"export", raw701 + "/captures.lcmlog", dir_ + "/exported701"}, &out), 0)
+      << out;
+  for (const char* file : {"scan.yaml", "texture.png", "frame_000.png", "frame_053.png"}) {
+    EXPECT_EQ(ReadText(dir_ + "/exported701/" + file), ReadText(dir_ + "/exported/" + file))
+        << file;
+  }
+}
+
 // Sends `msg` on `channel` as one LCM datagram ("LC02", a sequence number, the channel, the
 // message) unicast to 127.0.0.1:port, as any host that can reach the station could.
 template <class Msg>
@@ -678,17 +927,9 @@ TEST_F(StationTest, LostChunksAndSequenceGapsAreReportedNotSilentlyUsed) {
 // X server (Xvfb keeps its screen as an XWD file) shows the restored page, where OpenCV finds
 // the leaf's whole checkerboard (16 x 21 inner corners), and the camera's live preview.
 TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
-  const std::string display = ":" + std::to_string(200 + std::hash<std::string>()(dir_) % 300);
-  fs::create_directories(dir_ + "/fb");
-  Process xvfb({"/usr/bin/Xvfb", display, "-screen", "0", "1280x720x24", "-fbdir", dir_ + "/fb",
-                "-nolisten", "tcp"},
-               dir_ + "/xvfb.log");
-  const std::string screen = dir_ + "/fb/Xvfb_screen0";
-  for (int k = 0; k < 100 && !fs::exists(screen); ++k) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  }
-  ASSERT_TRUE(fs::exists(screen)) << xvfb.Output();
-  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  std::string screen;
+  const std::string display = StartXvfb(&screen);
+  ASSERT_TRUE(fs::exists(screen));
   Process* viewer =
       Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
   Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
@@ -725,6 +966,173 @@ TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
   cv::meanStdDev(preview, mean, stddev);
   EXPECT_GT(stddev[0], 20) << "the camera preview looks empty";
   EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();  // Before its X server goes.
+}
+
+// Issue 15: an operator at the viewer (a real X server, keys typed with xdotool) enters a
+// folio's identity once in the form, and scans folios 1r, 1v and 2r; then takes the last two
+// advances back (u, u) and retakes 1v. Each scan's folder is named after its folio, its
+// report.json carries the identity; the retake of 1v is the folder at the top, and the first
+// attempt of 1v is kept whole in retaken/.
+TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirstAside) {
+  std::string screen;
+  const std::string display = StartXvfb(&screen);
+  ASSERT_TRUE(fs::exists(screen));
+  Process* viewer =
+      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
+  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_VIEWER");
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  std::vector<scan_request_t> requests;
+  Listener<scan_request_t> on_request(*lcm_, "SCAN_REQUEST",
+                                      [&](const scan_request_t& m) { requests.push_back(m); });
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  // The viewer's window takes the keyboard (there is no window manager to give it).
+  ASSERT_TRUE(Xdotool(
+      display, {"search", "--sync", "--name", "vellum station", "windowfocus", "--sync", "%1"}));
+  // The form opens (its state on the viewer's status), then the operator types.
+  std::string viewer_state;
+  Listener<status_t> on_viewer(*lcm_, "STATUS_VIEWER",
+                               [&](const status_t& m) { viewer_state = m.state; });
+  ASSERT_TRUE(Xdotool(display, {"key", "e"}));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return viewer_state == "editing"; }));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "MS 7"}));
+  ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "1"}));
+  ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "recto"}));
+  ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "B. Binder"}));
+  ASSERT_TRUE(Xdotool(display, {"key", "Return"}));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return viewer_state == "idle"; }));
+  // One scan from the viewer's s key: asked for with `folio` and `side`, and restored.
+  auto scan = [&](const std::string& folio, const std::string& side) {
+    const size_t n = requests.size();
+    ASSERT_TRUE(Xdotool(display, {"key", "s"}));
+    ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return requests.size() > n; }))
+        << "no SCAN_REQUEST from the viewer's s key";
+    const scan_request_t& r = requests.back();
+    EXPECT_EQ(r.identity.shelfmark, "MS 7");
+    EXPECT_EQ(r.identity.folio, folio);
+    EXPECT_EQ(r.identity.side, side);
+    EXPECT_EQ(r.identity.operator_name, "B. Binder");
+    ASSERT_TRUE(HandleUntil(*lcm_, 300,
+                            [&] {
+                              return std::any_of(
+                                  restored.begin(), restored.end(),
+                                  [&](const restored_t& m) { return m.scan_id == r.scan_id; });
+                            }))
+        << "scan " << r.scan_id << " (" << folio << " " << side << ") was not restored";
+  };
+  scan("1", "recto");
+  scan("1", "verso");
+  const int64_t first_verso = requests.back().scan_id;
+  scan("2", "recto");
+  ASSERT_TRUE(Xdotool(display, {"key", "u"}));  // 2r again...
+  ASSERT_TRUE(Xdotool(display, {"key", "u"}));  // ...and 1v again: a retake.
+  scan("1", "verso");
+  const int64_t retake = requests.back().scan_id;
+  // The folders: one per folio at the top, the newest attempt; the first 1v in retaken/.
+  std::map<std::string, int> folios;
+  for (const auto& e : fs::directory_iterator(dir_ + "/scans")) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind("scan-", 0) != 0) continue;
+    const std::string slug = name.substr(name.find('-', 5) + 1);
+    ++folios[slug];
+    const nlohmann::json report =
+        nlohmann::json::parse(ReadText(e.path().string() + "/results/report.json"));
+    EXPECT_EQ(report["identity"]["shelfmark"], "MS 7") << name;
+    EXPECT_EQ(report["identity"]["operator"], "B. Binder") << name;
+    EXPECT_EQ("MS-7_" + report["identity"]["folio"].get<std::string>() + "_" +
+                  report["identity"]["side"].get<std::string>(),
+              slug);
+    EXPECT_TRUE(fs::exists(e.path().string() + "/results/restored.tif")) << name;
+  }
+  EXPECT_EQ(folios, (std::map<std::string, int>{
+                        {"MS-7_1_recto", 1}, {"MS-7_1_verso", 1}, {"MS-7_2_recto", 1}}));
+  EXPECT_TRUE(fs::exists(dir_ + "/scans/scan-" + std::to_string(retake) + "-MS-7_1_verso"));
+  const std::string aside =
+      dir_ + "/scans/retaken/scan-" + std::to_string(first_verso) + "-MS-7_1_verso";
+  EXPECT_TRUE(fs::exists(aside + "/results/restored.tif")) << aside;
+  EXPECT_TRUE(fs::exists(aside + "/raw/captures.lcmlog")) << aside;
+  // The contact sheet: the three folios, then the earlier attempt of 1v.
+  const std::string sheet = ReadText(dir_ + "/scans/index.html");
+  const size_t first = sheet.find("MS 7, 1 recto"), earlier = sheet.find("Earlier attempts");
+  EXPECT_NE(sheet.find("MS 7, 2 recto"), std::string::npos) << sheet;
+  EXPECT_NE(first, std::string::npos) << sheet;
+  EXPECT_NE(earlier, std::string::npos) << sheet;
+  EXPECT_NE(sheet.find("retaken/scan-" + std::to_string(first_verso)), std::string::npos);
+  EXPECT_LT(first, earlier);
+  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();  // Before its X server goes.
+}
+
+// Issue 15: the camera stops in the middle of a scan. The viewer (on a real X server) turns its
+// header red with the failure within the projector's capture timeout, checked on the screen;
+// the scan's folder is marked failed, with the reason.
+TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFailed) {
+  std::string screen;
+  const std::string display = StartXvfb(&screen);
+  ASSERT_TRUE(fs::exists(screen));
+  Process* viewer =
+      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
+  Process* camera =
+      Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  const double capture_timeout_s = 20;
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout",
+         std::to_string(static_cast<int>(capture_timeout_s))},
+        {"SDL_VIDEODRIVER=offscreen"});
+  Start(Daemon("vellum-decoder"), {"--data", dir_ + "/scans", "--scan-timeout", "5"});
+  for (const char* name : {"vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+    Start(Daemon(name), {"--data", dir_ + "/scans"});
+  }
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_VIEWER");
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  int captured = 0;
+  int64_t scan_id = 0;
+  Listener<capture_t> on_capture(*lcm_, "CAPTURE", [&](const capture_t& c) {
+    ++captured;
+    scan_id = c.scan_id;
+  });
+  Process scan({Tool(), "scan", "--url", url_, "--timeout", "300"}, dir_ + "/scan.log");
+  ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] { return captured >= 5; }));
+  camera->Kill();
+  const auto stopped = std::chrono::steady_clock::now();
+  // The header: red across the top of the screen.
+  auto header_red = [&] {
+    const cv::Mat shot = testing::ReadXwd(screen);
+    if (shot.empty()) return false;
+    cv::Mat mask;
+    cv::inRange(shot(cv::Rect(0, 0, shot.cols, 36)), cv::Scalar(0, 0, 180), cv::Scalar(80, 80, 255),
+                mask);
+    return cv::countNonZero(mask) > shot.cols * 36 / 2;
+  };
+  EXPECT_FALSE(header_red()) << "red before the failure";
+  ASSERT_TRUE(HandleUntil(*lcm_, capture_timeout_s + 30, header_red))
+      << "the viewer's header never turned red; see " << screen;
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - stopped).count();
+  std::printf("[viewer] header red %.1f s after the camera stopped (capture timeout %.0f s)\n",
+              seconds, capture_timeout_s);
+  std::fflush(stdout);
+  EXPECT_LE(seconds, capture_timeout_s + 5);  // A heartbeat and a redraw after the timeout.
+  cv::imwrite(dir_ + "/failed.png", testing::ReadXwd(screen));
+  EXPECT_NE(scan.Wait(120), 0) << scan.Output();
+  const std::string failed = dir_ + "/scans/scan-" + std::to_string(scan_id) + "/raw/failed.txt";
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return fs::exists(failed); })) << failed;
+  EXPECT_NE(ReadText(failed).find("captures missing"), std::string::npos) << ReadText(failed);
+  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();
 }
 
 // The recorder crashes in the middle of a scan and systemd starts it again. What the decoder

@@ -23,4 +23,23 @@ inline std::string Printable(const std::string& text, size_t max = 200) {
   return out;
 }
 
+// Text for HTML: <, >, & and " as entities.
+inline std::string HtmlEscape(const std::string& text) {
+  std::string out;
+  for (const char c : text) {
+    if (c == '<') {
+      out += "&lt;";
+    } else if (c == '>') {
+      out += "&gt;";
+    } else if (c == '&') {
+      out += "&amp;";
+    } else if (c == '"') {
+      out += "&quot;";
+    } else {
+      out += c;
+    }
+  }
+  return out;
+}
+
 }  // namespace vellum

@@ -5,8 +5,66 @@
 #include <limits>
 #include <set>
 
+#include "core/patterns/scan.h"
+
 namespace vellum {
 namespace {
+
+// Issue 15: the scan's folder is named after what is scanned, safely on any file system.
+TEST(ScanIdentity, SlugIsReadableAndSafe) {
+  ScanIdentity id;
+  EXPECT_EQ(IdentitySlug(id), "");
+  id.label = "from vellum-viewer";
+  EXPECT_EQ(IdentitySlug(id), "from-vellum-viewer");  // The label only without the others.
+  id.shelfmark = "MS 12";
+  id.folio = "3";
+  id.side = "recto";
+  EXPECT_EQ(IdentitySlug(id), "MS-12_3_recto");
+  id.shelfmark = "Cotton MS Otho A. VI, f. 12";
+  id.folio = "12";
+  id.side = "";
+  EXPECT_EQ(IdentitySlug(id), "Cotton-MS-Otho-A.-VI-f.-12_12");
+  // No path, no hidden file, no control or non-ASCII character, bounded.
+  id = ScanIdentity();
+  id.shelfmark = "../../etc/passwd";
+  id.folio = "..";
+  id.side = "\x01verso\n";
+  EXPECT_EQ(IdentitySlug(id), "etc-passwd_verso");
+  id.shelfmark = "\xce\x9c\xce\xa3 5 /\\ :*?\"<>|";  // Greek letters and Windows' forbidden set.
+  id.folio = id.side = "";
+  EXPECT_EQ(IdentitySlug(id), "5");
+  id.shelfmark = std::string(300, 'a');
+  EXPECT_EQ(IdentitySlug(id).size(), kMaxSlug);
+  id.shelfmark = std::string(kMaxSlug - 1, 'a') + " b";
+  EXPECT_EQ(IdentitySlug(id), std::string(kMaxSlug - 1, 'a'));  // Never ends in '-'.
+}
+
+// A sequence of scans: recto, verso, next recto...; pages (no side) count up; the folio's last
+// number is the one that counts ("f. 12a" has none after its letter: "12" is it).
+TEST(ScanIdentity, NextFolioRunsRectoVersoThenTheNextFolio) {
+  ScanIdentity id;
+  id.shelfmark = "MS 12";
+  id.folio = "3";
+  id.side = "recto";
+  id = NextFolio(id);
+  EXPECT_EQ(id.folio, "3");
+  EXPECT_EQ(id.side, "verso");
+  id = NextFolio(id);
+  EXPECT_EQ(id.folio, "4");
+  EXPECT_EQ(id.side, "recto");
+  EXPECT_EQ(id.shelfmark, "MS 12");
+  id.folio = "f. 99";
+  id.side = "verso";
+  EXPECT_EQ(NextFolio(id).folio, "f. 100");
+  id.folio = "12a";
+  EXPECT_EQ(NextFolio(id).folio, "13a");
+  id.side = "";  // Pages of a printed book, or the openings of a spread.
+  id.folio = "p. 109";
+  EXPECT_EQ(NextFolio(id).folio, "p. 110");
+  EXPECT_EQ(NextFolio(id).side, "");
+  id.folio = "flyleaf";
+  EXPECT_EQ(NextFolio(id).folio, "flyleaf");
+}
 
 TEST(Patterns, SequenceLayoutFor1024x768) {
   const PatternSequence seq = MakePatternSequence(PatternOptions());

@@ -49,4 +49,73 @@ ScanIdentity SanitizedIdentity(const ScanIdentity& in, std::string* why) {
   return out;
 }
 
+namespace {
+
+std::string SlugPart(const std::string& text) {
+  std::string out;
+  for (const char ch : text) {
+    const unsigned char c = static_cast<unsigned char>(ch);
+    if (std::isalnum(c) && c < 0x80) {
+      out += ch;
+    } else if ((ch == '.' || ch == '_') && !out.empty() && out.back() != '-') {
+      out += ch;
+    } else if (!out.empty() && out.back() != '-') {
+      out += '-';
+    }
+  }
+  while (!out.empty() && (out.back() == '-' || out.back() == '.' || out.back() == '_')) {
+    out.pop_back();
+  }
+  return out;
+}
+
+}  // namespace
+
+ScanIdentity NextFolio(const ScanIdentity& identity) {
+  ScanIdentity next = identity;
+  if (identity.side == "recto") {
+    next.side = "verso";
+    return next;
+  }
+  if (identity.side == "verso") next.side = "recto";
+  // The last run of digits, plus one.
+  std::string& folio = next.folio;
+  size_t end = folio.size();
+  while (end > 0 && !std::isdigit(static_cast<unsigned char>(folio[end - 1]))) --end;
+  size_t begin = end;
+  while (begin > 0 && std::isdigit(static_cast<unsigned char>(folio[begin - 1]))) --begin;
+  if (begin == end) return next;
+  std::string digits = folio.substr(begin, end - begin);
+  size_t k = digits.size();
+  while (k > 0 && digits[k - 1] == '9') digits[--k] = '0';
+  if (k == 0) {
+    digits.insert(digits.begin(), '1');
+  } else {
+    ++digits[k - 1];
+  }
+  folio.replace(begin, end - begin, digits);
+  return next;
+}
+
+std::string IdentitySlug(const ScanIdentity& identity) {
+  std::string slug;
+  auto add = [&](const std::string& text) {
+    const std::string part = SlugPart(text);
+    if (part.empty()) return;
+    if (!slug.empty()) slug += '_';
+    slug += part;
+  };
+  add(identity.shelfmark);
+  add(identity.folio);
+  add(identity.side);
+  if (slug.empty()) add(identity.label);
+  if (slug.size() > kMaxSlug) {
+    slug.resize(kMaxSlug);
+    while (!slug.empty() && (slug.back() == '-' || slug.back() == '.' || slug.back() == '_')) {
+      slug.pop_back();
+    }
+  }
+  return slug;
+}
+
 }  // namespace vellum

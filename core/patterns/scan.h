@@ -51,6 +51,20 @@ inline constexpr size_t kMaxIdentityField = 200;
 // (then dropped), or text that had to be changed; empty when it was clean.
 ScanIdentity SanitizedIdentity(const ScanIdentity& identity, std::string* why = nullptr);
 
+// The folio after `identity`'s, for a sequence of scans: recto -> verso of the same folio;
+// verso -> recto of the next (the folio's last number plus one: "3" -> "4", "f12" -> "f13");
+// without a side (a spread, or pages), the next number. A folio without a number stays.
+ScanIdentity NextFolio(const ScanIdentity& identity);
+
+// The most bytes of IdentitySlug.
+inline constexpr size_t kMaxSlug = 64;
+
+// A readable name for a folder, safe on any file system: the shelfmark, folio and side (else
+// the label), each with every run of characters other than ASCII letters, digits, '.' and '_'
+// made one '-', and no '.' or '-' at either end (so never "..", nor a hidden file); joined by
+// '_', at most kMaxSlug bytes; "" when nothing is left ("MS 12", "3", "recto" -> "MS-12_3_recto").
+std::string IdentitySlug(const ScanIdentity& identity);
+
 struct Scan {
   PatternSequence sequence;
   cv::Size camera_size;         // 0x0 when unknown (a pattern set not yet captured).

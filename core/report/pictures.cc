@@ -15,31 +15,45 @@ cv::Mat To8BitBgr(const cv::Mat& image) {
   return out;
 }
 
-// A vertical colour bar of `height` pixels for [lo, hi], labelled at its ends and middle.
-cv::Mat ColourBar(int height, double lo, double hi, const char* format) {
-  const int bar_w = 24, width = 110;
-  cv::Mat bar(height, width, CV_8UC3, cv::Scalar::all(255));
-  cv::Mat ramp(height, 1, CV_8U);
-  for (int y = 0; y < height; ++y)
+// A vertical colour bar beside a picture of `height` pixels: its `title` (what and in which
+// unit) on top, then the ramp for [lo, hi] labelled at its ends and middle, each label beside
+// its own level (the ramp is inset so that no label is cut at the picture's edge). The
+// picture's colours span exactly [lo, hi]: nothing is clipped.
+cv::Mat ColourBar(int height, double lo, double hi, const char* format, const char* title) {
+  const int bar_w = 24, width = 130, head = 22, foot = 8;
+  cv::Mat bar(std::max(height, head + foot + 16), width, CV_8UC3, cv::Scalar::all(255));
+  cv::putText(bar, title, cv::Point(4, 14), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar::all(0), 1,
+              cv::LINE_AA);
+  const int ramp_h = bar.rows - head - foot;
+  cv::Mat ramp(ramp_h, 1, CV_8U);
+  for (int y = 0; y < ramp_h; ++y)
     ramp.at<uint8_t>(y) =
-        cv::saturate_cast<uint8_t>(255.0 * (height - 1 - y) / std::max(1, height - 1));
+        cv::saturate_cast<uint8_t>(255.0 * (ramp_h - 1 - y) / std::max(1, ramp_h - 1));
   cv::Mat colours;
   cv::applyColorMap(ramp, colours, cv::COLORMAP_TURBO);
-  cv::resize(colours, colours, cv::Size(bar_w, height), 0, 0, cv::INTER_NEAREST);
-  colours.copyTo(bar(cv::Rect(6, 0, bar_w, height)));
+  cv::resize(colours, colours, cv::Size(bar_w, ramp_h), 0, 0, cv::INTER_NEAREST);
+  colours.copyTo(bar(cv::Rect(6, head, bar_w, ramp_h)));
   for (double f : {0.0, 0.5, 1.0}) {
     char text[48];
     std::snprintf(text, sizeof(text), format, lo + f * (hi - lo));
-    const int y = static_cast<int>(std::lround((1 - f) * (height - 1)));
-    cv::putText(bar, text, cv::Point(bar_w + 10, std::clamp(y + 5, 12, height - 4)),
-                cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar::all(0), 1, cv::LINE_AA);
+    const int y = head + static_cast<int>(std::lround((1 - f) * (ramp_h - 1)));
+    cv::line(bar, cv::Point(6 + bar_w, y), cv::Point(bar_w + 12, y), cv::Scalar::all(0), 1);
+    cv::putText(bar, text, cv::Point(bar_w + 14, y + 4), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                cv::Scalar::all(0), 1, cv::LINE_AA);
   }
   return bar;
 }
 
-cv::Mat WithBar(const cv::Mat& picture, double lo, double hi, const char* format) {
+cv::Mat WithBar(const cv::Mat& picture, double lo, double hi, const char* format,
+                const char* title) {
+  cv::Mat bar = ColourBar(picture.rows, lo, hi, format, title);
+  cv::Mat left = picture;
+  if (bar.rows > left.rows) {  // A picture lower than the bar's labels: padded below.
+    cv::copyMakeBorder(left, left, 0, bar.rows - left.rows, 0, 0, cv::BORDER_CONSTANT,
+                       cv::Scalar::all(255));
+  }
   cv::Mat out;
-  cv::hconcat(picture, ColourBar(picture.rows, lo, hi, format), out);
+  cv::hconcat(left, bar, out);
   return out;
 }
 
@@ -64,7 +78,7 @@ cv::Mat DepthWithColourBar(const cv::Mat& points, double* z_min_mm, double* z_ma
   planes[2].convertTo(z8, CV_8U, 255.0 / range, -*z_min_mm * 255.0 / range);
   cv::applyColorMap(z8, colour, cv::COLORMAP_TURBO);
   colour.setTo(cv::Scalar::all(0), ~valid);
-  return WithBar(colour, *z_min_mm, *z_min_mm + range, "%.1f mm");
+  return WithBar(colour, *z_min_mm, *z_min_mm + range, "%.1f", "height, mm");
 }
 
 std::function<cv::Point2d(const cv::Point2d&)> RestoredPixel(const RestoreResult& restored,
@@ -112,7 +126,7 @@ cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
     const cv::Vec3b c = colour.at<cv::Vec3b>(0);
     cv::fillConvexPoly(picture, corners, cv::Scalar(c[0], c[1], c[2]), cv::LINE_AA);
   }
-  return WithBar(picture, 0, max_strain, "%.1e");
+  return WithBar(picture, 0, max_strain, "%.1e", "strain (quad mean)");
 }
 
 cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
@@ -133,6 +147,47 @@ cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
     }
   }
   return picture;
+}
+
+cv::Mat RestoredWithScaleBar(const RestoreResult& restored, int max_width, double* bar_mm) {
+  cv::Mat page = To8BitBgr(restored.image);
+  double scale = 1;
+  if (page.cols > max_width) {
+    scale = static_cast<double>(max_width) / page.cols;
+    cv::resize(page, page, cv::Size(), scale, scale, cv::INTER_AREA);
+  } else {
+    page = page.clone();
+  }
+  *bar_mm = 0;
+  if (restored.view != RestoreView::kOrthographic || restored.dpi <= 0) return page;
+  const double px_per_mm = scale * restored.dpi / 25.4;
+  const double width_mm = page.cols / px_per_mm;
+  for (double mm : {1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0}) {
+    if (mm <= 0.3 * width_mm) *bar_mm = mm;
+  }
+  if (*bar_mm == 0) return page;
+  const int length = static_cast<int>(std::lround(*bar_mm * px_per_mm));
+  const int thick = std::max(6, page.cols / 120), margin = std::max(8, page.cols / 60);
+  const cv::Point origin(margin, page.rows - margin - thick);
+  char label[32];
+  std::snprintf(label, sizeof(label), "%g mm", *bar_mm);
+  const double font = std::max(0.4, page.cols / 1400.0);
+  int baseline = 0;
+  const cv::Size text = cv::getTextSize(label, cv::FONT_HERSHEY_SIMPLEX, font, 1, &baseline);
+  // A white ground, then five black and white segments, outlined.
+  cv::rectangle(page,
+                cv::Rect(origin.x - 4, origin.y - text.height - 10,
+                         std::max(length, text.width) + 8, text.height + thick + 14),
+                cv::Scalar::all(255), cv::FILLED);
+  for (int k = 0; k < 5; ++k) {
+    const int x0 = origin.x + length * k / 5, x1 = origin.x + length * (k + 1) / 5;
+    cv::rectangle(page, cv::Rect(x0, origin.y, x1 - x0, thick),
+                  k % 2 == 0 ? cv::Scalar::all(0) : cv::Scalar::all(255), cv::FILLED);
+  }
+  cv::rectangle(page, cv::Rect(origin.x, origin.y, length, thick), cv::Scalar::all(0), 1);
+  cv::putText(page, label, cv::Point(origin.x, origin.y - 5), cv::FONT_HERSHEY_SIMPLEX, font,
+              cv::Scalar::all(0), 1, cv::LINE_AA);
+  return page;
 }
 
 cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,

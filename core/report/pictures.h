@@ -34,6 +34,11 @@ cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
 cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                      const RestoreResult& restored, const CameraModel& camera, int step = 4);
 
+// The restored page for the report, at most `max_width` pixels wide; in orthographic view with
+// a scale bar (a round length in mm, about a quarter of the page, in black and white segments)
+// at its lower left. Sets *bar_mm to the bar's length (0 in camera view: no true scale).
+cv::Mat RestoredWithScaleBar(const RestoreResult& restored, int max_width, double* bar_mm);
+
 // The same part of the page before (texture) and after (restored), side by side: a window of
 // `size_mm` around the sheet's central node.
 cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,

@@ -1,5 +1,6 @@
 #include "daemons/decoder/decoder_node.h"
 
+#include <filesystem>
 #include <memory>
 #include <stdexcept>
 
@@ -36,6 +37,17 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     if (!Admitted(gate_.Start(msg), msg.scan_id)) return;  // That scan cannot be recorded.
     node_->Count("scans started");
     last_capture_ = std::chrono::steady_clock::now();  // The texture is awaited from now.
+    // The scan's folder, named after what is scanned; found by its id from here on. A retake of
+    // a folio sets the earlier attempts aside (kept whole).
+    const std::string slug = IdentitySlug(FromMessage(msg.identity));
+    for (const std::string& aside : SetAsideEarlierAttempts(options_.data_dir, msg.scan_id, slug)) {
+      node_->Count("retakes");
+      node_->Log("scan " + std::to_string(msg.scan_id) + ": a retake of " + slug +
+                 "; the earlier attempt is kept in " + aside);
+    }
+    std::error_code ec;
+    std::filesystem::create_directories(ScanFolder::New(options_.data_dir, msg.scan_id, slug).raw(),
+                                        ec);  // A failure shows as the log's.
     if (!Log(channel::kScanStarted, msg.scan_id, msg.utime, Encode(msg))) return;
     const int64_t id = msg.scan_id;
     // Begin takes the identity from the log, where this SCAN_STARTED now is.
@@ -231,7 +243,7 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
   node_->PublishChunks(channel::kTexture, &texture);
   const StageReport report = DecodeStage(scan, &decoder_, &decoded_);
   if (!report.status.ok()) {
-    supervisor_.Failed(id);  // Failed with a status: not sent again.
+    supervisor_.Failed(id, "decoding failed: " + report.status.message());  // Not sent again.
     node_->Error("scan " + std::to_string(id) + ": " + report.status.message(), id);
     node_->SetState("idle");
     return report.status;

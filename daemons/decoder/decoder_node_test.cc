@@ -9,6 +9,8 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -221,6 +223,64 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
   heartbeat("vellum-restorer", 302);
   ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("restarts seen") == 4; }));
   EXPECT_EQ(sent(41), 2);
+}
+
+// A scan that loses its daemon twice (a scan that crashes or hangs the restorer each time) is
+// parked: marked failed on disk with the reason, out of the ledger, reported, and not sent again
+// after another restart of the daemon or of the decoder itself.
+TEST_F(DecoderNodeTest, AScanThatLosesItsDaemonTwiceIsParked) {
+  auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
+  auto heartbeat = [&](const std::string& process, int32_t pid) {
+    status_t m{};
+    m.process = process;
+    m.pid = pid;
+    m.state = "idle";
+    bus_.probe().Publish(StatusChannel(process), &m);
+  };
+  auto sent = [&](int64_t id) {
+    int n = 0;
+    for (const correspondence_t& m : *correspondence) n += m.scan_id == id && m.chunk_index == 0;
+    return n;
+  };
+  const ScanFolder folder = ScanFolder::For(data_, 42);
+  bus_.Watch("vellum-decoder");
+  {
+    Node node("vellum-decoder", &bus_.lcm());
+    DecoderNode decoder(&node, options_);
+    heartbeat("vellum-triangulator", 100);
+    heartbeat("vellum-flattener", 200);
+    heartbeat("vellum-restorer", 300);
+    ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("processing daemons heard") == 3; }));
+    PublishScan(42);
+    ASSERT_TRUE(bus_.RunUntil([&] { return sent(42) == 1; }));
+    heartbeat("vellum-triangulator", 101);  // It held the scan, and died: sent again.
+    ASSERT_TRUE(bus_.RunUntil([&] { return sent(42) == 2; }));
+    EXPECT_EQ(PendingAttempts(folder), 2);
+    heartbeat("vellum-triangulator", 102);  // Again: parked.
+    ASSERT_TRUE(bus_.WaitForError("vellum-decoder", "scan 42 failed and is parked"))
+        << bus_.Status("vellum-decoder").last_error;
+    const std::string error = bus_.Status("vellum-decoder").last_error;
+    EXPECT_NE(error.find("not restored after 2 attempts"), std::string::npos) << error;
+    EXPECT_NE(error.find("vellum-triangulator restarted"), std::string::npos) << error;
+    EXPECT_NE(error.find(folder.raw()), std::string::npos) << error;
+    EXPECT_EQ(node.Counter("scans parked"), 1);
+    EXPECT_FALSE(fs::exists(folder.pending()));
+    std::ifstream failed(folder.failed());
+    const std::string why((std::istreambuf_iterator<char>(failed)), {});
+    EXPECT_EQ(why.rfind("parked: not restored after 2 attempts", 0), 0u) << why;
+    heartbeat("vellum-triangulator", 103);
+    ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("restarts seen") == 3; }));
+    EXPECT_EQ(sent(42), 2);
+  }
+  // The decoder restarts: nothing is pending, so nothing goes down the chain.
+  Node node("vellum-decoder", &bus_.lcm());
+  DecoderNode decoder(&node, options_);
+  heartbeat("vellum-triangulator", 104);
+  heartbeat("vellum-flattener", 201);
+  heartbeat("vellum-restorer", 301);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("processing daemons heard") == 3; }));
+  EXPECT_EQ(node.Counter("scans sent again"), 0);
+  EXPECT_EQ(sent(42), 2);
 }
 
 // Every byte of every file under `dir`, by relative path.

@@ -5,8 +5,10 @@
 
 #include "core/common/text.h"
 #include "io/scan_io.h"
+#include "pipeline/qc.h"
 #include "pipeline/report.h"
 #include "pipeline/stages.h"
+#include "station/contact_sheet.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
 #include "vellum/restored_t.hpp"
@@ -104,6 +106,7 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   out.npages = static_cast<int32_t>(out.pages.size());
   for (const Warning& w : report.Warnings()) out.warnings.push_back(w.code + ": " + w.message);
   out.nwarnings = static_cast<int32_t>(out.warnings.size());
+  out.qc = VerdictName(AssessQuality(report).verdict);
   // The preview: the pages side by side, scaled to at most preview_pixels.
   std::vector<cv::Mat> previews;
   int height = 0;
@@ -127,13 +130,17 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   out.preview.scan_id = id;
   out.preview.pattern_index = -1;
   scans_.erase(id);
+  // The session's contact sheet, with this scan in it (before RESTORED: whoever hears it finds
+  // the sheet up to date).
+  const Status sheet = WriteContactSheet(options_.data_dir);
+  if (!sheet.ok()) node_->Log("contact sheet: " + sheet.message());
   node_->Count("scans restored");
   node_->Publish(channel::kRestored, &out);
   AnnounceHandedOn(node_, id, channel::kRestored);
   for (const std::string& w : out.warnings)
     node_->Log("scan " + std::to_string(id) + ": warning: " + w);
   node_->Log("scan " + std::to_string(id) + ": restored " + std::to_string(out.npages) +
-             " page(s) -> " + folder.results());
+             " page(s), quality " + out.qc + " -> " + folder.results());
   node_->SetState("idle", id, "restored " + out.path);
 }
 

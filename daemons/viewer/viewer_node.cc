@@ -1,6 +1,12 @@
 #include "daemons/viewer/viewer_node.h"
 
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -36,29 +42,72 @@ void Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::strin
   scaled.copyTo(canvas(at & cv::Rect(0, 0, canvas.cols, canvas.rows)));
 }
 
+// The identity form's fields, in order.
+struct FormField {
+  const char* name;
+  std::string ScanIdentity::*field;
+};
+constexpr FormField kForm[] = {{"shelfmark", &ScanIdentity::shelfmark},
+                               {"folio", &ScanIdentity::folio},
+                               {"side", &ScanIdentity::side},
+                               {"operator", &ScanIdentity::operator_name},
+                               {"note", &ScanIdentity::note}};
+constexpr int kFormFields = static_cast<int>(std::size(kForm));
+
+// "MS 12, 3 recto (A. Scribe)"; "(no identity)".
+std::string Describe(const ScanIdentity& id) {
+  std::string out = id.shelfmark;
+  const std::string folio = id.folio + (id.side.empty() ? "" : " " + id.side);
+  if (!folio.empty() && folio != " ") out += (out.empty() ? "" : ", ") + folio;
+  if (!id.operator_name.empty()) out += " (" + id.operator_name + ")";
+  return out.empty() ? "(no identity: press e)" : out;
+}
+
+// Splits `text` into lines of at most `chars` characters, at spaces where it can.
+std::vector<std::string> Wrap(const std::string& text, size_t chars) {
+  std::vector<std::string> lines;
+  size_t at = 0;
+  while (at < text.size()) {
+    size_t end = std::min(text.size(), at + chars);
+    if (end < text.size()) {
+      const size_t space = text.rfind(' ', end);
+      if (space != std::string::npos && space > at) end = space;
+    }
+    lines.push_back(text.substr(at, end - at));
+    at = end;
+    while (at < text.size() && text[at] == ' ') ++at;
+  }
+  return lines;
+}
+
+const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60);
+
+cv::Scalar VerdictColour(const std::string& verdict) {
+  return verdict == "pass" ? kGreen : verdict == "warn" ? kAmber : kRed;
+}
+
 }  // namespace
 
 ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
     : node_(node), window_(std::move(window)) {
+  // Text input only while the form is open: a key that opens it (e) must not also type itself
+  // into it, as SDL sends both a key and its text while text input is on.
+  window_->TextInput(false);
   node->Subscribe<image_t>(channel::kPreview, [this](const image_t& m) {
     cv::Mat image;
     const Status s = FromMessage(m, &image);
     if (!s.ok()) return node_->Error("PREVIEW: " + s.message());
     preview_ = image;
+    last_preview_ = Clock::now();
   });
   node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
+    Started(m.scan_id);
     progress_ = "scan " + std::to_string(m.scan_id) + ": " +
                 (m.pattern_index < 0 ? std::string("texture")
                                      : "pattern " + std::to_string(m.pattern_index + 1) + " of " +
                                            std::to_string(m.pattern_count));
   });
-  auto on_status = [this](const status_t& m) {
-    statuses_[m.process] = m;
-    seen_[m.process] = Clock::now();
-    if (m.state == "busy") {
-      progress_ = "scan " + std::to_string(m.scan_id) + ": " + m.process.substr(7) + " " + m.detail;
-    }
-  };
+  auto on_status = [this](const status_t& m) { OnStatus(m); };
   for (const char* process : kGantry) node->Subscribe<status_t>(StatusChannel(process), on_status);
   for (const ChainLink& link : kChain) {
     node->Subscribe<status_t>(StatusChannel(link.process), on_status);
@@ -66,16 +115,85 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
   node->Subscribe<restored_t>(channel::kRestored, [this](const restored_t& m) { OnRestored(m); });
 }
 
+void ViewerNode::Started(int64_t scan_id) {
+  if (scan_id == scan_) return;
+  scan_ = scan_id;
+  if (failed_scan_ != scan_id) failure_.clear();
+}
+
+void ViewerNode::OnStatus(const status_t& m) {
+  statuses_[m.process] = m;
+  seen_[m.process] = Clock::now();
+  if (m.state == "busy") {
+    progress_ = "scan " + std::to_string(m.scan_id) + ": " + m.process.substr(7) + " " + m.detail;
+  }
+  // A new error about a scan (an old one, from before this viewer listened, is not news): the
+  // scan failed. The header turns red with the whole message.
+  auto known = error_utime_.find(m.process);
+  const bool news = known != error_utime_.end() && m.last_error_utime > known->second;
+  error_utime_[m.process] = m.last_error_utime;
+  if (!news || m.last_error_scan_id <= 0 || m.last_error.empty()) return;
+  if (scan_ != 0 && m.last_error_scan_id != scan_) return;  // Not the scan in progress.
+  scan_ = failed_scan_ = m.last_error_scan_id;
+  failure_ = m.process + ": " + m.last_error;
+  progress_ = "scan " + std::to_string(m.last_error_scan_id) + " FAILED";
+}
+
 void ViewerNode::Tick() {
-  std::vector<SDL_Keycode> keys;
-  if (!window_->Poll(&keys)) node_->Stop();
-  for (SDL_Keycode key : keys) OnKey(key);
+  std::vector<display::Window::Input> input;
+  if (!window_->Poll(&input)) node_->Stop();
+  for (const display::Window::Input& in : input) {
+    if (in.key != 0) {
+      OnKey(in.key);
+    } else if (editing_ >= 0) {
+      OnText(in.text);
+    }
+  }
   if (Clock::now() < next_draw_) return;
   next_draw_ = Clock::now() + std::chrono::milliseconds(100);
   window_->Show(Draw());
 }
 
+void ViewerNode::OnText(const std::string& text) {
+  std::string& field = next_.*kForm[editing_].field;
+  for (const char c : text) {
+    if (static_cast<unsigned char>(c) >= 0x20 && field.size() < kMaxIdentityField) field += c;
+  }
+}
+
 void ViewerNode::OnKey(SDL_Keycode key) {
+  if (editing_ >= 0) {  // The form has the keyboard: letters arrive as text (OnText).
+    std::string& field = next_.*kForm[editing_].field;
+    switch (key) {
+      case SDLK_TAB:
+      case SDLK_DOWN:
+        editing_ = (editing_ + 1) % kFormFields;
+        break;
+      case SDLK_UP:
+        editing_ = (editing_ + kFormFields - 1) % kFormFields;
+        break;
+      case SDLK_BACKSPACE:  // One character (UTF-8: its continuation bytes too).
+        while (!field.empty() && (static_cast<unsigned char>(field.back()) & 0xc0) == 0x80) {
+          field.pop_back();
+        }
+        if (!field.empty()) field.pop_back();
+        break;
+      case SDLK_RETURN:
+      case SDLK_KP_ENTER:
+      case SDLK_ESCAPE: {
+        std::string why;
+        next_ = SanitizedIdentity(next_, &why);
+        if (!why.empty()) progress_ = "identity: " + why;
+        editing_ = -1;
+        window_->TextInput(false);
+        node_->SetState("idle");
+        break;
+      }
+      default:
+        break;
+    }
+    return;
+  }
   switch (key) {
     case SDLK_q:
     case SDLK_ESCAPE:
@@ -84,11 +202,31 @@ void ViewerNode::OnKey(SDL_Keycode key) {
     case SDLK_s: {
       scan_request_t r{};
       r.scan_id = NowUtime();
-      r.identity.label = "from vellum-viewer";
+      r.identity = ToMessage(next_);
+      if (next_ == ScanIdentity()) r.identity.label = "from vellum-viewer";
       node_->Publish(channel::kScanRequest, &r);
-      progress_ = "scan " + std::to_string(r.scan_id) + " requested";
+      progress_ = "scan " + std::to_string(r.scan_id) + " requested: " + Describe(next_);
+      Started(r.scan_id);
+      history_.push_back(next_);
+      if (history_.size() > 1000) history_.erase(history_.begin());
+      next_ = NextFolio(next_);
       break;
     }
+    case SDLK_c:
+      sheet_ = !sheet_;
+      break;
+    case SDLK_e:
+      editing_ = 0;
+      window_->TextInput(true);
+      node_->SetState("editing", 0, "the next scan's identity");  // The form has the keyboard.
+      break;
+    case SDLK_u:  // The last advance taken back: the next scan is of that folio again.
+      if (!history_.empty()) {
+        next_ = history_.back();
+        history_.pop_back();
+        progress_ = "next scan again: " + Describe(next_);
+      }
+      break;
     case SDLK_LEFT:
       if (shown_ > 0) --shown_;
       break;
@@ -117,6 +255,7 @@ void ViewerNode::OnRestored(const restored_t& m) {
                  m.scan_id);
   }
   r.warnings = m.warnings;
+  r.quality = m.qc;
   // The other pictures from the scan's report (the restorer writes it before RESTORED): the
   // texture with the leaf's outline, and a spread's left page for its strain.
   auto load = [&](std::initializer_list<const char*> names) {
@@ -127,15 +266,27 @@ void ViewerNode::OnRestored(const restored_t& m) {
     return cv::Mat();
   };
   r.texture = load({"outline.png", "texture.png"});
+  // Its title: the identity in its report.
+  r.title = "scan " + std::to_string(m.scan_id);
+  std::ifstream report(fs::path(m.results) / "report.json");
+  const nlohmann::json j = nlohmann::json::parse(report, nullptr, false);
+  if (j.is_object() && j.contains("identity") && j["identity"].is_object()) {
+    ScanIdentity id;
+    ForEachIdentityField(id, [&](const char* key, std::string& value) {
+      if (j["identity"].contains(key) && j["identity"][key].is_string()) value = j["identity"][key];
+    });
+    if (!(id == ScanIdentity())) r.title = Describe(id);
+  }
   r.depth = load({"depth.png"});
   r.strain = load({"strain.png", "strain-left.png"});
   results_.push_back(r);
   if (results_.size() > 50) results_.pop_front();
   shown_ = static_cast<int>(results_.size()) - 1;
-  progress_ = r.summary + " restored" +
-              (r.warnings.empty() ? std::string()
-                                  : " with " + std::to_string(r.warnings.size()) +
-                                        " warning(s): check before delivering");
+  progress_ =
+      r.summary + " restored" + (r.quality.empty() ? std::string() : ", quality " + r.quality) +
+      (r.warnings.empty()
+           ? std::string()
+           : " with " + std::to_string(r.warnings.size()) + " warning(s): check before delivering");
 }
 
 std::vector<std::string> ViewerNode::warnings() const {
@@ -143,21 +294,76 @@ std::vector<std::string> ViewerNode::warnings() const {
   return results_[shown_].warnings;
 }
 
-cv::Mat ViewerNode::Draw() const {
-  const cv::Size size = window_->size();
-  cv::Mat canvas(size, CV_8UC3, cv::Scalar(30, 30, 30));
-  const int w = size.width, h = size.height, top = 44;
-  cv::putText(canvas, "vellum station", cv::Point(12, 28), cv::FONT_HERSHEY_SIMPLEX, 0.8,
-              cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
-  const bool doubtful = progress_.find("warning(s)") != std::string::npos;
-  cv::putText(canvas, progress_, cv::Point(230, 28), cv::FONT_HERSHEY_SIMPLEX, 0.6,
-              doubtful ? cv::Scalar(0, 170, 255) : cv::Scalar(120, 220, 255), 1, cv::LINE_AA);
-  cv::putText(canvas, "s: scan   left/right: results   q: quit", cv::Point(w - 330, 28),
-              cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
-  // Left: live preview and the daemons.
-  const int left_w = w / 3;
-  Panel(canvas, cv::Rect(8, top, left_w - 12, (h - top) / 2), preview_, "camera preview");
-  int y = top + (h - top) / 2 + 24;
+std::string ViewerNode::quality() const {
+  if (shown_ < 0 || shown_ >= static_cast<int>(results_.size())) return "";
+  return results_[shown_].quality;
+}
+
+void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
+  const int h = canvas.rows;
+  // The live preview, its clipped pixels in red; "NO SIGNAL" when the camera falls silent.
+  const int preview_h = (h - top) * 2 / 5;
+  const cv::Rect box(8, top, width - 12, preview_h);
+  cv::Mat shown = preview_;
+  double clipped = 0;
+  cv::Mat hist;
+  if (!preview_.empty()) {
+    cv::Mat gray = preview_;
+    if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+    if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 257);
+    cv::Mat top_mask;
+    cv::Mat per_channel = preview_.depth() == CV_8U ? preview_ : cv::Mat();
+    if (per_channel.empty()) preview_.convertTo(per_channel, CV_8U, 1.0 / 257);
+    cv::Mat channels_max = per_channel.reshape(1, per_channel.rows * per_channel.cols);
+    cv::reduce(channels_max, channels_max, 1, cv::REDUCE_MAX);
+    top_mask = channels_max.reshape(1, per_channel.rows) >= 255;
+    clipped = static_cast<double>(cv::countNonZero(top_mask)) / top_mask.total();
+    if (per_channel.channels() == 1) {
+      cv::cvtColor(per_channel, shown, cv::COLOR_GRAY2BGR);
+    } else {
+      shown = per_channel.clone();
+    }
+    shown.setTo(cv::Scalar(0, 0, 255), top_mask);
+    const int channels[] = {0};
+    const int bins[] = {64};
+    const float range[] = {0, 256};
+    const float* ranges[] = {range};
+    cv::calcHist(&gray, 1, channels, cv::Mat(), hist, 1, bins, ranges);
+  }
+  Panel(canvas, box, shown, "camera preview (clipped in red)");
+  const double silent = std::chrono::duration<double>(Clock::now() - last_preview_).count();
+  if (preview_.empty() || silent > 2) {
+    const std::string what = preview_.empty() ? "NO SIGNAL: no camera preview yet"
+                                              : "NO SIGNAL: no camera preview for " +
+                                                    std::to_string(static_cast<int>(silent)) + " s";
+    cv::putText(canvas, what, cv::Point(box.x + 8, box.y + box.height / 2),
+                cv::FONT_HERSHEY_SIMPLEX, 0.6, kRed, 2, cv::LINE_AA);
+  }
+  // The histogram under it, its top bin red when pixels clip.
+  const cv::Rect strip(8, top + preview_h + 2, width - 12, 36);
+  cv::rectangle(canvas, strip, cv::Scalar(70, 70, 70), 1);
+  if (!hist.empty()) {
+    double most = 0;
+    cv::minMaxLoc(hist, nullptr, &most);
+    const double bin_w = static_cast<double>(strip.width - 2) / hist.rows;
+    for (int b = 0; b < hist.rows; ++b) {
+      const int bar =
+          static_cast<int>((strip.height - 4) * hist.at<float>(b) / std::max(1.0, most));
+      const cv::Scalar colour =
+          b == hist.rows - 1 && clipped > 0 ? kRed : cv::Scalar(200, 200, 200);
+      cv::rectangle(
+          canvas,
+          cv::Rect(strip.x + 1 + static_cast<int>(b * bin_w), strip.y + strip.height - 2 - bar,
+                   std::max(1, static_cast<int>(bin_w)), bar),
+          colour, cv::FILLED);
+    }
+    char line[64];
+    std::snprintf(line, sizeof(line), "clipped %.2f%%", 100 * clipped);
+    cv::putText(canvas, line, cv::Point(strip.x + 4, strip.y + 14), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                clipped > 0.005 ? kRed : cv::Scalar(200, 200, 200), 1, cv::LINE_AA);
+  }
+  // The daemons.
+  int y = strip.y + strip.height + 18;
   std::vector<const char*> processes(std::begin(kGantry), std::end(kGantry));
   for (const ChainLink& link : kChain) processes.push_back(link.process);
   for (const char* process : processes) {
@@ -178,8 +384,89 @@ cv::Mat ViewerNode::Draw() const {
     cv::circle(canvas, cv::Point(18, y - 5), 5, colour, cv::FILLED, cv::LINE_AA);
     cv::putText(canvas, line, cv::Point(30, y), cv::FONT_HERSHEY_SIMPLEX, 0.42,
                 cv::Scalar(220, 220, 220), 1, cv::LINE_AA);
-    y += 22;
+    y += 18;
   }
+  // The next scan's identity; the form when it is edited.
+  const int form_lines = editing_ >= 0 ? kFormFields + 1 : 2;
+  y = std::max(y + 6, h - 8 - 18 * form_lines);
+  if (editing_ < 0) {
+    cv::putText(canvas, "next scan: " + Describe(next_), cv::Point(12, y + 12),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+    cv::putText(canvas, "e: edit   u: undo the last advance", cv::Point(12, y + 30),
+                cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
+    return;
+  }
+  cv::putText(canvas, "identity of the next scan (Tab: next field, Return: done)",
+              cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(255, 255, 255), 1,
+              cv::LINE_AA);
+  for (int k = 0; k < kFormFields; ++k) {
+    const int line_y = y + 18 * (k + 2);
+    const bool current = k == editing_;
+    if (current) {
+      cv::rectangle(canvas, cv::Rect(10, line_y - 14, width - 16, 18), cv::Scalar(90, 60, 20),
+                    cv::FILLED);
+    }
+    const std::string value = next_.*kForm[k].field + (current ? "_" : "");
+    cv::putText(canvas, std::string(kForm[k].name) + ": " + value, cv::Point(14, line_y),
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(240, 240, 240), 1, cv::LINE_AA);
+  }
+}
+
+void ViewerNode::DrawSheet(cv::Mat& canvas, cv::Rect area) const {
+  cv::rectangle(canvas, area, cv::Scalar(30, 30, 30), cv::FILLED);
+  cv::putText(canvas, "this session: " + std::to_string(results_.size()) + " scan(s) (c: back)",
+              area.tl() + cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.55,
+              cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  const int n = static_cast<int>(results_.size());
+  if (n == 0) return;
+  // Columns for about 4:3 cells, newest first.
+  int cols = 1;
+  while (cols * cols * 3 < n * 4) ++cols;
+  const int rows = (n + cols - 1) / cols;
+  const int cell_w = (area.width - 8) / cols, cell_h = std::min((area.height - 30) / rows, cell_w);
+  for (int k = 0; k < n; ++k) {
+    const Result& r = results_[n - 1 - k];
+    const cv::Rect cell(area.x + 4 + (k % cols) * cell_w, area.y + 26 + (k / cols) * cell_h,
+                        cell_w - 6, cell_h - 6);
+    const cv::Scalar colour =
+        r.quality.empty() ? cv::Scalar(120, 120, 120) : VerdictColour(r.quality);
+    Panel(canvas, cell, r.restored, r.title);
+    cv::rectangle(canvas, cell, colour, 3);
+    if (k == n - 1 - shown_) cv::rectangle(canvas, cell, cv::Scalar(255, 255, 255), 1);
+  }
+}
+
+cv::Mat ViewerNode::Draw() const {
+  const cv::Size size = window_->size();
+  cv::Mat canvas(size, CV_8UC3, cv::Scalar(30, 30, 30));
+  const int w = size.width, h = size.height, top = 44;
+  // The header: red, with the scan's failure, when the scan in progress failed.
+  const bool failed = !failure_.empty();
+  if (failed) cv::rectangle(canvas, cv::Rect(0, 0, w, top - 4), kRed, cv::FILLED);
+  cv::putText(canvas, "vellum station", cv::Point(12, 28), cv::FONT_HERSHEY_SIMPLEX, 0.8,
+              cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
+  const bool doubtful = progress_.find("warning(s)") != std::string::npos;
+  // The progress line, cut to end before the keys' help.
+  const int help_x = w - 390;
+  std::string progress = progress_;
+  int baseline = 0;
+  while (progress.size() > 4 &&
+         230 + cv::getTextSize(progress, cv::FONT_HERSHEY_SIMPLEX, 0.6, failed ? 2 : 1, &baseline)
+                     .width >
+             help_x - 10) {
+    progress = progress.substr(0, progress.size() - 4) + "...";
+  }
+  cv::putText(canvas, progress, cv::Point(230, 28), cv::FONT_HERSHEY_SIMPLEX, 0.6,
+              failed     ? cv::Scalar(255, 255, 255)
+              : doubtful ? kAmber
+                         : cv::Scalar(120, 220, 255),
+              failed ? 2 : 1, cv::LINE_AA);
+  cv::putText(canvas, "s: scan  e: identity  c: sheet  q: quit", cv::Point(help_x, 28),
+              cv::FONT_HERSHEY_SIMPLEX, 0.45,
+              failed ? cv::Scalar(255, 255, 255) : cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
+  // Left: live preview, histogram, the daemons, the next scan's identity.
+  const int left_w = w / 3;
+  DrawLeft(canvas, top, left_w);
   // Middle: texture, depth, strain; right: the restored page, large.
   const Result* r =
       shown_ >= 0 && shown_ < static_cast<int>(results_.size()) ? &results_[shown_] : nullptr;
@@ -191,18 +478,51 @@ cv::Mat ViewerNode::Draw() const {
   Panel(canvas, cv::Rect(mid_x, top + third, mid_w - 8, third - 4), show.depth, "depth (mm)");
   Panel(canvas, cv::Rect(mid_x, top + 2 * third, mid_w - 8, third - 4), show.strain,
         "flattening strain");
-  // The restored page, and under it a doubtful result's warnings in amber, a line each.
+  // The restored page, its quality verdict above it in its colour, and under it a doubtful
+  // result's warnings in amber, a line each.
   const int lines = std::min<int>(static_cast<int>(show.warnings.size()), 6);
   const int warn_h = lines > 0 ? 18 * lines + 8 : 0;
-  const cv::Rect page(mid_x + mid_w, top, w - mid_x - mid_w - 8, h - top - 8 - warn_h);
-  Panel(canvas, page, show.restored,
-        show.warnings.empty() ? "restored page" : "restored page: DOUBTFUL, see the warnings");
+  const int badge_h = show.quality.empty() ? 0 : 24;
+  const cv::Rect page(mid_x + mid_w, top + badge_h, w - mid_x - mid_w - 8,
+                      h - top - badge_h - 8 - warn_h);
+  if (!show.quality.empty()) {
+    const cv::Rect badge(page.x, top, page.width, badge_h - 4);
+    cv::rectangle(canvas, badge, VerdictColour(show.quality), cv::FILLED);
+    std::string verdict = show.quality;
+    for (char& c : verdict) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    cv::putText(canvas, "quality: " + verdict, badge.tl() + cv::Point(6, 15),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  }
+  std::string caption =
+      show.warnings.empty() ? "restored page" : "restored page: DOUBTFUL, see the warnings";
+  if (failed && r && r->scan_id != failed_scan_) {
+    caption = "an earlier scan (" + std::to_string(r->scan_id) + "); scan " +
+              std::to_string(failed_scan_) + " failed";
+  }
+  Panel(canvas, page, show.restored, caption);
   const size_t chars = static_cast<size_t>(std::max(20, page.width / 8));
   for (int k = 0; k < lines; ++k) {
     std::string line = "! " + show.warnings[k];
     if (line.size() > chars) line = line.substr(0, chars - 3) + "...";
     cv::putText(canvas, line, cv::Point(page.x + 4, page.y + page.height + 18 * (k + 1)),
-                cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(0, 170, 255), 1, cv::LINE_AA);
+                cv::FONT_HERSHEY_SIMPLEX, 0.42, kAmber, 1, cv::LINE_AA);
+  }
+  if (sheet_) DrawSheet(canvas, cv::Rect(mid_x, top, w - mid_x - 8, h - top - 8));
+  // The failure's whole message, over the middle and the right, in red.
+  if (failed) {
+    const std::vector<std::string> wrapped =
+        Wrap(failure_, static_cast<size_t>(std::max(30, (w - mid_x - 40) / 9)));
+    const int n = std::min<int>(static_cast<int>(wrapped.size()), 8);
+    const cv::Rect box(mid_x, top, w - mid_x - 8, 22 * n + 30);
+    cv::rectangle(canvas, box, cv::Scalar(20, 20, 60), cv::FILLED);
+    cv::rectangle(canvas, box, kRed, 2);
+    cv::putText(canvas,
+                "scan " + std::to_string(failed_scan_) + " failed:", box.tl() + cv::Point(10, 20),
+                cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+    for (int k = 0; k < n; ++k) {
+      cv::putText(canvas, wrapped[k], box.tl() + cv::Point(10, 42 + 22 * k),
+                  cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(200, 200, 255), 1, cv::LINE_AA);
+    }
   }
   return canvas;
 }

@@ -2,8 +2,18 @@
 // preview (PREVIEW, never full frames), the scan's progress, every daemon's status from its
 // heartbeat (alive, state, last error), and for each finished scan its texture, depth map,
 // strain map and the restored page side by side, with the leaf's outline over the texture and
-// a doubtful result's warnings in amber under the restored page. Keys: s = start a scan, left/right
-// = step through the scans of this session, q or Esc = quit.
+// a doubtful result's warnings in amber under the restored page, and its quality verdict
+// (pass, warn, fail) in green, amber or red. A scan that fails turns the header red with the
+// daemon's whole message. The preview shows clipped pixels in red with a histogram under it, and
+// "NO SIGNAL" when the camera falls silent.
+//
+// The next scan's catalogue identity (shelfmark, folio, side, operator, note) is set in a form
+// (e opens it; Tab or Down / Up move between fields; Return or Esc closes it); each scan then
+// advances the folio (recto, verso, the next recto: NextFolio), and u takes the last advance
+// back (to scan a folio again). Keys: s = start a scan, e = edit the identity, u = undo the last
+// advance, c = the session's contact sheet (every scan restored this session, its verdict in its
+// colour; on disk, <data>/index.html), left/right = step through the scans of this session,
+// q or Esc = quit.
 #pragma once
 
 #include <chrono>
@@ -13,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "core/patterns/scan.h"
 #include "display/window.h"
 #include "station/node.h"
 #include "vellum/restored_t.hpp"
@@ -32,17 +43,31 @@ class ViewerNode {
   const std::string& progress() const { return progress_; }
   // The warnings of the scan shown (code: message each), empty for a clean one.
   std::vector<std::string> warnings() const;
+  // The quality verdict of the scan shown ("" when none is shown).
+  std::string quality() const;
+  // The identity the next scan will carry.
+  const ScanIdentity& next_identity() const { return next_; }
+  bool editing() const { return editing_ >= 0; }
+  bool sheet() const { return sheet_; }
+  // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
+  const std::string& failure() const { return failure_; }
 
  private:
   struct Result {
     int64_t scan_id = 0;
-    std::string summary, results;
+    std::string summary, results, quality;
+    std::string title;  // The identity from its report ("MS 12, 3 recto"), or the scan id.
     cv::Mat texture, depth, strain, restored;  // texture: with the leaf's outline drawn.
     std::vector<std::string> warnings;
   };
   void OnKey(SDL_Keycode key);
+  void OnText(const std::string& text);
+  void OnStatus(const status_t& m);
   void OnRestored(const restored_t& m);
+  void Started(int64_t scan_id);  // A scan began: a failure shown before is over.
   cv::Mat Draw() const;
+  void DrawSheet(cv::Mat& canvas, cv::Rect area) const;
+  void DrawLeft(cv::Mat& canvas, int top, int width) const;
 
   using Clock = std::chrono::steady_clock;
   Node* node_;
@@ -51,9 +76,18 @@ class ViewerNode {
   std::string progress_ = "waiting for the station";
   std::map<std::string, status_t> statuses_;
   std::map<std::string, Clock::time_point> seen_;
+  Clock::time_point last_preview_;
   std::deque<Result> results_;
   int shown_ = -1;
   Clock::time_point next_draw_;
+  ScanIdentity next_;
+  std::vector<ScanIdentity> history_;  // The identities of the scans asked for, for undo.
+  int editing_ = -1;                   // The field being edited, or -1.
+  bool sheet_ = false;                 // The contact sheet is shown.
+  int64_t scan_ = 0;                   // The scan in progress (or last asked for).
+  int64_t failed_scan_ = 0;
+  std::string failure_;
+  std::map<std::string, int64_t> error_utime_;  // Each process's last error seen.
 };
 
 }  // namespace vellum::station

@@ -6,12 +6,15 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <opencv2/imgproc.hpp>
 
 #include "station/messages.h"
 #include "station/testing.h"
+#include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_request_t.hpp"
+#include "vellum/status_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -112,6 +115,179 @@ TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
   bus_.probe().Publish(channel::kRestored, &clean);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.results() == 2; }));
   EXPECT_TRUE(viewer.warnings().empty());
+}
+
+// Pixels of `area` near `colour` (BGR, within 40 each way).
+int Near(const cv::Mat& area, const cv::Scalar& colour) {
+  cv::Mat mask;
+  cv::inRange(area, colour - cv::Scalar(40, 40, 40), colour + cv::Scalar(40, 40, 40), mask);
+  return cv::countNonZero(mask);
+}
+
+void PushKey(SDL_Keycode sym) {
+  SDL_Event key{};
+  key.type = SDL_KEYDOWN;
+  key.key.keysym.sym = sym;
+  ASSERT_EQ(SDL_PushEvent(&key), 1) << SDL_GetError();
+}
+
+void PushText(const std::string& text) {
+  SDL_Event e{};
+  e.type = SDL_TEXTINPUT;
+  std::snprintf(e.text.text, sizeof(e.text.text), "%s", text.c_str());
+  ASSERT_EQ(SDL_PushEvent(&e), 1) << SDL_GetError();
+}
+
+// Issue 15: the operator types the folio's identity once in the viewer's form; each scan asked
+// for carries it and advances the folio (recto, verso, the next recto); u takes the last
+// advance back, so the next scan retakes that folio.
+TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
+  Node node("vellum-viewer", &bus_.lcm());
+  ViewerNode viewer(&node, Window());
+  bus_.AddTick([&] { viewer.Tick(); });
+  auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  PushKey(SDLK_e);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.editing(); }, 10));
+  PushText("MS 12");
+  PushKey(SDLK_TAB);
+  PushText("3");
+  PushKey(SDLK_TAB);
+  PushText("Recto");
+  PushKey(SDLK_TAB);
+  PushText("A. Scribé");    // UTF-8 kept.
+  PushKey(SDLK_BACKSPACE);  // One character, both of its bytes.
+  PushText("e");
+  PushKey(SDLK_s);  // A letter while the form is open: text, not a scan (as SDL sends both).
+  PushKey(SDLK_RETURN);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.editing(); }, 10));
+  EXPECT_EQ(viewer.next_identity().shelfmark, "MS 12");
+  EXPECT_EQ(viewer.next_identity().folio, "3");
+  EXPECT_EQ(viewer.next_identity().side, "recto");  // Sanitised when the form closes.
+  EXPECT_EQ(viewer.next_identity().operator_name, "A. Scribe");
+  EXPECT_TRUE(requests->empty());
+  auto scan = [&](size_t n) {
+    PushKey(SDLK_s);
+    ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == n; }, 10));
+  };
+  scan(1);
+  EXPECT_EQ(requests->back().identity.shelfmark, "MS 12");
+  EXPECT_EQ(requests->back().identity.folio, "3");
+  EXPECT_EQ(requests->back().identity.side, "recto");
+  EXPECT_EQ(requests->back().identity.operator_name, "A. Scribe");
+  scan(2);
+  EXPECT_EQ(requests->back().identity.side, "verso");
+  EXPECT_EQ(viewer.next_identity().folio, "4");
+  EXPECT_EQ(viewer.next_identity().side, "recto");
+  PushKey(SDLK_u);  // 3 verso again.
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.next_identity().folio == "3"; }, 10));
+  scan(3);
+  EXPECT_EQ(requests->back().identity.folio, "3");
+  EXPECT_EQ(requests->back().identity.side, "verso");
+}
+
+// Issue 15: a failed scan looks failed: the header turns red and the daemon's whole message is
+// kept (not cut at 70 characters); the next scan clears it. A result's quality verdict shows in
+// its colour above the restored page.
+TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour) {
+  Node node("vellum-viewer", &bus_.lcm());
+  auto owned = Window();
+  display::Window* window = owned.get();
+  ViewerNode viewer(&node, std::move(owned));
+  bus_.AddTick([&] { viewer.Tick(); });
+  status_t st{};
+  st.process = "vellum-projector";
+  st.pid = 7;
+  st.state = "idle";
+  bus_.probe().Publish(StatusChannel(st.process), &st);  // Its errors from before: not news.
+  pattern_shown_t shown{};
+  shown.scan_id = 31;
+  shown.pattern_index = -1;
+  shown.pattern_count = 54;
+  bus_.probe().Publish(channel::kPatternShown, &shown);
+  const std::string message =
+      "scan 31 failed: no CAPTURE of the texture within 5000 ms (is vellum-camera running, and "
+      "on this station's bus?)";
+  st.last_error = message;
+  st.last_error_utime = 1000;
+  st.last_error_scan_id = 31;
+  st.errors = 1;
+  bus_.probe().Publish(StatusChannel(st.process), &st);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.failure().empty(); }, 10));
+  EXPECT_EQ(viewer.failure(), "vellum-projector: " + message);
+  EXPECT_NE(viewer.progress().find("scan 31 FAILED"), std::string::npos) << viewer.progress();
+  const cv::Scalar red(40, 40, 220);
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return !screen.empty() &&
+               Near(screen(cv::Rect(0, 0, screen.cols, 36)), red) > screen.cols * 36 / 2;
+      },
+      10));
+  // The next scan: the failure is over.
+  shown.scan_id = 32;
+  bus_.probe().Publish(channel::kPatternShown, &shown);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.failure().empty(); }, 10));
+  // A result that failed quality control: a red badge over the restored page.
+  restored_t r = Restored(32);
+  r.qc = "fail";
+  bus_.probe().Publish(channel::kRestored, &r);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.quality() == "fail"; }, 10));
+  EXPECT_NE(viewer.progress().find("quality fail"), std::string::npos) << viewer.progress();
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return !screen.empty() &&
+               Near(screen(cv::Rect(screen.cols * 2 / 3, 44, screen.cols / 3 - 8, 20)), red) >
+                   screen.cols / 3 * 10;
+      },
+      10));
+  // The session's contact sheet (c): the result in a red frame over the middle third, where the
+  // texture panel was grey.
+  PushKey(SDLK_c);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.sheet(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return !screen.empty() &&
+               Near(screen(cv::Rect(screen.cols / 3, 60, screen.cols / 3, 200)), red) > 300;
+      },
+      10));
+}
+
+// Issue 15: the preview shows what clips in red, with a histogram; and "NO SIGNAL" once the
+// camera falls silent.
+TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
+  Node node("vellum-viewer", &bus_.lcm());
+  auto owned = Window();
+  display::Window* window = owned.get();
+  ViewerNode viewer(&node, std::move(owned));
+  bus_.AddTick([&] { viewer.Tick(); });
+  cv::Mat frame(240, 320, CV_8UC1, cv::Scalar(120));
+  frame(cv::Rect(0, 0, 160, 240)).setTo(255);  // The left half clips.
+  image_t preview{};
+  ToMessage(frame, &preview);
+  bus_.probe().Publish(channel::kPreview, &preview);
+  const cv::Scalar red(0, 0, 255);
+  const cv::Rect panel(8, 66, 960 / 3 - 12, 150);  // The preview panel's picture.
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return !screen.empty() && Near(screen(panel), red) > 2000;
+      },
+      10));
+  // Silent for more than 2 s: NO SIGNAL, written in red over the panel's middle.
+  const cv::Scalar text_red(40, 40, 220);
+  int before = 0;
+  {
+    const cv::Mat screen = window->Screen();
+    before = Near(screen(panel), text_red);
+  }
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return !screen.empty() && Near(screen(panel), text_red) > before + 200;
+      },
+      30));
 }
 
 TEST_F(ViewerNodeTest, AnUndecodablePreviewIsReportedAndTheViewerGoesOn) {

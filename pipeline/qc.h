@@ -1,0 +1,46 @@
+// Quality control of a processed scan: pass, warn or fail, from stated checks on its report.
+// Each check reads the warnings the stages raised (their limits are WarningLimits, in
+// pipeline/stages.h) and, for a fail, the figures against QcLimits below. The scan's verdict is
+// its worst check's. It is written to report.json (`qc`) and report.html, carried on RESTORED
+// to the viewer, and printed by `vellum process` and `vellum scan`.
+//
+// The checks:
+//  - leaf in view: fail when the leaf runs off the camera's view (page_cut_off);
+//  - measured: warn when less of the leaf was measured in 3D than WarningLimits asks
+//    (valid_low), fail below QcLimits::fail_valid_in_leaf;
+//  - flattening: warn on strain above its limits (strain_high), fail on fold-over (fold_over);
+//  - outline: warn when the leaf's rim is not clearly set apart (outline_uncertain);
+//  - exposure: warn when the leaf's pixels clip (exposure_clipped), fail above
+//    QcLimits::fail_clipped;
+//  - scale: warn when the leaf is not the size expected (size_unexpected).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "pipeline/report.h"
+
+namespace vellum {
+
+enum class QcVerdict { kPass = 0, kWarn = 1, kFail = 2 };
+const char* VerdictName(QcVerdict verdict);  // "pass", "warn", "fail"
+
+struct QcLimits {
+  double fail_valid_in_leaf = 0.5;  // Share of the leaf's pixels with a 3D point.
+  double fail_clipped = 0.05;       // Share of the leaf's pixels at the camera's maximum or 0.
+};
+
+struct QcCheck {
+  std::string name;  // "leaf in view", "measured", "flattening", "outline", "exposure", "scale"
+  QcVerdict verdict = QcVerdict::kPass;
+  std::string detail;  // The figure, or the warnings that set the verdict.
+};
+
+struct QcResult {
+  QcVerdict verdict = QcVerdict::kPass;
+  std::vector<QcCheck> checks;  // In the order above.
+};
+
+QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits = QcLimits());
+
+}  // namespace vellum

@@ -1,0 +1,157 @@
+#include "station/contact_sheet.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "core/common/text.h"
+#include "io/json.h"
+#include "io/scan_io.h"
+#include "station/scan_store.h"
+
+namespace vellum::station {
+namespace fs = std::filesystem;
+namespace {
+
+std::string FirstLine(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
+// The entry of one scan folder (`dir`, named `name`).
+SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t id) {
+  SheetEntry e;
+  e.scan_id = id;
+  e.folder = relative;
+  const fs::path raw = dir / "raw", results = dir / "results";
+  PatternSequence sequence;
+  cv::Size camera;
+  std::error_code ec;
+  if (fs::exists(raw / "scan.yaml", ec)) {
+    const Status ignored = ReadScanYaml(raw.string(), &sequence, &camera, &e.identity);
+    (void)ignored;  // An unreadable scan.yaml: the entry shows no identity.
+  }
+  for (const char* page : {"report/restored.png", "report/restored-left.png"}) {
+    if (fs::exists(results / page, ec)) {
+      e.thumbnail = relative + "/results/" + page;
+      break;
+    }
+  }
+  for (const char* tif : {"restored.tif", "pages/left/restored.tif"}) {
+    if (fs::exists(results / tif, ec)) {
+      e.restored = relative + "/results/" + tif;
+      break;
+    }
+  }
+  if (fs::exists(raw / "failed.txt", ec)) {
+    e.state = "failed";
+    e.detail = FirstLine((raw / "failed.txt").string());
+  } else if (fs::exists(dir / "pending", ec)) {
+    e.state = "pending";
+  } else if (fs::exists(results / "report.json", ec)) {
+    std::ifstream in(results / "report.json");
+    const nlohmann::json report = nlohmann::json::parse(in, nullptr, false);
+    e.state = "restored";
+    if (report.is_object() && report.contains("qc") && report["qc"].is_object()) {
+      const nlohmann::json& qc = report["qc"];
+      if (qc.contains("verdict") && qc["verdict"].is_string()) e.state = qc["verdict"];
+      if (qc.contains("checks") && qc["checks"].is_array()) {
+        for (const nlohmann::json& c : qc["checks"]) {
+          if (!c.is_object() || !c.contains("verdict") || c["verdict"] == "pass") continue;
+          e.detail += (e.detail.empty() ? "" : "; ") + c.value("name", std::string()) + ": " +
+                      c.value("detail", std::string());
+        }
+      }
+    }
+  } else {
+    e.state = "recording";
+  }
+  return e;
+}
+
+void Collect(const fs::path& dir, const std::string& prefix, bool retaken,
+             std::vector<SheetEntry>* out) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const int64_t id = ScanFolderId(name);
+    if (id == 0 || !it->is_directory(ec)) continue;
+    SheetEntry e = ReadEntry(it->path(), prefix + name, id);
+    e.retaken = retaken;
+    out->push_back(std::move(e));
+  }
+}
+
+}  // namespace
+
+std::vector<SheetEntry> ReadSheet(const std::string& data_dir) {
+  std::vector<SheetEntry> entries;
+  Collect(data_dir, "", false, &entries);
+  Collect(fs::path(data_dir) / "retaken", "retaken/", true, &entries);
+  std::sort(entries.begin(), entries.end(), [](const SheetEntry& a, const SheetEntry& b) {
+    if (a.retaken != b.retaken) return !a.retaken;
+    return a.scan_id > b.scan_id;
+  });
+  return entries;
+}
+
+Status WriteContactSheet(const std::string& data_dir) {
+  const std::vector<SheetEntry> entries = ReadSheet(data_dir);
+  std::ostringstream h;
+  h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n"
+    << "<title>vellum: scans in " << HtmlEscape(data_dir) << "</title>\n<style>\n"
+    << "body{font-family:sans-serif;margin:1.5em;color:#222}\n"
+    << ".sheet{display:flex;flex-wrap:wrap;gap:14px}\n"
+    << ".scan{width:230px;border:4px solid #999;padding:6px;background:#fafafa}\n"
+    << ".scan img{width:100%;height:260px;object-fit:contain;background:#333}\n"
+    << ".none{height:260px;display:flex;align-items:center;justify-content:center;"
+       "background:#333;color:#ddd}\n"
+    << ".pass{border-color:#2a2}.warn{border-color:#d90}.fail,.failed{border-color:#c22}"
+       ".pending,.recording{border-color:#48c}.retaken{opacity:0.6}\n"
+    << ".state{font-weight:bold;text-transform:uppercase}.detail{font-size:0.8em;color:#555}\n"
+    << "</style></head><body>\n<h1>vellum: " << entries.size() << " scan(s) in "
+    << HtmlEscape(data_dir) << "</h1>\n";
+  bool retaken_heading = false;
+  h << "<div class=sheet>\n";
+  for (const SheetEntry& e : entries) {
+    if (e.retaken && !retaken_heading) {
+      h << "</div>\n<h2>Earlier attempts, retaken (kept in retaken/)</h2>\n<div class=sheet>\n";
+      retaken_heading = true;
+    }
+    std::string title = e.identity.shelfmark;
+    const std::string folio =
+        e.identity.folio + (e.identity.side.empty() ? "" : " " + e.identity.side);
+    if (folio != "" && folio != " ") title += (title.empty() ? "" : ", ") + folio;
+    if (title.empty()) title = e.identity.label.empty() ? "(no identity)" : e.identity.label;
+    h << "<div class=\"scan " << HtmlEscape(e.state) << (e.retaken ? " retaken" : "") << "\">";
+    if (!e.thumbnail.empty()) {
+      h << "<a href=\"" << HtmlEscape(e.folder) << "/results/report.html\"><img src=\""
+        << HtmlEscape(e.thumbnail) << "\" alt=\"" << HtmlEscape(title) << "\"></a>";
+    } else {
+      h << "<div class=none>" << HtmlEscape(e.state) << "</div>";
+    }
+    h << "<div><b>" << HtmlEscape(title) << "</b></div>";
+    h << "<div class=state>" << HtmlEscape(e.state) << "</div>";
+    if (!e.detail.empty()) h << "<div class=detail>" << HtmlEscape(e.detail) << "</div>";
+    h << "<div class=detail>" << HtmlEscape(e.folder);
+    if (!e.restored.empty()) {
+      h << " &middot; <a href=\"" << HtmlEscape(e.restored) << "\">TIFF</a>";
+    }
+    h << "</div></div>\n";
+  }
+  h << "</div>\n</body></html>\n";
+  const std::string path = (fs::path(data_dir) / "index.html").string();
+  const std::string tmp = path + ".tmp";
+  Status s = WriteTextFile(tmp, h.str());
+  if (!s.ok()) return s;
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) return Status::Error("cannot write " + path + ": " + ec.message());
+  return Status::Ok();
+}
+
+}  // namespace vellum::station
