@@ -57,7 +57,8 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
       "vellum sheet after flattening: page plane, mm (same vertices as mesh.ply)");
 }
 
-Status WriteRestored(const std::string& dir, const RestoreResult& restored) {
+Status WriteRestored(const std::string& dir, const RestoreResult& restored,
+                     const ScanIdentity& identity) {
   std::vector<int> tiff_params;
   if (restored.view == RestoreView::kOrthographic) {
     const int dpi = static_cast<int>(std::lround(restored.dpi));
@@ -77,6 +78,11 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored) {
     return Status::Error(tif + ": cannot write image: " + e.what());
   }
   Json r;
+  Json id = Json::object();
+  ForEachIdentityField(identity, [&](const char* key, const std::string& value) {
+    if (!value.empty()) id[key] = value;
+  });
+  if (!id.empty()) r["identity"] = id;
   r["view"] = ToString(restored.view);
   r["image"] = "restored.tif";
   if (!restored.mask.empty()) r["mask"] = "restored_mask.png";

@@ -10,6 +10,7 @@
 #include "core/common/status.h"
 #include "core/common/text.h"
 #include "core/mesh/mesh.h"
+#include "core/patterns/scan.h"
 #include "core/restore/restore.h"
 
 namespace vellum {
@@ -24,7 +25,9 @@ Status WritePointProducts(const std::string& dir, const cv::Mat& points, double*
 // mesh.ply (3D) and flat.ply (z = 0): the sheet's active nodes in the same order, quad faces.
 Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat);
 // restored.tif (TIFF dpi tags in orthographic view), restored_mask.png (when the leaf's mask was
-// restored: 255 on the leaf) and restored.json (the map from flat mm to pixels, the turn).
-Status WriteRestored(const std::string& dir, const RestoreResult& restored);
+// restored: 255 on the leaf) and restored.json (the map from flat mm to pixels, the turn, and
+// the scan's catalogue identity when it has one).
+Status WriteRestored(const std::string& dir, const RestoreResult& restored,
+                     const ScanIdentity& identity = ScanIdentity());
 
 }  // namespace vellum

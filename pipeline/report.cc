@@ -280,6 +280,19 @@ Status WriteJson(const std::string& dir, const ProcessReport& r) {
 
 }  // namespace
 
+ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages) {
+  ScanIdentity identity;
+  for (const StageReport& stage : stages) {
+    for (const ReportValue& v : stage.values) {
+      if (v.section != "identity" || !v.is_text) continue;
+      ForEachIdentityField(identity, [&](const char* key, std::string& field) {
+        if (v.key == key) field = v.text;
+      });
+    }
+  }
+  return identity;
+}
+
 void StageReport::Text(const std::string& section, const std::string& key,
                        const std::string& value) {
   ReportValue v;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "core/patterns/scan.h"
 
 namespace vellum {
 
@@ -63,6 +64,9 @@ struct ProcessReport {
   // Every file written for the scan: the stages' outputs, in order, then the report's own.
   std::vector<std::string> Outputs() const;
 };
+
+// The scan's catalogue identity as its decode stage reported it (the `identity` section).
+ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages);
 
 // Writes report.html (the warnings, the key figures, the pictures the stages wrote to report/,
 // the options) and then report.json (every section; on a spread, `pages` holds each page's

@@ -288,8 +288,8 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const std::string& results, const std::string& page,
-                         RestoreResult* restored) {
+                         const ScanIdentity& identity, const std::string& results,
+                         const std::string& page, RestoreResult* restored) {
   Stage stage("restore", page);
   StageReport& r = stage.report();
   r.Text("options", "view", ToString(options.view));
@@ -322,7 +322,7 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   }
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
-  if (s.ok()) s = WriteRestored(dir, *restored);
+  if (s.ok()) s = WriteRestored(dir, *restored, identity);
   if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back(PageFile(page, "restored.tif"));
   if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));

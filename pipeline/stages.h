@@ -100,10 +100,11 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
 // leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
 // restored.json in the page's folder and the report's pictures of the page (grid, strain,
 // before/after). Warns of a leaf whose size is not the one expected.
+// `identity` goes into restored.json.
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const std::string& results, const std::string& page,
-                         RestoreResult* restored);
+                         const ScanIdentity& identity, const std::string& results,
+                         const std::string& page, RestoreResult* restored);
 
 }  // namespace vellum

@@ -1055,6 +1055,10 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
                   report["identity"]["side"].get<std::string>(),
               slug);
     EXPECT_TRUE(fs::exists(e.path().string() + "/results/restored.tif")) << name;
+    // The restored file's own record of what it is.
+    const nlohmann::json restored_json =
+        nlohmann::json::parse(ReadText(e.path().string() + "/results/restored.json"));
+    EXPECT_EQ(restored_json["identity"], report["identity"]) << name;
   }
   EXPECT_EQ(folios, (std::map<std::string, int>{
                         {"MS-7_1_recto", 1}, {"MS-7_1_verso", 1}, {"MS-7_2_recto", 1}}));
