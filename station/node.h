@@ -41,7 +41,9 @@ inline constexpr char kFlatMesh[] = "FLAT_MESH";
 inline constexpr char kRestored[] = "RESTORED";
 inline constexpr char kScanProgress[] = "SCAN_PROGRESS";  // A product handed on.
 inline constexpr char kPreview[] = "PREVIEW";             // Camera preview, at most 640 px wide.
-inline constexpr char kStatusPrefix[] = "STATUS_";        // + the process name, upper case
+// The live preview's centre at the camera's full resolution (320 x 240 at most), for focusing.
+inline constexpr char kPreviewFocus[] = "PREVIEW_FOCUS";
+inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper case
 }  // namespace channel
 
 // Decodes an LCM message from untrusted bytes. lcm-gen 1.3.1's decoders throw

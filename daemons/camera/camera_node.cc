@@ -24,7 +24,18 @@ void CameraNode::Tick() {
   node_->Post([this] {
     cv::Mat image;
     int64_t exposure = 0;
-    if (camera_->Preview(&image, &exposure).ok()) PublishPreview(image, exposure, 0, -1, 0);
+    if (!camera_->Preview(&image, &exposure).ok()) return;
+    PublishPreview(image, exposure, 0, -1, 0);
+    // The centre, pixel for pixel.
+    const cv::Size crop(std::min(320, image.cols), std::min(240, image.rows));
+    image_t focus{};
+    ToMessage(image(cv::Rect((image.cols - crop.width) / 2, (image.rows - crop.height) / 2,
+                             crop.width, crop.height))
+                  .clone(),
+              &focus);
+    focus.utime = exposure;
+    focus.pattern_index = -1;
+    node_->Publish(channel::kPreviewFocus, &focus);
   });
 }
 

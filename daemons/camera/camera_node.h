@@ -1,6 +1,7 @@
 // vellum-camera's node: on each PATTERN_SHOWN, the camera's first frame whose exposure starts
 // after it, published as CAPTURE (the texture in colour, patterns in gray); a copy at most 640
-// pixels wide on PREVIEW; and a live preview while no scan runs.
+// pixels wide on PREVIEW; and a live preview while no scan runs, with the centre of its view at
+// full resolution on PREVIEW_FOCUS (the viewer's 100% zoom, for focusing).
 #pragma once
 
 #include <chrono>

@@ -73,6 +73,27 @@ TEST_F(CameraNodeTest, AnswersEachPatternShownWithTheFrameTheGantryRenders) {
   EXPECT_LE(previews->back().width, 640);
 }
 
+// While no scan runs: the live preview, at most 640 wide, and the view's centre at the
+// camera's own resolution (the viewer's 100% zoom): the same pixels as the camera's frame.
+TEST_F(CameraNodeTest, TheLivePreviewComesWithTheCentreAtFullResolution) {
+  Node node("vellum-camera", &bus_.lcm());
+  CameraNode camera(&node, std::make_unique<SimCamera>(sim_), CameraNodeOptions());
+  bus_.AddTick([&] { camera.Tick(); });
+  auto previews = bus_.Record<image_t>(channel::kPreview);
+  auto focus = bus_.Record<image_t>(channel::kPreviewFocus);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !previews->empty() && !focus->empty(); }));
+  cv::Mat crop, frame;
+  ASSERT_TRUE(FromMessage(focus->back(), &crop).ok());
+  SimCamera reference(sim_);
+  int64_t exposure = 0;
+  ASSERT_TRUE(reference.Preview(&frame, &exposure).ok());
+  const cv::Size size(std::min(320, frame.cols), std::min(240, frame.rows));
+  ASSERT_EQ(crop.size(), size);
+  const cv::Rect centre((frame.cols - size.width) / 2, (frame.rows - size.height) / 2, size.width,
+                        size.height);
+  EXPECT_EQ(cv::norm(crop, frame(centre), cv::NORM_INF), 0);
+}
+
 TEST_F(CameraNodeTest, BadPatternsAreReportedAndTheNodeGoesOn) {
   Node node("vellum-camera", &bus_.lcm());
   CameraNode camera(&node, std::make_unique<SimCamera>(sim_), CameraNodeOptions());

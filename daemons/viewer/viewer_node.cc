@@ -100,6 +100,12 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
     preview_ = image;
     last_preview_ = Clock::now();
   });
+  node->Subscribe<image_t>(channel::kPreviewFocus, [this](const image_t& m) {
+    cv::Mat image;
+    const Status s = FromMessage(m, &image);
+    if (!s.ok()) return node_->Error("PREVIEW_FOCUS: " + s.message());
+    focus_ = image;
+  });
   node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
     Started(m.scan_id);
     progress_ = "scan " + std::to_string(m.scan_id) + ": " +
@@ -214,6 +220,9 @@ void ViewerNode::OnKey(SDL_Keycode key) {
     }
     case SDLK_c:
       sheet_ = !sheet_;
+      break;
+    case SDLK_z:
+      zoom_ = !zoom_;
       break;
     case SDLK_e:
       editing_ = 0;
@@ -330,7 +339,42 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
     const float* ranges[] = {range};
     cv::calcHist(&gray, 1, channels, cv::Mat(), hist, 1, bins, ranges);
   }
-  Panel(canvas, box, shown, "camera preview (clipped in red)");
+  if (zoom_) {
+    // The centre at the camera's own resolution, pixel for pixel (never scaled up), and how
+    // sharp it is: the variance of its Laplacian (higher is sharper; compare while focusing).
+    cv::Mat gray = focus_;
+    double sharpness = 0;
+    if (!gray.empty()) {
+      if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
+      cv::Mat laplacian;
+      cv::Laplacian(gray, laplacian, CV_64F);
+      cv::Scalar mean, stddev;
+      cv::meanStdDev(laplacian, mean, stddev);
+      sharpness = stddev[0] * stddev[0];
+    }
+    cv::rectangle(canvas, box, cv::Scalar(70, 70, 70), 1);
+    char caption[96];
+    std::snprintf(caption, sizeof(caption), "100%% of the view's centre (z: back), focus %.0f",
+                  sharpness);
+    cv::putText(canvas, caption, box.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.45,
+                cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
+    const cv::Rect inner(box.x + 2, box.y + 22, box.width - 4, box.height - 24);
+    if (!focus_.empty()) {
+      cv::Mat bgr = focus_;
+      if (bgr.depth() != CV_8U) bgr.convertTo(bgr, CV_8U, 1.0 / 257);
+      if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
+      const cv::Rect part(0, 0, std::min(bgr.cols, inner.width), std::min(bgr.rows, inner.height));
+      const cv::Rect at(inner.x + (inner.width - part.width) / 2,
+                        inner.y + (inner.height - part.height) / 2, part.width, part.height);
+      bgr(part + cv::Point((bgr.cols - part.width) / 2, (bgr.rows - part.height) / 2))
+          .copyTo(canvas(at));
+    } else {
+      cv::putText(canvas, "(no full-resolution view yet)", inner.tl() + cv::Point(8, 24),
+                  cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
+    }
+  } else {
+    Panel(canvas, box, shown, "camera preview (clipped in red)");
+  }
   const double silent = std::chrono::duration<double>(Clock::now() - last_preview_).count();
   if (preview_.empty() || silent > 2) {
     const std::string what = preview_.empty() ? "NO SIGNAL: no camera preview yet"
@@ -392,7 +436,7 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
   if (editing_ < 0) {
     cv::putText(canvas, "next scan: " + Describe(next_), cv::Point(12, y + 12),
                 cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
-    cv::putText(canvas, "e: edit   u: undo the last advance", cv::Point(12, y + 30),
+    cv::putText(canvas, "e: edit   u: undo the last advance   z: 100% zoom", cv::Point(12, y + 30),
                 cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
     return;
   }

@@ -11,7 +11,8 @@
 // (e opens it; Tab or Down / Up move between fields; Return or Esc closes it); each scan then
 // advances the folio (recto, verso, the next recto: NextFolio), and u takes the last advance
 // back (to scan a folio again). Keys: s = start a scan, e = edit the identity, u = undo the last
-// advance, c = the session's contact sheet (every scan restored this session, its verdict in its
+// advance, z = the preview's centre at 100% (the camera's own pixels, with a focus figure),
+// c = the session's contact sheet (every scan restored this session, its verdict in its
 // colour; on disk, <data>/index.html), left/right = step through the scans of this session,
 // q or Esc = quit.
 #pragma once
@@ -49,6 +50,7 @@ class ViewerNode {
   const ScanIdentity& next_identity() const { return next_; }
   bool editing() const { return editing_ >= 0; }
   bool sheet() const { return sheet_; }
+  bool zoomed() const { return zoom_; }
   // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
   const std::string& failure() const { return failure_; }
 
@@ -84,6 +86,8 @@ class ViewerNode {
   std::vector<ScanIdentity> history_;  // The identities of the scans asked for, for undo.
   int editing_ = -1;                   // The field being edited, or -1.
   bool sheet_ = false;                 // The contact sheet is shown.
+  bool zoom_ = false;                  // The preview at 100%: the focus crop.
+  cv::Mat focus_;                      // PREVIEW_FOCUS: the view's centre, full resolution.
   int64_t scan_ = 0;                   // The scan in progress (or last asked for).
   int64_t failed_scan_ = 0;
   std::string failure_;

@@ -275,6 +275,34 @@ TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
         return !screen.empty() && Near(screen(panel), red) > 2000;
       },
       10));
+  // z: the view's centre at 100%, pixel for pixel: a 200 x 100 white block on black shows as a
+  // white block of that size.
+  cv::Mat crop(240, 320, CV_8UC1, cv::Scalar(0));
+  crop(cv::Rect(60, 70, 200, 100)).setTo(255);
+  image_t focus{};
+  ToMessage(crop, &focus);
+  bus_.probe().Publish(channel::kPreviewFocus, &focus);
+  PushKey(SDLK_z);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.zoomed(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        if (screen.empty()) return false;
+        cv::Mat gray, white;
+        cv::cvtColor(screen(panel), gray, cv::COLOR_BGR2GRAY);
+        cv::threshold(gray, white, 250, 255, cv::THRESH_BINARY);
+        const cv::Rect block = cv::boundingRect(white);
+        return block.width == 200 && block.height == 100;
+      },
+      10));
+  PushKey(SDLK_z);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.zoomed(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil(  // The preview again, its clipped half red.
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return !screen.empty() && Near(screen(panel), red) > 2000;
+      },
+      10));
   // Silent for more than 2 s: NO SIGNAL, written in red over the panel's middle.
   const cv::Scalar text_red(40, 40, 220);
   int before = 0;
