@@ -43,6 +43,7 @@ std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
       {"texture", "KIND|FILE", prefix + "checkerboard, text, plain, or an image file of the page",
        "checkerboard"},
       {"page-size", "WxH", prefix + "page size, mm", "190x240"},
+      {"centre", "X,Y", prefix + "where the page's centre lies on the table, mm", "0,0"},
       {"noise", "DN", prefix + "camera noise sigma, DN", "1.5"},
       {"seed", "N", prefix + "noise seed (the same seed gives the same images)", "1"},
       {"scene", "NAME",
@@ -85,6 +86,14 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   }
   const cv::Size page_size = flags.GetSize("page-size");
   page->size_mm = cv::Size2d(page_size.width, page_size.height);
+  double centre[2];
+  char centre_end = 0;
+  if (std::sscanf(flags.Get("centre").c_str(), "%lf,%lf%c", &centre[0], &centre[1], &centre_end) !=
+          2 ||
+      !std::isfinite(centre[0] + centre[1])) {
+    throw UsageError("--centre must be two numbers X,Y, got '" + flags.Get("centre") + "'");
+  }
+  page->centre_mm = cv::Vec2d(centre[0], centre[1]);
   light->noise_dn = flags.GetDouble("noise", 0, 100);
   double pose[6];
   char end = 0;
