@@ -65,6 +65,13 @@ void JsonKeys(const nlohmann::json& j, const std::string& prefix, std::set<std::
 }
 std::string Tool() { return kBuild + "/cli/vellum"; }
 
+// How long the projector waits for each CAPTURE from the sim camera: the camera renders every
+// frame, which takes seconds under the sanitizers on a loaded machine (the default is 5 s).
+constexpr char kSimCaptureTimeout[] = "30";
+
+const std::vector<std::string> kProcessingStatus = {"STATUS_DECODER", "STATUS_TRIANGULATOR",
+                                                    "STATUS_FLATTENER", "STATUS_RESTORER"};
+
 class StationTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -199,6 +206,41 @@ class StationTest : public ::testing::Test {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     return display;
   }
+  // The whole station with the viewer on an X server (StartXvfb): the viewer, the sim camera
+  // on `rig` (with `camera_flags` more), the projector (its capture timeout `capture_timeout`),
+  // the decoder (with `decoder_flags` more) and the three other processing daemons; waits for
+  // every heartbeat.
+  struct ViewedStation {
+    std::string display, screen;
+    Process* viewer = nullptr;
+    Process* camera = nullptr;
+  };
+  ViewedStation StartViewedStation(const std::string& rig,
+                                   const std::vector<std::string>& camera_flags = {},
+                                   const std::string& capture_timeout = kSimCaptureTimeout,
+                                   const std::vector<std::string>& decoder_flags = {}) {
+    ViewedStation v;
+    v.display = StartXvfb(&v.screen);
+    v.viewer = Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + v.display, "SDL_VIDEODRIVER=x11"});
+    std::vector<std::string> camera = {"--backend", "sim", "--rig", rig, "--page", "curl"};
+    camera.insert(camera.end(), camera_flags.begin(), camera_flags.end());
+    v.camera = Start(Daemon("vellum-camera"), camera);
+    Start(Daemon("vellum-projector"),
+          {"--calibration", rig, "--fullscreen", "false", "--capture-timeout", capture_timeout},
+          {"SDL_VIDEODRIVER=offscreen"});
+    std::vector<std::string> decoder = {"--data", dir_ + "/scans"};
+    decoder.insert(decoder.end(), decoder_flags.begin(), decoder_flags.end());
+    Start(Daemon("vellum-decoder"), decoder);
+    for (const char* name : {"vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
+      Start(Daemon(name), {"--data", dir_ + "/scans"});
+    }
+    std::vector<std::string> all = kProcessingStatus;
+    all.push_back("STATUS_VIEWER");
+    all.push_back("STATUS_CAMERA");
+    all.push_back("STATUS_PROJECTOR");
+    WaitForHeartbeats(all);
+    return v;
+  }
   // Runs xdotool on `display` (keys and text as an operator types them); true when it worked.
   bool Xdotool(const std::string& display, std::vector<std::string> args) {
     args.insert(args.begin(), "/usr/bin/xdotool");
@@ -251,13 +293,6 @@ class StatusBoard {
   std::map<std::string, std::vector<std::string>> errors_;
   std::vector<std::unique_ptr<Listener<status_t>>> listeners_;
 };
-
-// How long the projector waits for each CAPTURE from the sim camera: the camera renders every
-// frame, which takes seconds under the sanitizers on a loaded machine (the default is 5 s).
-constexpr char kSimCaptureTimeout[] = "30";
-
-const std::vector<std::string> kProcessingStatus = {"STATUS_DECODER", "STATUS_TRIANGULATOR",
-                                                    "STATUS_FLATTENER", "STATUS_RESTORER"};
 
 // A scan through all six daemons with the sim camera on `rig`; checks the raw captures, the
 // handshake's timing, what lcm-spy decodes, and the products against `vellum process`.
@@ -927,20 +962,8 @@ TEST_F(StationTest, LostChunksAndSequenceGapsAreReportedNotSilentlyUsed) {
 // X server (Xvfb keeps its screen as an XWD file) shows the restored page, where OpenCV finds
 // the leaf's whole checkerboard (16 x 21 inner corners), and the camera's live preview.
 TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
-  std::string screen;
-  const std::string display = StartXvfb(&screen);
-  ASSERT_TRUE(fs::exists(screen));
-  Process* viewer =
-      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
-  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
-  Start(Daemon("vellum-projector"),
-        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
-        {"SDL_VIDEODRIVER=offscreen"});
-  StartProcessing();
-  std::vector<std::string> all = kProcessingStatus;
-  all.push_back("STATUS_VIEWER");
-  all.push_back("STATUS_CAMERA");
-  WaitForHeartbeats(all);
+  const ViewedStation station = StartViewedStation(kRig);
+  const std::string& screen = station.screen;
   std::string out;
   ASSERT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 0) << out;
   // The viewer redraws ten times a second.
@@ -965,7 +988,7 @@ TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
   cv::Scalar mean, stddev;
   cv::meanStdDev(preview, mean, stddev);
   EXPECT_GT(stddev[0], 20) << "the camera preview looks empty";
-  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();  // Before its X server goes.
+  EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();  // Before its X server goes.
 }
 
 // Issue 15: an operator at the viewer (a real X server, keys typed with xdotool) enters a
@@ -974,21 +997,8 @@ TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
 // report.json carries the identity; the retake of 1v is the folder at the top, and the first
 // attempt of 1v is kept whole in retaken/.
 TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirstAside) {
-  std::string screen;
-  const std::string display = StartXvfb(&screen);
-  ASSERT_TRUE(fs::exists(screen));
-  Process* viewer =
-      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
-  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
-  Start(Daemon("vellum-projector"),
-        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
-        {"SDL_VIDEODRIVER=offscreen"});
-  StartProcessing();
-  std::vector<std::string> all = kProcessingStatus;
-  all.push_back("STATUS_VIEWER");
-  all.push_back("STATUS_CAMERA");
-  all.push_back("STATUS_PROJECTOR");
-  WaitForHeartbeats(all);
+  const ViewedStation station = StartViewedStation(kRig);
+  const std::string& display = station.display;
   std::vector<scan_request_t> requests;
   Listener<scan_request_t> on_request(*lcm_, "SCAN_REQUEST",
                                       [&](const scan_request_t& m) { requests.push_back(m); });
@@ -1075,7 +1085,7 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
   EXPECT_NE(earlier, std::string::npos) << sheet;
   EXPECT_NE(sheet.find("retaken/scan-" + std::to_string(first_verso)), std::string::npos);
   EXPECT_LT(first, earlier);
-  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();  // Before its X server goes.
+  EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();  // Before its X server goes.
 }
 
 // Issue 15: a leaf that runs off the camera's view (its centre 60 mm up: its top edge 30 mm past
@@ -1083,26 +1093,12 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
 // report.json, on RESTORED, in `vellum scan`'s output and exit status, and as a red badge over
 // the restored page in the viewer (read from the X screen).
 TEST_F(StationTest, ALeafPartlyOutOfViewFailsQualityControlInTheReportAndTheViewer) {
-  std::string screen;
-  const std::string display = StartXvfb(&screen);
-  ASSERT_TRUE(fs::exists(screen));
-  Process* viewer =
-      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
   // The default rig: on the small rig's coarse pixels (0.6 mm) a leaf cut off at its curl is
   // not told from the table at all ("no leaf found"); on the default rig it is found, and
   // flagged.
-  const std::string rig = kSource + "/config/default_calibration.yaml";
-  Start(Daemon("vellum-camera"),
-        {"--backend", "sim", "--rig", rig, "--page", "curl", "--centre", "0,60"});
-  Start(Daemon("vellum-projector"),
-        {"--calibration", rig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
-        {"SDL_VIDEODRIVER=offscreen"});
-  StartProcessing();
-  std::vector<std::string> all = kProcessingStatus;
-  all.push_back("STATUS_VIEWER");
-  all.push_back("STATUS_CAMERA");
-  all.push_back("STATUS_PROJECTOR");
-  WaitForHeartbeats(all);
+  const ViewedStation station =
+      StartViewedStation(kSource + "/config/default_calibration.yaml", {"--centre", "0,60"});
+  const std::string& screen = station.screen;
   std::vector<restored_t> restored;
   Listener<restored_t> on_restored(*lcm_, "RESTORED",
                                    [&](const restored_t& m) { restored.push_back(m); });
@@ -1131,34 +1127,17 @@ TEST_F(StationTest, ALeafPartlyOutOfViewFailsQualityControlInTheReportAndTheView
   };
   EXPECT_TRUE(HandleUntil(*lcm_, 30, badge_red)) << "no red quality badge; see " << screen;
   cv::imwrite(dir_ + "/cut_off.png", testing::ReadXwd(screen));
-  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();
+  EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
 }
 
 // Issue 15: the camera stops in the middle of a scan. The viewer (on a real X server) turns its
 // header red with the failure within the projector's capture timeout, checked on the screen;
 // the scan's folder is marked failed, with the reason.
 TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFailed) {
-  std::string screen;
-  const std::string display = StartXvfb(&screen);
-  ASSERT_TRUE(fs::exists(screen));
-  Process* viewer =
-      Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
-  Process* camera =
-      Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
   const double capture_timeout_s = 20;
-  Start(Daemon("vellum-projector"),
-        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout",
-         std::to_string(static_cast<int>(capture_timeout_s))},
-        {"SDL_VIDEODRIVER=offscreen"});
-  Start(Daemon("vellum-decoder"), {"--data", dir_ + "/scans", "--scan-timeout", "5"});
-  for (const char* name : {"vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
-    Start(Daemon(name), {"--data", dir_ + "/scans"});
-  }
-  std::vector<std::string> all = kProcessingStatus;
-  all.push_back("STATUS_VIEWER");
-  all.push_back("STATUS_CAMERA");
-  all.push_back("STATUS_PROJECTOR");
-  WaitForHeartbeats(all);
+  const ViewedStation station = StartViewedStation(
+      kRig, {}, std::to_string(static_cast<int>(capture_timeout_s)), {"--scan-timeout", "5"});
+  const std::string& screen = station.screen;
   int captured = 0;
   int64_t scan_id = 0;
   Listener<capture_t> on_capture(*lcm_, "CAPTURE", [&](const capture_t& c) {
@@ -1167,7 +1146,7 @@ TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFail
   });
   Process scan({Tool(), "scan", "--url", url_, "--timeout", "300"}, dir_ + "/scan.log");
   ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] { return captured >= 5; }));
-  camera->Kill();
+  station.camera->Kill();
   const auto stopped = std::chrono::steady_clock::now();
   // The header: red across the top of the screen.
   auto header_red = [&] {
@@ -1192,7 +1171,7 @@ TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFail
   const std::string failed = dir_ + "/scans/scan-" + std::to_string(scan_id) + "/raw/failed.txt";
   ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return fs::exists(failed); })) << failed;
   EXPECT_NE(ReadText(failed).find("captures missing"), std::string::npos) << ReadText(failed);
-  EXPECT_EQ(viewer->Stop(), 0) << viewer->Output();
+  EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
 }
 
 // The recorder crashes in the middle of a scan and systemd starts it again. What the decoder

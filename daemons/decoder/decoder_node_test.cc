@@ -56,6 +56,21 @@ class DecoderNodeTest : public ::testing::Test {
     bus_.probe().Publish(channel::kScanStarted, &m);
   }
 
+  // A processing daemon's heartbeat (a new pid: it restarted).
+  void Heartbeat(const std::string& process, int32_t pid) {
+    status_t m{};
+    m.process = process;
+    m.pid = pid;
+    m.state = "idle";
+    bus_.probe().Publish(StatusChannel(process), &m);
+  }
+  // How many times scan `id` was sent down the chain.
+  static int Sent(const std::vector<correspondence_t>& correspondence, int64_t id) {
+    int n = 0;
+    for (const correspondence_t& m : correspondence) n += m.scan_id == id && m.chunk_index == 0;
+    return n;
+  }
+
   std::string data_;
   DecoderNodeOptions options_;
   MemqBus bus_;
@@ -175,13 +190,7 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
   Node node("vellum-decoder", &bus_.lcm());
   DecoderNode decoder(&node, options_);
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
-  auto heartbeat = [&](const std::string& process, int32_t pid) {
-    status_t m{};
-    m.process = process;
-    m.pid = pid;
-    m.state = "idle";
-    bus_.probe().Publish(StatusChannel(process), &m);
-  };
+  auto heartbeat = [&](const std::string& process, int32_t pid) { Heartbeat(process, pid); };
   auto handed_on = [&](const std::string& process, int64_t id) {
     scan_progress_t m{};
     m.scan_id = id;
@@ -190,11 +199,7 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
     m.product = "x";
     bus_.probe().Publish(channel::kScanProgress, &m);
   };
-  auto sent = [&](int64_t id) {
-    int n = 0;
-    for (const correspondence_t& m : *correspondence) n += m.scan_id == id && m.chunk_index == 0;
-    return n;
-  };
+  auto sent = [&](int64_t id) { return Sent(*correspondence, id); };
   heartbeat("vellum-triangulator", 100);
   heartbeat("vellum-flattener", 200);
   heartbeat("vellum-restorer", 300);
@@ -230,18 +235,8 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
 // after another restart of the daemon or of the decoder itself.
 TEST_F(DecoderNodeTest, AScanThatLosesItsDaemonTwiceIsParked) {
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
-  auto heartbeat = [&](const std::string& process, int32_t pid) {
-    status_t m{};
-    m.process = process;
-    m.pid = pid;
-    m.state = "idle";
-    bus_.probe().Publish(StatusChannel(process), &m);
-  };
-  auto sent = [&](int64_t id) {
-    int n = 0;
-    for (const correspondence_t& m : *correspondence) n += m.scan_id == id && m.chunk_index == 0;
-    return n;
-  };
+  auto heartbeat = [&](const std::string& process, int32_t pid) { Heartbeat(process, pid); };
+  auto sent = [&](int64_t id) { return Sent(*correspondence, id); };
   const ScanFolder folder = ScanFolder::For(data_, 42);
   bus_.Watch("vellum-decoder");
   {
