@@ -105,6 +105,11 @@ Status MarkFailed(const ScanFolder& folder, const std::string& why) {
   return WriteTextFile(folder.failed(), why + "\n");
 }
 
+bool ClaimsAPattern(const capture_t& c) {
+  return c.pattern_count > 0 && c.pattern_count <= kMaxPatterns && c.pattern_index >= -1 &&
+         c.pattern_index < c.pattern_count;
+}
+
 Status CheckCapture(const capture_t& c) {
   const std::string where =
       "scan " + std::to_string(c.scan_id) + ", pattern " + std::to_string(c.pattern_index);
@@ -112,7 +117,7 @@ Status CheckCapture(const capture_t& c) {
     return Status::Error(where + ": pattern_count " + std::to_string(c.pattern_count) +
                          " is not valid");
   }
-  if (c.pattern_index < -1 || c.pattern_index >= c.pattern_count) {
+  if (!ClaimsAPattern(c)) {
     return Status::Error(where + ": pattern_index outside -1.." +
                          std::to_string(c.pattern_count - 1));
   }

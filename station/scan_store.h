@@ -69,6 +69,10 @@ inline constexpr int kMaxPatterns = 1000;
 // each way. A capture that fails is refused whole (never recorded: a scan's log holds only
 // captures that belong in it).
 Status CheckCapture(const capture_t& c);
+// Whether a capture claims to be one of its scan's captures (a count of 1 to kMaxPatterns, its
+// index -1 or within it): one that does, and is bad, may stand in for the scan's real capture of
+// that pattern (its projector moves on); one that does not never does.
+bool ClaimsAPattern(const capture_t& c);
 
 // The captures of one scan, as they arrive.
 class CaptureSet {

@@ -59,11 +59,13 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     const Status ok = CheckCapture(msg);
     if (!ok.ok()) {
       node_->Count("captures refused");
-      if (!gate_.Holds(msg.scan_id, msg.session)) {
+      if (!gate_.Holds(msg.scan_id, msg.session) || !ClaimsAPattern(msg)) {
+        // Not one of the scan's captures (no projector takes it for one): the scan goes on.
         node_->Error("CAPTURE refused, not recorded: " + ok.message());
         return;
       }
-      // The scan in progress cannot be whole: it fails now, not at its timeout.
+      // One of the scan's captures, and bad: the scan cannot be whole (its projector took this
+      // capture for the pattern's and moved on), so it fails now, not at its timeout.
       gate_.Close(msg.scan_id);
       const int64_t id = msg.scan_id;
       const std::string why = "CAPTURE refused, not recorded: " + ok.message();
