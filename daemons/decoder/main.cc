@@ -11,10 +11,12 @@ int main(int argc, char** argv) {
   specs.push_back({"scan-timeout", "S", "give up an incomplete scan after this long", "30"});
   return DaemonMain(
       argc, argv, "vellum-decoder",
-      "Records every scan's CAPTURE messages to <data>/scan-<id>/raw (captures.lcmlog, the scan\n"
-      "directory of DESIGN.md, calibration.yaml) as they arrive, then sends the complete scan\n"
-      "down the chain: TEXTURE and the decoded CORRESPONDENCE (in row chunks). Supervises the\n"
-      "chain: a scan a processing daemon died holding is sent again from disk.",
+      "Records every scan's CAPTURE messages to <data>/scan-<id>[-<slug>]/raw (the slug from\n"
+      "the scan's identity; captures.lcmlog, the scan directory of DESIGN.md,\n"
+      "calibration.yaml) as they arrive, then sends the complete scan down the chain: TEXTURE\n"
+      "and the decoded CORRESPONDENCE (in row chunks). A retake of a folio moves the earlier\n"
+      "attempt into <data>/retaken/. Supervises the chain: a scan a processing daemon died\n"
+      "holding is sent again from disk, at most twice, then parked (raw/failed.txt).",
       specs, [](const Flags& flags, Node& node) {
         DecoderNodeOptions options;
         options.data_dir = flags.Get("data");

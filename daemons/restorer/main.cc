@@ -11,8 +11,10 @@ int main(int argc, char** argv) {
   specs.push_back(FallbackCalibrationSpec());
   return DaemonMain(argc, argv, "vellum-restorer",
                     "Restores each scan's TEXTURE through its FLAT_MESH: writes restored.tif,\n"
-                    "restored.json, report.html and report.json to <data>/scan-<id>/results and\n"
-                    "publishes RESTORED (the results folder and a preview of at most 1 Mpixel).",
+                    "restored.json, report.html and report.json to the scan's results folder\n"
+                    "(<data>/scan-<id>[-<slug>]/results), rewrites the contact sheet\n"
+                    "<data>/index.html, and publishes RESTORED (the results folder, the quality\n"
+                    "verdict and a preview of at most 1 Mpixel).",
                     specs, [](const Flags& flags, Node& node) {
                       RestorerNodeOptions options;
                       options.data_dir = flags.Get("data");

@@ -16,7 +16,10 @@ int main(int argc, char** argv) {
   return DaemonMain(argc, argv, "vellum-viewer",
                     "The operator's window: live camera preview, scan progress, the daemons'\n"
                     "status, and each finished scan's texture, depth, strain and restored page.\n"
-                    "Keys: s = start a scan, left/right = step through results, q = quit.",
+                    "Keys: e = the next scan's identity (a form: Tab moves, Return closes),\n"
+                    "s = start a scan (the folio then advances), u = undo the last advance,\n"
+                    "z = 100% zoom with a focus figure, c = the session's contact sheet,\n"
+                    "left/right = step through results, q = quit.",
                     Join(DaemonFlagSpecs(false), own), [](const Flags& flags, Node& node) {
                       display::WindowOptions window;
                       window.title = "vellum station";
