@@ -122,10 +122,7 @@ Status WriteContactSheet(const std::string& data_dir) {
       h << "</div>\n<h2>Earlier attempts, retaken (kept in retaken/)</h2>\n<div class=sheet>\n";
       retaken_heading = true;
     }
-    std::string title = e.identity.shelfmark;
-    const std::string folio =
-        e.identity.folio + (e.identity.side.empty() ? "" : " " + e.identity.side);
-    if (folio != "" && folio != " ") title += (title.empty() ? "" : ", ") + folio;
+    std::string title = IdentityTitle(e.identity);
     if (title.empty()) title = e.identity.label.empty() ? "(no identity)" : e.identity.label;
     h << "<div class=\"scan " << HtmlEscape(e.state) << (e.retaken ? " retaken" : "") << "\">";
     if (!e.thumbnail.empty()) {

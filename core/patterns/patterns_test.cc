@@ -20,6 +20,7 @@ TEST(ScanIdentity, SlugIsReadableAndSafe) {
   id.folio = "3";
   id.side = "recto";
   EXPECT_EQ(IdentitySlug(id), "MS-12_3_recto");
+  EXPECT_EQ(IdentityTitle(id), "MS 12, 3 recto");
   id.shelfmark = "Cotton MS Otho A. VI, f. 12";
   id.folio = "12";
   id.side = "";

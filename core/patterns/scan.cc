@@ -97,6 +97,14 @@ ScanIdentity NextFolio(const ScanIdentity& identity) {
   return next;
 }
 
+std::string IdentityTitle(const ScanIdentity& identity) {
+  std::string title = identity.shelfmark;
+  std::string folio = identity.folio;
+  if (!identity.side.empty()) folio += (folio.empty() ? "" : " ") + identity.side;
+  if (!folio.empty()) title += (title.empty() ? "" : ", ") + folio;
+  return title;
+}
+
 std::string IdentitySlug(const ScanIdentity& identity) {
   std::string slug;
   auto add = [&](const std::string& text) {

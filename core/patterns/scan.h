@@ -56,6 +56,10 @@ ScanIdentity SanitizedIdentity(const ScanIdentity& identity, std::string* why = 
 // without a side (a spread, or pages), the next number. A folio without a number stays.
 ScanIdentity NextFolio(const ScanIdentity& identity);
 
+// The identity as a person reads it: "MS 12, 3 recto" (shelfmark, then folio and side); ""
+// when it has none of them.
+std::string IdentityTitle(const ScanIdentity& identity);
+
 // The most bytes of IdentitySlug.
 inline constexpr size_t kMaxSlug = 64;
 

@@ -56,9 +56,7 @@ constexpr int kFormFields = static_cast<int>(std::size(kForm));
 
 // "MS 12, 3 recto (A. Scribe)"; "(no identity)".
 std::string Describe(const ScanIdentity& id) {
-  std::string out = id.shelfmark;
-  const std::string folio = id.folio + (id.side.empty() ? "" : " " + id.side);
-  if (!folio.empty() && folio != " ") out += (out.empty() ? "" : ", ") + folio;
+  std::string out = IdentityTitle(id);
   if (!id.operator_name.empty()) out += " (" + id.operator_name + ")";
   return out.empty() ? "(no identity: press e)" : out;
 }
@@ -82,6 +80,43 @@ std::vector<std::string> Wrap(const std::string& text, size_t chars) {
 
 const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60);
 
+// The preview as the viewer shows it (8-bit BGR, the pixels at the camera's maximum in any
+// channel painted red) and its histogram (64 bins of gray); returns the share clipped. Worked
+// out once per preview, not at each redraw.
+double ClippingView(const cv::Mat& preview, cv::Mat* shown, cv::Mat* hist) {
+  cv::Mat eight = preview;
+  if (eight.depth() != CV_8U) preview.convertTo(eight, CV_8U, 1.0 / 257);
+  cv::Mat top = eight.reshape(1, eight.rows * eight.cols);
+  cv::reduce(top, top, 1, cv::REDUCE_MAX);
+  const cv::Mat clipped = top.reshape(1, eight.rows) >= 255;
+  cv::Mat gray = eight;
+  if (eight.channels() == 3) {
+    cv::cvtColor(eight, gray, cv::COLOR_BGR2GRAY);
+    *shown = eight.clone();
+  } else {
+    cv::cvtColor(eight, *shown, cv::COLOR_GRAY2BGR);
+  }
+  shown->setTo(cv::Scalar(0, 0, 255), clipped);
+  const int channels[] = {0};
+  const int bins[] = {64};
+  const float range[] = {0, 256};
+  const float* ranges[] = {range};
+  cv::calcHist(&gray, 1, channels, cv::Mat(), *hist, 1, bins, ranges);
+  return static_cast<double>(cv::countNonZero(clipped)) / clipped.total();
+}
+
+// How sharp an 8-bit image is: the variance of its Laplacian (higher is sharper; compared
+// while focusing).
+double Sharpness(const cv::Mat& image) {
+  cv::Mat gray = image;
+  if (gray.channels() == 3) cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+  cv::Mat laplacian;
+  cv::Laplacian(gray, laplacian, CV_64F);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(laplacian, mean, stddev);
+  return stddev[0] * stddev[0];
+}
+
 cv::Scalar VerdictColour(const std::string& verdict) {
   return verdict == "pass" ? kGreen : verdict == "warn" ? kAmber : kRed;
 }
@@ -99,11 +134,15 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
     if (!s.ok()) return node_->Error("PREVIEW: " + s.message());
     preview_ = image;
     last_preview_ = Clock::now();
+    preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
   });
   node->Subscribe<image_t>(channel::kPreviewFocus, [this](const image_t& m) {
     cv::Mat image;
     const Status s = FromMessage(m, &image);
     if (!s.ok()) return node_->Error("PREVIEW_FOCUS: " + s.message());
+    if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 257);
+    focus_sharpness_ = Sharpness(image);
+    if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
     focus_ = image;
   });
   node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
@@ -313,56 +352,18 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
   // The live preview, its clipped pixels in red; "NO SIGNAL" when the camera falls silent.
   const int preview_h = (h - top) * 2 / 5;
   const cv::Rect box(8, top, width - 12, preview_h);
-  cv::Mat shown = preview_;
-  double clipped = 0;
-  cv::Mat hist;
-  if (!preview_.empty()) {
-    cv::Mat gray = preview_;
-    if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-    if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 257);
-    cv::Mat top_mask;
-    cv::Mat per_channel = preview_.depth() == CV_8U ? preview_ : cv::Mat();
-    if (per_channel.empty()) preview_.convertTo(per_channel, CV_8U, 1.0 / 257);
-    cv::Mat channels_max = per_channel.reshape(1, per_channel.rows * per_channel.cols);
-    cv::reduce(channels_max, channels_max, 1, cv::REDUCE_MAX);
-    top_mask = channels_max.reshape(1, per_channel.rows) >= 255;
-    clipped = static_cast<double>(cv::countNonZero(top_mask)) / top_mask.total();
-    if (per_channel.channels() == 1) {
-      cv::cvtColor(per_channel, shown, cv::COLOR_GRAY2BGR);
-    } else {
-      shown = per_channel.clone();
-    }
-    shown.setTo(cv::Scalar(0, 0, 255), top_mask);
-    const int channels[] = {0};
-    const int bins[] = {64};
-    const float range[] = {0, 256};
-    const float* ranges[] = {range};
-    cv::calcHist(&gray, 1, channels, cv::Mat(), hist, 1, bins, ranges);
-  }
   if (zoom_) {
     // The centre at the camera's own resolution, pixel for pixel (never scaled up), and how
-    // sharp it is: the variance of its Laplacian (higher is sharper; compare while focusing).
-    cv::Mat gray = focus_;
-    double sharpness = 0;
-    if (!gray.empty()) {
-      if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-      cv::Mat laplacian;
-      cv::Laplacian(gray, laplacian, CV_64F);
-      cv::Scalar mean, stddev;
-      cv::meanStdDev(laplacian, mean, stddev);
-      sharpness = stddev[0] * stddev[0];
-    }
+    // sharp it is.
     cv::rectangle(canvas, box, cv::Scalar(70, 70, 70), 1);
     char caption[96];
     std::snprintf(caption, sizeof(caption), "100%% of the view's centre (z: back), focus %.0f",
-                  sharpness);
+                  focus_sharpness_);
     cv::putText(canvas, caption, box.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.45,
                 cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
     const cv::Rect inner(box.x + 2, box.y + 22, box.width - 4, box.height - 24);
     if (!focus_.empty()) {
-      cv::Mat bgr = focus_;
-      if (bgr.depth() != CV_8U) bgr.convertTo(bgr, CV_8U, 1.0 / 257);
-      if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
+      const cv::Mat& bgr = focus_;
       const cv::Rect part(0, 0, std::min(bgr.cols, inner.width), std::min(bgr.rows, inner.height));
       const cv::Rect at(inner.x + (inner.width - part.width) / 2,
                         inner.y + (inner.height - part.height) / 2, part.width, part.height);
@@ -373,7 +374,7 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
                   cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
     }
   } else {
-    Panel(canvas, box, shown, "camera preview (clipped in red)");
+    Panel(canvas, box, preview_shown_, "camera preview (clipped in red)");
   }
   const double silent = std::chrono::duration<double>(Clock::now() - last_preview_).count();
   if (preview_.empty() || silent > 2) {
@@ -386,6 +387,8 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
   // The histogram under it, its top bin red when pixels clip.
   const cv::Rect strip(8, top + preview_h + 2, width - 12, 36);
   cv::rectangle(canvas, strip, cv::Scalar(70, 70, 70), 1);
+  const cv::Mat& hist = preview_hist_;
+  const double clipped = preview_clipped_;
   if (!hist.empty()) {
     double most = 0;
     cv::minMaxLoc(hist, nullptr, &most);

@@ -75,6 +75,8 @@ class ViewerNode {
   Node* node_;
   std::unique_ptr<display::Window> window_;
   cv::Mat preview_;
+  cv::Mat preview_shown_, preview_hist_;  // As shown (clipped pixels red), and its histogram.
+  double preview_clipped_ = 0;            // Share of its pixels clipped.
   std::string progress_ = "waiting for the station";
   std::map<std::string, status_t> statuses_;
   std::map<std::string, Clock::time_point> seen_;
@@ -87,7 +89,8 @@ class ViewerNode {
   int editing_ = -1;                   // The field being edited, or -1.
   bool sheet_ = false;                 // The contact sheet is shown.
   bool zoom_ = false;                  // The preview at 100%: the focus crop.
-  cv::Mat focus_;                      // PREVIEW_FOCUS: the view's centre, full resolution.
+  cv::Mat focus_;                      // PREVIEW_FOCUS: the view's centre, full resolution, BGR.
+  double focus_sharpness_ = 0;         // Its Laplacian's variance.
   int64_t scan_ = 0;                   // The scan in progress (or last asked for).
   int64_t failed_scan_ = 0;
   std::string failure_;
