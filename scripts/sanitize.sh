@@ -3,7 +3,12 @@
 # a RelWithDebInfo build in build-asan/ whose tests start the sanitized daemons too. The
 # full-size scene tests (label `scenes`: outline_test, leaves_test) are left out, as they take
 # half an hour sanitized; their code (finding the leaf, pages, flying points) runs here through
-# the chain, CLI and station tests on the small rig. Any report
+# the chain, CLI and station tests on the small rig. So are five accuracy tests on the
+# full-size rig (about 750 s sanitized, the slowest of the suite): their code runs sanitized in
+# smaller tests (the calibration solve in CliTest.CalibrateSolve... and Calibrate.BadPoses...,
+# decoding without inverses or finest bits in patterns_test, the flying-point filter and the
+# whole pipeline in the chain and CLI tests); what they add is the accuracy bars, which the
+# plain build checks. Any report
 # aborts the process that made it, and so fails its test. The load test runs 10 scans here
 # (50 in the plain build).
 set -euo pipefail
@@ -23,4 +28,5 @@ fi
 VELLUM_LOAD_SCANS=10 VELLUM_TEST_PACE=25 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
   LSAN_OPTIONS=suppressions=$PWD/../tests/lsan.supp \
   UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  ctest --output-on-failure -j2 --timeout 1800 --label-exclude scenes
+  ctest --output-on-failure -j2 --timeout 1800 --label-exclude scenes \
+  --exclude-regex '^(Calibrate\.(RecoversTheVirtualGantrysCalibration|APageScannedWithTheSolvedCalibrationMeetsTheBar)|OtherRigs\.GrayCodeWithoutInverses.*|FlyingPoints\.AreRejected.*|ExperimentOne\.RestoredCornersMatchTheControl)$'
