@@ -5,11 +5,14 @@
 #include <fstream>
 #include <iterator>
 #include <opencv2/imgcodecs.hpp>
+#include <tiffio.h>
 
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"
 #include "io/ply.h"
+#include "io/products.h"
 #include "io/scan_io.h"
+#include "io/xmp.h"
 
 namespace vellum {
 namespace {
@@ -314,6 +317,58 @@ TEST_F(IoTest, PlyRoundTrip) {
   EXPECT_EQ(r[0].u, 2.0f);
   EXPECT_EQ(r[0].v, 1.0f);
   EXPECT_EQ(r[1].z, 6.0f);
+}
+
+// The restored page carries its catalogue identity in an XMP packet that any XMP reader finds
+// (Dublin Core, and vellum's own namespace), beside unchanged pixels and resolution tags.
+TEST_F(IoTest, TheRestoredTiffCarriesItsIdentityInXmpBesideItsPixelsAndDpi) {
+  RestoreResult restored;
+  restored.status = Status::Ok();
+  restored.image = cv::Mat(40, 30, CV_8UC3);
+  cv::randu(restored.image, 0, 255);
+  restored.view = RestoreView::kOrthographic;
+  restored.dpi = 400;
+  restored.rotation_deg = -2.5;
+  ScanIdentity id;
+  id.shelfmark = "Cotton MS Otho B <x> & \"y\"";  // Markup characters must survive.
+  id.folio = "12";
+  id.side = "verso";
+  id.operator_name = "Ann Example";
+  id.note = "burnt edge, lower left";
+  ASSERT_TRUE(WriteRestored(dir_.string(), restored, id).ok());
+
+  std::map<std::string, std::string> xmp;
+  const Status s = ReadXmp(Path("restored.tif"), &xmp);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(xmp["dc:identifier"], id.shelfmark);
+  EXPECT_EQ(xmp["dc:title"], IdentityTitle(id));
+  EXPECT_EQ(xmp["dc:description"], id.note);
+  EXPECT_EQ(xmp["dc:contributor"], id.operator_name);
+  EXPECT_EQ(xmp["vellum:folio"], "12");
+  EXPECT_EQ(xmp["vellum:side"], "verso");
+  EXPECT_EQ(xmp["vellum:dpi"], "400");
+  EXPECT_EQ(xmp["vellum:rotationDeg"], "-2.5");
+  EXPECT_EQ(xmp.count("vellum:label"), 0u) << "empty fields are left out";
+  EXPECT_EQ(xmp["xmp:CreatorTool"].rfind("vellum ", 0), 0u) << xmp["xmp:CreatorTool"];
+
+  const cv::Mat back = cv::imread(Path("restored.tif"), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(back.size(), restored.image.size());
+  EXPECT_EQ(cv::norm(back, restored.image, cv::NORM_INF), 0);
+  TIFF* tif = TIFFOpen(Path("restored.tif").c_str(), "r");
+  ASSERT_NE(tif, nullptr);
+  float xres = 0, yres = 0;
+  uint16_t unit = 0;
+  EXPECT_EQ(TIFFGetField(tif, TIFFTAG_XRESOLUTION, &xres), 1);
+  EXPECT_EQ(TIFFGetField(tif, TIFFTAG_YRESOLUTION, &yres), 1);
+  EXPECT_EQ(TIFFGetField(tif, TIFFTAG_RESOLUTIONUNIT, &unit), 1);
+  TIFFClose(tif);
+  EXPECT_EQ(xres, 400.0f);
+  EXPECT_EQ(yres, 400.0f);
+  EXPECT_EQ(unit, RESUNIT_INCH);
+
+  const Status missing = ReadXmp(Path("none.tif"), &xmp);
+  EXPECT_FALSE(missing.ok());
+  EXPECT_NE(missing.message().find("none.tif"), std::string::npos) << missing.message();
 }
 
 }  // namespace

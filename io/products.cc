@@ -7,6 +7,7 @@
 #include "io/json.h"
 #include "io/ply.h"
 #include "io/scan_io.h"
+#include "io/xmp.h"
 
 namespace vellum {
 namespace fs = std::filesystem;
@@ -77,6 +78,16 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
   } catch (const cv::Exception& e) {
     return Status::Error(tif + ": cannot write image: " + e.what());
   }
+  XmpFields xmp;
+  xmp.identity = identity;
+  xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
+  xmp.figures["view"] = ToString(restored.view);
+  if (restored.view == RestoreView::kOrthographic) {
+    xmp.figures["dpi"] = JsonNumber(restored.dpi).dump();
+    xmp.figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
+  }
+  const Status xs = WriteXmp(tif, xmp);
+  if (!xs.ok()) return xs;
   Json r;
   Json id = Json::object();
   ForEachIdentityField(identity, [&](const char* key, const std::string& value) {

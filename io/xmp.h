@@ -1,0 +1,37 @@
+// Metadata inside image files: an XMP packet (Adobe's Extensible Metadata Platform, the
+// packet libraries and image servers read) written into a TIFF that is already on disk, and
+// read back. Written with Exiv2 (Debian's libexiv2), so the TIFF structure is never
+// hand-made.
+#pragma once
+
+#include <map>
+#include <string>
+
+#include "core/common/status.h"
+#include "core/patterns/scan.h"
+
+namespace vellum {
+
+// The namespace of vellum's own XMP properties (prefix "vellum"), one per identity field and
+// per measured figure. The host name is reserved (RFC 2606): it names, it does not resolve.
+inline constexpr const char* kVellumXmpNamespace = "http://vellum.invalid/ns/scan/1.0/";
+
+// What goes into a file's XMP packet. Dublin Core carries the catalogue identity as any
+// reader expects it: dc:identifier = shelfmark, dc:title = IdentityTitle (shelfmark, folio,
+// side), dc:description = note, dc:contributor = operator; vellum:<key> repeats each identity
+// field as typed and adds `figures` (key -> text, e.g. "dpi" -> "400").
+struct XmpFields {
+  ScanIdentity identity;
+  std::map<std::string, std::string> figures;
+  std::string creator_tool;  // xmp:CreatorTool, e.g. "vellum 0.1.0"
+};
+
+// Adds the packet to the image file at `path` (TIFF, PNG or JPEG), keeping its pixels and
+// tags. Empty fields are left out.
+Status WriteXmp(const std::string& path, const XmpFields& fields);
+
+// The packet's properties as "prefix:name" -> value (the first value of a bag or
+// language alternative), for tests and tools; an error names the file.
+Status ReadXmp(const std::string& path, std::map<std::string, std::string>* properties);
+
+}  // namespace vellum
