@@ -26,6 +26,7 @@
 #include <tuple>
 
 #include "io/scan_io.h"
+#include "io/xmp.h"
 #include "station/scan_log.h"
 #include "station/scan_store.h"
 #include "tests/station_harness.h"
@@ -1063,6 +1064,11 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
     const nlohmann::json restored_json =
         nlohmann::json::parse(ReadText(e.path().string() + "/results/restored.json"));
     EXPECT_EQ(restored_json["identity"], report["identity"]) << name;
+    std::map<std::string, std::string> xmp;
+    EXPECT_TRUE(ReadXmp(e.path().string() + "/results/restored.tif", &xmp).ok()) << name;
+    EXPECT_EQ(xmp["dc:identifier"], "MS 7") << name;
+    EXPECT_EQ(xmp["vellum:folio"], report["identity"]["folio"]) << name;
+    EXPECT_EQ(xmp["vellum:side"], report["identity"]["side"]) << name;
   }
   EXPECT_EQ(folios, (std::map<std::string, int>{
                         {"MS-7_1_recto", 1}, {"MS-7_1_verso", 1}, {"MS-7_2_recto", 1}}));
