@@ -579,6 +579,28 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   return out;
 }
 
+Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
+  Outline out;
+  out.method = "brightness";
+  const cv::Mat bright = SegmentPage(image);
+  const double share = static_cast<double>(cv::countNonZero(bright)) / bright.total();
+  if (share < options.min_area) {
+    out.status = Status::Error("no leaf in view: nothing brighter than its surround");
+    return out;
+  }
+  if (share > 0.9) {
+    out.status = Status::Error(
+        "the leaf is not set apart from its surround by brightness here (the scan finds it by "
+        "its shape)");
+    return out;
+  }
+  out.mask = bright;
+  out.pages = {bright};
+  out.touches_border = TouchesBorder(bright, options.border_px);
+  out.status = Status::Ok();
+  return out;
+}
+
 cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline) {
   cv::Mat out;
   if (texture.channels() == 1) {

@@ -50,6 +50,13 @@ struct Outline {
 Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
                  const OutlineOptions& options = OutlineOptions());
 
+// The leaf as a live preview shows it, before any scan, for placing it: by brightness alone
+// (a leaf brighter than its surround; the scan itself finds the leaf by its shape). Sets
+// `touches_border` when it runs off the view. An error when nothing sets a leaf apart: no
+// bright region of min_area, or one covering most of the view (a support as bright as the
+// leaf), which only the scan can tell apart.
+Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options = OutlineOptions());
+
 // The texture with the outline drawn over it (each page in its own colour), for the report and
 // the viewer.
 cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline);

@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/outline/outline.h"
 #include "station/chain.h"
 #include "station/messages.h"
 #include "vellum/pattern_shown_t.hpp"
@@ -135,6 +136,17 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
     preview_ = image;
     last_preview_ = Clock::now();
     preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
+    // The leaf as it is being placed: outlined green, red once it runs off the view.
+    const Outline leaf = LeafInPreview(image);
+    if (leaf.status.ok()) {
+      preview_leaf_ = leaf.touches_border ? "off the view" : "in view";
+      std::vector<std::vector<cv::Point>> contours;
+      cv::findContours(leaf.mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+      cv::drawContours(preview_shown_, contours, -1, leaf.touches_border ? kRed : kGreen,
+                       std::max(1, image.cols / 160), cv::LINE_AA);
+    } else {
+      preview_leaf_ = leaf.status.message();
+    }
   });
   node->Subscribe<image_t>(channel::kPreviewFocus, [this](const image_t& m) {
     cv::Mat image;
@@ -375,6 +387,16 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
     }
   } else {
     Panel(canvas, box, preview_shown_, "camera preview (clipped in red)");
+    if (!preview_leaf_.empty()) {
+      const bool off = preview_leaf_ == "off the view", in = preview_leaf_ == "in view";
+      const std::string line = off  ? "LEAF RUNS OFF THE VIEW"
+                               : in ? "leaf in view"
+                                    : "no outline: " + preview_leaf_;
+      cv::putText(canvas, line, cv::Point(box.x + 6, box.y + box.height - 8),
+                  cv::FONT_HERSHEY_SIMPLEX, off ? 0.5 : 0.4,
+                  off ? kRed : in ? kGreen : cv::Scalar(170, 170, 170), off ? 2 : 1,
+                  cv::LINE_AA);
+    }
   }
   const double silent = std::chrono::duration<double>(Clock::now() - last_preview_).count();
   if (preview_.empty() || silent > 2) {

@@ -5,7 +5,8 @@
 // a doubtful result's warnings in amber under the restored page, and its quality verdict
 // (pass, warn, fail) in green, amber or red. A scan that fails turns the header red with the
 // daemon's whole message. The preview shows clipped pixels in red with a histogram under it, and
-// "NO SIGNAL" when the camera falls silent.
+// "NO SIGNAL" when the camera falls silent. The leaf's outline is drawn over the preview as it
+// is placed (by brightness: LeafInPreview), with a red warning when it runs off the view.
 //
 // The next scan's catalogue identity (shelfmark, folio, side, operator, note) is set in a form
 // (e opens it; Tab or Down / Up move between fields; Return or Esc closes it); each scan then
@@ -51,6 +52,9 @@ class ViewerNode {
   bool editing() const { return editing_ >= 0; }
   bool sheet() const { return sheet_; }
   bool zoomed() const { return zoom_; }
+  // The live preview's leaf: "in view", "off the view" (it touches the border), or why none
+  // is outlined; "" before any preview.
+  const std::string& preview_leaf() const { return preview_leaf_; }
   // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
   const std::string& failure() const { return failure_; }
 
@@ -77,6 +81,7 @@ class ViewerNode {
   cv::Mat preview_;
   cv::Mat preview_shown_, preview_hist_;  // As shown (clipped pixels red), and its histogram.
   double preview_clipped_ = 0;            // Share of its pixels clipped.
+  std::string preview_leaf_;              // See preview_leaf().
   std::string progress_ = "waiting for the station";
   std::map<std::string, status_t> statuses_;
   std::map<std::string, Clock::time_point> seen_;

@@ -256,6 +256,50 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
 
 // Issue 15: the preview shows what clips in red, with a histogram; and "NO SIGNAL" once the
 // camera falls silent.
+// The leaf being placed is outlined on the live preview, green while it is in view; once it
+// runs off the view the outline and a warning turn red; a surround as bright as the leaf gets
+// no outline (only the scan can tell them apart), and says so.
+TEST_F(ViewerNodeTest, ThePreviewOutlinesTheLeafAndWarnsWhenItRunsOffTheView) {
+  Node node("vellum-viewer", &bus_.lcm());
+  auto owned = Window();
+  display::Window* window = owned.get();
+  ViewerNode viewer(&node, std::move(owned));
+  bus_.AddTick([&] { viewer.Tick(); });
+  const cv::Rect panel(8, 66, 960 / 3 - 12, 150);  // The preview panel's picture.
+  auto show = [&](const cv::Rect& leaf, int surround) {
+    cv::Mat frame(240, 320, CV_8UC1, cv::Scalar(surround));
+    frame(leaf & cv::Rect(0, 0, 320, 240)).setTo(200);
+    cv::putText(frame, "f. 3r", leaf.tl() + cv::Point(10, 40), cv::FONT_HERSHEY_SIMPLEX, 0.8,
+                cv::Scalar(60), 2);  // Ink on the leaf.
+    image_t preview{};
+    ToMessage(frame, &preview);
+    bus_.probe().Publish(channel::kPreview, &preview);
+  };
+  const cv::Scalar green(60, 190, 60), red(40, 40, 220);
+  show(cv::Rect(80, 50, 150, 140), 40);
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return viewer.preview_leaf() == "in view" && !screen.empty() &&
+               Near(screen(panel), green) > 300 && Near(screen(panel), red) < 20;
+      },
+      10))
+      << viewer.preview_leaf();
+  show(cv::Rect(200, 50, 150, 140), 40);  // Past the right edge.
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        return viewer.preview_leaf() == "off the view" && !screen.empty() &&
+               Near(screen(panel), red) > 300 && Near(screen(panel), green) < 20;
+      },
+      10))
+      << viewer.preview_leaf();
+  show(cv::Rect(80, 50, 150, 140), 195);  // A support as bright as the leaf.
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] { return viewer.preview_leaf().find("not set apart") != std::string::npos; }, 10))
+      << viewer.preview_leaf();
+}
+
 TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
   Node node("vellum-viewer", &bus_.lcm());
   auto owned = Window();
