@@ -1,11 +1,11 @@
 #include <gtest/gtest.h>
+#include <tiffio.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <opencv2/imgcodecs.hpp>
-#include <tiffio.h>
 
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"

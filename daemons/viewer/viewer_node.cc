@@ -394,8 +394,10 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
                                     : "no outline: " + preview_leaf_;
       cv::putText(canvas, line, cv::Point(box.x + 6, box.y + box.height - 8),
                   cv::FONT_HERSHEY_SIMPLEX, off ? 0.5 : 0.4,
-                  off ? kRed : in ? kGreen : cv::Scalar(170, 170, 170), off ? 2 : 1,
-                  cv::LINE_AA);
+                  off  ? kRed
+                  : in ? kGreen
+                       : cv::Scalar(170, 170, 170),
+                  off ? 2 : 1, cv::LINE_AA);
     }
   }
   const double silent = std::chrono::duration<double>(Clock::now() - last_preview_).count();
