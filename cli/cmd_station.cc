@@ -179,6 +179,26 @@ int RunScan(const std::vector<std::string>& args) {
   if (!changed.empty()) std::fprintf(stderr, "vellum scan: %s\n", changed.c_str());
   request.identity = station::ToMessage(identity);
   Follower follower(&node, request.scan_id);
+  // The request goes out once every daemon of the station is heard: one sent before the
+  // projector listens would be lost, and a station that is not running is named at once.
+  const double wait = std::min(timeout, 15.0);
+  const auto missing = [&] {
+    std::string names;
+    for (const char* process : station::kGantry) {
+      if (!follower.Heard(process)) names += std::string(names.empty() ? "" : ", ") + process;
+    }
+    for (const station::ChainLink& link : station::kChain) {
+      if (!follower.Heard(link.process))
+        names += std::string(names.empty() ? "" : ", ") + link.process;
+    }
+    return names;
+  };
+  if (!Follow(node, wait, [&] { return missing().empty(); })) {
+    std::fprintf(
+        stderr, "vellum scan: no heartbeat within %.0f s from %s (is the station running on %s?)\n",
+        wait, missing().c_str(), flags.Get("url").c_str());
+    return 1;
+  }
   node.Publish(channel::kScanRequest, &request);
   if (isatty(2))
     std::fprintf(stderr, "scan %lld requested\n", static_cast<long long>(request.scan_id));

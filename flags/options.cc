@@ -13,6 +13,10 @@ std::vector<Flags::Spec> Join(std::vector<Flags::Spec> a, const std::vector<Flag
 
 std::vector<Flags::Spec> PatternFlagSpecs() {
   return {
+      {"axes", "WHICH",
+       "projector coordinates coded: both (columns and rows), or columns alone (half the "
+       "frames: the triangulation needs only columns, but no epipolar check is made)",
+       "both"},
       {"phase-steps", "N", "phase shifts per axis; 0 = Gray code only", "8"},
       {"period", "PX", "sinusoid period, projector pixels", "16"},
       {"gray-inverses", "BOOL",
@@ -28,6 +32,11 @@ std::vector<Flags::Spec> PatternFlagSpecs() {
 PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
   PatternOptions o;
   o.projector_size = projector;
+  const std::string axes = flags.Get("axes");
+  if (axes != "both" && axes != "columns") {
+    throw UsageError("--axes: '" + axes + "' is not both or columns");
+  }
+  o.rows = axes == "both";
   o.phase_steps = flags.GetInt("phase-steps", 0, 64);
   o.phase_period_px = flags.GetInt("period", 4, 4096);
   o.gray_inverses = flags.GetBool("gray-inverses");

@@ -1,5 +1,6 @@
 #include "core/sim/texture.h"
 
+#include <algorithm>
 #include <cmath>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -70,6 +71,14 @@ PageTexture::PageTexture(const TextureOptions& options, cv::Size2d page_size_mm)
   } else if (options.kind == TextureKind::kImage) {
     if (options.image.channels() == 3) {
       cv::cvtColor(options.image, gray, cv::COLOR_BGR2GRAY);
+      // Each channel against the gray, both lifted off zero so that ink keeps a finite hue.
+      cv::Mat colour, luma;
+      options.image.convertTo(colour, CV_32FC3, 1.0, 8.0);
+      gray.convertTo(luma, CV_32F, 1.0, 8.0);
+      cv::Mat luma3;
+      cv::merge(std::vector<cv::Mat>{luma, luma, luma}, luma3);
+      cv::divide(colour, luma3, tint_);
+      if (cv::norm(tint_ - cv::Scalar::all(1), cv::NORM_INF) < 1e-3) tint_.release();  // Gray.
     } else {
       gray = options.image;
     }
@@ -116,6 +125,14 @@ double PageTexture::Albedo(double s, double t) const {
     }
   }
   return options_.paper_albedo;
+}
+
+cv::Vec3d PageTexture::Tint(double s, double t) const {
+  if (tint_.empty()) return cv::Vec3d(1, 1, 1);
+  const int x = std::clamp(static_cast<int>(s * px_per_mm_x_), 0, tint_.cols - 1);
+  const int y = std::clamp(static_cast<int>((page_size_.height - t) * px_per_mm_y_), 0,
+                           tint_.rows - 1);
+  return cv::Vec3d(tint_.at<cv::Vec3f>(y, x));
 }
 
 }  // namespace vellum

@@ -27,11 +27,16 @@ class PageTexture {
   PageTexture(const TextureOptions& options, cv::Size2d page_size_mm);
   // Albedo (0..1) at page coordinate (s, t) mm.
   double Albedo(double s, double t) const;
+  // A colour image's hue at (s, t): each channel's albedo over Albedo (B, G, R); (1, 1, 1) for
+  // gray kinds. The structured-light frames see Albedo; the studio-lit texture sees the colour.
+  cv::Vec3d Tint(double s, double t) const;
+  bool coloured() const { return !tint_.empty(); }
 
  private:
   TextureOptions options_;
   cv::Size2d page_size_;
   cv::Mat albedo_;  // CV_32F albedo image for kText and kImage.
+  cv::Mat tint_;    // CV_32FC3 per-channel ratio to the gray, for a colour kImage; else empty.
   double px_per_mm_x_ = 1.0, px_per_mm_y_ = 1.0;
 };
 
