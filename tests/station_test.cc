@@ -53,6 +53,7 @@ const std::string kBuild = VELLUM_BUILD_DIR;
 const std::string kSource = VELLUM_SOURCE_DIR;
 const std::string kRig = kSource + "/config/small_rig.yaml";
 const std::string kLog = kBuild + "/tests/data/curl_scan.lcmlog";
+const std::string kDemoLog = kBuild + "/tests/data/demo_leaf.lcmlog";  // What the demo plays.
 
 std::string Daemon(const std::string& name) { return kBuild + "/daemons/" + name; }
 
@@ -392,14 +393,14 @@ TEST_F(StationTest, FullResolutionScanCrossesTheBusInChunks) {
 }
 
 TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
-  ASSERT_TRUE(fs::exists(kLog)) << kLog << " (made from tests/data at build time)";
+  ASSERT_TRUE(fs::exists(kDemoLog)) << kDemoLog << " (made from tests/data at build time)";
   std::vector<restored_t> restored;
   Listener<restored_t> on_restored(*lcm_, "RESTORED",
                                    [&](const restored_t& m) { restored.push_back(m); });
   // As the demo plays it: `vellum watch --play` starts the player once every processing
   // daemon's heartbeat is heard (the daemons are started after it, so it must wait).
   Process player(
-      {Tool(), "watch", "--url", url_, "--count", "1", "--timeout", "300", "--play", kLog},
+      {Tool(), "watch", "--url", url_, "--count", "1", "--timeout", "300", "--play", kDemoLog},
       dir_ + "/watch.log");
   StartProcessing();
   ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] { return !restored.empty(); }))
@@ -408,13 +409,33 @@ TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
   EXPECT_NE(player.Output().find("restored: "), std::string::npos) << player.Output();
   const restored_t& r = restored[0];
   EXPECT_EQ(r.view, "orthographic");
-  EXPECT_GT(r.dpi, 30);
+  // The demo's leaf as a library would judge it (issue 15): at least 300 ppi, the camera's own
+  // sampling (305 ppi: 0.083 mm per pixel), a clean verdict, its identity in the folder name.
+  EXPECT_GE(r.dpi, 300);
+  EXPECT_EQ(r.qc, "pass");
+  EXPECT_NE(r.results.find("Demo-MS-1_7_recto"), std::string::npos) << r.results;
   EXPECT_GT(r.preview.width, 100);
   EXPECT_LE(static_cast<size_t>(r.preview.size), size_t{3} << 20);
+  // Cropped to the leaf (56 x 70 mm) plus its margin, upright: the red initial at the top
+  // left of the text, as on the page drawn, in colour.
+  const cv::Mat page = cv::imread(r.results + "/restored.tif", cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(page.type(), CV_8UC3);
+  const double mm = 25.4 / r.dpi;
+  EXPECT_NEAR(page.cols * mm, 56, 8) << page.cols << " px";
+  EXPECT_NEAR(page.rows * mm, 70, 8) << page.rows << " px";
+  std::vector<cv::Mat> bgr;
+  cv::split(page, bgr);
+  cv::Mat redder;
+  cv::subtract(bgr[2], bgr[1], redder, cv::noArray(), CV_16S);
+  const cv::Mat red = redder > 60;  // Parchment's red exceeds its green by about 25 DN.
+  ASSERT_GT(cv::countNonZero(red), 200);
+  const cv::Rect initial = cv::boundingRect(red);
+  EXPECT_LT(initial.x + initial.width, page.cols / 3) << initial;
+  EXPECT_LT(initial.y + initial.height, page.rows / 3) << initial;
 
   // The same scan exported from the log and processed by `vellum process`.
   std::string out;
-  ASSERT_EQ(RunTool({"export", kLog, dir_ + "/exported"}, &out), 0) << out;
+  ASSERT_EQ(RunTool({"export", kDemoLog, dir_ + "/exported"}, &out), 0) << out;
   ExpectSameAsProcess(dir_ + "/exported", r.results);
   EXPECT_TRUE(fs::exists(fs::path(r.results).parent_path() / "raw" / "captures.lcmlog"));
 }

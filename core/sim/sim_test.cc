@@ -105,10 +105,63 @@ TEST_F(GantryTest, RenderingIsDeterministicPerSeed) {
   const cv::Mat c = gantry_->RenderFrame(white, 6);
   EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0);
   EXPECT_GT(cv::norm(a, c, cv::NORM_INF), 0);
+  EXPECT_EQ(gantry_->RenderTexture(5).type(), CV_8UC1);  // A gray page, a gray texture.
   // Paper under full light: 255 x 0.85 x (0.08 + 0.85 cos) stays below 8-bit saturation.
   double lo, hi;
   cv::minMaxLoc(a, &lo, &hi);
   EXPECT_LT(hi, 255);
+}
+
+// A colour page image gives a colour texture (the studio light sees each channel's albedo) and
+// the same gray structured-light frames; a gray page gives a gray texture. The page's left half
+// is red and its right half green, both of one gray level: only the texture tells them apart.
+TEST(Gantry, AColourPageGivesAColourTextureAndGrayPatternFrames) {
+  PageOptions page;
+  page.shape = PageShape::kFlat;
+  TextureOptions texture;
+  texture.kind = TextureKind::kImage;
+  texture.image = cv::Mat(240, 190, CV_8UC3, cv::Scalar(40, 40, 200));
+  texture.image.colRange(95, 190).setTo(cv::Scalar(40, 120, 51));  // Gray 90; the red, 88.
+  const VirtualGantry gantry(DefaultRig(), page, texture);
+  const cv::Mat colour = gantry.RenderTexture(3);
+  ASSERT_EQ(colour.type(), CV_8UC3);
+  const cv::Mat white(768, 1024, CV_8U, cv::Scalar(255));
+  EXPECT_EQ(gantry.RenderFrame(white, 3).type(), CV_8UC1);
+  const GroundTruth& truth = gantry.truth();
+  cv::Scalar left(0, 0, 0), right(0, 0, 0), table(0, 0, 0);
+  int n_left = 0, n_right = 0, n_table = 0;
+  for (int v = 0; v < colour.rows; v += 7) {
+    for (int u = 0; u < colour.cols; u += 7) {
+      const cv::Vec3b c = colour.at<cv::Vec3b>(v, u);
+      const cv::Scalar bgr(c[0], c[1], c[2]);
+      if (!truth.page_index.at<uint8_t>(v, u)) {
+        table += bgr;
+        ++n_table;
+        continue;
+      }
+      const float s = truth.page.at<cv::Vec2f>(v, u)[0];
+      if (s > 10 && s < 85) {
+        left += bgr;
+        ++n_left;
+      } else if (s > 105 && s < 180) {
+        right += bgr;
+        ++n_right;
+      }
+    }
+  }
+  ASSERT_GT(n_left, 100);
+  ASSERT_GT(n_right, 100);
+  ASSERT_GT(n_table, 100);
+  left /= n_left;
+  right /= n_right;
+  table /= n_table;
+  // The image's hues, within the sensor's noise (1.5 DN, averaged over hundreds of pixels).
+  EXPECT_GT(left[2], 3 * left[1]) << left;
+  EXPECT_NEAR(left[0], left[1], 2) << left;
+  EXPECT_GT(right[1], 2 * right[0]) << right;
+  EXPECT_GT(right[1], 2 * right[2]) << right;
+  EXPECT_NEAR(table[0], table[2], 2) << table;  // The table stays gray.
+  EXPECT_NEAR(table[1], table[2], 2) << table;
 }
 
 }  // namespace
