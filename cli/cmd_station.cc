@@ -151,9 +151,10 @@ int RunScan(const std::vector<std::string>& args) {
                    "has recorded before",
                    "0"});
   Flags flags("vellum scan",
-              "Asks the station for one scan (SCAN_REQUEST), shows its progress and prints\n"
-              "where the results are once the page is restored. Exit status 1 when a daemon\n"
-              "reports the scan failed or nothing happens before the timeout; 3 when the page\n"
+              "Asks the station for one scan (SCAN_REQUEST) once every daemon's heartbeat is\n"
+              "heard, shows its progress and prints where the results are once the page is\n"
+              "restored. Exit status 1 when a daemon is not heard within 15 s (named), reports\n"
+              "the scan failed, or nothing happens before the timeout; 3 when the page\n"
               "was restored with warnings that make it doubtful (printed; the leaf runs off the\n"
               "view, an uncertain outline, high strain): check its report.html.",
               specs);
