@@ -146,6 +146,10 @@ int RunScan(const std::vector<std::string>& args) {
   specs.push_back({"operator", "NAME", "who scans", ""});
   specs.push_back({"note", "TEXT", "anything else about the scan", ""});
   specs.push_back({"timeout", "S", "give up after this long", "600"});
+  specs.push_back({"wait", "S",
+                   "wait this long for every daemon's heartbeat before asking (no projector: "
+                   "exit 1; another daemon missing: named, then asked anyway)",
+                   "5"});
   specs.push_back({"scan-id", "ID",
                    "the scan's id (0: this clock's microseconds); the station refuses an id it "
                    "has recorded before",
@@ -153,8 +157,8 @@ int RunScan(const std::vector<std::string>& args) {
   Flags flags("vellum scan",
               "Asks the station for one scan (SCAN_REQUEST) once every daemon's heartbeat is\n"
               "heard, shows its progress and prints where the results are once the page is\n"
-              "restored. Exit status 1 when a daemon is not heard within 15 s (named), reports\n"
-              "the scan failed, or nothing happens before the timeout; 3 when the page\n"
+              "restored. Exit status 1 when the projector is not heard within --wait, a daemon\n"
+              "reports the scan failed, or nothing happens before the timeout; 3 when the page\n"
               "was restored with warnings that make it doubtful (printed; the leaf runs off the\n"
               "view, an uncertain outline, high strain): check its report.html.",
               specs);
@@ -180,9 +184,11 @@ int RunScan(const std::vector<std::string>& args) {
   if (!changed.empty()) std::fprintf(stderr, "vellum scan: %s\n", changed.c_str());
   request.identity = station::ToMessage(identity);
   Follower follower(&node, request.scan_id);
-  // The request goes out once every daemon of the station is heard: one sent before the
-  // projector listens would be lost, and a station that is not running is named at once.
-  const double wait = std::min(timeout, 15.0);
+  // The request goes out once every daemon of the station is heard (a heartbeat a second), or
+  // --wait has passed: one sent before the projector listens would be lost. Without the
+  // projector nothing can start; without another daemon the scan is asked for anyway, so that
+  // the station's own failure says what is missing, and this names it first.
+  const double wait = std::min(timeout, flags.GetDouble("wait", 0, 600));
   const auto missing = [&] {
     std::string names;
     for (const char* process : station::kGantry) {
@@ -195,10 +201,15 @@ int RunScan(const std::vector<std::string>& args) {
     return names;
   };
   if (!Follow(node, wait, [&] { return missing().empty(); })) {
-    std::fprintf(
-        stderr, "vellum scan: no heartbeat within %.0f s from %s (is the station running on %s?)\n",
-        wait, missing().c_str(), flags.Get("url").c_str());
-    return 1;
+    if (!follower.Heard(station::kGantry[0])) {
+      std::fprintf(stderr,
+                   "vellum scan: no heartbeat within %.0f s from %s (is the station running on "
+                   "%s?)\n",
+                   wait, missing().c_str(), flags.Get("url").c_str());
+      return 1;
+    }
+    std::fprintf(stderr, "vellum scan: not heard within %.0f s: %s; asking anyway\n", wait,
+                 missing().c_str());
   }
   node.Publish(channel::kScanRequest, &request);
   if (isatty(2))

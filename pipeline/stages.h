@@ -100,7 +100,7 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
 // leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
 // restored.json in the page's folder and the report's pictures of the page (grid, strain,
 // before/after). Warns of a leaf whose size is not the one expected.
-// `identity` goes into restored.json.
+// `identity` goes into restored.json and the TIFF's XMP (a spread's page's own: PageIdentity).
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,

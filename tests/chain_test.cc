@@ -8,6 +8,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
+#include <tuple>
 #include <sstream>
 
 #include "daemons/decoder/decoder_node.h"
@@ -56,7 +57,11 @@ Scan SceneScan(const Scene& scene) {
   SceneOptions options;
   options.spread = scene.spread;
   options.frame = scene.frame;
-  return AsScan(SimulateScan(QuickRig(), page, TextureOptions(), options, 7));
+  Scan scan = AsScan(SimulateScan(QuickRig(), page, TextureOptions(), options, 7));
+  scan.identity.shelfmark = "MS 5";
+  scan.identity.folio = scene.spread ? "2v-3r" : "4";  // A spread names its opening.
+  if (!scene.spread) scan.identity.side = "recto";
+  return scan;
 }
 
 // Every file under `root`, relative to it.
@@ -147,6 +152,18 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
     EXPECT_EQ(station.at(it.key()), it.value()) << it.key();
   }
   EXPECT_EQ(cli.contains("pages"), GetParam().spread);
+  // Each restored page knows which it is: a spread's left page is folio 2 verso, its right
+  // folio 3 recto.
+  if (spread) {
+    for (const auto& [page, folio, side] :
+         {std::tuple<std::string, std::string, std::string>{"left", "2", "verso"},
+          {"right", "3", "recto"}}) {
+      const nlohmann::json r = ReadJson(process + "/pages/" + page + "/restored.json");
+      EXPECT_EQ(r["identity"]["shelfmark"], "MS 5") << page;
+      EXPECT_EQ(r["identity"]["folio"], folio) << page;
+      EXPECT_EQ(r["identity"]["side"], side) << page;
+    }
+  }
   EXPECT_GE(station_keys.count("options/max_epipolar_error_px"), 1u);
   EXPECT_GE(station_keys.count("options/smooth_radius_px"), 1u);
   fs::remove_all(dir);

@@ -863,6 +863,13 @@ TEST_F(StationTest, TheFirewallDropsAUnicastDatagramToTheBusPort) {
 }
 
 TEST_F(StationTest, WithoutACameraTheScanFailsWithAClearStatusAndTheStationStaysReady) {
+  {  // No station at all: vellum scan says so at once, naming the daemons it did not hear.
+    std::string out;
+    EXPECT_EQ(RunTool({"scan", "--url", url_, "--wait", "1"}, &out), 1) << out;
+    EXPECT_NE(out.find("no heartbeat within 1 s from vellum-projector, vellum-camera"),
+              std::string::npos)
+        << out;
+  }
   Process* projector =
       Start(Daemon("vellum-projector"),
             {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", "1"},
@@ -870,7 +877,10 @@ TEST_F(StationTest, WithoutACameraTheScanFailsWithAClearStatusAndTheStationStays
   WaitForHeartbeats({"STATUS_PROJECTOR"});
   for (int attempt = 0; attempt < 2; ++attempt) {
     std::string out;
-    EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "60"}, &out), 1) << out;
+    EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "60", "--wait", "1"}, &out), 1) << out;
+    // vellum scan names the silent camera first, asks anyway, and the projector's failure
+    // follows.
+    EXPECT_NE(out.find("not heard within 1 s: vellum-camera"), std::string::npos) << out;
     EXPECT_NE(out.find("no CAPTURE of the texture within 1000 ms"), std::string::npos) << out;
     EXPECT_NE(out.find("failed"), std::string::npos) << out;
   }

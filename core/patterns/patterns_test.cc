@@ -67,6 +67,35 @@ TEST(ScanIdentity, NextFolioRunsRectoVersoThenTheNextFolio) {
   EXPECT_EQ(NextFolio(id).folio, "flyleaf");
 }
 
+// A spread names its opening: "2v-3r" (foliated) turns to "3v-4r", "14-15" (paginated) to
+// "16-17", across a carry; each page gets its own folio and side. A folio that is not an
+// opening keeps its text, with the page as its side.
+TEST(ScanIdentity, ASpreadTurnsToTheNextOpeningAndEachPageHasItsOwnFolio) {
+  ScanIdentity id;
+  id.shelfmark = "MS 12";
+  id.folio = "2v-3r";
+  EXPECT_EQ(NextFolio(id).folio, "3v-4r");
+  EXPECT_EQ(NextFolio(id).side, "");
+  EXPECT_EQ(PageIdentity(id, "left").folio, "2");
+  EXPECT_EQ(PageIdentity(id, "left").side, "verso");
+  EXPECT_EQ(PageIdentity(id, "right").folio, "3");
+  EXPECT_EQ(PageIdentity(id, "right").side, "recto");
+  EXPECT_EQ(PageIdentity(id, "right").shelfmark, "MS 12");
+  id.folio = "9v-10r";
+  EXPECT_EQ(NextFolio(id).folio, "10v-11r");
+  id.folio = "14-15";
+  EXPECT_EQ(NextFolio(id).folio, "16-17");
+  EXPECT_EQ(PageIdentity(id, "left").folio, "14");
+  EXPECT_EQ(PageIdentity(id, "left").side, "left");
+  EXPECT_EQ(PageIdentity(id, "right").folio, "15");
+  id.folio = "p. 98-p. 99";
+  EXPECT_EQ(NextFolio(id).folio, "p. 100-p. 101");
+  id.folio = "frontispiece";
+  EXPECT_EQ(NextFolio(id).folio, "frontispiece");
+  EXPECT_EQ(PageIdentity(id, "right").folio, "frontispiece");
+  EXPECT_EQ(PageIdentity(id, "right").side, "right");
+}
+
 TEST(Patterns, SequenceLayoutFor1024x768) {
   const PatternSequence seq = MakePatternSequence(PatternOptions());
   std::string why;

@@ -1,5 +1,6 @@
 #include "core/patterns/scan.h"
 
+#include <algorithm>
 #include <cctype>
 
 namespace vellum {
@@ -69,6 +70,53 @@ std::string SlugPart(const std::string& text) {
   return out;
 }
 
+// `text` with its last run of digits raised by `by` ("f. 99" + 1 = "f. 100"); unchanged when it
+// has none.
+std::string AddToLastNumber(const std::string& text, int by) {
+  size_t end = text.size();
+  while (end > 0 && !std::isdigit(static_cast<unsigned char>(text[end - 1]))) --end;
+  size_t begin = end;
+  while (begin > 0 && std::isdigit(static_cast<unsigned char>(text[begin - 1]))) --begin;
+  if (begin == end) return text;
+  std::string digits = text.substr(begin, end - begin);
+  for (int step = 0; step < by; ++step) {
+    size_t k = digits.size();
+    while (k > 0 && digits[k - 1] == '9') digits[--k] = '0';
+    if (k == 0) {
+      digits.insert(digits.begin(), '1');
+    } else {
+      ++digits[k - 1];
+    }
+  }
+  return text.substr(0, begin) + digits + text.substr(end);
+}
+
+// A spread's opening, "2v-3r" or "14-15": its two pages' folios, and whether they are folios
+// (each ending in r or v after its number) rather than pages.
+struct Opening {
+  std::string left, right;
+  bool foliated = false;
+};
+
+bool ParseOpening(const std::string& folio, Opening* opening) {
+  const size_t dash = folio.find('-');
+  if (dash == std::string::npos || folio.find('-', dash + 1) != std::string::npos) return false;
+  opening->left = folio.substr(0, dash);
+  opening->right = folio.substr(dash + 1);
+  auto numbered = [](const std::string& part) {
+    return std::any_of(part.begin(), part.end(),
+                       [](char c) { return std::isdigit(static_cast<unsigned char>(c)); });
+  };
+  if (!numbered(opening->left) || !numbered(opening->right)) return false;
+  auto side_letter = [](const std::string& part) {
+    const char last = static_cast<char>(std::tolower(static_cast<unsigned char>(part.back())));
+    return (last == 'r' || last == 'v') && part.size() > 1 &&
+           std::isdigit(static_cast<unsigned char>(part[part.size() - 2]));
+  };
+  opening->foliated = side_letter(opening->left) && side_letter(opening->right);
+  return true;
+}
+
 }  // namespace
 
 ScanIdentity NextFolio(const ScanIdentity& identity) {
@@ -78,23 +126,30 @@ ScanIdentity NextFolio(const ScanIdentity& identity) {
     return next;
   }
   if (identity.side == "verso") next.side = "recto";
-  // The last run of digits, plus one.
-  std::string& folio = next.folio;
-  size_t end = folio.size();
-  while (end > 0 && !std::isdigit(static_cast<unsigned char>(folio[end - 1]))) --end;
-  size_t begin = end;
-  while (begin > 0 && std::isdigit(static_cast<unsigned char>(folio[begin - 1]))) --begin;
-  if (begin == end) return next;
-  std::string digits = folio.substr(begin, end - begin);
-  size_t k = digits.size();
-  while (k > 0 && digits[k - 1] == '9') digits[--k] = '0';
-  if (k == 0) {
-    digits.insert(digits.begin(), '1');
-  } else {
-    ++digits[k - 1];
+  Opening opening;
+  if (identity.side.empty() && ParseOpening(identity.folio, &opening)) {
+    // The next opening: one leaf on when foliated, two pages on when paginated.
+    const int by = opening.foliated ? 1 : 2;
+    next.folio = AddToLastNumber(opening.left, by) + "-" + AddToLastNumber(opening.right, by);
+    return next;
   }
-  folio.replace(begin, end - begin, digits);
+  next.folio = AddToLastNumber(identity.folio, 1);
   return next;
+}
+
+ScanIdentity PageIdentity(const ScanIdentity& spread, const std::string& page) {
+  ScanIdentity id = spread;
+  id.side = page;
+  Opening opening;
+  if (!ParseOpening(spread.folio, &opening)) return id;
+  std::string folio = page == "left" ? opening.left : opening.right;
+  if (opening.foliated) {
+    const char letter = static_cast<char>(std::tolower(static_cast<unsigned char>(folio.back())));
+    id.side = letter == 'r' ? "recto" : "verso";
+    folio.pop_back();
+  }
+  id.folio = folio;
+  return id;
 }
 
 std::string IdentityTitle(const ScanIdentity& identity) {

@@ -56,6 +56,13 @@ ScanIdentity SanitizedIdentity(const ScanIdentity& identity, std::string* why = 
 // without a side (a spread, or pages), the next number. A folio without a number stays.
 ScanIdentity NextFolio(const ScanIdentity& identity);
 
+// A spread (an open book, two pages in one scan) names its opening in `folio`, side empty:
+// "2v-3r" when the book is foliated (the left page is folio 2 verso, the right folio 3 recto),
+// "14-15" when it is paginated. NextFolio turns to the next opening ("3v-4r", "16-17").
+// PageIdentity gives one page of it ("left" or "right") its own folio and side ("2", verso;
+// "14", left); a folio that is not an opening keeps its text, with the page as its side.
+ScanIdentity PageIdentity(const ScanIdentity& spread, const std::string& page);
+
 // The identity as a person reads it: "MS 12, 3 recto" (shelfmark, then folio and side); ""
 // when it has none of them.
 std::string IdentityTitle(const ScanIdentity& identity);
