@@ -8,8 +8,8 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
-#include <tuple>
 #include <sstream>
+#include <tuple>
 
 #include "daemons/decoder/decoder_node.h"
 #include "daemons/flattener/flattener_node.h"
