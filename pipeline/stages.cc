@@ -322,7 +322,8 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   }
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
-  if (s.ok()) s = WriteRestored(dir, *restored, page.empty() ? identity : PageIdentity(identity, page));
+  if (s.ok())
+    s = WriteRestored(dir, *restored, page.empty() ? identity : PageIdentity(identity, page));
   if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back(PageFile(page, "restored.tif"));
   if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));
