@@ -130,8 +130,8 @@ double PageTexture::Albedo(double s, double t) const {
 cv::Vec3d PageTexture::Tint(double s, double t) const {
   if (tint_.empty()) return cv::Vec3d(1, 1, 1);
   const int x = std::clamp(static_cast<int>(s * px_per_mm_x_), 0, tint_.cols - 1);
-  const int y = std::clamp(static_cast<int>((page_size_.height - t) * px_per_mm_y_), 0,
-                           tint_.rows - 1);
+  const int y =
+      std::clamp(static_cast<int>((page_size_.height - t) * px_per_mm_y_), 0, tint_.rows - 1);
   return cv::Vec3d(tint_.at<cv::Vec3f>(y, x));
 }
 
