@@ -2,6 +2,7 @@
 #include <tiffio.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -9,6 +10,7 @@
 
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"
+#include "io/manifest.h"
 #include "io/ply.h"
 #include "io/products.h"
 #include "io/scan_io.h"
@@ -317,6 +319,50 @@ TEST_F(IoTest, PlyRoundTrip) {
   EXPECT_EQ(r[0].u, 2.0f);
   EXPECT_EQ(r[0].v, 1.0f);
   EXPECT_EQ(r[1].z, 6.0f);
+}
+
+// A scan's manifest lists every file of its raw/ and results/ (not what lies beside them), in
+// the format sha256sum reads (checked by sha256sum itself), and names each file missing,
+// changed or added since.
+TEST_F(IoTest, TheManifestProvesAScanWholeAndNamesWhatChanged) {
+  fs::create_directories(dir_ / "raw");
+  fs::create_directories(dir_ / "results" / "report");
+  auto write = [&](const std::string& rel, const std::string& text) {
+    std::ofstream(dir_ / rel, std::ios::binary) << text;
+  };
+  write("raw/scan.yaml", "format: vellum-scan\n");
+  write("results/restored.tif", std::string(3 << 20, 'x'));  // Several read buffers.
+  write("results/report/strain.png", "png");
+  write("pending", "the supervisor's ledger");
+  int files = 0;
+  ASSERT_TRUE(WriteManifest(dir_.string(), {"raw", "results"}, &files).ok());
+  EXPECT_EQ(files, 3);
+  std::string hex;
+  ASSERT_TRUE(Sha256OfFile(Path("raw/scan.yaml"), &hex).ok());
+  EXPECT_EQ(hex.size(), 64u);
+  std::vector<std::string> problems;
+  ASSERT_TRUE(CheckManifest(dir_.string(), &problems).ok());
+  EXPECT_TRUE(problems.empty()) << problems.front();
+  // The same verdict from coreutils.
+  const std::string cmd = "cd '" + dir_.string() + "' && sha256sum --quiet -c " + kManifestName;
+  EXPECT_EQ(std::system(cmd.c_str()), 0);
+  // A byte changed, a file gone, a file added.
+  write("results/report/strain.png", "pnG");
+  fs::remove(dir_ / "raw" / "scan.yaml");
+  write("results/extra.txt", "added");
+  ASSERT_TRUE(CheckManifest(dir_.string(), &problems).ok());
+  ASSERT_EQ(problems.size(), 3u);
+  std::string all;
+  for (const std::string& p : problems) all += p + "\n";
+  EXPECT_NE(all.find("raw/scan.yaml: missing"), std::string::npos) << all;
+  EXPECT_NE(all.find("results/report/strain.png: changed"), std::string::npos) << all;
+  EXPECT_NE(all.find("results/extra.txt: not in the manifest"), std::string::npos) << all;
+  EXPECT_NE(std::system(cmd.c_str()), 0);
+  // No manifest, or a damaged one: an error naming it.
+  write(kManifestName, "not a manifest\n");
+  const Status bad = CheckManifest(dir_.string(), &problems);
+  EXPECT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("manifest-sha256.txt: line 1"), std::string::npos) << bad.message();
 }
 
 // The restored page carries its catalogue identity in an XMP packet that any XMP reader finds

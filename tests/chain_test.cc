@@ -15,6 +15,7 @@
 #include "daemons/flattener/flattener_node.h"
 #include "daemons/restorer/restorer_node.h"
 #include "daemons/triangulator/triangulator_node.h"
+#include "io/manifest.h"
 #include "pipeline/process.h"
 #include "station/scan_log.h"
 #include "station/testing.h"
@@ -115,6 +116,11 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
       << ", triangulator: " << triangulator_node.Counter("scans triangulated")
       << ", flattener: " << flattener_node.Counter("scans flattened");
   const ScanFolder folder = ScanFolder::For(data, 3);
+  // The scan's manifest, in its folder: every file of raw/ and results/, whole (issue 16).
+  std::vector<std::string> problems;
+  const Status manifest = CheckManifest(folder.root, &problems);
+  EXPECT_TRUE(manifest.ok()) << manifest.message();
+  EXPECT_TRUE(problems.empty()) << problems.front();
 
   // The same scan, as recorded, through `vellum process`'s pipeline.
   ProcessInput input;

@@ -69,7 +69,8 @@ class CliTest : public ::testing::Test {
 fs::path CliTest::root_;
 
 TEST_F(CliTest, EveryCommandHasHelp) {
-  for (const char* cmd : {"--help", "patterns --help", "render --help", "process --help"}) {
+  for (const char* cmd :
+       {"--help", "patterns --help", "render --help", "process --help", "manifest --help"}) {
     const Result r = RunVellum(cmd);
     EXPECT_EQ(r.exit_code, 0) << cmd;
     EXPECT_NE(r.output.find("usage: vellum"), std::string::npos) << r.output;
@@ -277,6 +278,21 @@ TEST_F(CliTest, ALeafLaidTurnedIsRestoredUpright) {
     EXPECT_NEAR(upright.width * mm, 150, 8) << shape;
     EXPECT_NEAR(upright.height * mm, 200, 8) << shape;
   }
+}
+
+// vellum manifest writes a folder's SHA-256 manifest and checks it: a changed file is named
+// and fails the check.
+TEST_F(CliTest, ManifestWritesAndChecksAFolder) {
+  const std::string dir = CopyScan("manifest");
+  const Result w = RunVellum("manifest write " + dir);
+  ASSERT_EQ(w.exit_code, 0) << w.output;
+  EXPECT_TRUE(fs::exists(fs::path(dir) / "manifest-sha256.txt"));
+  const Result ok = RunVellum("manifest check " + dir);
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  std::ofstream(fs::path(dir) / "scan.yaml", std::ios::app) << "# edited\n";
+  const Result bad = RunVellum("manifest check " + dir);
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("scan.yaml: changed"), std::string::npos) << bad.output;
 }
 
 void ExpectCleanError(const Result& r, const std::string& file, const std::string& problem) {

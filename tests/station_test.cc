@@ -438,6 +438,9 @@ TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
   ASSERT_EQ(RunTool({"export", kDemoLog, dir_ + "/exported"}, &out), 0) << out;
   ExpectSameAsProcess(dir_ + "/exported", r.results);
   EXPECT_TRUE(fs::exists(fs::path(r.results).parent_path() / "raw" / "captures.lcmlog"));
+  // The scan's folder holds its SHA-256 manifest, and every file checks against it.
+  ASSERT_EQ(RunTool({"manifest", "check", fs::path(r.results).parent_path().string()}, &out), 0)
+      << out;
 }
 
 // Issue 14: two gantries on one network, on the same multicast group and port, told apart by

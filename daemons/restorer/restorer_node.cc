@@ -4,6 +4,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/text.h"
+#include "io/manifest.h"
 #include "io/scan_io.h"
 #include "pipeline/qc.h"
 #include "pipeline/report.h"
@@ -88,7 +89,10 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   }
   report.scan = folder.raw();
   report.calibration = folder.calibration();
-  const Status s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
+  Status s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
+  // The archive's proof that the scan is whole: a SHA-256 of every file of raw/ and results/,
+  // in the scan's folder (manifest-sha256.txt; `vellum manifest check` verifies it).
+  if (s.ok()) s = WriteManifest(folder.root, {"raw", "results"});
   if (!s.ok()) {
     scans_.erase(id);
     return node_->FailScan(id, s.message());
