@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iterator>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"
@@ -411,6 +412,28 @@ TEST_F(IoTest, TheRestoredTiffCarriesItsIdentityInXmpBesideItsPixelsAndDpi) {
   EXPECT_EQ(xres, 400.0f);
   EXPECT_EQ(yres, 400.0f);
   EXPECT_EQ(unit, RESUNIT_INCH);
+
+  // The colour profile: sRGB, embedded where TIFF keeps it (tag 34675), and a gray page gets a
+  // gray one (an RGB profile on a gray image is refused by colour-managed readers).
+  auto icc_space = [&](const std::string& file) {
+    std::string icc;
+    EXPECT_TRUE(ReadIccProfile(file, &icc).ok()) << file;
+    EXPECT_GT(icc.size(), 128u) << file;
+    EXPECT_EQ(icc.substr(36, 4), "acsp") << file;  // The ICC header's signature.
+    return icc.size() > 128 ? icc.substr(16, 4) : std::string();
+  };
+  EXPECT_EQ(icc_space(Path("restored.tif")), "RGB ");
+  TIFF* tagged = TIFFOpen(Path("restored.tif").c_str(), "r");
+  ASSERT_NE(tagged, nullptr);
+  uint32_t icc_size = 0;
+  void* icc_data = nullptr;
+  EXPECT_EQ(TIFFGetField(tagged, TIFFTAG_ICCPROFILE, &icc_size, &icc_data), 1);
+  TIFFClose(tagged);
+  EXPECT_GT(icc_size, 128u);
+  cv::cvtColor(restored.image, restored.image, cv::COLOR_BGR2GRAY);
+  fs::create_directories(dir_ / "gray");
+  ASSERT_TRUE(WriteRestored((dir_ / "gray").string(), restored, id).ok());
+  EXPECT_EQ(icc_space(Path("gray/restored.tif")), "GRAY");
 
   const Status missing = ReadXmp(Path("none.tif"), &xmp);
   EXPECT_FALSE(missing.ok());

@@ -81,6 +81,7 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
   XmpFields xmp;
   xmp.identity = identity;
   xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
+  xmp.icc_channels = restored.image.channels();  // sRGB: no camera profile is configured yet.
   xmp.figures["view"] = ToString(restored.view);
   if (restored.view == RestoreView::kOrthographic) {
     xmp.figures["dpi"] = JsonNumber(restored.dpi).dump();

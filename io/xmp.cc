@@ -1,6 +1,9 @@
 #include "io/xmp.h"
 
+#include <lcms2.h>
+
 #include <exiv2/exiv2.hpp>
+#include <memory>
 #include <mutex>
 
 namespace vellum {
@@ -31,6 +34,37 @@ void AddText(Exiv2::XmpData& xmp, const std::string& key, Exiv2::TypeId type,
 
 }  // namespace
 
+std::string MakeSrgbProfile(int channels) {
+  cmsHPROFILE profile = nullptr;
+  if (channels == 3) {
+    profile = cmsCreate_sRGBProfile();
+  } else {
+    // sRGB's transfer function (IEC 61966-2-1), as a parametric curve of type 4.
+    const cmsFloat64Number srgb[5] = {2.4, 1 / 1.055, 0.055 / 1.055, 1 / 12.92, 0.04045};
+    cmsToneCurve* curve = cmsBuildParametricToneCurve(nullptr, 4, srgb);
+    cmsCIExyY d65;
+    cmsWhitePointFromTemp(&d65, 6504);
+    profile = cmsCreateGrayProfile(&d65, curve);
+    cmsFreeToneCurve(curve);
+    if (profile) {
+      cmsMLU* description = cmsMLUalloc(nullptr, 1);
+      cmsMLUsetASCII(description, "en", "US", "Gray, sRGB tone curve (vellum)");
+      cmsWriteTag(profile, cmsSigProfileDescriptionTag, description);
+      cmsMLUfree(description);
+    }
+  }
+  if (!profile) return "";
+  cmsSetProfileVersion(profile, 2.1);
+  cmsUInt32Number size = 0;
+  std::string bytes;
+  if (cmsSaveProfileToMem(profile, nullptr, &size) && size > 0) {
+    bytes.resize(size);
+    if (!cmsSaveProfileToMem(profile, bytes.data(), &size)) bytes.clear();
+  }
+  cmsCloseProfile(profile);
+  return bytes;
+}
+
 Status WriteXmp(const std::string& path, const XmpFields& fields) {
   std::lock_guard<std::mutex> lock(ExivMutex());
   try {
@@ -50,6 +84,13 @@ Status WriteXmp(const std::string& path, const XmpFields& fields) {
       AddText(xmp, "Xmp.vellum." + key, Exiv2::xmpText, value);
     }
     AddText(xmp, "Xmp.xmp.CreatorTool", Exiv2::xmpText, fields.creator_tool);
+    if (fields.icc_channels == 1 || fields.icc_channels == 3) {
+      const std::string icc = MakeSrgbProfile(fields.icc_channels);
+      if (icc.empty()) return Status::Error(path + ": cannot make its ICC profile");
+      Exiv2::DataBuf buffer(reinterpret_cast<const Exiv2::byte*>(icc.data()),
+                            static_cast<long>(icc.size()));
+      image->setIccProfile(buffer, true);
+    }
     image->writeMetadata();
   } catch (const Exiv2::AnyError& e) {
     return Status::Error(path + ": cannot write its XMP metadata: " + e.what());
@@ -69,6 +110,23 @@ Status ReadXmp(const std::string& path, std::map<std::string, std::string>* prop
     }
   } catch (const Exiv2::AnyError& e) {
     return Status::Error(path + ": cannot read its XMP metadata: " + e.what());
+  }
+  return Status::Ok();
+}
+
+Status ReadIccProfile(const std::string& path, std::string* profile) {
+  std::lock_guard<std::mutex> lock(ExivMutex());
+  profile->clear();
+  try {
+    InitializeOnce();
+    auto image = Exiv2::ImageFactory::open(path);
+    image->readMetadata();
+    if (image->iccProfileDefined()) {
+      const Exiv2::DataBuf* icc = image->iccProfile();
+      profile->assign(reinterpret_cast<const char*>(icc->pData_), icc->size_);
+    }
+  } catch (const Exiv2::AnyError& e) {
+    return Status::Error(path + ": cannot read its ICC profile: " + e.what());
   }
   return Status::Ok();
 }

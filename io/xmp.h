@@ -1,7 +1,7 @@
 // Metadata inside image files: an XMP packet (Adobe's Extensible Metadata Platform, the
-// packet libraries and image servers read) written into a TIFF that is already on disk, and
-// read back. Written with Exiv2 (Debian's libexiv2), so the TIFF structure is never
-// hand-made.
+// packet libraries and image servers read) and an ICC colour profile, written into a TIFF that
+// is already on disk, and read back. Written with Exiv2 (Debian's libexiv2), so the TIFF
+// structure is never hand-made; the profile is made by Little CMS (liblcms2).
 #pragma once
 
 #include <map>
@@ -24,14 +24,24 @@ struct XmpFields {
   ScanIdentity identity;
   std::map<std::string, std::string> figures;
   std::string creator_tool;  // xmp:CreatorTool, e.g. "vellum 0.1.0"
+  // The ICC profile to embed: 3 = sRGB (a colour image), 1 = gray with sRGB's tone curve and
+  // white (a gray image), 0 = none.
+  int icc_channels = 0;
 };
 
-// Adds the packet to the image file at `path` (TIFF, PNG or JPEG), keeping its pixels and
-// tags. Empty fields are left out.
+// Adds the packet (and the profile) to the image file at `path` (TIFF, PNG or JPEG), keeping
+// its pixels and tags. Empty fields are left out.
 Status WriteXmp(const std::string& path, const XmpFields& fields);
 
 // The packet's properties as "prefix:name" -> value (the first value of a bag or
 // language alternative), for tests and tools; an error names the file.
 Status ReadXmp(const std::string& path, std::map<std::string, std::string>* properties);
+
+// The ICC profile embedded in an image file (empty when there is none).
+Status ReadIccProfile(const std::string& path, std::string* profile);
+
+// An ICC profile (v2.1, so every reader takes it) from Little CMS: sRGB for 3 channels, gray with
+// sRGB's tone curve and D65 white for 1.
+std::string MakeSrgbProfile(int channels);
 
 }  // namespace vellum
