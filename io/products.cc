@@ -58,6 +58,23 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
       "vellum sheet after flattening: page plane, mm (same vertices as mesh.ply)");
 }
 
+Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
+                           const ScanIdentity& identity) {
+  const std::string tif = (fs::path(dir) / "archival.tif").string();
+  try {
+    if (!cv::imwrite(tif, texture)) return Status::Error(tif + ": cannot write image");
+  } catch (const cv::Exception& e) {
+    return Status::Error(tif + ": cannot write image: " + e.what());
+  }
+  XmpFields xmp;
+  xmp.identity = identity;
+  xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
+  xmp.figures["view"] = "camera";
+  xmp.figures["master"] = "archival: the texture as captured, not flattened";
+  xmp.icc_channels = texture.channels();  // sRGB: no camera profile is configured yet.
+  return WriteXmp(tif, xmp);
+}
+
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
                      const ScanIdentity& identity) {
   std::vector<int> tiff_params;

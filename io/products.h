@@ -24,6 +24,11 @@ Status WritePointProducts(const std::string& dir, const cv::Mat& points, double*
                           double* z_max_mm);
 // mesh.ply (3D) and flat.ply (z = 0): the sheet's active nodes in the same order, quad faces.
 Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat);
+// The archival master: the texture as captured (unflattened, the camera's own pixels), as
+// archival.tif in `dir`, with the same identity, XMP and ICC profile as the restored page.
+Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
+                           const ScanIdentity& identity);
+
 // restored.tif (TIFF dpi tags in orthographic view), restored_mask.png (when the leaf's mask was
 // restored: 255 on the leaf) and restored.json (the map from flat mm to pixels, the turn, and
 // the scan's catalogue identity when it has one).

@@ -62,6 +62,15 @@ std::string MakeSrgbProfile(int channels) {
     if (!cmsSaveProfileToMem(profile, bytes.data(), &size)) bytes.clear();
   }
   cmsCloseProfile(profile);
+  // The header's creation date (bytes 24 to 35) is the time Little CMS made it; a fixed one
+  // keeps the files vellum writes the same from run to run (2024-01-01 00:00:00).
+  if (bytes.size() >= 128) {
+    const uint16_t date[6] = {2024, 1, 1, 0, 0, 0};
+    for (int k = 0; k < 6; ++k) {
+      bytes[24 + 2 * k] = static_cast<char>(date[k] >> 8);
+      bytes[25 + 2 * k] = static_cast<char>(date[k] & 0xff);
+    }
+  }
   return bytes;
 }
 

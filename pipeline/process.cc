@@ -100,6 +100,8 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     }
     out.pages.push_back(std::move(page));
   }
+  next("archive", 0.96);
+  if (!ran(ArchiveStage(input.scan.texture, input.scan.identity, results), true)) return out;
   next("report", 0.97);
   out.status = WriteReports(results, input.scan_dir, &report);
   return out;

@@ -285,6 +285,16 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
   return stage.Finish(s);
 }
 
+StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
+                         const std::string& results) {
+  Stage stage("archive");
+  StageReport& r = stage.report();
+  const Status s = WriteArchivalMaster(results, texture, identity);
+  if (!s.ok()) return stage.Finish(s);
+  r.outputs.push_back("archival.tif");
+  return stage.Finish(Status::Ok());
+}
+
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,

@@ -96,6 +96,11 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
                          const WarningLimits& limits, const std::string& results,
                          const std::string& page, FlattenResult* flat);
 
+// The archival master of the scan: the texture as captured, as archival.tif in `results`, with
+// the scan's identity (WriteArchivalMaster). Once per scan, after its pages.
+StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
+                         const std::string& results);
+
 // Restore (3.10): the texture through the flattened sheet, with the page's mask (cropped to the
 // leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
 // restored.json in the page's folder and the report's pictures of the page (grid, strain,

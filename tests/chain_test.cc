@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -97,6 +98,13 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   FlattenerNode flattener(&flattener_node, f);
   RestorerNode restorer(&restorer_node, r);
   auto restored = bus.Record<restored_t>(channel::kRestored);
+  // As at a station: the scan comes once every daemon has been heard (Node::Run's heartbeat,
+  // which these in-memory nodes do not run, so each says its state once). Sent sooner, the
+  // decoder's supervisor finds the chain not whole and sends the scan down it a second time
+  // while the first is in flight, and the first RESTORED is followed by another.
+  for (Node* node : {&decoder_node, &triangulator_node, &flattener_node, &restorer_node}) {
+    node->SetState("idle");
+  }
   // The scan as the station receives it: SCAN_STARTED, its calibration, then the captures.
   const int64_t session = NewSession();
   scan_started_t started = MakeScanStarted(scan, 3, session);

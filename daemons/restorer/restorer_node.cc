@@ -89,7 +89,16 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   }
   report.scan = folder.raw();
   report.calibration = folder.calibration();
-  Status s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
+  // The archival master, once the pages are restored (as RunPipeline does).
+  cv::Mat texture;
+  Status s = textures_.Get(id, &texture);
+  if (s.ok()) {
+    const StageReport archive =
+        ArchiveStage(texture, ReportedIdentity(pages->common), folder.results());
+    report.stages.push_back(archive);
+    s = archive.status;
+  }
+  if (s.ok()) s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
   // The archive's proof that the scan is whole: a SHA-256 of every file of raw/ and results/,
   // in the scan's folder (manifest-sha256.txt; `vellum manifest check` verifies it).
   if (s.ok()) s = WriteManifest(folder.root, {"raw", "results"});
