@@ -107,37 +107,38 @@ Status WriteXmp(const std::string& path, const XmpFields& fields) {
   return Status::Ok();
 }
 
-Status ReadXmp(const std::string& path, std::map<std::string, std::string>* properties) {
+// Opens the file's metadata under the lock and hands it to `read`; an error names the file and
+// `what` was being read.
+template <class Read>
+Status ReadMetadata(const std::string& path, const char* what, Read&& read) {
   std::lock_guard<std::mutex> lock(ExivMutex());
-  properties->clear();
   try {
     InitializeOnce();
     auto image = Exiv2::ImageFactory::open(path);
     image->readMetadata();
-    for (const Exiv2::Xmpdatum& datum : image->xmpData()) {
-      (*properties)[datum.groupName() + ":" + datum.tagName()] = datum.value().toString(0);
-    }
+    read(*image);
   } catch (const Exiv2::AnyError& e) {
-    return Status::Error(path + ": cannot read its XMP metadata: " + e.what());
+    return Status::Error(path + ": cannot read its " + what + ": " + e.what());
   }
   return Status::Ok();
 }
 
-Status ReadIccProfile(const std::string& path, std::string* profile) {
-  std::lock_guard<std::mutex> lock(ExivMutex());
-  profile->clear();
-  try {
-    InitializeOnce();
-    auto image = Exiv2::ImageFactory::open(path);
-    image->readMetadata();
-    if (image->iccProfileDefined()) {
-      const Exiv2::DataBuf* icc = image->iccProfile();
-      profile->assign(reinterpret_cast<const char*>(icc->pData_), icc->size_);
+Status ReadXmp(const std::string& path, std::map<std::string, std::string>* properties) {
+  properties->clear();
+  return ReadMetadata(path, "XMP metadata", [&](Exiv2::Image& image) {
+    for (const Exiv2::Xmpdatum& datum : image.xmpData()) {
+      (*properties)[datum.groupName() + ":" + datum.tagName()] = datum.value().toString(0);
     }
-  } catch (const Exiv2::AnyError& e) {
-    return Status::Error(path + ": cannot read its ICC profile: " + e.what());
-  }
-  return Status::Ok();
+  });
+}
+
+Status ReadIccProfile(const std::string& path, std::string* profile) {
+  profile->clear();
+  return ReadMetadata(path, "ICC profile", [&](Exiv2::Image& image) {
+    if (!image.iccProfileDefined()) return;
+    const Exiv2::DataBuf* icc = image.iccProfile();
+    profile->assign(reinterpret_cast<const char*>(icc->pData_), icc->size_);
+  });
 }
 
 }  // namespace vellum

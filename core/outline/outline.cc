@@ -585,13 +585,11 @@ Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
   const cv::Mat bright = SegmentPage(image);
   const double share = static_cast<double>(cv::countNonZero(bright)) / bright.total();
   if (share < options.min_area) {
-    out.status = Status::Error("no leaf in view: nothing brighter than its surround");
+    out.status = Status::Error("no leaf in view");
     return out;
   }
   if (share > 0.9) {
-    out.status = Status::Error(
-        "the leaf is not set apart from its surround by brightness here (the scan finds it by "
-        "its shape)");
+    out.status = Status::Error("leaf as bright as its surround");  // The scan finds it by shape.
     return out;
   }
   out.mask = bright;

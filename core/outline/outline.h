@@ -52,9 +52,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
 
 // The leaf as a live preview shows it, before any scan, for placing it: by brightness alone
 // (a leaf brighter than its surround; the scan itself finds the leaf by its shape). Sets
-// `touches_border` when it runs off the view. An error when nothing sets a leaf apart: no
-// bright region of min_area, or one covering most of the view (a support as bright as the
-// leaf), which only the scan can tell apart.
+// `touches_border` when it runs off the view. An error, in a few words for the viewer, when
+// nothing sets a leaf apart: no bright region of min_area ("no leaf in view"), or one covering
+// most of the view (a support as bright as the leaf, which only the scan tells apart).
 Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options = OutlineOptions());
 
 // The texture with the outline drawn over it (each page in its own colour), for the report and

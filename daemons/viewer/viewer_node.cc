@@ -391,7 +391,7 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
       const bool off = preview_leaf_ == "off the view", in = preview_leaf_ == "in view";
       const std::string line = off  ? "LEAF RUNS OFF THE VIEW"
                                : in ? "leaf in view"
-                                    : "no outline: " + preview_leaf_;
+                                    : "no outline: " + preview_leaf_;  // 45 characters at most.
       cv::putText(canvas, line, cv::Point(box.x + 6, box.y + box.height - 8),
                   cv::FONT_HERSHEY_SIMPLEX, off ? 0.5 : 0.4,
                   off  ? kRed
