@@ -153,15 +153,23 @@ double UprightAngle(const cv::Mat& mask) {
   }
   double angle;
   if (best_weight >= 0.5 * perimeter) {
-    // Straight edges: their length-weighted mean direction about the peak.
-    const double peak = (best + 0.5) / 2;
-    double sum = 0, total = 0;
-    for (const auto& [a, l] : segments) {
-      double d = a - peak;
-      d -= 90.0 * std::round(d / 90.0);
-      if (std::fabs(d) <= 2.0) sum += d * l, total += l;
+    // Straight edges: their length-weighted mean direction within 2 degrees, moved to that mean
+    // until it settles (mean shift). The window found first is only the lowest of those that
+    // hold the edges: its centre may lie up to 2 degrees off them, and a mean taken about it
+    // alone leaves out the edges on its far side (a leaf turned 12 degrees came out 1.85 off).
+    double peak = (best + 0.5) / 2;
+    for (int pass = 0; pass < 8; ++pass) {
+      double sum = 0, total = 0;
+      for (const auto& [a, l] : segments) {
+        double d = a - peak;
+        d -= 90.0 * std::round(d / 90.0);
+        if (std::fabs(d) <= 2.0) sum += d * l, total += l;
+      }
+      const double shift = total > 0 ? sum / total : 0;
+      peak += shift;
+      if (std::fabs(shift) < 1e-3) break;
     }
-    angle = peak + (total > 0 ? sum / total : 0);
+    angle = peak;
   } else {
     angle = cv::minAreaRect(outline).angle;
   }
