@@ -1,6 +1,7 @@
 #include "io/products.h"
 
 #include <filesystem>
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -58,21 +59,33 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
       "vellum sheet after flattening: page plane, mm (same vertices as mesh.ply)");
 }
 
-Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
-                           const ScanIdentity& identity) {
-  const std::string tif = (fs::path(dir) / "archival.tif").string();
+namespace {
+
+// Writes `image` as the TIFF `tif` (with OpenCV's `params`), then its XMP and ICC profile: the
+// identity, vellum's name and version, `figures`, and an sRGB profile (no camera profile is
+// configured yet).
+Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::vector<int>& params,
+                       const ScanIdentity& identity, std::map<std::string, std::string> figures) {
   try {
-    if (!cv::imwrite(tif, texture)) return Status::Error(tif + ": cannot write image");
+    if (!cv::imwrite(tif, image, params)) return Status::Error(tif + ": cannot write image");
   } catch (const cv::Exception& e) {
     return Status::Error(tif + ": cannot write image: " + e.what());
   }
   XmpFields xmp;
   xmp.identity = identity;
   xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
-  xmp.figures["view"] = "camera";
-  xmp.figures["master"] = "archival: the texture as captured, not flattened";
-  xmp.icc_channels = texture.channels();  // sRGB: no camera profile is configured yet.
+  xmp.figures = std::move(figures);
+  xmp.icc_channels = image.channels();
   return WriteXmp(tif, xmp);
+}
+
+}  // namespace
+
+Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
+                           const ScanIdentity& identity) {
+  return WriteTiffMaster(
+      (fs::path(dir) / "archival.tif").string(), texture, {}, identity,
+      {{"view", "camera"}, {"master", "archival: the texture as captured, not flattened"}});
 }
 
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
@@ -88,24 +101,13 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
     const Status s = WriteImage((fs::path(dir) / "restored_mask.png").string(), restored.mask);
     if (!s.ok()) return s;
   }
-  try {
-    if (!cv::imwrite(tif, restored.image, tiff_params)) {
-      return Status::Error(tif + ": cannot write image");
-    }
-  } catch (const cv::Exception& e) {
-    return Status::Error(tif + ": cannot write image: " + e.what());
-  }
-  XmpFields xmp;
-  xmp.identity = identity;
-  xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
-  xmp.icc_channels = restored.image.channels();  // sRGB: no camera profile is configured yet.
-  xmp.figures["view"] = ToString(restored.view);
+  std::map<std::string, std::string> figures = {{"view", ToString(restored.view)}};
   if (restored.view == RestoreView::kOrthographic) {
-    xmp.figures["dpi"] = JsonNumber(restored.dpi).dump();
-    xmp.figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
+    figures["dpi"] = JsonNumber(restored.dpi).dump();
+    figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
   }
-  const Status xs = WriteXmp(tif, xmp);
-  if (!xs.ok()) return xs;
+  const Status written = WriteTiffMaster(tif, restored.image, tiff_params, identity, figures);
+  if (!written.ok()) return written;
   Json r;
   Json id = Json::object();
   ForEachIdentityField(identity, [&](const char* key, const std::string& value) {

@@ -288,11 +288,8 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
 StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
                          const std::string& results) {
   Stage stage("archive");
-  StageReport& r = stage.report();
-  const Status s = WriteArchivalMaster(results, texture, identity);
-  if (!s.ok()) return stage.Finish(s);
-  r.outputs.push_back("archival.tif");
-  return stage.Finish(Status::Ok());
+  return stage.Finish(
+      stage.Output("archival.tif", WriteArchivalMaster(results, texture, identity)));
 }
 
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
