@@ -256,7 +256,7 @@ void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
   albedo_.create(size, CV_32F);
   const bool coloured = std::any_of(textures.begin(), textures.end(),
                                     [](const PageTexture& t) { return t.coloured(); });
-  if (coloured) tint_.create(size, CV_32FC3);
+  if (coloured) colour_albedo_.create(size, CV_32FC3);
   truth_.lit.create(size, CV_8U);
   const cv::Vec3d prj_centre = prj.Center();
   const int ss = std::max(1, light_.albedo_supersampling);
@@ -293,8 +293,9 @@ void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
           albedo = sum / (ss * ss);
         }
         if (coloured) {
-          tint_.at<cv::Vec3f>(v, u) =
-              k > 0 ? cv::Vec3f(textures[k - 1].Tint(st[0], st[1])) : cv::Vec3f(1, 1, 1);
+          colour_albedo_.at<cv::Vec3f>(v, u) =
+              static_cast<float>(albedo) *
+              (k > 0 ? cv::Vec3f(textures[k - 1].Tint(st[0], st[1])) : cv::Vec3f(1, 1, 1));
         }
         const cv::Point2d p = prj.Project(x);
         const double depth = (prj.rotation * x + prj.translation)[2];
@@ -363,15 +364,10 @@ cv::Mat VirtualGantry::RenderFrame(const cv::Mat& projector_image, uint64_t seed
 
 cv::Mat VirtualGantry::RenderTexture(uint64_t seed) const {
   // Gray unless a page is coloured; then each channel has its own albedo and noise.
-  cv::Mat noise(rig_.camera.size, tint_.empty() ? CV_32F : CV_32FC3);
+  const cv::Mat& albedo = colour_albedo_.empty() ? albedo_ : colour_albedo_;
+  cv::Mat noise(rig_.camera.size, albedo.type());
   cv::RNG rng(seed);
   rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
-  cv::Mat albedo = albedo_;
-  if (!tint_.empty()) {
-    cv::Mat gray3;
-    cv::merge(std::vector<cv::Mat>{albedo_, albedo_, albedo_}, gray3);
-    albedo = gray3.mul(tint_);
-  }
   cv::Mat frame;
   cv::Mat light = albedo * (255.0 * light_.studio_light) + noise;
   light.convertTo(frame, CV_8U);  // Rounds and saturates.

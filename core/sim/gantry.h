@@ -96,7 +96,7 @@ class VirtualGantry {
   cv::Mat gain_;           // CV_32F DN per unit projector intensity (0 in shadow).
   cv::Mat offset_;         // CV_32F DN of the ambient light.
   cv::Mat albedo_;         // CV_32F albedo seen by each pixel.
-  cv::Mat tint_;           // CV_32FC3 its colour over albedo_ (B, G, R); empty when all gray.
+  cv::Mat colour_albedo_;  // CV_32FC3 its albedo per channel (B, G, R); empty when all gray.
 };
 
 }  // namespace vellum
