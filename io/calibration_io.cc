@@ -1,7 +1,9 @@
 #include "io/calibration_io.h"
 
+#include <cstdio>
 #include <opencv2/core.hpp>
 
+#include "io/manifest.h"
 #include "io/yaml_guard.h"
 
 namespace vellum {
@@ -174,6 +176,26 @@ Status WriteCalibration(const std::string& path, const Calibration& calibration)
     return Status::Error(path + ": cannot write the calibration file: " + e.what());
   }
   return Status::Ok();
+}
+
+std::string CalibrationSha256(const Calibration& calibration) {
+  std::string text;
+  auto add = [&](double v) {
+    char buf[40];
+    std::snprintf(buf, sizeof(buf), "%.17g\n", v);
+    text += buf;
+  };
+  for (const CameraModel* device : {&calibration.camera, &calibration.projector}) {
+    add(device->size.width);
+    add(device->size.height);
+    for (int k = 0; k < 9; ++k) add(device->matrix.val[k]);
+    for (int k = 0; k < 5; ++k) add(device->distortion[k]);
+    for (int k = 0; k < 9; ++k) add(device->rotation.val[k]);
+    for (int k = 0; k < 3; ++k) add(device->translation[k]);
+  }
+  add(calibration.min_z_mm);
+  add(calibration.max_z_mm);
+  return Sha256OfBytes(text);
 }
 
 }  // namespace vellum

@@ -35,31 +35,55 @@ std::vector<std::string> FilesUnder(const std::string& dir) {
   return files;
 }
 
+// OpenSSL's SHA-256, fed in pieces.
+class Sha256 {
+ public:
+  Sha256() : ctx_(EVP_MD_CTX_new(), EVP_MD_CTX_free) {
+    ok_ = ctx_ && EVP_DigestInit_ex(ctx_.get(), EVP_sha256(), nullptr) == 1;
+  }
+  bool ok() const { return ok_; }
+  void Add(const char* data, size_t size) {
+    if (ok_) EVP_DigestUpdate(ctx_.get(), data, size);
+  }
+  std::string Hex() {
+    unsigned char digest[EVP_MAX_MD_SIZE];
+    unsigned int length = 0;
+    if (ok_) EVP_DigestFinal_ex(ctx_.get(), digest, &length);
+    std::string hex;
+    char two[3];
+    for (unsigned int i = 0; i < length; ++i) {
+      std::snprintf(two, sizeof(two), "%02x", digest[i]);
+      hex += two;
+    }
+    return hex;
+  }
+
+ private:
+  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx_;
+  bool ok_ = false;
+};
+
 }  // namespace
 
 Status Sha256OfFile(const std::string& path, std::string* hex) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return Status::Error(path + ": cannot read");
-  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx(EVP_MD_CTX_new(), EVP_MD_CTX_free);
-  if (!ctx || EVP_DigestInit_ex(ctx.get(), EVP_sha256(), nullptr) != 1) {
-    return Status::Error(path + ": SHA-256 not available");
-  }
+  Sha256 sha;
+  if (!sha.ok()) return Status::Error(path + ": SHA-256 not available");
   std::vector<char> buffer(1 << 20);
   while (in) {
     in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-    if (in.gcount() > 0) EVP_DigestUpdate(ctx.get(), buffer.data(), in.gcount());
+    if (in.gcount() > 0) sha.Add(buffer.data(), static_cast<size_t>(in.gcount()));
   }
   if (in.bad()) return Status::Error(path + ": read error");
-  unsigned char digest[EVP_MAX_MD_SIZE];
-  unsigned int length = 0;
-  EVP_DigestFinal_ex(ctx.get(), digest, &length);
-  hex->clear();
-  char two[3];
-  for (unsigned int i = 0; i < length; ++i) {
-    std::snprintf(two, sizeof(two), "%02x", digest[i]);
-    *hex += two;
-  }
+  *hex = sha.Hex();
   return Status::Ok();
+}
+
+std::string Sha256OfBytes(const std::string& bytes) {
+  Sha256 sha;
+  sha.Add(bytes.data(), bytes.size());
+  return sha.Hex();
 }
 
 Status WriteManifest(const std::string& dir, const std::vector<std::string>& parts, int* files) {

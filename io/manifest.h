@@ -15,6 +15,8 @@ inline constexpr const char* kManifestName = "manifest-sha256.txt";
 
 // The SHA-256 of a file, as 64 lower-case hex digits.
 Status Sha256OfFile(const std::string& path, std::string* hex);
+// The SHA-256 of bytes in memory, as 64 lower-case hex digits.
+std::string Sha256OfBytes(const std::string& bytes);
 
 // Writes <dir>/manifest-sha256.txt over every regular file under `dir` but itself, or only
 // under its subfolders `parts` when given (a station's scan: raw and results, not the

@@ -1,5 +1,6 @@
 #include "io/products.h"
 
+#include <cctype>
 #include <filesystem>
 #include <map>
 #include <opencv2/imgcodecs.hpp>
@@ -89,7 +90,8 @@ Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
 }
 
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
-                     const ScanIdentity& identity) {
+                     const ScanIdentity& identity,
+                     const std::map<std::string, std::string>& provenance) {
   std::vector<int> tiff_params;
   if (restored.view == RestoreView::kOrthographic) {
     const int dpi = static_cast<int>(std::lround(restored.dpi));
@@ -101,7 +103,24 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
     const Status s = WriteImage((fs::path(dir) / "restored_mask.png").string(), restored.mask);
     if (!s.ok()) return s;
   }
-  std::map<std::string, std::string> figures = {{"view", ToString(restored.view)}};
+  if (!restored.sampling.empty()) {
+    const Status s = WriteImage((fs::path(dir) / "sampling_ppi.tif").string(), restored.sampling);
+    if (!s.ok()) return s;
+  }
+  // XMP names are camelCase (rotationDeg), restored.json's snake_case (rotation_deg).
+  std::map<std::string, std::string> figures;
+  for (const auto& [key, value] : provenance) {
+    std::string name;
+    for (size_t k = 0; k < key.size(); ++k) {
+      if (key[k] == '_' && k + 1 < key.size()) {
+        name += static_cast<char>(std::toupper(static_cast<unsigned char>(key[++k])));
+      } else {
+        name += key[k];
+      }
+    }
+    figures[name] = value;
+  }
+  figures["view"] = ToString(restored.view);
   if (restored.view == RestoreView::kOrthographic) {
     figures["dpi"] = JsonNumber(restored.dpi).dump();
     figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
@@ -138,6 +157,8 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
     r["flat_frame"] = "the x, y of flat.ply, mm, on the table plane z = 0";
     r["pixel_from_flat_mm"] = "the calibrated camera's projection of (x, y, 0)";
   }
+  if (!restored.sampling.empty()) r["sampling"] = "sampling_ppi.tif";
+  if (!provenance.empty()) r["provenance"] = provenance;
   return WriteJsonFile((fs::path(dir) / "restored.json").string(), r);
 }
 

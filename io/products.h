@@ -3,6 +3,7 @@
 // pipeline's stages (pipeline/stages.h) for `vellum process` and the daemons alike.
 #pragma once
 
+#include <map>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -30,9 +31,13 @@ Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
                            const ScanIdentity& identity);
 
 // restored.tif (TIFF dpi tags in orthographic view), restored_mask.png (when the leaf's mask was
-// restored: 255 on the leaf) and restored.json (the map from flat mm to pixels, the turn, and
-// the scan's catalogue identity when it has one).
+// restored: 255 on the leaf), sampling_ppi.tif (the true sampling map, 32-bit float ppi, 0 off
+// the leaf; orthographic view) and restored.json (the map from flat mm to pixels, the turn, the
+// scan's catalogue identity when it has one, and `provenance`). `provenance` (key -> text: the
+// scale and its error, the calibration's checksum, the options) goes into restored.json and
+// the TIFF's XMP beside the dpi.
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
-                     const ScanIdentity& identity = ScanIdentity());
+                     const ScanIdentity& identity = ScanIdentity(),
+                     const std::map<std::string, std::string>& provenance = {});
 
 }  // namespace vellum

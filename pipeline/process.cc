@@ -93,7 +93,7 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     }
     next("restore", done + (slow ? 0.8 : 0.3) * share);
     if (!ran(RestoreStage(input.scan.texture, mask, page.mesh, page.flat.flat, camera,
-                          options.restore, options.limits, input.scan.identity, results, page.name,
+                          options.restore, options.limits, report.stages, results, page.name,
                           &page.restored),
              true)) {
       return out;

@@ -12,7 +12,9 @@
 //  - outline: warn when the leaf's rim is not clearly set apart (outline_uncertain);
 //  - exposure: warn when the leaf's pixels clip (exposure_clipped), fail above
 //    QcLimits::fail_clipped;
-//  - scale: warn when the leaf is not the size expected (size_unexpected).
+//  - scale: warn when the leaf is not the size expected (size_unexpected);
+//  - sampling: warn when the page is written at a dpi above what the camera truly sampled
+//    (dpi_above_sampling).
 #pragma once
 
 #include <string>
@@ -31,7 +33,8 @@ struct QcLimits {
 };
 
 struct QcCheck {
-  std::string name;  // "leaf in view", "measured", "flattening", "outline", "exposure", "scale"
+  std::string name;  // "leaf in view", "measured", "flattening", "outline", "exposure", "scale",
+                     // "sampling"
   QcVerdict verdict = QcVerdict::kPass;
   std::string detail;  // The figure, or the warnings that set the verdict.
 };
@@ -42,5 +45,22 @@ struct QcResult {
 };
 
 QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits = QcLimits());
+
+// The FADGI figures vellum can vouch for, for each restored page, and the star level each meets
+// (0: below one star). The levels are those of kFadgiLevels in qc.cc, vellum's reading of FADGI's
+// Technical Guidelines (2016; 2023 edition) for manuscripts; what FADGI also asks and vellum
+// does not measure (tone, colour, noise, MTF: they need a target) is not claimed.
+struct FadgiFigure {
+  std::string name;   // "sampling", "bit depth", "scale error"
+  std::string value;  // The figure, with its unit.
+  int stars = 0;
+  std::string basis;  // What the figure is measured from.
+};
+struct FadgiPage {
+  std::string page;  // "" for a single leaf; "left", "right".
+  std::vector<FadgiFigure> figures;
+  int stars = 0;  // The least of its figures'.
+};
+std::vector<FadgiPage> AssessFadgi(const ProcessReport& report);
 
 }  // namespace vellum

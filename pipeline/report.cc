@@ -39,13 +39,16 @@ constexpr Picture kPictures[] = {
     {"report/strain",
      "Residual strain of each quad after flattening (mean relative spring-length error); high "
      "values mark stretch or creases the flat page cannot keep."},
+    {"report/sampling",
+     "The camera's true sampling of the restored page (from the warp's Jacobian): what detail "
+     "the page can hold, whatever dpi it is written at."},
     {"report/before_after",
      "The centre of the page before (left, camera) and after (right, restored)."},
 };
 
 // report.json's sections in their order; a section no stage fills is left out.
-constexpr const char* kSections[] = {"options", "sizes", "stages_seconds", "pixels",  "height_mm",
-                                     "outline", "sheet", "flattening",     "restored"};
+constexpr const char* kSections[] = {"options", "sizes", "stages_seconds", "pixels",   "height_mm",
+                                     "outline", "sheet", "flattening",     "restored", "sampling"};
 
 std::string PictureFile(const Picture& p, const std::string& page) {
   return std::string(p.stem) + (page.empty() ? "" : "-" + page) + ".png";
@@ -127,6 +130,24 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
       h << "<li><b>" << HtmlEscape(w.code) << "</b>: " << HtmlEscape(w.message) << "</li>\n";
     }
     h << "</ul></div>\n";
+  }
+  // The FADGI figures vellum can vouch for.
+  const std::vector<FadgiPage> fadgi = AssessFadgi(r);
+  if (!fadgi.empty()) {
+    h << "<h2>FADGI figures</h2>\n<table>\n";
+    for (const FadgiPage& page : fadgi) {
+      const std::string of = page.page.empty() ? "" : " (" + page.page + ")";
+      for (const FadgiFigure& f : page.figures) {
+        h << "<tr><th>" << HtmlEscape(f.name + of) << "</th><td>" << HtmlEscape(f.value)
+          << "</td><td>" << (f.stars > 0 ? std::to_string(f.stars) + "-star" : "below 1-star")
+          << "</td><td>" << HtmlEscape(f.basis) << "</td></tr>\n";
+      }
+      h << "<tr><th>level" << HtmlEscape(of) << "</th><td colspan=3><b>"
+        << (page.stars > 0 ? std::to_string(page.stars) + "-star" : "below 1-star")
+        << "</b> in what vellum measures (tone, colour and noise need a target and are not "
+           "judged here)</td></tr>\n";
+    }
+    h << "</table>\n";
   }
   const double pixels = r.Number("pixels", "camera"), valid = r.Number("pixels", "valid");
   h << "<h2>Key figures</h2>\n<table>\n";
@@ -274,6 +295,16 @@ Status WriteJson(const std::string& dir, const ProcessReport& r) {
     checks.push_back({{"name", c.name}, {"verdict", VerdictName(c.verdict)}, {"detail", c.detail}});
   }
   j["qc"] = {{"verdict", VerdictName(qc.verdict)}, {"checks", checks}};
+  Json fadgi = Json::array();
+  for (const FadgiPage& page : AssessFadgi(r)) {
+    Json figures = Json::array();
+    for (const FadgiFigure& f : page.figures) {
+      figures.push_back(
+          {{"name", f.name}, {"value", f.value}, {"stars", f.stars}, {"basis", f.basis}});
+    }
+    fadgi.push_back({{"page", page.page}, {"stars", page.stars}, {"figures", figures}});
+  }
+  j["fadgi"] = fadgi;
   j["outputs"] = r.Outputs();
   return WriteJsonFile((fs::path(dir) / "report.json").string(), j);
 }
@@ -317,6 +348,11 @@ void StageReport::Warn(const std::string& code, const std::string& message) {
 
 const ReportValue* ProcessReport::Find(const std::string& section, const std::string& key,
                                        const std::string& page) const {
+  return FindValue(stages, section, key, page);
+}
+
+const ReportValue* FindValue(const std::vector<StageReport>& stages, const std::string& section,
+                             const std::string& key, const std::string& page) {
   const ReportValue* found = nullptr;
   for (const StageReport& stage : stages) {
     if (stage.page != page) continue;

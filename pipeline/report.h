@@ -26,7 +26,7 @@ struct ReportValue {
 // and a sentence for the operator.
 struct Warning {
   // page_cut_off, outline_uncertain, valid_low, exposure_clipped, strain_high, fold_over,
-  // size_unexpected
+  // size_unexpected, dpi_above_sampling
   std::string code;
   std::string message;
 };
@@ -64,6 +64,11 @@ struct ProcessReport {
   // Every file written for the scan: the stages' outputs, in order, then the report's own.
   std::vector<std::string> Outputs() const;
 };
+
+// The value of section/key for `page` in `stages` (the last stage that set it), or nullptr;
+// ProcessReport::Find over its stages.
+const ReportValue* FindValue(const std::vector<StageReport>& stages, const std::string& section,
+                             const std::string& key, const std::string& page = "");
 
 // The scan's catalogue identity as its decode stage reported it (the `identity` section).
 ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages);

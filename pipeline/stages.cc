@@ -4,10 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/text.h"
 #include "core/report/pictures.h"
+#include "io/calibration_io.h"
+#include "io/json.h"
 #include "io/products.h"
 #include "io/scan_io.h"
 
@@ -129,6 +132,7 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   r.Number("options", "max_epipolar_error_px", options.max_epipolar_error_px);
   r.Number("options", "max_flying_mm", options.max_flying_mm);
   const Calibration& c = triangulator.calibration();
+  r.Text("provenance", "calibration_sha256", CalibrationSha256(c));
   r.Number("options", "volume_low_mm",
            std::isnan(options.min_z_mm) ? c.min_z_mm : options.min_z_mm);
   r.Number("options", "volume_high_mm",
@@ -285,6 +289,51 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
   return stage.Finish(s);
 }
 
+namespace {
+
+// What the restored page's files say of how it was made (restored.json's `provenance` and the
+// TIFF's XMP): its scale and measured error, its true sampling, the calibration's checksum and
+// every stage's options, from the stages so far and the restore stage's own report `own`.
+std::map<std::string, std::string> Provenance(const RestoreResult& restored,
+                                              const std::vector<StageReport>& earlier,
+                                              const StageReport& own, const std::string& page) {
+  std::map<std::string, std::string> out;
+  auto number = [&](const std::string& section, const std::string& key, const std::string& p) {
+    const ReportValue* v = FindValue(earlier, section, key, p);
+    return v && !v->is_text ? v->number : std::nan("");
+  };
+  if (restored.view == RestoreView::kOrthographic && restored.dpi > 0) {
+    out["scale_mm_per_pixel"] = JsonNumber(25.4 / restored.dpi).dump();
+  }
+  const double mean_strain = number("flattening", "mean_strain", page);
+  if (!std::isnan(mean_strain)) {
+    // The flat page's lengths against the measured surface's: the flattening's share of the
+    // reproduction scale error (the calibration's own is not measured here).
+    out["scale_error_percent"] = JsonNumber(100 * mean_strain).dump();
+    out["flattening_mean_strain"] = JsonNumber(mean_strain).dump();
+    out["flattening_max_strain"] = JsonNumber(number("flattening", "max_strain", page)).dump();
+  }
+  for (const ReportValue& v : own.values) {
+    if (v.section == "sampling" && (v.key == "median_ppi" || v.key == "p5_ppi"))
+      out["true_" + v.key] = JsonNumber(v.number).dump();
+  }
+  const ReportValue* calibration = FindValue(earlier, "provenance", "calibration_sha256");
+  if (calibration) out["calibration_sha256"] = calibration->text;
+  Json options = Json::object();
+  std::vector<StageReport> all = earlier;
+  all.push_back(own);
+  for (const StageReport& stage : all) {
+    if (!stage.page.empty() && stage.page != page) continue;
+    for (const ReportValue& v : stage.values) {
+      if (v.section == "options") options[v.key] = v.is_text ? Json(v.text) : JsonNumber(v.number);
+    }
+  }
+  out["options"] = options.dump();
+  return out;
+}
+
+}  // namespace
+
 StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
                          const std::string& results) {
   Stage stage("archive");
@@ -295,7 +344,7 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const ScanIdentity& identity, const std::string& results,
+                         const std::vector<StageReport>& earlier, const std::string& results,
                          const std::string& page, RestoreResult* restored) {
   Stage stage("restore", page);
   StageReport& r = stage.report();
@@ -307,6 +356,27 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   r.Number("restored", "height", restored->image.rows);
   r.Number("restored", "dpi", restored->dpi);
   r.Number("restored", "rotation_deg", restored->rotation_deg);
+  r.Number("restored", "bits_per_channel", texture.depth() == CV_16U ? 16 : 8);
+  if (!restored->sampling.empty()) {
+    // What the camera truly saw of the page, beside the dpi it is written at.
+    const SamplingSummary sampling = SummarizeSampling(restored->sampling);
+    r.Number("sampling", "median_ppi", sampling.median_ppi);
+    r.Number("sampling", "p5_ppi", sampling.p5_ppi);
+    r.Number("sampling", "p95_ppi", sampling.p95_ppi);
+    r.Number("sampling", "share_400", sampling.share_400);
+    r.Number("sampling", "share_300", sampling.share_300);
+    r.Number("sampling", "share_200", sampling.share_200);
+    if (sampling.p95_ppi > 0 && restored->dpi > (1 + limits.max_upsampling) * sampling.p95_ppi) {
+      r.Warn("dpi_above_sampling",
+             "the page is written at " + Fixed(restored->dpi, 0) +
+                 " dpi, but the camera truly sampled it at " + Fixed(sampling.p95_ppi, 0) +
+                 " ppi at the finest (median " + Fixed(sampling.median_ppi, 0) +
+                 "): it is upsampled " + Fixed(restored->dpi / sampling.p95_ppi, 1) +
+                 " times and holds no finer detail than that; leave out --dpi to write the true "
+                 "sampling");
+    }
+  }
+  const std::map<std::string, std::string> provenance = Provenance(*restored, earlier, r, page);
   if (restored->view == RestoreView::kOrthographic && !restored->mask.empty()) {
     const cv::Rect leaf = cv::boundingRect(restored->mask);
     const double mm = 25.4 / restored->dpi;
@@ -329,11 +399,15 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   }
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
-  if (s.ok())
-    s = WriteRestored(dir, *restored, page.empty() ? identity : PageIdentity(identity, page));
+  const ScanIdentity identity = ReportedIdentity(earlier);
+  if (s.ok()) {
+    s = WriteRestored(dir, *restored, page.empty() ? identity : PageIdentity(identity, page),
+                      provenance);
+  }
   if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back(PageFile(page, "restored.tif"));
   if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));
+  if (!restored->sampling.empty()) r.outputs.push_back(PageFile(page, "sampling_ppi.tif"));
   r.outputs.push_back(PageFile(page, "restored.json"));
   // The whole restored page for the report (1400 px wide at most), with its scale bar.
   double bar_mm = 0;
@@ -345,6 +419,9 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   }
   if (s.ok()) {
     s = stage.Picture(results, "before_after", BeforeAfter(texture, mesh, flat, *restored, camera));
+  }
+  if (s.ok() && !restored->sampling.empty()) {
+    s = stage.Picture(results, "sampling", SamplingPicture(restored->sampling));
   }
   return stage.Finish(s);
 }

@@ -37,6 +37,9 @@ struct WarningLimits {
   // Share of the leaf's pixels that should have a 3D point: below it, parts of the leaf were
   // not measured (glare, the projector's light not reaching, ink too dark to decode).
   double min_valid_in_leaf = 0.9;
+  // An output dpi asked above the page's finest true sampling by more than this share is
+  // upsampling: the restored page holds no detail finer than the camera saw.
+  double max_upsampling = 0.05;
 };
 
 // Every stage's options: what `vellum process` takes, and each daemon its own part of.
@@ -104,12 +107,15 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 // Restore (3.10): the texture through the flattened sheet, with the page's mask (cropped to the
 // leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
 // restored.json in the page's folder and the report's pictures of the page (grid, strain,
-// before/after). Warns of a leaf whose size is not the one expected.
-// `identity` goes into restored.json and the TIFF's XMP (a spread's page's own: PageIdentity).
+// before/after), and the camera's true sampling of the page (sampling_ppi.tif, its summary and
+// picture). Warns of a leaf whose size is not the one expected, and of a dpi asked above the
+// true sampling. `earlier` are the scan's stages so far: the scan's identity (a spread's page
+// gets its own, PageIdentity), its calibration's checksum, the page's flattening residual and
+// every stage's options go into restored.json and the TIFF's XMP.
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const ScanIdentity& identity, const std::string& results,
+                         const std::vector<StageReport>& earlier, const std::string& results,
                          const std::string& page, RestoreResult* restored);
 
 }  // namespace vellum

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job on its embedded default: installs, builds, then plays the recorded scan in
-# tests/data (a curled parchment leaf at 305 ppi, recorded from the virtual gantry through the
+# tests/data (a curled parchment leaf at 326 ppi, recorded from the virtual gantry through the
 # real camera and projector daemons by scripts/record-demo.sh) through the real processing
 # daemons on a private LCM bus, and writes the restored page.
 set -euo pipefail

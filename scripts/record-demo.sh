@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Maintainer's tool: records the demo's scan (tests/data/demo_leaf.lcmlog.xz) through the real
-# station: the camera daemon on the virtual gantry's demo rig (config/demo_rig.yaml, 305 ppi)
+# station: the camera daemon on the virtual gantry's demo rig (config/demo_rig.yaml, 343 ppi on the table)
 # with a curled parchment leaf of 56 x 70 mm whose page is tests/data/demo_page.png (drawn by
 # scripts/make-demo-page.py), the projector daemon (offscreen SDL) showing a columns-only
 # sequence without inverses and with four phase steps (15 frames: small enough for the

@@ -375,6 +375,37 @@ TEST(Doubtful, ALeafOfAnotherSizeThanExpectedIsFlagged) {
   EXPECT_TRUE(WarningCodes(right).empty()) << ::testing::PrintToString(WarningCodes(right));
 }
 
+// Issue 16: asking 600 dpi of the default rig (which samples the table at about 102 ppi) writes
+// the page at 600 dpi, with a warning that names the true figure (the page's finest true
+// sampling, as report.json states it), and the sampling check warns. Left to its default, the
+// same scan is written at that true figure and nothing is flagged.
+TEST(Doubtful, ADpiAboveTheTrueSamplingIsFlaggedWithTheTrueFigure) {
+  PipelineOptions options;
+  options.restore.dpi = 600;
+  const Scanned run = Process(Scene{"dpi", PageShape::kCurl}, 31, options);
+  ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
+  const ProcessReport& report = run.result.report;
+  const double finest = report.Number("sampling", "p95_ppi");
+  EXPECT_NEAR(finest, 102, 3);  // 25.4 / 0.25 mm, the rig's sampling of the table.
+  EXPECT_EQ(report.Number("restored", "dpi"), 600);
+  std::string message;
+  for (const Warning& w : report.Warnings())
+    if (w.code == "dpi_above_sampling") message = w.message;
+  char figure[32];
+  std::snprintf(figure, sizeof(figure), "%.0f ppi", finest);
+  EXPECT_NE(message.find("written at 600 dpi"), std::string::npos) << message;
+  EXPECT_NE(message.find(std::string("truly sampled it at ") + figure), std::string::npos)
+      << message;
+  const QcResult qc = AssessQuality(report);
+  EXPECT_EQ(qc.verdict, QcVerdict::kWarn);
+  const Scanned plain = Process(Scene{"dpi", PageShape::kCurl}, 31);
+  ASSERT_TRUE(plain.result.status.ok()) << plain.result.status.message();
+  // The sheet's finest sampling (by flat area) sets the dpi; the map's is over the leaf's pixels.
+  EXPECT_NEAR(plain.result.report.Number("restored", "dpi"),
+              plain.result.report.Number("sampling", "p95_ppi"), 1.0);
+  EXPECT_TRUE(WarningCodes(plain).empty()) << ::testing::PrintToString(WarningCodes(plain));
+}
+
 // A sheet held over more than the leaf: with no rim ever found (the step asked for is
 // absurd), the leaf found takes the support with it to the edges of the view: the strain and
 // the view's border say so.

@@ -38,8 +38,9 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   ASSERT_EQ(status, 0) << out;
   const fs::path html = dir / "result" / "report.html";
   ASSERT_TRUE(fs::exists(html));
-  for (const char* picture : {"restored.png", "texture.png", "outline.png", "valid.png",
-                              "depth.png", "grid.png", "strain.png", "before_after.png"}) {
+  for (const char* picture :
+       {"restored.png", "texture.png", "outline.png", "valid.png", "depth.png", "grid.png",
+        "strain.png", "before_after.png", "sampling.png"}) {
     const cv::Mat image = cv::imread((dir / "result" / "report" / picture).string());
     EXPECT_FALSE(image.empty()) << picture;
     EXPECT_GT(image.cols, 100) << picture;
@@ -54,8 +55,9 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   std::smatch m;
   ASSERT_TRUE(std::regex_search(out, m, std::regex("data-images=\"(\\d+)/(\\d+)\""))) << out;
   EXPECT_EQ(m[1], m[2]) << "only " << m[1] << " of " << m[2] << " pictures loaded";
-  // The six of before, the leaf's outline (issue 13) and the whole restored page (issue 15).
-  EXPECT_EQ(m[2], "8");
+  // The six of before, the leaf's outline (issue 13), the whole restored page (issue 15) and
+  // the true sampling map (issue 16).
+  EXPECT_EQ(m[2], "9");
   // Nothing in it reaches for the network.
   std::ifstream in(html);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -63,6 +65,13 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   // Issue 15: the quality verdict first, the whole restored page linking to its TIFF, with the
   // leaf's size and the scale bar's length; the report's date.
   EXPECT_NE(text.find("<div class=\"qc qc-pass\"><h2>Quality: pass</h2>"), std::string::npos);
+  // Issue 16: the FADGI figures vellum can vouch for, each with its star level.
+  EXPECT_TRUE(std::regex_search(
+      text, std::regex("<tr><th>sampling</th><td>[0-9]+ ppi at 95% of the page \\(median "
+                       "[0-9]+\\)</td><td>(below 1-star|[1-4]-star)</td>")))
+      << text.substr(0, 4000);
+  EXPECT_NE(text.find("<tr><th>bit depth</th><td>8 bits per channel</td><td>3-star</td>"),
+            std::string::npos);
   EXPECT_NE(text.find("<a href=\"restored.tif\"><img src=\"report/restored.png\""),
             std::string::npos);
   EXPECT_TRUE(std::regex_search(text, std::regex("the leaf [0-9.]+ x [0-9.]+ mm, [0-9.]+ ppi; "

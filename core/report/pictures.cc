@@ -129,6 +129,41 @@ cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
   return WithBar(picture, 0, max_strain, "%.1e", "strain (quad mean)");
 }
 
+cv::Mat SamplingPicture(const cv::Mat& sampling) {
+  struct Band {
+    double from;
+    cv::Scalar colour;  // BGR
+    const char* label;
+  };
+  const Band bands[] = {{400, cv::Scalar(60, 140, 30), ">= 400 ppi"},
+                        {300, cv::Scalar(120, 210, 140), "300-400 ppi"},
+                        {200, cv::Scalar(40, 170, 250), "200-300 ppi"},
+                        {1e-6, cv::Scalar(50, 50, 210), "< 200 ppi"}};
+  cv::Mat picture(sampling.size(), CV_8UC3, cv::Scalar::all(255));
+  cv::Mat taken = cv::Mat::zeros(sampling.size(), CV_8U);
+  for (const Band& b : bands) {
+    const cv::Mat in = (sampling >= b.from) & ~taken;
+    picture.setTo(b.colour, in);
+    taken |= in;
+  }
+  // The legend on the right: a swatch and its band per line.
+  const int width = 130, line = 20;
+  cv::Mat legend(std::max(picture.rows, 4 * line + 8), width, CV_8UC3, cv::Scalar::all(255));
+  for (int k = 0; k < 4; ++k) {
+    const int y = 6 + k * line;
+    cv::rectangle(legend, cv::Rect(6, y, 16, 14), bands[k].colour, cv::FILLED);
+    cv::putText(legend, bands[k].label, cv::Point(28, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+                cv::Scalar::all(0), 1, cv::LINE_AA);
+  }
+  if (legend.rows > picture.rows) {
+    cv::copyMakeBorder(picture, picture, 0, legend.rows - picture.rows, 0, 0, cv::BORDER_CONSTANT,
+                       cv::Scalar::all(255));
+  }
+  cv::Mat out;
+  cv::hconcat(picture, legend, out);
+  return out;
+}
+
 cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                      const RestoreResult& restored, const CameraModel& camera, int step) {
   const auto to_pixel = RestoredPixel(restored, camera);

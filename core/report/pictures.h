@@ -30,6 +30,10 @@ std::function<cv::Point2d(const cv::Point2d&)> RestoredPixel(const RestoreResult
 cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                       const RestoreResult& restored, const CameraModel& camera);
 
+// The camera's true sampling of the restored page (RestoreResult::sampling) in four bands, with
+// their legend: >= 400 ppi, 300-400, 200-300, below 200; white off the page.
+cv::Mat SamplingPicture(const cv::Mat& sampling);
+
 // The flattened grid drawn over the restored page (every `step`-th grid line).
 cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                      const RestoreResult& restored, const CameraModel& camera, int step = 4);

@@ -15,7 +15,44 @@ struct Triangle {
   cv::Point2d d[3];  // Destination (output) pixels.
   cv::Matx23d source_from_dest;
   int samples = 1;  // Supersampling per pixel side (footprint of one output pixel).
+  double ppi = 0;   // The camera's true sampling over the triangle.
 };
+
+// The smallest and largest stretch of a 2x2 linear map (its singular values).
+void Stretches(const cv::Matx22d& j, double* smallest, double* largest) {
+  const cv::Matx22d jtj = j.t() * j;
+  const double tr = jtj(0, 0) + jtj(1, 1), det = cv::determinant(jtj);
+  const double root = std::sqrt(std::max(0.0, tr * tr - 4 * det));
+  *smallest = std::sqrt(std::max(0.0, 0.5 * (tr - root)));
+  *largest = std::sqrt(0.5 * (tr + root));
+}
+
+// The sheet's triangles, as node triples, in the order they are rendered.
+std::vector<cv::Vec3i> SheetTriangles(const Mesh& mesh) {
+  std::vector<cv::Vec3i> out;
+  out.reserve(mesh.quads.size() * 2);
+  for (const cv::Vec4i& q : mesh.quads) {
+    out.emplace_back(q[0], q[1], q[2]);
+    out.emplace_back(q[0], q[2], q[3]);
+  }
+  return out;
+}
+
+// The camera's true sampling over a triangle of the sheet, ppi (0 if it is degenerate), and its
+// flat area, mm^2: from its flat-page millimetres to its camera pixels.
+double TrianglePpi(const cv::Vec3i& t, const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                   double* area_mm2) {
+  const cv::Point2d f0 = flat[t[0]], f1 = flat[t[1]], f2 = flat[t[2]];
+  const cv::Matx22d fm(f1.x - f0.x, f2.x - f0.x, f1.y - f0.y, f2.y - f0.y);
+  const double det = cv::determinant(fm);
+  *area_mm2 = 0.5 * std::fabs(det);
+  if (std::fabs(det) < 1e-12) return 0;
+  const cv::Point2d s0 = mesh.pixel[t[0]], s1 = mesh.pixel[t[1]], s2 = mesh.pixel[t[2]];
+  const cv::Matx22d sm(s1.x - s0.x, s2.x - s0.x, s1.y - s0.y, s2.y - s0.y);
+  double smallest, largest;
+  Stretches(sm * fm.inv(), &smallest, &largest);
+  return 25.4 * smallest;
+}
 
 template <typename T, int C>
 void Sample(const cv::Mat& src, double x, double y, double* out) {
@@ -120,6 +157,36 @@ double NativeDpi(const CameraModel& camera) {
   return std::max(1.0, std::round(25.4 / mm_per_px));
 }
 
+SamplingSummary SummarizeSampling(const cv::Mat& sampling) {
+  SamplingSummary out;
+  if (sampling.empty() || sampling.type() != CV_32F) return out;
+  std::vector<float> values;
+  values.reserve(sampling.total());
+  for (int y = 0; y < sampling.rows; ++y) {
+    const float* row = sampling.ptr<float>(y);
+    for (int x = 0; x < sampling.cols; ++x)
+      if (row[x] > 0) values.push_back(row[x]);
+  }
+  if (values.empty()) return out;
+  auto at = [&](double q) {
+    const size_t k = std::min(values.size() - 1, static_cast<size_t>(q * values.size()));
+    std::nth_element(values.begin(), values.begin() + k, values.end());
+    return static_cast<double>(values[k]);
+  };
+  out.median_ppi = at(0.5);
+  out.p5_ppi = at(0.05);
+  out.p95_ppi = at(0.95);
+  auto share = [&](double ppi) {
+    return static_cast<double>(
+               std::count_if(values.begin(), values.end(), [&](float v) { return v >= ppi; })) /
+           values.size();
+  };
+  out.share_400 = share(400);
+  out.share_300 = share(300);
+  out.share_200 = share(200);
+  return out;
+}
+
 double UprightAngle(const cv::Mat& mask) {
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
@@ -203,8 +270,32 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   // Destination pixel of every node.
   std::vector<cv::Point2d> dest(flat.size());
   cv::Size size;
+  // The camera's true sampling over each triangle, and the sheet's median by flat area.
+  const std::vector<cv::Vec3i> triangles = SheetTriangles(mesh);
+  std::vector<double> tri_ppi(triangles.size());
+  {
+    std::vector<std::pair<double, double>> by_ppi;  // (ppi, flat area)
+    double total = 0;
+    for (size_t k = 0; k < triangles.size(); ++k) {
+      double area = 0;
+      tri_ppi[k] = TrianglePpi(triangles[k], mesh, flat, &area);
+      if (tri_ppi[k] > 0) by_ppi.emplace_back(tri_ppi[k], area), total += area;
+    }
+    std::sort(by_ppi.begin(), by_ppi.end());
+    double below = 0;
+    for (const auto& [ppi, area] : by_ppi) {
+      below += area;
+      if (result.true_ppi == 0 && below >= 0.5 * total) result.true_ppi = ppi;
+      if (below >= 0.95 * total) {
+        result.finest_ppi = ppi;
+        break;
+      }
+    }
+  }
   if (options.view == RestoreView::kOrthographic) {
-    result.dpi = options.dpi > 0 ? options.dpi : NativeDpi(camera);
+    result.dpi = options.dpi > 0            ? options.dpi
+                 : result.finest_ppi >= 0.5 ? std::round(result.finest_ppi)
+                                            : NativeDpi(camera);
     const double s = result.dpi / 25.4;  // Pixels per mm.
     if (options.deskew && !leaf.empty()) {
       // The leaf's outline, flat: its mask restored alone at 2 pixels per mm (cheap), turned
@@ -252,28 +343,27 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     }
   }
   std::vector<Triangle> tris;
-  tris.reserve(mesh.quads.size() * 2);
-  for (const cv::Vec4i& q : mesh.quads) {
-    for (const cv::Vec3i& t : {cv::Vec3i(q[0], q[1], q[2]), cv::Vec3i(q[0], q[2], q[3])}) {
-      Triangle tri;
-      for (int c = 0; c < 3; ++c) tri.d[c] = dest[t[c]];
-      const cv::Matx22d dm(tri.d[1].x - tri.d[0].x, tri.d[2].x - tri.d[0].x,
-                           tri.d[1].y - tri.d[0].y, tri.d[2].y - tri.d[0].y);
-      const cv::Point2d s0 = mesh.pixel[t[0]], s1 = mesh.pixel[t[1]], s2 = mesh.pixel[t[2]];
-      const cv::Matx22d sm(s1.x - s0.x, s2.x - s0.x, s1.y - s0.y, s2.y - s0.y);
-      if (std::fabs(cv::determinant(dm)) < 1e-12) continue;
-      const cv::Matx22d j = sm * dm.inv();  // Source pixels per destination pixel.
-      const cv::Point2d off = s0 - cv::Point2d(j(0, 0) * tri.d[0].x + j(0, 1) * tri.d[0].y,
-                                               j(1, 0) * tri.d[0].x + j(1, 1) * tri.d[0].y);
-      tri.source_from_dest = cv::Matx23d(j(0, 0), j(0, 1), off.x, j(1, 0), j(1, 1), off.y);
-      // Largest stretch of one output pixel in the source (the Jacobian's spectral norm).
-      const cv::Matx22d jtj = j.t() * j;
-      const double tr = jtj(0, 0) + jtj(1, 1), det = cv::determinant(jtj);
-      const double footprint = std::sqrt(0.5 * (tr + std::sqrt(std::max(0.0, tr * tr - 4 * det))));
-      tri.samples =
-          std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
-      tris.push_back(tri);
-    }
+  tris.reserve(triangles.size());
+  for (size_t k = 0; k < triangles.size(); ++k) {
+    const cv::Vec3i& t = triangles[k];
+    Triangle tri;
+    tri.ppi = tri_ppi[k];
+    for (int c = 0; c < 3; ++c) tri.d[c] = dest[t[c]];
+    const cv::Matx22d dm(tri.d[1].x - tri.d[0].x, tri.d[2].x - tri.d[0].x, tri.d[1].y - tri.d[0].y,
+                         tri.d[2].y - tri.d[0].y);
+    const cv::Point2d s0 = mesh.pixel[t[0]], s1 = mesh.pixel[t[1]], s2 = mesh.pixel[t[2]];
+    const cv::Matx22d sm(s1.x - s0.x, s2.x - s0.x, s1.y - s0.y, s2.y - s0.y);
+    if (std::fabs(cv::determinant(dm)) < 1e-12) continue;
+    const cv::Matx22d j = sm * dm.inv();  // Source pixels per destination pixel.
+    const cv::Point2d off = s0 - cv::Point2d(j(0, 0) * tri.d[0].x + j(0, 1) * tri.d[0].y,
+                                             j(1, 0) * tri.d[0].x + j(1, 1) * tri.d[0].y);
+    tri.source_from_dest = cv::Matx23d(j(0, 0), j(0, 1), off.x, j(1, 0), j(1, 1), off.y);
+    // Largest stretch of one output pixel in the source (the Jacobian's spectral norm).
+    double shortest, footprint;
+    Stretches(j, &shortest, &footprint);
+    tri.samples =
+        std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
+    tris.push_back(tri);
   }
   result.image = cv::Mat::zeros(size, texture.type());
   if (!leaf.empty()) {
@@ -296,6 +386,18 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
       Render<uint16_t, 3>(texture, tris, &result.image);
       break;
   }
+  if (options.view == RestoreView::kOrthographic) {
+    // The sampling map: each triangle filled with its true sampling, in the renderer's order (the
+    // last triangle covering a pixel gives it), subpixel corners (4 fractional bits).
+    result.sampling = cv::Mat::zeros(size, CV_32F);
+    for (const Triangle& t : tris) {
+      cv::Point corners[3];
+      for (int c = 0; c < 3; ++c)
+        corners[c] = cv::Point(cvRound(t.d[c].x * 16), cvRound(t.d[c].y * 16));
+      cv::fillConvexPoly(result.sampling, corners, 3, cv::Scalar(t.ppi), cv::LINE_8, 4);
+    }
+    if (!result.mask.empty()) result.sampling.setTo(0, result.mask == 0);
+  }
   if (options.crop_to_leaf && options.view == RestoreView::kOrthographic && !result.mask.empty() &&
       cv::countNonZero(result.mask) > 0) {
     // The leaf plus the margin: the map to pixels moves with the crop.
@@ -305,6 +407,7 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
           cv::Rect(0, 0, size.width, size.height);
     result.image = result.image(box).clone();
     result.mask = result.mask(box).clone();
+    result.sampling = result.sampling(box).clone();
     result.pixel_from_flat(0, 2) -= box.x;
     result.pixel_from_flat(1, 2) -= box.y;
   }

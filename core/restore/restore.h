@@ -22,7 +22,11 @@ bool ParseRestoreView(const std::string& text, RestoreView* view);
 
 struct RestoreOptions {
   RestoreView view = RestoreView::kOrthographic;
-  double dpi = 0;             // Orthographic resolution, dots per inch; 0 = NativeDpi(camera).
+  // Orthographic resolution, dots per inch; 0: what the camera truly sampled, at its finest on
+  // this page (RestoreResult::finest_ppi, rounded to a whole dpi): coarser would throw away
+  // detail the camera saw, finer would add none anywhere. The sampling map says where the page
+  // was sampled less finely (a slope seen at a grazing angle).
+  double dpi = 0;
   double margin_mm = 3.0;     // Orthographic: border around the flattened sheet (or leaf), mm.
   int max_supersampling = 8;  // Samples per pixel side where the warp shrinks, at most.
   // Orthographic, with the leaf's mask (Restore's `leaf`): turn the page so the leaf stands
@@ -42,10 +46,30 @@ struct RestoreResult {
   double dpi = 0;                                      // Orthographic: the resolution used.
   cv::Matx23d pixel_from_flat = cv::Matx23d::zeros();  // Orthographic: flat mm -> pixel.
   double rotation_deg = 0;  // Orthographic: the turn applied to the flat page (deskew), degrees.
+  // Orthographic: the camera's true sampling of the page at each restored pixel, in ppi (CV_32F,
+  // the image's size; 0 off the sheet, and off the leaf when a leaf mask was given). It is the
+  // warp's own: 25.4 times the smallest singular value of the map from flat-page millimetres to
+  // camera pixels over each triangle of the sheet, so a slope seen at a grazing angle or a part
+  // of the page far from the camera shows as coarser. It does not depend on the output dpi.
+  cv::Mat sampling;
+  // The sheet's true sampling, ppi, by flat area: its median, and its finest (the 95th
+  // percentile: 5% of the sheet is sampled more finely).
+  double true_ppi = 0, finest_ppi = 0;
 };
 
+// How finely a restored page was truly sampled (from RestoreResult::sampling, over its nonzero
+// pixels).
+struct SamplingSummary {
+  double median_ppi = 0;
+  double p5_ppi = 0;   // 95% of the page is sampled at least this finely.
+  double p95_ppi = 0;  // 5% of the page is sampled more finely: its finest sampling.
+  double share_400 = 0, share_300 = 0, share_200 = 0;  // Shares of the page at >= 400, 300, 200.
+};
+SamplingSummary SummarizeSampling(const cv::Mat& sampling);
+
 // The camera's sampling of the table plane at the image centre, rounded to a whole dpi (so
-// TIFF resolution tags, which OpenCV writes as integers, state it exactly).
+// TIFF resolution tags, which OpenCV writes as integers, state it exactly). Restore's default
+// when the sheet gives no sampling of its own.
 double NativeDpi(const CameraModel& camera);
 
 // `flat` holds the flattened (x, y) of every node, in mm, aligned to the page's original

@@ -62,7 +62,7 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   RestoreResult restored;
   StageReport restore =
       RestoreStage(texture, sheet_page.mask, sheet_.mesh, sheet_.flat, camera, o.restore, o.limits,
-                   ReportedIdentity(stages), folder.results(), name, &restored);
+                   stages, folder.results(), name, &restored);
   if (!restore.status.ok()) {
     scans_.erase(id);
     return node_->FailScan(id, restore.status.message());
