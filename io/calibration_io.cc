@@ -182,7 +182,8 @@ std::string CalibrationSha256(const Calibration& calibration) {
   std::string text;
   auto add = [&](double v) {
     char buf[40];
-    std::snprintf(buf, sizeof(buf), "%.17g\n", v);
+    // + 0.0 makes -0 plain 0: a YAML writer may drop the sign of zero (OpenCV's does).
+    std::snprintf(buf, sizeof(buf), "%.17g\n", v + 0.0);
     text += buf;
   };
   for (const CameraModel* device : {&calibration.camera, &calibration.projector}) {

@@ -15,7 +15,8 @@ Status WriteCalibration(const std::string& path, const Calibration& calibration)
 
 // A checksum of the calibration's values (not of its file, which may be written in other ways):
 // the SHA-256 of every number in a fixed order and precision (%.17g), as 64 hex digits. The
-// same calibration gives the same checksum from a file, the station's message or a rig.
+// same calibration gives the same checksum from a file, the station's message or a rig (zero
+// counts as zero whatever its sign).
 std::string CalibrationSha256(const Calibration& calibration);
 
 }  // namespace vellum

@@ -10,6 +10,7 @@
 #include "core/common/text.h"
 #include "core/report/pictures.h"
 #include "io/calibration_io.h"
+#include "io/iiif.h"
 #include "io/json.h"
 #include "io/products.h"
 #include "io/scan_io.h"
@@ -408,6 +409,11 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   r.outputs.push_back(PageFile(page, "restored.tif"));
   if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));
   if (!restored->sampling.empty()) r.outputs.push_back(PageFile(page, "sampling_ppi.tif"));
+  // The production master as a pyramid of tiles, for an IIIF image server (io/iiif.h).
+  s = stage.Output(PageFile(page, kPyramidName),
+                   WritePyramidalTiff((fs::path(dir) / "restored.tif").string(),
+                                      (fs::path(dir) / kPyramidName).string()));
+  if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back(PageFile(page, "restored.json"));
   // The whole restored page for the report (1400 px wide at most), with its scale bar.
   double bar_mm = 0;

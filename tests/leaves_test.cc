@@ -220,7 +220,13 @@ class Leaves : public ::testing::TestWithParam<Scene> {};
 
 TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
   const Scene& scene = GetParam();
-  const Scanned run = Process(scene, 31);
+  // Restored at the rig's sampling of the table (102 dpi), where issue 13's bars in pixels were
+  // set; the default, the page's finest true sampling (issue 16), is 1-3% finer on raised
+  // leaves, and the pixel figures with it (the ripple's 0.038 mm is 0.150 px at 102 dpi and
+  // 0.154 px at 103). The bars in mm do not depend on it.
+  PipelineOptions options;
+  options.restore.dpi = NativeDpi(DefaultRig().camera);
+  const Scanned run = Process(scene, 31, options);
   ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
   const GroundTruth& truth = run.scan.gantry->truth();
   const auto& pages = run.scan.gantry->pages();

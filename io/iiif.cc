@@ -1,0 +1,178 @@
+#include "io/iiif.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <vips/vips8>
+
+#include "core/patterns/scan.h"
+
+namespace vellum {
+namespace fs = std::filesystem;
+namespace {
+
+// libvips is started once per process (it keeps its own thread pool and caches).
+Status StartVips() {
+  static std::once_flag once;
+  static bool ok = false;
+  std::call_once(once, [] { ok = VIPS_INIT("vellum") == 0; });
+  return ok ? Status::Ok() : Status::Error(std::string("libvips: ") + vips_error_buffer());
+}
+
+// An Image API identifier: the path with every byte outside the unreserved set (and '/')
+// percent-encoded.
+std::string EncodeIdentifier(const std::string& path) {
+  std::string out;
+  for (const unsigned char c : path) {
+    if (std::isalnum(c) || c == '-' || c == '.' || c == '_' || c == '~') {
+      out += static_cast<char>(c);
+    } else {
+      char hex[4];
+      std::snprintf(hex, sizeof(hex), "%%%02X", c);
+      out += hex;
+    }
+  }
+  return out;
+}
+
+Json Label(const std::string& text) { return {{"en", Json::array({text})}}; }
+
+// One page's canvas from its restored.json in `dir`.
+Status ReadCanvas(const fs::path& dir, const std::string& page, const fs::path& root,
+                  const std::string& image_base, IiifCanvas* canvas) {
+  const fs::path json_path = dir / "restored.json";
+  std::ifstream in(json_path);
+  if (!in) return Status::Error(json_path.string() + ": cannot read (is this a results folder?)");
+  Json r;
+  try {
+    r = Json::parse(in);
+  } catch (const std::exception& e) {
+    return Status::Error(json_path.string() + ": not JSON: " + e.what());
+  }
+  if (!r.is_object() || !r.contains("width") || !r.contains("height") || !r["width"].is_number() ||
+      !r["height"].is_number()) {
+    return Status::Error(json_path.string() + ": no width and height");
+  }
+  const fs::path pyramid = dir / kPyramidName;
+  if (!fs::exists(pyramid)) return Status::Error(pyramid.string() + ": missing");
+  std::error_code ec;
+  const fs::path rel =
+      fs::relative(fs::weakly_canonical(pyramid, ec), fs::weakly_canonical(root, ec), ec);
+  if (ec || rel.empty() || *rel.begin() == "..") {
+    return Status::Error(pyramid.string() + ": not under the served folder " + root.string());
+  }
+  canvas->width = r["width"].get<int>();
+  canvas->height = r["height"].get<int>();
+  canvas->dpi = r.contains("dpi") && r["dpi"].is_number() ? r["dpi"].get<double>() : 0;
+  ScanIdentity identity;
+  if (r.contains("identity") && r["identity"].is_object()) {
+    ForEachIdentityField(identity, [&](const char* key, std::string& field) {
+      if (r["identity"].contains(key) && r["identity"][key].is_string())
+        field = r["identity"][key].get<std::string>();
+    });
+  }
+  canvas->label = IdentityTitle(identity);
+  if (canvas->label.empty()) canvas->label = dir.parent_path().filename().string();
+  if (!page.empty()) canvas->label += ", " + page;
+  canvas->image_id = image_base + "/" + EncodeIdentifier(rel.generic_string());
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid) {
+  Status s = StartVips();
+  if (!s.ok()) return s;
+  try {
+    vips::VImage image = vips::VImage::new_from_file(tif.c_str());
+    image.tiffsave(pyramid.c_str(),
+                   vips::VImage::option()
+                       ->set("tile", true)
+                       ->set("pyramid", true)
+                       ->set("tile_width", 256)
+                       ->set("tile_height", 256)
+                       ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_DEFLATE));
+  } catch (const vips::VError& e) {
+    return Status::Error(pyramid + ": cannot write the pyramidal TIFF: " + e.what());
+  }
+  return Status::Ok();
+}
+
+Status ReadIiifCanvases(const std::string& results, const std::string& root,
+                        const std::string& image_base, std::vector<IiifCanvas>* canvases) {
+  canvases->clear();
+  const fs::path dir(results);
+  if (fs::exists(dir / "restored.json")) {
+    IiifCanvas c;
+    const Status s = ReadCanvas(dir, "", root, image_base, &c);
+    if (!s.ok()) return s;
+    canvases->push_back(c);
+    return Status::Ok();
+  }
+  for (const char* page : {"left", "right"}) {
+    const fs::path page_dir = dir / "pages" / page;
+    if (!fs::exists(page_dir / "restored.json")) continue;
+    IiifCanvas c;
+    const Status s = ReadCanvas(page_dir, page, root, image_base, &c);
+    if (!s.ok()) return s;
+    canvases->push_back(c);
+  }
+  if (canvases->empty()) {
+    return Status::Error(results +
+                         ": no restored page (restored.json, or pages/left and "
+                         "pages/right)");
+  }
+  return Status::Ok();
+}
+
+Json IiifManifest(const std::string& id, const std::string& label,
+                  const std::vector<IiifCanvas>& canvases) {
+  Json items = Json::array();
+  for (size_t k = 0; k < canvases.size(); ++k) {
+    const IiifCanvas& c = canvases[k];
+    const std::string canvas_id = id + "/canvas/" + std::to_string(k + 1);
+    Json image = {
+        {"id", c.image_id + "/full/max/0/default.jpg"},
+        {"type", "Image"},
+        {"format", "image/jpeg"},
+        {"width", c.width},
+        {"height", c.height},
+        // An Image API 2 service (IIPImage 1.1's), named as Presentation 3 names
+        // the older services: @id and @type.
+        {"service", Json::array({{{"@id", c.image_id},
+                                  {"@type", "ImageService2"},
+                                  {"profile", "http://iiif.io/api/image/2/level1.json"}}})}};
+    Json annotation = {{"id", canvas_id + "/annotation/1"},
+                       {"type", "Annotation"},
+                       {"motivation", "painting"},
+                       {"body", image},
+                       {"target", canvas_id}};
+    Json canvas = {{"id", canvas_id},
+                   {"type", "Canvas"},
+                   {"label", Label(c.label)},
+                   {"width", c.width},
+                   {"height", c.height},
+                   {"items", Json::array({{{"id", canvas_id + "/page/1"},
+                                           {"type", "AnnotationPage"},
+                                           {"items", Json::array({annotation})}}})}};
+    if (c.dpi > 0) {
+      // The physical-dimensions service: millimetres per canvas pixel.
+      canvas["service"] =
+          Json::array({{{"id", canvas_id + "/physdim"},
+                        {"type", "PhysicalDimensions"},
+                        {"@context", "http://iiif.io/api/annex/services/physdim/1/context.json"},
+                        {"profile", "http://iiif.io/api/annex/services/physdim"},
+                        {"physicalScale", 25.4 / c.dpi},
+                        {"physicalUnits", "mm"}}});
+    }
+    items.push_back(canvas);
+  }
+  return {{"@context", "http://iiif.io/api/presentation/3/context.json"},
+          {"id", id},
+          {"type", "Manifest"},
+          {"label", Label(label)},
+          {"items", items}};
+}
+
+}  // namespace vellum

@@ -1,0 +1,47 @@
+// IIIF for the restored pages: a pyramidal tiled TIFF of each production master (written with
+// libvips, so an image server such as IIPImage serves its tiles without decoding the whole
+// page), and IIIF Presentation 3 manifests, one per scan and one per sequence of scans, with one
+// canvas per page sized to its image and the physical-dimensions service (physicalScale =
+// 25.4 / dpi mm per pixel), so that any IIIF viewer shows the page at true scale.
+//
+// Where the images are served: an image server whose IIIF endpoint is `image_base` (e.g.
+// http://host:8080/iiif) and whose identifiers are file paths relative to a served `root`
+// folder, '/' encoded as %2F as the Image API asks (scripts/serve-iiif.sh runs IIPImage that
+// way behind lighttpd).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "io/json.h"
+
+namespace vellum {
+
+// The pyramid's name beside each restored.tif.
+inline constexpr const char* kPyramidName = "restored_pyramid.tif";
+// The scan's own manifest, in its results folder.
+inline constexpr const char* kIiifManifestName = "iiif-manifest.json";
+
+// Writes `tif` as a tiled (256 x 256), pyramidal, deflate-compressed TIFF `pyramid`, keeping its
+// resolution, ICC profile and XMP.
+Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid);
+
+// One restored page as a canvas.
+struct IiifCanvas {
+  std::string label;     // "MS 12, 3 recto", "MS 12, 3v-4r, left"
+  std::string image_id;  // The image service's id: image_base + "/" + encoded identifier.
+  int width = 0, height = 0;
+  double dpi = 0;  // 0: camera view, no true scale (no physical-dimensions service).
+};
+
+// The canvases of one scan's results folder (its restored.json, or pages/left and pages/right
+// for a spread), each image served from its pyramid under `root`. An error names the file.
+Status ReadIiifCanvases(const std::string& results, const std::string& root,
+                        const std::string& image_base, std::vector<IiifCanvas>* canvases);
+
+// A Presentation 3 manifest `id` labelled `label` over `canvases`, in order.
+Json IiifManifest(const std::string& id, const std::string& label,
+                  const std::vector<IiifCanvas>& canvases);
+
+}  // namespace vellum
