@@ -133,7 +133,7 @@ Json IiifManifest(const std::string& id, const std::string& label,
     const IiifCanvas& c = canvases[k];
     const std::string canvas_id = id + "/canvas/" + std::to_string(k + 1);
     Json image = {
-        {"id", c.image_id + "/full/max/0/default.jpg"},
+        {"id", c.image_id + "/full/full/0/default.jpg"},
         {"type", "Image"},
         {"format", "image/jpeg"},
         {"width", c.width},
