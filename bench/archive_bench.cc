@@ -78,14 +78,15 @@ void BM_LogAppendRaw(benchmark::State& state) {
 void BM_PngDefault(benchmark::State& s) { WriteImage(s, ".png", {}); }
 void BM_PngLevel0(benchmark::State& s) { WriteImage(s, ".png", {cv::IMWRITE_PNG_COMPRESSION, 0}); }
 void BM_PngLevel1(benchmark::State& s) { WriteImage(s, ".png", {cv::IMWRITE_PNG_COMPRESSION, 1}); }
-void BM_TiffNone(benchmark::State& s) {
-  WriteImage(s, ".tif", {cv::IMWRITE_TIFF_COMPRESSION, 1});
-}
+void BM_TiffNone(benchmark::State& s) { WriteImage(s, ".tif", {cv::IMWRITE_TIFF_COMPRESSION, 1}); }
 void BM_TiffLzw(benchmark::State& s) { WriteImage(s, ".tif", {}); }
 
 }  // namespace
 
-BENCHMARK(BM_Baseline_FrameInterval5fps)->Unit(benchmark::kMillisecond)->UseManualTime()->Iterations(1);
+BENCHMARK(BM_Baseline_FrameInterval5fps)
+    ->Unit(benchmark::kMillisecond)
+    ->UseManualTime()
+    ->Iterations(1);
 BENCHMARK(BM_LogAppendRaw)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(5);
 BENCHMARK(BM_PngDefault)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 BENCHMARK(BM_PngLevel0)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);

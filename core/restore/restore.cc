@@ -358,11 +358,13 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     const cv::Point2d off = s0 - cv::Point2d(j(0, 0) * tri.d[0].x + j(0, 1) * tri.d[0].y,
                                              j(1, 0) * tri.d[0].x + j(1, 1) * tri.d[0].y);
     tri.source_from_dest = cv::Matx23d(j(0, 0), j(0, 1), off.x, j(1, 0), j(1, 1), off.y);
-    // Largest stretch of one output pixel in the source (the Jacobian's spectral norm).
+    // Largest stretch of one output pixel in the source (the Jacobian's spectral norm), and from
+    // it the supersampling: a bilinear sample spans two source pixels, so a footprint under 1.5
+    // needs no more (at the page's own sampling the footprint is about 1).
     double shortest, footprint;
     Stretches(j, &shortest, &footprint);
     tri.samples =
-        std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
+        std::clamp(static_cast<int>(std::lround(footprint)), 1, options.max_supersampling);
     tris.push_back(tri);
   }
   result.image = cv::Mat::zeros(size, texture.type());
