@@ -16,28 +16,16 @@
 #include "io/calibration_io.h"
 #include "io/ply.h"
 #include "io/scan_io.h"
+#include "tests/shell.h"
 
 namespace vellum {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int exit_code = -1;  // -1: killed by a signal (a crash).
-  std::string output;
-};
+using Result = ShellResult;
 
-Result RunVellum(const std::string& args) {
-  const std::string cmd = std::string(VELLUM_BIN) + " " + args + " 2>&1";
-  Result r;
-  FILE* p = popen(cmd.c_str(), "r");
-  char buf[4096];
-  size_t n;
-  while ((n = fread(buf, 1, sizeof(buf), p)) > 0) r.output.append(buf, n);
-  const int status = pclose(p);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+Result RunVellum(const std::string& args) { return Shell(std::string(VELLUM_BIN) + " " + args); }
 
 class CliTest : public ::testing::Test {
  protected:

@@ -19,18 +19,17 @@
 #include <string>
 #include <thread>
 
+#include "tests/shell.h"
+
 namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 std::string Shell(const std::string& command, int* status) {
-  std::string out;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  char buf[4096];
-  while (p && fgets(buf, sizeof(buf), p)) out += buf;
-  *status = p ? pclose(p) : -1;
-  return out;
+  const vellum::ShellResult r = vellum::Shell(command);
+  *status = r.exit_code;
+  return r.output;
 }
 
 // An HTTP GET with curl: the body into `file`, the status code returned (0: no answer).

@@ -10,17 +10,16 @@
 #include <regex>
 #include <string>
 
+#include "tests/shell.h"
+
 namespace {
 
 namespace fs = std::filesystem;
 
 std::string RunCommand(const std::string& command, int* status) {
-  std::string out;
-  FILE* p = popen((command + " 2>&1").c_str(), "r");
-  char buf[4096];
-  while (p && fgets(buf, sizeof(buf), p)) out += buf;
-  *status = p ? pclose(p) : -1;
-  return out;
+  const vellum::ShellResult r = vellum::Shell(command);
+  *status = r.exit_code;
+  return r.output;
 }
 
 TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
