@@ -367,8 +367,8 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     tri.source_from_dest = cv::Matx23d(j(0, 0), j(0, 1), off.x, j(1, 0), j(1, 1), off.y);
     // Largest stretch of one output pixel in the source (the Jacobian's spectral norm), and from
     // it the supersampling. At the page's own sampling (a footprint just over 1) this takes 2 x 2
-    // samples: rounding instead (1 sample up to 1.5) restores a 24 MP page in 638 ms, not about
-    // 1000, but the ripple leaf's corners then move by 0.003 px more than its bar allows.
+    // samples: rounding instead (1 sample up to 1.5) restores a 24 MP page in 638 ms, not 836,
+    // but the ripple leaf's corners then move by 0.003 px more than its bar allows.
     double shortest, footprint;
     Stretches(j, &shortest, &footprint);
     tri.samples =
@@ -377,9 +377,13 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   }
   result.image = cv::Mat::zeros(size, texture.type());
   if (!leaf.empty()) {
+    // The mask is thresholded at half: one bilinear sample per pixel decides it (supersampling
+    // would only smooth what the threshold takes away).
     cv::Mat restored_leaf = cv::Mat::zeros(size, CV_8U);
     const cv::Mat leaf255 = leaf != 0;
-    Render<uint8_t, 1>(leaf255, tris, &restored_leaf);
+    std::vector<Triangle> single = tris;
+    for (Triangle& t : single) t.samples = 1;
+    Render<uint8_t, 1>(leaf255, single, &restored_leaf);
     result.mask = restored_leaf >= 128;
   }
   switch (texture.type()) {
