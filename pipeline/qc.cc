@@ -58,8 +58,8 @@ std::vector<FadgiPage> AssessFadgi(const ProcessReport& report) {
                          Stars([&](const FadgiLevel& l) { return bits >= l.bits; }),
                          "the restored master's samples, as the camera gave them"});
     FadgiFigure scale{"scale error", "no true scale (camera view)", 0, ""};
-    if (true_scale && report.Find("flattening", "mean_strain", page)) {
-      const double error = 100 * report.Number("flattening", "mean_strain", page);
+    if (report.Find("restored", "scale_error_percent", page)) {
+      const double error = report.Number("restored", "scale_error_percent", page);
       std::snprintf(text, sizeof(text), "%.3f%%", error);
       scale.value = text;
       scale.stars = Stars([&](const FadgiLevel& l) { return error <= l.scale_error_percent; });

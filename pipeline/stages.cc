@@ -308,15 +308,14 @@ std::map<std::string, std::string> Provenance(const RestoreResult& restored,
   }
   const double mean_strain = number("flattening", "mean_strain", page);
   if (!std::isnan(mean_strain)) {
-    // The flat page's lengths against the measured surface's: the flattening's share of the
-    // reproduction scale error (the calibration's own is not measured here).
-    out["scale_error_percent"] = JsonNumber(100 * mean_strain).dump();
     out["flattening_mean_strain"] = JsonNumber(mean_strain).dump();
     out["flattening_max_strain"] = JsonNumber(number("flattening", "max_strain", page)).dump();
   }
   for (const ReportValue& v : own.values) {
     if (v.section == "sampling" && (v.key == "median_ppi" || v.key == "p5_ppi"))
       out["true_" + v.key] = JsonNumber(v.number).dump();
+    if (v.section == "restored" && v.key == "scale_error_percent")
+      out[v.key] = JsonNumber(v.number).dump();
   }
   const ReportValue* calibration = FindValue(earlier, "provenance", "calibration_sha256");
   if (calibration) out["calibration_sha256"] = calibration->text;
@@ -358,6 +357,12 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   r.Number("restored", "dpi", restored->dpi);
   r.Number("restored", "rotation_deg", restored->rotation_deg);
   r.Number("restored", "bits_per_channel", texture.depth() == CV_16U ? 16 : 8);
+  if (const ReportValue* strain = FindValue(earlier, "flattening", "mean_strain", page);
+      strain && restored->view == RestoreView::kOrthographic) {
+    // The flat page's lengths against the measured surface's: the flattening's share of the
+    // reproduction scale error (the calibration's own is not measured here).
+    r.Number("restored", "scale_error_percent", 100 * strain->number);
+  }
   if (!restored->sampling.empty()) {
     // What the camera truly saw of the page, beside the dpi it is written at.
     const SamplingSummary sampling = SummarizeSampling(restored->sampling);
@@ -373,8 +378,8 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
                  " dpi, but the camera truly sampled it at " + Fixed(sampling.p95_ppi, 0) +
                  " ppi at the finest (median " + Fixed(sampling.median_ppi, 0) +
                  "): it is upsampled " + Fixed(restored->dpi / sampling.p95_ppi, 1) +
-                 " times and holds no finer detail than that; leave out --dpi to write the true "
-                 "sampling");
+                 " times and holds no finer detail than that; leave the dpi unset (0) to write "
+                 "the true sampling");
     }
   }
   const std::map<std::string, std::string> provenance = Provenance(*restored, earlier, r, page);
