@@ -57,8 +57,8 @@ class CliTest : public ::testing::Test {
 fs::path CliTest::root_;
 
 TEST_F(CliTest, EveryCommandHasHelp) {
-  for (const char* cmd :
-       {"--help", "patterns --help", "render --help", "process --help", "manifest --help"}) {
+  for (const char* cmd : {"--help", "patterns --help", "render --help", "process --help",
+                          "manifest --help", "iiif --help"}) {
     const Result r = RunVellum(cmd);
     EXPECT_EQ(r.exit_code, 0) << cmd;
     EXPECT_NE(r.output.find("usage: vellum"), std::string::npos) << r.output;
@@ -281,6 +281,44 @@ TEST_F(CliTest, ALeafLaidTurnedIsRestoredUpright) {
 
 // vellum manifest writes a folder's SHA-256 manifest and checks it: a changed file is named
 // and fails the check.
+// vellum iiif: a manifest per scan, with the page's canvas at its size and true scale; a folder
+// that is not a scan's results, or one outside the served folder, is named and refused.
+TEST_F(CliTest, IiifWritesAManifestAndNamesWhatItCannotServe) {
+  const fs::path served = root_ / "served";
+  const fs::path leaf = served / "leaf";
+  Result r = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " + Rig() +
+                       " --out " + leaf.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunVellum("iiif --root " + served.string() + " --base http://127.0.0.1:8080/ " +
+                leaf.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream in(leaf / "iiif-manifest.json");
+  const nlohmann::json manifest = nlohmann::json::parse(in);
+  EXPECT_EQ(manifest["id"], "http://127.0.0.1:8080/leaf/iiif-manifest.json");
+  std::ifstream page_in(leaf / "restored.json");
+  const nlohmann::json page = nlohmann::json::parse(page_in);
+  const nlohmann::json& canvas = manifest["items"][0];
+  EXPECT_EQ(canvas["width"], page["width"]);
+  EXPECT_EQ(canvas["height"], page["height"]);
+  EXPECT_DOUBLE_EQ(canvas["service"][0]["physicalScale"].get<double>(),
+                   25.4 / page["dpi"].get<double>());
+  EXPECT_EQ(canvas["items"][0]["items"][0]["body"]["service"][0]["@id"],
+            "http://127.0.0.1:8080/iiif/leaf%2Frestored_pyramid.tif");
+  // Not a results folder: the file it looked for is named.
+  fs::create_directories(served / "empty");
+  r = RunVellum("iiif --root " + served.string() + " --base http://h " +
+                (served / "empty").string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("no restored page"), std::string::npos) << r.output;
+  // Outside the served folder: the server could not reach it.
+  r = RunVellum("iiif --root " + (served / "empty").string() + " --base http://h " + leaf.string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("not under the served folder"), std::string::npos) << r.output;
+  // No --root: a usage error.
+  r = RunVellum("iiif --base http://h " + leaf.string());
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+}
+
 TEST_F(CliTest, ManifestWritesAndChecksAFolder) {
   const std::string dir = CopyScan("manifest");
   const Result w = RunVellum("manifest write " + dir);
