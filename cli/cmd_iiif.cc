@@ -13,14 +13,11 @@ namespace fs = std::filesystem;
 namespace {
 
 // The URL of a file under the served root.
-std::string UrlOf(const std::string& base, const fs::path& root, const fs::path& file) {
-  std::error_code ec;
-  const fs::path rel =
-      fs::relative(fs::weakly_canonical(file, ec), fs::weakly_canonical(root, ec), ec);
-  if (ec || rel.empty() || *rel.begin() == "..") {
-    throw UsageError(file.string() + " is not under the served folder " + root.string());
-  }
-  return base + "/" + rel.generic_string();
+std::string UrlOf(const std::string& base, const std::string& root, const fs::path& file) {
+  std::string rel;
+  const Status s = PathUnderRoot(root, file.string(), &rel);
+  if (!s.ok()) throw UsageError(s.message());
+  return base + "/" + rel;
 }
 
 }  // namespace

@@ -56,12 +56,9 @@ Status ReadCanvas(const fs::path& dir, const std::string& page, const fs::path& 
   }
   const fs::path pyramid = dir / kPyramidName;
   if (!fs::exists(pyramid)) return Status::Error(pyramid.string() + ": missing");
-  std::error_code ec;
-  const fs::path rel =
-      fs::relative(fs::weakly_canonical(pyramid, ec), fs::weakly_canonical(root, ec), ec);
-  if (ec || rel.empty() || *rel.begin() == "..") {
-    return Status::Error(pyramid.string() + ": not under the served folder " + root.string());
-  }
+  std::string rel;
+  const Status under = PathUnderRoot(root.string(), pyramid.string(), &rel);
+  if (!under.ok()) return under;
   canvas->width = r["width"].get<int>();
   canvas->height = r["height"].get<int>();
   canvas->dpi = r.contains("dpi") && r["dpi"].is_number() ? r["dpi"].get<double>() : 0;
@@ -75,11 +72,22 @@ Status ReadCanvas(const fs::path& dir, const std::string& page, const fs::path& 
   canvas->label = IdentityTitle(identity);
   if (canvas->label.empty()) canvas->label = dir.parent_path().filename().string();
   if (!page.empty()) canvas->label += ", " + page;
-  canvas->image_id = image_base + "/" + EncodeIdentifier(rel.generic_string());
+  canvas->image_id = image_base + "/" + EncodeIdentifier(rel);
   return Status::Ok();
 }
 
 }  // namespace
+
+Status PathUnderRoot(const std::string& root, const std::string& file, std::string* relative) {
+  std::error_code ec;
+  const fs::path rel =
+      fs::relative(fs::weakly_canonical(file, ec), fs::weakly_canonical(root, ec), ec);
+  if (ec || rel.empty() || *rel.begin() == "..") {
+    return Status::Error(file + ": not under the served folder " + root);
+  }
+  *relative = rel.generic_string();
+  return Status::Ok();
+}
 
 Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid) {
   Status s = StartVips();

@@ -27,6 +27,10 @@ inline constexpr const char* kIiifManifestName = "iiif-manifest.json";
 // resolution, ICC profile and XMP.
 Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid);
 
+// `file`'s path relative to the served folder `root` ('/' between folders), as the web server
+// and the image server see it; an error when it does not lie under `root`.
+Status PathUnderRoot(const std::string& root, const std::string& file, std::string* relative);
+
 // One restored page as a canvas.
 struct IiifCanvas {
   std::string label;     // "MS 12, 3 recto", "MS 12, 3v-4r, left"

@@ -50,6 +50,11 @@ constexpr Picture kPictures[] = {
 constexpr const char* kSections[] = {"options", "sizes", "stages_seconds", "pixels",   "height_mm",
                                      "outline", "sheet", "flattening",     "restored", "sampling"};
 
+// A FADGI level as the report says it: "3-star", or "below 1-star".
+std::string StarLevel(int stars) {
+  return stars > 0 ? std::to_string(stars) + "-star" : "below 1-star";
+}
+
 std::string PictureFile(const Picture& p, const std::string& page) {
   return std::string(p.stem) + (page.empty() ? "" : "-" + page) + ".png";
 }
@@ -139,11 +144,10 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
       const std::string of = page.page.empty() ? "" : " (" + page.page + ")";
       for (const FadgiFigure& f : page.figures) {
         h << "<tr><th>" << HtmlEscape(f.name + of) << "</th><td>" << HtmlEscape(f.value)
-          << "</td><td>" << (f.stars > 0 ? std::to_string(f.stars) + "-star" : "below 1-star")
-          << "</td><td>" << HtmlEscape(f.basis) << "</td></tr>\n";
+          << "</td><td>" << StarLevel(f.stars) << "</td><td>" << HtmlEscape(f.basis)
+          << "</td></tr>\n";
       }
-      h << "<tr><th>level" << HtmlEscape(of) << "</th><td colspan=3><b>"
-        << (page.stars > 0 ? std::to_string(page.stars) + "-star" : "below 1-star")
+      h << "<tr><th>level" << HtmlEscape(of) << "</th><td colspan=3><b>" << StarLevel(page.stars)
         << "</b> in what vellum measures (tone, colour and noise need a target and are not "
            "judged here)</td></tr>\n";
     }

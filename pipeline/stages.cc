@@ -320,14 +320,14 @@ std::map<std::string, std::string> Provenance(const RestoreResult& restored,
   const ReportValue* calibration = FindValue(earlier, "provenance", "calibration_sha256");
   if (calibration) out["calibration_sha256"] = calibration->text;
   Json options = Json::object();
-  std::vector<StageReport> all = earlier;
-  all.push_back(own);
-  for (const StageReport& stage : all) {
-    if (!stage.page.empty() && stage.page != page) continue;
+  auto add_options = [&](const StageReport& stage) {
+    if (!stage.page.empty() && stage.page != page) return;
     for (const ReportValue& v : stage.values) {
       if (v.section == "options") options[v.key] = v.is_text ? Json(v.text) : JsonNumber(v.number);
     }
-  }
+  };
+  for (const StageReport& stage : earlier) add_options(stage);
+  add_options(own);
   out["options"] = options.dump();
   return out;
 }

@@ -25,12 +25,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-std::string Shell(const std::string& command, int* status) {
-  const vellum::ShellResult r = vellum::Shell(command);
-  *status = r.exit_code;
-  return r.output;
-}
+using vellum::Shell;
 
 // An HTTP GET with curl: the body into `file`, the status code returned (0: no answer).
 int Get(const std::string& url, const fs::path& file) {

@@ -16,24 +16,18 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string RunCommand(const std::string& command, int* status) {
-  const vellum::ShellResult r = vellum::Shell(command);
-  *status = r.exit_code;
-  return r.output;
-}
-
 TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   const fs::path dir = fs::temp_directory_path() / ("vellum_report_" + std::to_string(getpid()));
   fs::remove_all(dir);
   const std::string tool = VELLUM_BIN;
   int status = 0;
   std::string out =
-      RunCommand(tool + " export " + VELLUM_LOG + " " + (dir / "scan").string(), &status);
+      vellum::Shell(tool + " export " + VELLUM_LOG + " " + (dir / "scan").string(), &status);
   ASSERT_EQ(status, 0) << out;
-  out = RunCommand(tool + " process --scan " + (dir / "scan").string() + " --calibration " +
-                       (dir / "scan" / "calibration.yaml").string() + " --out " +
-                       (dir / "result").string(),
-                   &status);
+  out = vellum::Shell(tool + " process --scan " + (dir / "scan").string() + " --calibration " +
+                          (dir / "scan" / "calibration.yaml").string() + " --out " +
+                          (dir / "result").string(),
+                      &status);
   ASSERT_EQ(status, 0) << out;
   const fs::path html = dir / "result" / "report.html";
   ASSERT_TRUE(fs::exists(html));
@@ -45,7 +39,7 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
     EXPECT_GT(image.cols, 100) << picture;
   }
   // The page counts the images that loaded into <body data-images="loaded/total">.
-  out = RunCommand(
+  out = vellum::Shell(
       "timeout 120 chromium --headless --no-sandbox --disable-gpu --virtual-time-budget=5000 "
       "--dump-dom file://" +
           html.string(),

@@ -236,7 +236,9 @@ TEST(Restore, TheSamplingMapIsTheCamerasTrueSampling) {
     EXPECT_NEAR(map.p5_ppi / p5, 1.0, 0.05);
     EXPECT_NEAR(p.restored.dpi, std::round(p.restored.finest_ppi), 0.5);
     EXPECT_NEAR(p.restored.finest_ppi / p95, 1.0, 0.02);
-    if (shape == PageShape::kCurl) EXPECT_LT(p5, 0.8 * median) << "the curl should slope";
+    if (shape == PageShape::kCurl) {
+      EXPECT_LT(p5, 0.8 * median) << "the curl should slope";
+    }
   }
 }
 

@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <string>
+#include <utility>
 
 namespace vellum {
 
@@ -24,6 +25,13 @@ inline ShellResult Shell(const std::string& command) {
   const int status = pclose(p);
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
+}
+
+// The same, for tests that keep the exit code apart: the output, and the exit code in `*status`.
+inline std::string Shell(const std::string& command, int* status) {
+  ShellResult r = Shell(command);
+  *status = r.exit_code;
+  return std::move(r.output);
 }
 
 }  // namespace vellum

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -71,8 +72,11 @@ void Sample(const cv::Mat& src, double x, double y, double* out) {
   }
 }
 
+// Each pixel of `dst` inside a triangle from `src` through the triangle's map, with its own
+// supersampling but at most `max_samples` per pixel side.
 template <typename T, int C>
-void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst) {
+void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
+            int max_samples = std::numeric_limits<int>::max()) {
   const int bands = (dst->rows + kBandRows - 1) / kBandRows;
   cv::parallel_for_(
       cv::Range(0, bands),
@@ -96,7 +100,7 @@ void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst)
             if (std::fabs(area) < 1e-12) continue;
             const double inv_area = 1.0 / area;
             const cv::Matx23d& m = t.source_from_dest;
-            const int n = t.samples;
+            const int n = std::min(t.samples, max_samples);
             const double inv_n2 = 1.0 / (n * n);
             for (int y = ya; y <= yb; ++y) {
               T* row = dst->ptr<T>(y);
@@ -277,7 +281,7 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   // Destination pixel of every node.
   std::vector<cv::Point2d> dest(flat.size());
   cv::Size size;
-  // The camera's true sampling over each triangle, and the sheet's median by flat area.
+  // The camera's true sampling over each triangle, and the sheet's finest by flat area.
   const std::vector<cv::Vec3i> triangles = SheetTriangles(mesh);
   std::vector<double> tri_ppi(triangles.size());
   {
@@ -292,7 +296,6 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     double below = 0;
     for (const auto& [ppi, area] : by_ppi) {
       below += area;
-      if (result.true_ppi == 0 && below >= 0.5 * total) result.true_ppi = ppi;
       if (below >= 0.95 * total) {
         result.finest_ppi = ppi;
         break;
@@ -381,9 +384,7 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     // would only smooth what the threshold takes away).
     cv::Mat restored_leaf = cv::Mat::zeros(size, CV_8U);
     const cv::Mat leaf255 = leaf != 0;
-    std::vector<Triangle> single = tris;
-    for (Triangle& t : single) t.samples = 1;
-    Render<uint8_t, 1>(leaf255, single, &restored_leaf);
+    Render<uint8_t, 1>(leaf255, tris, &restored_leaf, 1);
     result.mask = restored_leaf >= 128;
   }
   switch (texture.type()) {

@@ -52,9 +52,9 @@ struct RestoreResult {
   // camera pixels over each triangle of the sheet, so a slope seen at a grazing angle or a part
   // of the page far from the camera shows as coarser. It does not depend on the output dpi.
   cv::Mat sampling;
-  // The sheet's true sampling, ppi, by flat area: its median, and its finest (the 95th
-  // percentile: 5% of the sheet is sampled more finely).
-  double true_ppi = 0, finest_ppi = 0;
+  // The sheet's finest true sampling, ppi: the 95th percentile by flat area (5% of the sheet is
+  // sampled more finely).
+  double finest_ppi = 0;
 };
 
 // How finely a restored page was truly sampled (from RestoreResult::sampling, over its nonzero
