@@ -19,18 +19,6 @@ constexpr char kScanYaml[] = "scan.yaml";
 constexpr char kTexture[] = "texture.png";
 constexpr char kFormat[] = "vellum-scan";
 
-std::string Describe(const PatternSpec& s) {
-  std::string d = ToString(s.kind);
-  if (s.kind == PatternKind::kGray) {
-    d += std::string(" ") + ToString(s.axis) + " bit " + std::to_string(s.bit) +
-         (s.inverted ? " inverse" : "");
-  } else if (s.kind == PatternKind::kPhase) {
-    d += std::string(" ") + ToString(s.axis) + " step " + std::to_string(s.step) + " of " +
-         std::to_string(s.steps);
-  }
-  return d;
-}
-
 // The largest image a scan may hold, each side (a 24 MP camera is 6000 x 4000).
 constexpr uint32_t kMaxImageSide = 16384;
 

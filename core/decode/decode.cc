@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <opencv2/core/utility.hpp>
 
@@ -54,7 +55,10 @@ struct AxisPlan {
   int steps = 0;  // Phase steps, 0 if no phase patterns are used.
   int period = 0;
   std::vector<int> phase;  // Frame indices per step.
-  std::vector<float> cos_k, sin_k;
+  // cos and sin of each step in fixed point (times `fixed`): the phase sums are exact integers,
+  // the same whatever order the frames come in.
+  std::vector<int32_t> cos_k, sin_k;
+  float fixed = 1.0f;
   double sigma_scale = 0.5;  // Expected coordinate noise (px) x amplitude (DN).
 };
 
@@ -70,11 +74,14 @@ AxisPlan PlanAxis(const PatternSequence& seq, Axis axis, const DecodeOptions& op
   if (options.use_phase && seq.PhaseSteps(axis) > 0) {
     plan.steps = seq.PhaseSteps(axis);
     plan.period = seq.PhasePeriod(axis);
+    // 2^14 (a coefficient to 6e-5, far below the camera's noise), less for sequences so long
+    // that 255 x steps x it would overflow 32 bits.
+    plan.fixed = static_cast<float>(std::min<int64_t>(1 << 14, INT32_MAX / (255LL * plan.steps)));
     for (int k = 0; k < plan.steps; ++k) {
       plan.phase.push_back(seq.Find(PatternKind::kPhase, axis, 0, false, k));
       const double delta = 2.0 * M_PI * k / plan.steps;
-      plan.cos_k.push_back(static_cast<float>(std::cos(delta)));
-      plan.sin_k.push_back(static_cast<float>(std::sin(delta)));
+      plan.cos_k.push_back(static_cast<int32_t>(std::lround(plan.fixed * std::cos(delta))));
+      plan.sin_k.push_back(static_cast<int32_t>(std::lround(plan.fixed * std::sin(delta))));
     }
     // Phase noise sigma / (b sqrt(N / 2)) rad, times P / (2 pi) px per rad.
     plan.sigma_scale = plan.period / (2.0 * M_PI) * options.noise_dn / std::sqrt(plan.steps / 2.0);
@@ -86,52 +93,41 @@ struct Counters {
   int lit = 0, saturated = 0, bits = 0, modulation = 0, unwrap = 0;
 };
 
-// Per-row scratch of the decode pass.
+// Per-row scratch of the final pass.
 struct RowScratch {
-  explicit RowScratch(int width)
-      : code(width),
-        uncertain(width),
-        inverse(width),
-        s(width),
-        c(width),
-        amp(width),
-        coord(width),
-        error(width) {}
-  std::vector<uint16_t> code, uncertain;
-  std::vector<uint8_t> inverse;  // A Gray bit's inverse, where the sequence has none.
-  std::vector<float> s, c, amp, coord, error;
+  explicit RowScratch(int width) : code(width), amp(width), coord(width), error(width) {}
+  std::vector<uint16_t> code;
+  std::vector<float> amp, coord, error;
 };
+
+// Restrict-qualified parameters of functions that stay out of line are what lets GCC
+// vectorise these loops (restrict on locals, or after inlining, is ignored).
 
 // Direct and global light of one camera row (Nayar et al. 2006, as Xu & Aliaga and Moreno &
 // Taubin's scan3d-capture use it): over high-frequency patterns, each lighting half the scene,
 // a pixel sees Lmax = Ld + Lg / 2 and Lmin = Lg / 2. The black frame is subtracted first, so
 // ambient light and the projector's black level do not count as global light.
-struct LightRow {
-  std::vector<int16_t> black, direct, global, lmax, lmin;
-};
-
-// Restrict-qualified parameters of functions that stay out of line are what lets GCC
-// vectorise these loops (restrict on locals, or after inlining, is ignored).
-void LightFromExtremes(const int16_t* __restrict lmax, const int16_t* __restrict lmin,
-                       const uint8_t* __restrict b, int16_t* __restrict black,
-                       int16_t* __restrict direct, int16_t* __restrict global, int width) {
+__attribute__((noinline)) void LightFromExtremes(const uint8_t* __restrict lmax,
+                                                 const uint8_t* __restrict lmin,
+                                                 const uint8_t* __restrict b,
+                                                 int16_t* __restrict direct,
+                                                 int16_t* __restrict global, int width) {
   for (int x = 0; x < width; ++x) {
     const int16_t lo = static_cast<int16_t>(std::max(0, lmin[x] - b[x]));
-    black[x] = b[x];
     direct[x] = static_cast<int16_t>(lmax[x] - lmin[x]);
     global[x] = static_cast<int16_t>(2 * lo);
   }
 }
 
-// Classifies one Gray bit of a row into code (shifted in) and counts uncertain votes. Bit
+// Classifies one Gray bit of a row into code (at bit `shift`) and counts uncertain votes. Bit
 // classification of Xu & Aliaga: where direct light dominates, pattern vs inverse (with a
 // noise margin); where global light dominates, only a pattern clearly below the direct level
 // with its inverse above the global level (or the reverse) decides.
 __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const uint8_t* __restrict q,
-                                           const int16_t* __restrict black,
+                                           const uint8_t* __restrict black,
                                            const int16_t* __restrict direct,
                                            const int16_t* __restrict global, int16_t margin,
-                                           int16_t min_direct, uint16_t votes,
+                                           int16_t min_direct, uint16_t votes, int shift,
                                            uint16_t* __restrict code,
                                            uint16_t* __restrict uncertain, int width) {
   const int16_t neg_margin = static_cast<int16_t>(-margin);
@@ -147,65 +143,33 @@ __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const ui
     const uint16_t near = (d < margin) & (d > neg_margin);
     const uint16_t unsure = static_cast<uint16_t>((direct[x] < min_direct) | (direct_wins & near) |
                                                   ((1 - direct_wins) & (1 - (one | zero))));
-    code[x] = static_cast<uint16_t>((code[x] << 1) | bit);
+    code[x] = static_cast<uint16_t>(code[x] | (bit << shift));
     uncertain[x] = static_cast<uint16_t>(uncertain[x] + unsure * votes);
   }
 }
 
-void EstimateLight(const std::vector<int>& high_frequency, const std::vector<cv::Mat>& frames,
-                   const cv::Mat& black_frame, int y, LightRow* light) {
-  const int width = frames[0].cols;
-  for (auto* v : {&light->black, &light->direct, &light->global, &light->lmax, &light->lmin}) {
-    v->resize(width);
+// Adds one phase-shifted frame's row to the sums c += v cos(delta_k), s += v sin(delta_k).
+__attribute__((noinline)) void AccumulatePhase(const uint8_t* __restrict f, int32_t ck,
+                                               int32_t sk, int32_t* __restrict c,
+                                               int32_t* __restrict s, int width) {
+  for (int x = 0; x < width; ++x) {
+    const int32_t v = f[x];
+    c[x] += v * ck;
+    s[x] += v * sk;
   }
-  int16_t* __restrict lmax = light->lmax.data();
-  int16_t* __restrict lmin = light->lmin.data();
-  std::fill(lmax, lmax + width, 0);
-  std::fill(lmin, lmin + width, 255);
-  for (int index : high_frequency) {
-    const uint8_t* __restrict f = frames[index].ptr<uint8_t>(y);
-    for (int x = 0; x < width; ++x) {
-      lmax[x] = std::max<int16_t>(lmax[x], f[x]);
-      lmin[x] = std::min<int16_t>(lmin[x], f[x]);
-    }
-  }
-  LightFromExtremes(lmax, lmin, black_frame.ptr<uint8_t>(y), light->black.data(),
-                    light->direct.data(), light->global.data(), width);
 }
 
-// Decodes one axis of one camera row: `coordinate` gets the projector coordinate, NaN where
-// the pixel is rejected, and `modulation` the sinusoid amplitude (or (white - black) / 2 for
-// Gray code alone). Pixels with lit[x] == 0 are skipped and not counted.
-void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int y,
-                   const DecodeOptions& options, const uint8_t* lit, const float* half_contrast,
-                   const uint8_t* white, const uint8_t* black, const LightRow& light,
-                   RowScratch* sc, float* coordinate, float* modulation, Counters* count) {
-  const int width = frames[0].cols;
+// One axis of one camera row, from its classified Gray code (reflected, as accumulated) and
+// phase sums: `coordinate` gets the projector coordinate, NaN where the pixel is rejected, and
+// `modulation` the sinusoid amplitude (or (white - black) / 2 for Gray code alone). Pixels with
+// lit[x] == 0 are skipped and not counted.
+void CoordinatesRow(const AxisPlan& plan, const uint16_t* gray_code, const uint16_t* uncertain,
+                    const int32_t* c, const int32_t* s, const DecodeOptions& options,
+                    const uint8_t* lit, const float* half_contrast, int width, RowScratch* sc,
+                    float* coordinate, float* modulation, Counters* count) {
   uint16_t* __restrict code = sc->code.data();
-  uint16_t* __restrict uncertain = sc->uncertain.data();
-  std::fill(code, code + width, 0);
-  std::fill(uncertain, uncertain + width, 0);
-  const int16_t margin = static_cast<int16_t>(std::ceil(options.uncertain_bit_dn));
-  const int16_t min_direct = static_cast<int16_t>(std::ceil(options.min_contrast_dn));
-  for (int b = plan.bits - 1; b >= plan.first_bit; --b) {
-    const uint8_t* p = frames[plan.pattern[b]].ptr<uint8_t>(y);
-    const uint8_t* q = nullptr;
-    if (plan.inverse[b] >= 0) {
-      q = frames[plan.inverse[b]].ptr<uint8_t>(y);
-    } else {
-      // No inverse pattern: the one it would have given, white + black - pattern, so the bit is
-      // judged against the middle of the white and black frames.
-      uint8_t* __restrict made = sc->inverse.data();
-      for (int x = 0; x < width; ++x) {
-        made[x] = static_cast<uint8_t>(std::clamp(white[x] + black[x] - p[x], 0, 255));
-      }
-      q = made;
-    }
-    ClassifyBit(p, q, light.black.data(), light.direct.data(), light.global.data(), margin,
-                min_direct, b >= kFirstVotingBit ? 1 : 0, code, uncertain, width);
-  }
   for (int x = 0; x < width; ++x) {  // Reflected Gray code to binary.
-    uint16_t v = code[x];
+    uint16_t v = gray_code[x];
     v ^= v >> 1;
     v ^= v >> 2;
     v ^= v >> 4;
@@ -226,26 +190,14 @@ void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int
       err[x] = 0.0f;
     }
   } else {
-    float* s = sc->s.data();
-    float* c = sc->c.data();
-    std::fill(s, s + width, 0.0f);
-    std::fill(c, c + width, 0.0f);
-    for (int k = 0; k < plan.steps; ++k) {
-      const uint8_t* f = frames[plan.phase[k]].ptr<uint8_t>(y);
-      const float ck = plan.cos_k[k], sk = plan.sin_k[k];
-      for (int x = 0; x < width; ++x) {
-        const float v = f[x];
-        c[x] += v * ck;
-        s[x] += v * sk;
-      }
-    }
     const float period = static_cast<float>(plan.period);
     const float inv_period = 1.0f / period;
     const float to_px = period / (2.0f * kPi);
-    const float amp_scale = 2.0f / plan.steps;
+    const float amp_scale = 2.0f / (plan.steps * plan.fixed);
     for (int x = 0; x < width; ++x) {
-      amp[x] = amp_scale * std::sqrt(s[x] * s[x] + c[x] * c[x]);
-      float phase = Atan2Inline(s[x], c[x]);
+      const float sx = static_cast<float>(s[x]), cx = static_cast<float>(c[x]);
+      amp[x] = amp_scale * std::sqrt(sx * sx + cx * cx);
+      float phase = Atan2Inline(sx, cx);
       phase = phase < 0 ? phase + 2.0f * kPi : phase;
       const float wrapped = phase * to_px;  // In [0, period).
       const float gray = static_cast<float>(code[x]) * stripe + centre;
@@ -277,6 +229,231 @@ void DecodeAxisRow(const AxisPlan& plan, const std::vector<cv::Mat>& frames, int
 }
 
 }  // namespace
+
+// The decode in progress: what has come, what is held, and the sums so far.
+struct Decoder::Stream {
+  PatternSequence sequence;
+  cv::Size size;
+  AxisPlan axes[2];  // Column, row.
+  int white = -1, black = -1;
+  // Frames the direct/global light estimate needs: the two finest inverse-paired Gray bits of
+  // each axis (high frequency); white and black when the code has no inverses.
+  std::vector<int> high_frequency;
+  std::vector<cv::Mat> held;      // By frame index: frames come and not yet taken up.
+  std::vector<uint8_t> received;  // By frame index.
+  std::vector<uint8_t> phase_done[2], bit_done[2];  // By step, by bit.
+  int count = 0;                                    // Frames received.
+  cv::Mat code[2], uncertain[2];  // CV_16U: reflected Gray code so far; uncertain-bit votes.
+  cv::Mat cos_sum[2], sin_sum[2];  // CV_32S: phase sums so far, fixed point.
+  cv::Mat direct, global;          // CV_16S: the light estimate, once light_ready.
+  bool light_ready = false;
+  Status status = Status::Error("decode not begun");
+
+  bool Has(int index) const { return index >= 0 && received[index]; }
+  bool LightInputsIn() const {
+    if (!Has(black)) return false;
+    for (int k : high_frequency) {
+      if (!Has(k)) return false;
+    }
+    return true;
+  }
+  // Gray bit b of an axis can be classified (its light estimate aside).
+  bool BitInputsIn(const AxisPlan& plan, int b) const {
+    return Has(plan.pattern[b]) && (plan.inverse[b] >= 0 ? Has(plan.inverse[b]) : Has(white));
+  }
+};
+
+Decoder::Decoder(const DecodeOptions& options)
+    : options_(options), stream_(std::make_unique<Stream>()) {}
+Decoder::~Decoder() = default;
+
+Status Decoder::Begin(const PatternSequence& sequence, cv::Size camera_size) {
+  Stream& st = *stream_;
+  st.held.clear();
+  st.count = 0;
+  st.light_ready = false;
+  std::string why;
+  if (!options_.Check(&why)) return st.status = Status::Error("decode options: " + why);
+  if (!sequence.Check(&why)) return st.status = Status::Error("pattern sequence: " + why);
+  if (camera_size.width <= 0 || camera_size.height <= 0) {
+    return st.status = Status::Error("decode: the camera size is empty");
+  }
+  st.sequence = sequence;
+  st.size = camera_size;
+  const int n = static_cast<int>(sequence.patterns.size());
+  st.held.assign(n, cv::Mat());
+  st.received.assign(n, 0);
+  st.white = sequence.Find(PatternKind::kWhite);
+  st.black = sequence.Find(PatternKind::kBlack);
+  st.axes[0] = PlanAxis(sequence, Axis::kColumn, options_);
+  st.axes[1] = PlanAxis(sequence, Axis::kRow, options_);
+  st.high_frequency.clear();
+  for (const AxisPlan& plan : st.axes) {
+    const int low = std::max(1, plan.first_bit);
+    for (int b = low; b <= low + 1 && b < plan.bits; ++b) {
+      if (plan.inverse[b] < 0) continue;
+      st.high_frequency.push_back(plan.pattern[b]);
+      st.high_frequency.push_back(plan.inverse[b]);
+    }
+  }
+  const AxisPlan& first = st.axes[0].present ? st.axes[0] : st.axes[1];
+  if (st.high_frequency.empty() && first.inverse[first.first_bit] >= 0) {
+    st.high_frequency = {first.pattern[first.first_bit], first.inverse[first.first_bit]};
+  }
+  if (st.high_frequency.empty()) st.high_frequency = {st.white, st.black};
+  for (int a = 0; a < 2; ++a) {
+    const AxisPlan& plan = st.axes[a];
+    st.bit_done[a].assign(plan.bits, 0);
+    st.phase_done[a].assign(plan.steps, 0);
+    if (!plan.present) continue;
+    st.code[a].create(camera_size, CV_16U);
+    st.code[a].setTo(0);
+    st.uncertain[a].create(camera_size, CV_16U);
+    st.uncertain[a].setTo(0);
+    if (plan.steps > 0) {
+      st.cos_sum[a].create(camera_size, CV_32S);
+      st.cos_sum[a].setTo(0);
+      st.sin_sum[a].create(camera_size, CV_32S);
+      st.sin_sum[a].setTo(0);
+    }
+  }
+  st.direct.create(camera_size, CV_16S);
+  st.global.create(camera_size, CV_16S);
+  return st.status = Status::Ok();
+}
+
+Status Decoder::Store(int index, const cv::Mat& frame) {
+  Stream& st = *stream_;
+  if (!st.status.ok()) return st.status;
+  const int n = static_cast<int>(st.received.size());
+  auto fail = [&](const std::string& why) {
+    return st.status = Status::Error("frame " + std::to_string(index) + ": " + why);
+  };
+  if (index < 0 || index >= n) {
+    return fail("no such frame: the pattern sequence has " + std::to_string(n));
+  }
+  if (st.received[index]) return fail("given twice");
+  if (frame.empty() || frame.type() != CV_8UC1 || frame.size() != st.size) {
+    return fail(frame.empty() ? "is empty" : frame.type() != CV_8UC1
+                                                 ? "is not 8-bit single channel"
+                                                 : "is " + std::to_string(frame.cols) + "x" +
+                                                       std::to_string(frame.rows) + ", not the camera's " +
+                                                       std::to_string(st.size.width) + "x" +
+                                                       std::to_string(st.size.height));
+  }
+  st.received[index] = 1;
+  ++st.count;
+  const PatternSpec& spec = st.sequence.patterns[index];
+  // Phase frames of an axis decoded by Gray code alone are not needed.
+  const bool unused = spec.kind == PatternKind::kPhase &&
+                      st.axes[spec.axis == Axis::kColumn ? 0 : 1].steps == 0;
+  // A frame that does not own its pixels (wrapping a message's buffer) is copied.
+  if (!unused) st.held[index] = frame.u != nullptr ? frame : frame.clone();
+  return Status::Ok();
+}
+
+Status Decoder::Add(int index, const cv::Mat& frame) {
+  const Status s = Store(index, frame);
+  if (s.ok()) Digest();
+  return s;
+}
+
+int Decoder::Received() const { return stream_->count; }
+
+size_t Decoder::HeldFrameBytes() const {
+  size_t bytes = 0;
+  for (const cv::Mat& m : stream_->held) bytes += m.total() * m.elemSize();
+  return bytes;
+}
+
+void Decoder::Digest() {
+  Stream& st = *stream_;
+  if (!st.status.ok()) return;
+  const bool do_light = !st.light_ready && st.LightInputsIn();
+  const bool light = st.light_ready || do_light;
+  struct BitJob {
+    int axis, bit;
+  };
+  struct PhaseJob {
+    int axis, step;
+  };
+  std::vector<BitJob> bits;
+  std::vector<PhaseJob> phases;
+  for (int a = 0; a < 2; ++a) {
+    const AxisPlan& plan = st.axes[a];
+    for (int b = plan.first_bit; light && b < plan.bits; ++b) {
+      if (!st.bit_done[a][b] && st.BitInputsIn(plan, b)) bits.push_back({a, b});
+    }
+    for (int k = 0; k < plan.steps; ++k) {
+      if (!st.phase_done[a][k] && st.Has(plan.phase[k])) phases.push_back({a, k});
+    }
+  }
+  if (!do_light && bits.empty() && phases.empty()) return;
+  const int width = st.size.width;
+  const int16_t margin = static_cast<int16_t>(std::ceil(options_.uncertain_bit_dn));
+  const int16_t min_direct = static_cast<int16_t>(std::ceil(options_.min_contrast_dn));
+  // One pass over the rows takes up every frame that can be: with a whole scan at hand, that
+  // is all of them, row by row in cache.
+  cv::parallel_for_(cv::Range(0, st.size.height), [&](const cv::Range& range) {
+    std::vector<uint8_t> lmax(width), lmin(width), made(width);
+    for (int y = range.start; y < range.end; ++y) {
+      const uint8_t* black = st.held[st.black].ptr<uint8_t>(y);
+      int16_t* direct = st.direct.ptr<int16_t>(y);
+      int16_t* global = st.global.ptr<int16_t>(y);
+      if (do_light) {
+        std::fill(lmax.begin(), lmax.end(), 0);
+        std::fill(lmin.begin(), lmin.end(), 255);
+        for (int index : st.high_frequency) {
+          const uint8_t* f = st.held[index].ptr<uint8_t>(y);
+          for (int x = 0; x < width; ++x) {
+            lmax[x] = std::max(lmax[x], f[x]);
+            lmin[x] = std::min(lmin[x], f[x]);
+          }
+        }
+        LightFromExtremes(lmax.data(), lmin.data(), black, direct, global, width);
+      }
+      for (const BitJob& job : bits) {
+        const AxisPlan& plan = st.axes[job.axis];
+        const uint8_t* p = st.held[plan.pattern[job.bit]].ptr<uint8_t>(y);
+        const uint8_t* q = nullptr;
+        if (plan.inverse[job.bit] >= 0) {
+          q = st.held[plan.inverse[job.bit]].ptr<uint8_t>(y);
+        } else {
+          // No inverse pattern: the one it would have given, white + black - pattern, so the
+          // bit is judged against the middle of the white and black frames.
+          const uint8_t* white = st.held[st.white].ptr<uint8_t>(y);
+          for (int x = 0; x < width; ++x) {
+            made[x] = static_cast<uint8_t>(std::clamp(white[x] + black[x] - p[x], 0, 255));
+          }
+          q = made.data();
+        }
+        ClassifyBit(p, q, black, direct, global, margin, min_direct,
+                    job.bit >= kFirstVotingBit ? 1 : 0, job.bit - plan.first_bit, st.code[job.axis].ptr<uint16_t>(y),
+                    st.uncertain[job.axis].ptr<uint16_t>(y), width);
+      }
+      for (const PhaseJob& job : phases) {
+        const AxisPlan& plan = st.axes[job.axis];
+        AccumulatePhase(st.held[plan.phase[job.step]].ptr<uint8_t>(y), plan.cos_k[job.step],
+                        plan.sin_k[job.step], st.cos_sum[job.axis].ptr<int32_t>(y),
+                        st.sin_sum[job.axis].ptr<int32_t>(y), width);
+      }
+    }
+  });
+  // Frames taken up are let go (white and black are kept to the end).
+  st.light_ready = light;
+  auto let_go = [&](int index) {
+    if (index >= 0 && index != st.white && index != st.black) st.held[index].release();
+  };
+  for (const BitJob& job : bits) {
+    st.bit_done[job.axis][job.bit] = 1;
+    let_go(st.axes[job.axis].pattern[job.bit]);
+    let_go(st.axes[job.axis].inverse[job.bit]);
+  }
+  for (const PhaseJob& job : phases) {
+    st.phase_done[job.axis][job.step] = 1;
+    let_go(st.axes[job.axis].phase[job.step]);
+  }
+}
 
 bool DecodeOptions::Check(std::string* why) const {
   if (min_contrast_dn < 0 || min_modulation_dn < 0 || uncertain_bit_dn < 0) {
@@ -487,60 +664,46 @@ void LocalLinearFit(const std::vector<cv::Mat>& values, const cv::Mat& weights, 
 
 void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>& frames,
                      DecodeResult* result) {
-  const DecodeOptions& options = options_;
-  result->status = Status::Error("decode not run");
-  result->stats = DecodeStats();
-  std::string why;
-  if (!options.Check(&why)) {
-    result->status = Status::Error("decode options: " + why);
-    return;
-  }
-  if (!sequence.Check(&why)) {
-    result->status = Status::Error("pattern sequence: " + why);
-    return;
-  }
+  result->status = Begin(sequence, frames.empty() ? cv::Size() : frames[0].size());
+  if (!result->status.ok()) return;
   if (frames.size() != sequence.patterns.size()) {
     result->status = Status::Error("the scan has " + std::to_string(frames.size()) +
                                    " frames but its pattern sequence has " +
                                    std::to_string(sequence.patterns.size()));
     return;
   }
+  // Every frame first, then one pass over the rows takes them all up.
   for (size_t k = 0; k < frames.size(); ++k) {
-    if (frames[k].empty() || frames[k].type() != CV_8UC1 || frames[k].size() != frames[0].size()) {
-      result->status = Status::Error("frame " + std::to_string(k) +
-                                     " is empty, not 8-bit single channel, or differs in size "
-                                     "from frame 0");
-      return;
-    }
+    result->status = Store(static_cast<int>(k), frames[k]);
+    if (!result->status.ok()) return;
   }
-  const cv::Size size = frames[0].size();
+  Digest();
+  Finish(result);
+}
+
+void Decoder::Finish(DecodeResult* result) {
+  Stream& st = *stream_;
+  const DecodeOptions& options = options_;
+  result->stats = DecodeStats();
+  result->status = st.status;
+  if (!st.status.ok()) return;
+  const int n = static_cast<int>(st.received.size());
+  if (st.count < n) {
+    int first = 0;
+    while (st.received[first]) ++first;
+    result->status = st.status = Status::Error(
+        "frame " + std::to_string(first) + " (pattern '" + Describe(st.sequence.patterns[first]) +
+        "') never came: " + std::to_string(st.count) + " of " + std::to_string(n) + " frames");
+    return;
+  }
+  Digest();
+  st.status = Status::Error("decode finished; begin the next");
+  const cv::Size size = st.size;
   const int width = size.width, height = size.height;
-  const AxisPlan col = PlanAxis(sequence, Axis::kColumn, options);
-  const AxisPlan row = PlanAxis(sequence, Axis::kRow, options);
-  const cv::Mat& white = frames[sequence.Find(PatternKind::kWhite)];
-  const cv::Mat& black = frames[sequence.Find(PatternKind::kBlack)];
-  // High-frequency patterns for the direct/global estimate: Gray bits 1 and 2 (stripes of 4
-  // and 8 projector pixels: fine, yet above the defocus) of each axis, with their inverses.
-  // A code without its finest bits uses its two finest; without inverses, no pattern pair lights
-  // every pixel once, and the white and black frames give the light (direct = white - black,
-  // no global light seen).
-  std::vector<int> high_frequency;
-  for (const AxisPlan* plan : {&col, &row}) {
-    const int low = std::max(1, plan->first_bit);
-    for (int b = low; b <= low + 1 && b < plan->bits; ++b) {
-      if (plan->inverse[b] < 0) continue;
-      high_frequency.push_back(plan->pattern[b]);
-      high_frequency.push_back(plan->inverse[b]);
-    }
-  }
-  const AxisPlan& first = col.present ? col : row;
-  if (high_frequency.empty() && first.inverse[first.first_bit] >= 0) {
-    // A projector of 2 or 3 pixels: its only bit.
-    high_frequency = {first.pattern[first.first_bit], first.inverse[first.first_bit]};
-  }
-  if (high_frequency.empty()) {
-    high_frequency = {sequence.Find(PatternKind::kWhite), sequence.Find(PatternKind::kBlack)};
-  }
+  const AxisPlan& col = st.axes[0];
+  const AxisPlan& row = st.axes[1];
+  const cv::Mat& white = st.held[st.white];
+  const cv::Mat& black = st.held[st.black];
 
   cv::Mat& out_x = result->projector_x;
   cv::Mat& out_y = result->projector_y;
@@ -554,10 +717,17 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
 
   cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
     RowScratch scratch(width);
-    LightRow light;
     std::vector<uint8_t> on(width);
     std::vector<float> mod_x(width, 0.0f), mod_y(width, 0.0f);
     Counters count;
+    auto axis_row = [&](int a, int y, float* coordinate, float* modulation, const float* amp) {
+      const AxisPlan& plan = st.axes[a];
+      const bool phase = plan.steps > 0;
+      CoordinatesRow(plan, st.code[a].ptr<uint16_t>(y), st.uncertain[a].ptr<uint16_t>(y),
+                     phase ? st.cos_sum[a].ptr<int32_t>(y) : nullptr,
+                     phase ? st.sin_sum[a].ptr<int32_t>(y) : nullptr, options, on.data(), amp,
+                     width, &scratch, coordinate, modulation, &count);
+    };
     for (int y = range.start; y < range.end; ++y) {
       const uint8_t* wr = white.ptr<uint8_t>(y);
       const uint8_t* br = black.ptr<uint8_t>(y);
@@ -572,20 +742,17 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
         count.lit += has_light;
         count.saturated += has_light & clipped;
       }
-      EstimateLight(high_frequency, frames, black, y, &light);
       float* px = out_x.ptr<float>(y);
       float* py = out_y.ptr<float>(y);
       if (col.present) {
-        DecodeAxisRow(col, frames, y, options, on.data(), amp, wr, br, light, &scratch, px,
-                      mod_x.data(), &count);
+        axis_row(0, y, px, mod_x.data(), amp);
         // A pixel rejected by the column code is not counted again by the row code.
         for (int x = 0; x < width; ++x) on[x] = on[x] & (px[x] == px[x]);
       } else {
         std::fill(px, px + width, kNaN);
       }
       if (row.present) {
-        DecodeAxisRow(row, frames, y, options, on.data(), amp, wr, br, light, &scratch, py,
-                      mod_y.data(), &count);
+        axis_row(1, y, py, mod_y.data(), amp);
         for (int x = 0; x < width; ++x) px[x] = py[x] == py[x] ? px[x] : kNaN;
       } else {
         std::fill(py, py + width, kNaN);
@@ -620,6 +787,7 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
     bad_mod += count.modulation;
     bad_unwrap += count.unwrap;
   });
+  st.held.assign(n, cv::Mat());  // The white and black frames too: the stream is done.
 
   std::vector<cv::Mat> raw;
   if (col.present) raw.push_back(out_x);
@@ -684,17 +852,17 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
   result->valid = weight_ > 0;
   result->has_columns = col.present;
   result->has_rows = row.present;
-  DecodeStats& st = result->stats;
-  st.pixels = width * height;
-  st.lit = lit;
-  st.valid = cv::countNonZero(result->valid);
-  st.rejected_saturated = saturated;
-  st.rejected_bits = bad_bits;
-  st.gray_stripe_px = 1 << std::max(col.first_bit, row.first_bit);
-  st.step_px = col.steps + row.steps == 0 ? st.gray_stripe_px : 0;
-  st.rejected_modulation = bad_mod;
-  st.rejected_unwrap = bad_unwrap;
-  st.fit_fallbacks = fallbacks;
+  DecodeStats& stats = result->stats;
+  stats.pixels = width * height;
+  stats.lit = lit;
+  stats.valid = cv::countNonZero(result->valid);
+  stats.rejected_saturated = saturated;
+  stats.rejected_bits = bad_bits;
+  stats.gray_stripe_px = 1 << std::max(col.first_bit, row.first_bit);
+  stats.step_px = col.steps + row.steps == 0 ? stats.gray_stripe_px : 0;
+  stats.rejected_modulation = bad_mod;
+  stats.rejected_unwrap = bad_unwrap;
+  stats.fit_fallbacks = fallbacks;
   result->status = Status::Ok();
 }
 

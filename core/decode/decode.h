@@ -7,6 +7,7 @@
 // each pixel's coordinate from its neighbourhood, so dark ink borrows from nearby paper.
 #pragma once
 
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -61,9 +62,20 @@ struct DecodeResult {
 
 // Decodes scans and keeps its scratch buffers between calls (a daemon decodes many scans; fresh
 // 8 MB buffers per call would cost more in page faults than the arithmetic).
+//
+// A scan is decoded whole (Decode) or frame by frame as a camera gives them or a reader reads
+// them (Begin, Add each frame once in any order, Finish). Each frame is taken up as soon as
+// what it depends on is in: a phase frame at once, a Gray bit once its inverse (or the white
+// frame) and the light estimate's high-frequency frames are; then it is let go. Memory is the
+// camera's pixels times a fixed count (the sums, the white and black frames, the light
+// estimate's few frames), not times the frame count, when the sequence shows its finest Gray
+// bits first (MakePatternSequence does); any order decodes, holding what it must.
 class Decoder {
  public:
-  explicit Decoder(const DecodeOptions& options = DecodeOptions()) : options_(options) {}
+  explicit Decoder(const DecodeOptions& options = DecodeOptions());
+  ~Decoder();
+  Decoder(const Decoder&) = delete;
+  Decoder& operator=(const Decoder&) = delete;
 
   const DecodeOptions& options() const { return options_; }
   // frames[k] is the camera image (CV_8U, one channel) taken while sequence.patterns[k] was
@@ -71,8 +83,25 @@ class Decoder {
   void Decode(const PatternSequence& sequence, const std::vector<cv::Mat>& frames,
               DecodeResult* result);
 
+  // Starts a scan, forgetting any unfinished one.
+  Status Begin(const PatternSequence& sequence, cv::Size camera_size);
+  // Frame `index` of the sequence (CV_8U, one channel, the camera's size). A frame is kept by
+  // reference until it is taken up (do not write into it meanwhile); one that does not own its
+  // pixels is copied. An error (no such index, a frame twice, a wrong size) names the frame and
+  // ends the scan: Finish reports it.
+  Status Add(int index, const cv::Mat& frame);
+  // Decodes what the frames gave; an error names the first frame that never came.
+  void Finish(DecodeResult* result);
+  int Received() const;           // Frames added since Begin.
+  size_t HeldFrameBytes() const;  // Bytes of frames held now, waiting to be taken up.
+
  private:
+  struct Stream;
+  Status Store(int index, const cv::Mat& frame);  // Checks and keeps a frame.
+  void Digest();  // Takes up every frame whose inputs are in, in one pass over the rows.
+
   DecodeOptions options_;
+  std::unique_ptr<Stream> stream_;
   cv::Mat weight_, sigma_,
       robust_weight_;         // Per-pixel fit weight, expected noise (px), IRLS weight.
   std::vector<cv::Mat> fit_;  // Fitted coordinates per encoded axis.

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <opencv2/imgproc.hpp>
 
 namespace vellum {
 namespace {
@@ -198,6 +200,122 @@ TEST(Decode, RejectsWrongFrameCountAndMixedSizes) {
   EXPECT_FALSE(r.status.ok());
   EXPECT_NE(r.status.message().find("frame 3"), std::string::npos) << r.status.message();
   EXPECT_FALSE(DecodeResult().status.ok()) << "a default result must say 'not run'";
+}
+
+// Frames as a camera sees them: a page at 70% of the projector's light over a 12 DN black
+// level, slightly defocused, with 1.5 DN noise (the default DecodeOptions::noise_dn).
+std::vector<cv::Mat> CameraFrames(const PatternSequence& seq, uint64_t seed) {
+  cv::RNG rng(seed);
+  std::vector<cv::Mat> frames;
+  for (const PatternSpec& s : seq.patterns) {
+    cv::Mat f;
+    RenderPattern(s, seq.projector_size).convertTo(f, CV_32F, 0.7, 12.0);
+    cv::GaussianBlur(f, f, cv::Size(3, 3), 0.6);
+    cv::Mat noise(f.size(), CV_32F);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.5);
+    f += noise;
+    f.convertTo(f, CV_8U);
+    frames.push_back(f);
+  }
+  return frames;
+}
+
+// Frame by frame in any order decodes exactly as the whole scan does (the phase sums are exact
+// integers, so their order cannot matter).
+TEST(StreamingDecode, AnyOrderGivesTheWholeScansDecode) {
+  const PatternSequence seq = MakePatternSequence(PatternOptions{{160, 96}});
+  const std::vector<cv::Mat> frames = CameraFrames(seq, 7);
+  const DecodeResult whole = Decode(seq, frames);
+  ASSERT_TRUE(whole.status.ok()) << whole.status.message();
+  ASSERT_GT(whole.stats.valid, 160 * 96 * 9 / 10);
+  std::vector<int> order(frames.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = static_cast<int>(k);
+  cv::RNG rng(11);
+  for (int trial = 0; trial < 3; ++trial) {
+    if (trial == 1) std::reverse(order.begin(), order.end());
+    if (trial == 2) cv::randShuffle(order, 1.0, &rng);
+    Decoder decoder;
+    ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
+    for (int k : order) ASSERT_TRUE(decoder.Add(k, frames[k]).ok()) << k;
+    DecodeResult streamed;
+    decoder.Finish(&streamed);
+    ASSERT_TRUE(streamed.status.ok()) << streamed.status.message();
+    EXPECT_EQ(cv::norm(streamed.valid, whole.valid, cv::NORM_INF), 0) << "trial " << trial;
+    EXPECT_EQ(streamed.stats.valid, whole.stats.valid);
+    EXPECT_EQ(streamed.stats.rejected_bits, whole.stats.rejected_bits);
+    // NaN where invalid: compare on valid pixels only.
+    for (const auto& [a, b] : {std::pair{&streamed.projector_x, &whole.projector_x},
+                               std::pair{&streamed.projector_y, &whole.projector_y}}) {
+      cv::Mat d = cv::abs(*a - *b);
+      d.setTo(0, whole.valid == 0);
+      double worst = 0;
+      cv::minMaxLoc(d, nullptr, &worst);
+      EXPECT_EQ(worst, 0) << "trial " << trial;
+    }
+    EXPECT_EQ(decoder.HeldFrameBytes(), 0u) << "a finished decode holds no frame";
+  }
+}
+
+// In the station's own order (MakePatternSequence: white, black, finest Gray bits first) a frame
+// is let go as soon as it is taken up: the frames held never exceed white and black, the light
+// estimate's 8 high-frequency frames and the finest bits before them (4 frames), against the
+// 58 frames of a scan held whole.
+TEST(StreamingDecode, InTheStationsOrderFewFramesAreEverHeld) {
+  const PatternSequence seq = MakePatternSequence(PatternOptions{{160, 96}});
+  ASSERT_EQ(seq.patterns.size(), 2u + 2 * (8 + 7) + 16u);  // 160 x 96: 8 and 7 Gray bits.
+  const std::vector<cv::Mat> frames = CameraFrames(seq, 3);
+  const size_t frame_bytes = frames[0].total();
+  Decoder decoder;
+  ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
+  size_t peak = 0;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    ASSERT_TRUE(decoder.Add(static_cast<int>(k), frames[k]).ok());
+    peak = std::max(peak, decoder.HeldFrameBytes());
+    EXPECT_EQ(decoder.Received(), static_cast<int>(k + 1));
+  }
+  EXPECT_LE(peak, 14 * frame_bytes);
+  // After the light estimate only white and black stay.
+  EXPECT_EQ(decoder.HeldFrameBytes(), 2 * frame_bytes);
+  DecodeResult r;
+  decoder.Finish(&r);
+  ASSERT_TRUE(r.status.ok()) << r.status.message();
+  EXPECT_EQ(r.stats.valid, Decode(seq, frames).stats.valid);
+}
+
+TEST(StreamingDecode, AFrameMissingTwiceOrOfTheWrongSizeIsNamed) {
+  const PatternSequence seq = MakePatternSequence(PatternOptions{{64, 32}});
+  const std::vector<cv::Mat> frames = IdealFrames(seq);
+  Decoder decoder;
+  DecodeResult r;
+  ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
+  for (size_t k = 0; k < frames.size(); ++k) {
+    if (k != 9) {
+      ASSERT_TRUE(decoder.Add(static_cast<int>(k), frames[k]).ok());
+    }
+  }
+  decoder.Finish(&r);
+  ASSERT_FALSE(r.status.ok());
+  EXPECT_NE(r.status.message().find("frame 9 (pattern '" + Describe(seq.patterns[9]) +
+                                    "') never came: 39 of 40 frames"),
+            std::string::npos)
+      << r.status.message();
+
+  ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
+  ASSERT_TRUE(decoder.Add(4, frames[4]).ok());
+  Status s = decoder.Add(4, frames[4]);
+  EXPECT_NE(s.message().find("frame 4: given twice"), std::string::npos) << s.message();
+  decoder.Finish(&r);
+  EXPECT_EQ(r.status.message(), s.message()) << "the scan ends with its first error";
+
+  ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
+  s = decoder.Add(5, cv::Mat(10, 20, CV_8U, cv::Scalar(0)));
+  EXPECT_NE(s.message().find("frame 5: is 20x10, not the camera's 64x32"), std::string::npos)
+      << s.message();
+  s = decoder.Add(58, frames[0]);
+  EXPECT_FALSE(s.ok());
+  ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
+  EXPECT_NE(decoder.Add(58, frames[0]).message().find("frame 58: no such frame"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -92,6 +92,18 @@ int GrayBitsFor(int extent) {
   return bits;
 }
 
+std::string Describe(const PatternSpec& s) {
+  std::string d = ToString(s.kind);
+  if (s.kind == PatternKind::kGray) {
+    d += std::string(" ") + ToString(s.axis) + " bit " + std::to_string(s.bit) +
+         (s.inverted ? " inverse" : "");
+  } else if (s.kind == PatternKind::kPhase) {
+    d += std::string(" ") + ToString(s.axis) + " step " + std::to_string(s.step) + " of " +
+         std::to_string(s.steps);
+  }
+  return d;
+}
+
 PatternSequence MakePatternSequence(const PatternOptions& options) {
   std::string why;
   VELLUM_DEMAND(options.Check(&why));
@@ -100,14 +112,24 @@ PatternSequence MakePatternSequence(const PatternOptions& options) {
   auto& p = seq.patterns;
   p.push_back({PatternKind::kWhite});
   p.push_back({PatternKind::kBlack});
+  // Gray code finest bit first, the axes taking turns: the decoder's light estimate needs the
+  // finest bits of both axes, and once it has them every later frame is taken up as it comes
+  // (Decoder::Add), so a scan is decoded while it is captured in memory that does not grow
+  // with its frames.
+  int most_bits = 0;
   for (Axis axis : {Axis::kColumn, Axis::kRow}) {
-    if ((axis == Axis::kColumn && !options.columns) || (axis == Axis::kRow && !options.rows)) {
-      continue;
-    }
+    const bool on = axis == Axis::kColumn ? options.columns : options.rows;
     const int extent =
         axis == Axis::kColumn ? options.projector_size.width : options.projector_size.height;
-    for (int bit = GrayBitsFor(extent) - 1; bit >= options.gray_skip_bits; --bit) {
-      for (bool inverted : {false, true}) {  // Coarse to fine.
+    if (on) most_bits = std::max(most_bits, GrayBitsFor(extent));
+  }
+  for (int bit = options.gray_skip_bits; bit < most_bits; ++bit) {
+    for (Axis axis : {Axis::kColumn, Axis::kRow}) {
+      const bool on = axis == Axis::kColumn ? options.columns : options.rows;
+      const int extent =
+          axis == Axis::kColumn ? options.projector_size.width : options.projector_size.height;
+      if (!on || bit >= GrayBitsFor(extent)) continue;
+      for (bool inverted : {false, true}) {
         if (inverted && !options.gray_inverses) continue;
         PatternSpec s;
         s.kind = PatternKind::kGray;

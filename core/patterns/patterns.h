@@ -66,6 +66,9 @@ struct PatternSequence {
   int PhasePeriod(Axis axis) const;
 };
 
+// A pattern in words, for messages: "gray column bit 3 inverse", "phase row step 2 of 8".
+std::string Describe(const PatternSpec& spec);
+
 // The largest projector extent a sequence may describe (a 2^16-pixel-wide projector is far
 // beyond any made; larger claims are refused before any loop runs over them).
 constexpr int kMaxProjectorExtent = 1 << 16;
