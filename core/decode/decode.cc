@@ -149,9 +149,9 @@ __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const ui
 }
 
 // Adds one phase-shifted frame's row to the sums c += v cos(delta_k), s += v sin(delta_k).
-__attribute__((noinline)) void AccumulatePhase(const uint8_t* __restrict f, int32_t ck,
-                                               int32_t sk, int32_t* __restrict c,
-                                               int32_t* __restrict s, int width) {
+__attribute__((noinline)) void AccumulatePhase(const uint8_t* __restrict f, int32_t ck, int32_t sk,
+                                               int32_t* __restrict c, int32_t* __restrict s,
+                                               int width) {
   for (int x = 0; x < width; ++x) {
     const int32_t v = f[x];
     c[x] += v * ck;
@@ -243,7 +243,7 @@ struct Decoder::Stream {
   std::vector<uint8_t> received;  // By frame index.
   std::vector<uint8_t> phase_done[2], bit_done[2];  // By step, by bit.
   int count = 0;                                    // Frames received.
-  cv::Mat code[2], uncertain[2];  // CV_16U: reflected Gray code so far; uncertain-bit votes.
+  cv::Mat code[2], uncertain[2];   // CV_16U: reflected Gray code so far; uncertain-bit votes.
   cv::Mat cos_sum[2], sin_sum[2];  // CV_32S: phase sums so far, fixed point.
   cv::Mat direct, global;          // CV_16S: the light estimate, once light_ready.
   bool light_ready = false;
@@ -334,19 +334,19 @@ Status Decoder::Store(int index, const cv::Mat& frame) {
   }
   if (st.received[index]) return fail("given twice");
   if (frame.empty() || frame.type() != CV_8UC1 || frame.size() != st.size) {
-    return fail(frame.empty() ? "is empty" : frame.type() != CV_8UC1
-                                                 ? "is not 8-bit single channel"
-                                                 : "is " + std::to_string(frame.cols) + "x" +
-                                                       std::to_string(frame.rows) + ", not the camera's " +
-                                                       std::to_string(st.size.width) + "x" +
-                                                       std::to_string(st.size.height));
+    return fail(frame.empty() ? "is empty"
+                : frame.type() != CV_8UC1
+                    ? "is not 8-bit single channel"
+                    : "is " + std::to_string(frame.cols) + "x" + std::to_string(frame.rows) +
+                          ", not the camera's " + std::to_string(st.size.width) + "x" +
+                          std::to_string(st.size.height));
   }
   st.received[index] = 1;
   ++st.count;
   const PatternSpec& spec = st.sequence.patterns[index];
   // Phase frames of an axis decoded by Gray code alone are not needed.
-  const bool unused = spec.kind == PatternKind::kPhase &&
-                      st.axes[spec.axis == Axis::kColumn ? 0 : 1].steps == 0;
+  const bool unused =
+      spec.kind == PatternKind::kPhase && st.axes[spec.axis == Axis::kColumn ? 0 : 1].steps == 0;
   // A frame that does not own its pixels (wrapping a message's buffer) is copied.
   if (!unused) st.held[index] = frame.u != nullptr ? frame : frame.clone();
   return Status::Ok();
@@ -428,8 +428,9 @@ void Decoder::Digest() {
           q = made.data();
         }
         ClassifyBit(p, q, black, direct, global, margin, min_direct,
-                    job.bit >= kFirstVotingBit ? 1 : 0, job.bit - plan.first_bit, st.code[job.axis].ptr<uint16_t>(y),
-                    st.uncertain[job.axis].ptr<uint16_t>(y), width);
+                    job.bit >= kFirstVotingBit ? 1 : 0, job.bit - plan.first_bit,
+                    st.code[job.axis].ptr<uint16_t>(y), st.uncertain[job.axis].ptr<uint16_t>(y),
+                    width);
       }
       for (const PhaseJob& job : phases) {
         const AxisPlan& plan = st.axes[job.axis];
