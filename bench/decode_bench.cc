@@ -1,8 +1,9 @@
-// Decode + triangulation of one 1600x1200 scan (default rig, curled checkerboard page), beside
-// OpenCV's cv::structured_light::GrayCodePattern decoding the same page from its own Gray-code
-// frames (same virtual gantry, same noise). The ratios are printed at the end of the run.
+// Decode + triangulation of one scan (a curled checkerboard page; the default 1600x1200 rig, or
+// any rig file: config/hires_rig.yaml is issue 16's 24 MP camera), beside OpenCV's
+// cv::structured_light::GrayCodePattern decoding the same page from its own Gray-code frames
+// (same virtual gantry, same noise). The ratios are printed at the end of the run.
 //
-//   ./build/bench/decode_bench [--benchmark_min_time=2]
+//   ./build/bench/decode_bench [--rig=config/hires_rig.yaml] [--benchmark_min_time=2]
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
@@ -16,14 +17,21 @@
 #include "core/decode/decode.h"
 #include "core/geometry/triangulate.h"
 #include "core/sim/evaluate.h"
+#include "io/calibration_io.h"
 
 namespace vellum {
 namespace {
 
+// The rig of --rig=FILE, else the default.
+Calibration& BenchRig() {
+  static Calibration rig = DefaultRig();
+  return rig;
+}
+
 // One rendered scan shared by every benchmark.
 struct Fixture {
   Fixture() {
-    SimulatedScan scan = SimulateScan(DefaultRig(), PageShape::kCurl, 21);
+    SimulatedScan scan = SimulateScan(BenchRig(), PageShape::kCurl, 21);
     gantry = std::move(scan.gantry);
     sequence = scan.sequence;
     frames = std::move(scan.frames);
@@ -159,7 +167,22 @@ BENCHMARK(BM_OpenCV_GrayCodeDecode)
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
-  std::printf("threads: %d (cv::getNumThreads)\n", cv::getNumThreads());
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg.rfind("--rig=", 0) != 0) {
+      std::fprintf(stderr, "decode_bench: unknown argument %s (--rig=FILE, --benchmark_*)\n",
+                   argv[i]);
+      return 2;
+    }
+    const vellum::Status s = vellum::ReadCalibration(arg.substr(6), &vellum::BenchRig());
+    if (!s.ok()) {
+      std::fprintf(stderr, "decode_bench: %s\n", s.message().c_str());
+      return 2;
+    }
+  }
+  const cv::Size camera = vellum::BenchRig().camera.size;
+  std::printf("threads: %d (cv::getNumThreads); camera %dx%d\n", cv::getNumThreads(), camera.width,
+              camera.height);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   for (int threads : {1, 2}) {

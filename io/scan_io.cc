@@ -1,13 +1,17 @@
 #include "io/scan_io.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <mutex>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <thread>
 
 #include "io/yaml_guard.h"
 
@@ -45,21 +49,35 @@ bool PngHeader(const std::string& path, uint32_t* width, uint32_t* height, int* 
   return true;
 }
 
-Status ReadImageFile(const std::string& path, cv::Mat* image) {
-  if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+// What an image file's header says, before its pixels are decoded: a PNG's size (*size), or an
+// empty size for another format OpenCV reads; an error for a claim too large, a PNG deeper than
+// 8 bits, or a file no reader knows.
+Status CheckImageHeader(const std::string& path, cv::Size* size) {
+  *size = cv::Size();
   uint32_t width = 0, height = 0;
   int bit_depth = 0;
-  if (PngHeader(path, &width, &height, &bit_depth)) {
-    if (width == 0 || height == 0 || width > kMaxImageSide || height > kMaxImageSide) {
-      return Status::Error(path + ": its header claims " + std::to_string(width) + "x" +
-                           std::to_string(height) + " pixels (at most " +
-                           std::to_string(kMaxImageSide) + " each way); not read");
-    }
-    if (bit_depth > 8) {
-      return Status::Error(path + ": must be an 8-bit image (its header says " +
-                           std::to_string(bit_depth) + "-bit); not read");
-    }
+  if (!PngHeader(path, &width, &height, &bit_depth)) {
+    return cv::haveImageReader(path) ? Status::Ok()
+                                     : Status::Error(path + ": not a readable image");
   }
+  if (width == 0 || height == 0 || width > kMaxImageSide || height > kMaxImageSide) {
+    return Status::Error(path + ": its header claims " + std::to_string(width) + "x" +
+                         std::to_string(height) + " pixels (at most " +
+                         std::to_string(kMaxImageSide) + " each way); not read");
+  }
+  if (bit_depth > 8) {
+    return Status::Error(path + ": must be an 8-bit image (its header says " +
+                         std::to_string(bit_depth) + "-bit); not read");
+  }
+  *size = cv::Size(static_cast<int>(width), static_cast<int>(height));
+  return Status::Ok();
+}
+
+Status ReadImageFile(const std::string& path, cv::Mat* image) {
+  if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  cv::Size claimed;
+  const Status header = CheckImageHeader(path, &claimed);
+  if (!header.ok()) return header;
   cv::Mat img;
   try {
     img = cv::imread(path, cv::IMREAD_UNCHANGED);
@@ -262,56 +280,114 @@ Status ReadTexture(const std::string& dir, cv::Mat* texture) {
   return ReadImageFile((fs::path(dir) / kTexture).string(), texture);
 }
 
-Status ReadScan(const std::string& dir, Scan* scan) {
+namespace {
+
+std::string SizeWords(cv::Size size) {
+  return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+// The frames' expected size and where it was said: scan.yaml's camera_size, else the texture's.
+cv::Size ExpectedSize(const Scan& scan, const char** said_by) {
+  *said_by = scan.camera_size.area() > 0 ? "camera_size in scan.yaml" : kTexture;
+  return scan.camera_size.area() > 0 ? scan.camera_size : scan.texture.size();
+}
+
+Status MissingFrame(const std::string& path, int k, const Scan& scan) {
+  return Status::Error(path + ": file is missing (frame " + std::to_string(k) + " of " +
+                       std::to_string(scan.sequence.patterns.size()) + ", pattern '" +
+                       Describe(scan.sequence.patterns[k]) + "')");
+}
+
+}  // namespace
+
+Status ReadScanHeader(const std::string& dir, Scan* scan) {
   Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture);
   if (!s.ok()) return s;
-  cv::Size expected = scan->camera_size.area() > 0 ? scan->camera_size : scan->texture.size();
-  const char* expected_from = scan->camera_size.area() > 0 ? "camera_size in scan.yaml" : kTexture;
+  const char* said_by = nullptr;
+  const cv::Size expected = ExpectedSize(*scan, &said_by);
   if (scan->texture.size() != expected) {
     return Status::Error((root / kTexture).string() + ": image is " +
-                         std::to_string(scan->texture.cols) + "x" +
-                         std::to_string(scan->texture.rows) + " but " + expected_from + " says " +
-                         std::to_string(expected.width) + "x" + std::to_string(expected.height));
+                         SizeWords(scan->texture.size()) + " but " + said_by + " says " +
+                         SizeWords(expected));
   }
+  scan->frames.clear();
+  // Every frame is there, an image, of the camera's size (a PNG's header says it without
+  // decoding a pixel): a scan that cannot be decoded is refused before any work.
   const int n = static_cast<int>(scan->sequence.patterns.size());
-  scan->frames.assign(n, cv::Mat());
-  // PNG decoding dominates reading a scan: frames are read in parallel, and the error of the
-  // lowest-numbered bad frame is reported, as a serial read would.
-  std::vector<Status> errors(n, Status::Ok());
-  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
-    for (int k = range.start; k < range.end; ++k) {
-      const std::string path = (root / FrameName(k)).string();
-      if (!fs::exists(path)) {
-        errors[k] = Status::Error(path + ": file is missing (frame " + std::to_string(k) + " of " +
-                                  std::to_string(n) + ", pattern '" +
-                                  Describe(scan->sequence.patterns[k]) + "')");
-        continue;
-      }
-      cv::Mat img;
-      errors[k] = ReadImageFile(path, &img);
-      if (!errors[k].ok()) continue;
-      if (img.size() != expected) {
-        errors[k] =
-            Status::Error(path + ": image is " + std::to_string(img.cols) + "x" +
-                          std::to_string(img.rows) + " but " + expected_from + " says " +
-                          std::to_string(expected.width) + "x" + std::to_string(expected.height));
-        continue;
-      }
-      if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
-      scan->frames[k] = img;
+  for (int k = 0; k < n; ++k) {
+    const std::string path = (root / FrameName(k)).string();
+    if (!PathExists(path)) return MissingFrame(path, k, *scan);
+    cv::Size claimed;
+    s = CheckImageHeader(path, &claimed);
+    if (!s.ok()) return s;
+    if (!claimed.empty() && claimed != expected) {
+      return Status::Error(path + ": image is " + SizeWords(claimed) + " but " + said_by +
+                           " says " + SizeWords(expected));
     }
-  });
-  for (const Status& e : errors) {
-    if (!e.ok()) return e;
   }
-  if (fs::exists(root / FrameName(n))) {
+  if (PathExists((root / FrameName(n)).string())) {
     return Status::Error((root / FrameName(n)).string() + ": more frames than the " +
                          std::to_string(n) + " patterns of scan.yaml");
   }
   scan->camera_size = expected;
+  return Status::Ok();
+}
+
+Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& take) {
+  const fs::path root(dir);
+  const int n = static_cast<int>(header.sequence.patterns.size());
+  const char* said_by = nullptr;
+  const cv::Size expected = ExpectedSize(header, &said_by);
+  // PNG decoding dominates reading a scan: a few readers decode frames at once, each handing
+  // its frame on as soon as it is read, so no more than one frame per reader is in memory.
+  const int readers = std::clamp(cv::getNumberOfCPUs(), 1, std::min(n, 4));
+  std::atomic<int> next{0};
+  std::atomic<bool> stop{false};
+  std::mutex take_mutex;
+  std::vector<Status> errors(n, Status::Ok());
+  auto read = [&] {
+    for (int k = next++; k < n && !stop; k = next++) {
+      const std::string path = (root / FrameName(k)).string();
+      cv::Mat img;
+      Status s = PathExists(path) ? ReadImageFile(path, &img) : MissingFrame(path, k, header);
+      if (s.ok() && img.size() != expected) {
+        s = Status::Error(path + ": image is " + SizeWords(img.size()) + " but " + said_by +
+                          " says " + SizeWords(expected));
+      }
+      if (s.ok()) {
+        if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
+        const std::lock_guard<std::mutex> lock(take_mutex);
+        if (!stop) s = take(k, img);
+      }
+      if (!s.ok()) {
+        errors[k] = s;
+        stop = true;  // Frames below k are all claimed: the lowest error is among those seen.
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int r = 1; r < readers; ++r) pool.emplace_back(read);
+  read();
+  for (std::thread& t : pool) t.join();
+  for (const Status& e : errors) {
+    if (!e.ok()) return e;
+  }
+  return Status::Ok();
+}
+
+Status ReadScan(const std::string& dir, Scan* scan) {
+  Status s = ReadScanHeader(dir, scan);
+  if (!s.ok()) return s;
+  std::vector<cv::Mat> frames(scan->sequence.patterns.size());
+  s = ReadFrames(dir, *scan, [&](int k, cv::Mat frame) {
+    frames[k] = std::move(frame);
+    return Status::Ok();
+  });
+  if (!s.ok()) return s;
+  scan->frames = std::move(frames);
   return Status::Ok();
 }
 

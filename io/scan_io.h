@@ -2,6 +2,7 @@
 // texture.png, frame_000.png, ... with frame k taken while pattern k was shown.
 #pragma once
 
+#include <functional>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -23,7 +24,18 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
                      const ScanIdentity& identity = ScanIdentity());
 
-// Reads and validates a whole scan directory; errors name the file and the problem.
+// Reads scan.yaml and texture.png, and checks that every frame file is there, an image, of the
+// camera's size (from its PNG header, no pixel decoded); scan->frames is left empty. Errors
+// name the file and the problem.
+Status ReadScanHeader(const std::string& dir, Scan* scan);
+// Hands on one frame as it is read: its index and its 8-bit one-channel image.
+using FrameSink = std::function<Status(int index, cv::Mat frame)>;
+// Reads the frames of a scan (its header from ReadScanHeader) with a few readers at once, handing
+// each to `take` as soon as it is read: one call at a time, in no set order, so no more frames
+// are in memory than readers. Stops at the first error, a frame's or take's; the one returned
+// is the lowest-numbered frame's, as a serial read would give.
+Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& take);
+// Reads and validates a whole scan directory (ReadScanHeader, then every frame).
 Status ReadScan(const std::string& dir, Scan* scan);
 // Reads the scan directory's texture.png alone.
 Status ReadTexture(const std::string& dir, cv::Mat* texture);

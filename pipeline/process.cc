@@ -12,7 +12,7 @@ Status ReadProcessInput(const std::string& scan_dir, const std::string& calibrat
   input->calibration_path = calibration_path;
   Status s = ReadCalibration(calibration_path, &input->calibration);
   if (!s.ok()) return s;
-  s = ReadScan(scan_dir, &input->scan);
+  s = ReadScanHeader(scan_dir, &input->scan);  // The frames are read as they are decoded.
   if (!s.ok()) return s;
   const Calibration& c = input->calibration;
   const Scan& scan = input->scan;
@@ -56,7 +56,7 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
   next("decode", 0.35);
   Decoder decoder(options.decode);
   DecodeResult decoded;
-  if (!ran(DecodeStage(input.scan, &decoder, &decoded), true)) return out;
+  if (!ran(DecodeStage(input.scan, &decoder, &decoded, input.scan_dir), true)) return out;
   next("triangulate", 0.5);
   const Triangulator triangulator(input.calibration);
   if (!ran(TriangulateStage(decoded, triangulator, options.triangulate, results, &out.map),

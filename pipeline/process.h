@@ -15,12 +15,14 @@ namespace vellum {
 
 struct ProcessInput {
   std::string scan_dir, calibration_path;  // Where they were read from (for messages, report).
-  Scan scan;
+  Scan scan;  // Its frames, or none: RunPipeline then reads them from scan_dir as it decodes.
   Calibration calibration;
 };
 
-// Reads the scan directory and the calibration and checks that they belong together (camera
-// and projector sizes); errors name the file and the problem.
+// Reads the scan directory's scan.yaml and texture (checking that every frame is there, of the
+// camera's size; the frames themselves are read while they are decoded) and the calibration,
+// and checks that they belong together (camera and projector sizes); errors name the file and
+// the problem.
 Status ReadProcessInput(const std::string& scan_dir, const std::string& calibration_path,
                         ProcessInput* input);
 

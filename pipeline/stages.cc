@@ -90,7 +90,8 @@ std::string PageDir(const std::string& results, const std::string& page) {
   return page.empty() ? results : (fs::path(results) / "pages" / page).string();
 }
 
-StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded) {
+StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded,
+                        const std::string& frames_dir) {
   Stage stage("decode");
   StageReport& r = stage.report();
   const DecodeOptions& o = decoder->options();
@@ -110,7 +111,18 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
          scan.sequence.GrayInverses(Axis::kColumn) || scan.sequence.GrayInverses(Axis::kRow)
              ? "yes"
              : "no");
-  decoder->Decode(scan.sequence, scan.frames, decoded);
+  if (!scan.frames.empty() || frames_dir.empty()) {
+    decoder->Decode(scan.sequence, scan.frames, decoded);
+  } else {
+    // Each frame is decoded as it is read: the scan's frames are never all in memory.
+    Status read = decoder->Begin(scan.sequence, scan.camera_size);
+    if (read.ok()) {
+      read = ReadFrames(frames_dir, scan,
+                        [&](int k, cv::Mat frame) { return decoder->Add(k, frame); });
+    }
+    if (!read.ok()) return stage.Finish(read);
+    decoder->Finish(decoded);
+  }
   if (!decoded->status.ok()) return stage.Finish(decoded->status);
   const DecodeStats& d = decoded->stats;
   r.Number("pixels", "camera", d.pixels);

@@ -71,8 +71,11 @@ std::string PageName(const Outline& outline, size_t page);
 std::string PageDir(const std::string& results, const std::string& page);
 
 // Decode (3.2): the frames of `scan` -> projector coordinates per camera pixel, by `decoder`
-// (which keeps its buffers between scans). Writes nothing.
-StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded);
+// (which keeps its buffers between scans). The frames are scan.frames; when that is empty
+// (ReadScanHeader) they are read from the scan folder `frames_dir` and each is decoded as it is
+// read, so they are never all in memory. Writes nothing.
+StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded,
+                        const std::string& frames_dir = "");
 
 // Triangulate (3.2): the correspondences -> the point map, by `triangulator` (which holds the
 // calibration's rays). Writes points.ply, depth.png, report/valid.png and report/depth.png.

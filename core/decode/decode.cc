@@ -74,9 +74,11 @@ AxisPlan PlanAxis(const PatternSequence& seq, Axis axis, const DecodeOptions& op
   if (options.use_phase && seq.PhaseSteps(axis) > 0) {
     plan.steps = seq.PhaseSteps(axis);
     plan.period = seq.PhasePeriod(axis);
-    // 2^14 (a coefficient to 6e-5, far below the camera's noise), less for sequences so long
-    // that 255 x steps x it would overflow 32 bits.
-    plan.fixed = static_cast<float>(std::min<int64_t>(1 << 14, INT32_MAX / (255LL * plan.steps)));
+    // The largest power of two for which 255 x steps x fixed cannot overflow 32 bits: 2^20 for
+    // 8 steps, a coefficient to 5e-7, as fine as float sums were.
+    int64_t fixed = 1;
+    while (255LL * plan.steps * fixed * 2 <= INT32_MAX) fixed *= 2;
+    plan.fixed = static_cast<float>(fixed);
     for (int k = 0; k < plan.steps; ++k) {
       plan.phase.push_back(seq.Find(PatternKind::kPhase, axis, 0, false, k));
       const double delta = 2.0 * M_PI * k / plan.steps;
