@@ -111,8 +111,10 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
          scan.sequence.GrayInverses(Axis::kColumn) || scan.sequence.GrayInverses(Axis::kRow)
              ? "yes"
              : "no");
-  if (!scan.frames.empty() || frames_dir.empty()) {
+  if (!scan.frames.empty()) {
     decoder->Decode(scan.sequence, scan.frames, decoded);
+  } else if (frames_dir.empty()) {
+    decoder->Finish(decoded);  // Its frames were added as they came.
   } else {
     // Each frame is decoded as it is read: the scan's frames are never all in memory.
     Status read = decoder->Begin(scan.sequence, scan.camera_size);

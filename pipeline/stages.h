@@ -73,7 +73,9 @@ std::string PageDir(const std::string& results, const std::string& page);
 // Decode (3.2): the frames of `scan` -> projector coordinates per camera pixel, by `decoder`
 // (which keeps its buffers between scans). The frames are scan.frames; when that is empty
 // (ReadScanHeader) they are read from the scan folder `frames_dir` and each is decoded as it is
-// read, so they are never all in memory. Writes nothing.
+// read, so they are never all in memory; with no folder either, they are those already added
+// to the decoder (Decoder::Begin and Add, as a camera gave them), and it finishes. Writes
+// nothing.
 StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded,
                         const std::string& frames_dir = "");
 

@@ -167,7 +167,7 @@ Status CaptureSet::Add(const capture_t& c) {
     if (image.channels() != 1) {
       return Status::Error(where + ": pattern frames must be gray (GREY)");
     }
-    frames_[c.pattern_index] = image;
+    if (keep_frames_) frames_[c.pattern_index] = image;
     specs_[c.pattern_index] = spec;
   }
   have_[c.pattern_index + 1] = true;
@@ -196,8 +196,15 @@ Scan CaptureSet::ToScan() const {
   scan.sequence.patterns = specs_;
   scan.camera_size = camera_;
   scan.texture = texture_;
-  scan.frames = frames_;
+  if (keep_frames_) scan.frames = frames_;
   return scan;
+}
+
+void CaptureSet::KeepFrames(bool keep) {
+  keep_frames_ = keep;
+  if (!keep) {
+    for (cv::Mat& frame : frames_) frame.release();
+  }
 }
 
 DataLock::~DataLock() {

@@ -91,8 +91,12 @@ class CaptureSet {
   }
   // "texture, frames 3, 7 of 54 missing".
   std::string Missing() const;
-  // The whole scan (only when Complete()).
+  // The whole scan (only when Complete()); without its frames when they are not kept.
   Scan ToScan() const;
+  // Whether Add keeps the frames' images (the default). A decoder that takes each frame up as
+  // it comes, and reads them from the scan's folder when it must, keeps none: turning it off
+  // lets go of those kept so far.
+  void KeepFrames(bool keep);
 
  private:
   int64_t scan_id_ = 0;
@@ -102,6 +106,7 @@ class CaptureSet {
   std::vector<cv::Mat> frames_;
   std::vector<PatternSpec> specs_;
   std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
+  bool keep_frames_ = true;
 };
 
 // A data folder's lock (<data>/.vellum-decoder.lock, flock): one decoder records into a data

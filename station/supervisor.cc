@@ -160,7 +160,7 @@ void Supervisor::SendAgain(const std::function<bool(int64_t)>& held, const std::
       continue;
     }
     Scan scan;
-    Status s = ReadScan(folder.raw(), &scan);
+    Status s = ReadScanHeader(folder.raw(), &scan);  // The decoder reads the frames as it goes.
     if (s.ok()) s = MarkPending(folder, attempts + 1);
     if (!s.ok()) {
       Park(id, "cannot process it again: " + s.message());

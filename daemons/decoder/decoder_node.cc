@@ -185,6 +185,9 @@ bool DecoderNode::Begin(int64_t scan_id) {
     Fail(scan_id, "cannot record: " + s.message());
     return false;
   }
+  set_.KeepFrames(false);  // The decoder takes each up (Stream) or reads it from the folder.
+  stream_id_ = resumed == 0 ? scan_id : 0;
+  stream_begun_ = false;
   node_->Log(
       "scan " + std::to_string(scan_id) + ": recording to " + folder.raw() +
       (resumed ? " (continuing: " + std::to_string(resumed) + " captures already there)" : ""));
@@ -215,6 +218,7 @@ void DecoderNode::OnCapture(const capture_t& msg) {
       Fail(msg.scan_id, "recording: " + s.message());
       return;
     }
+    Stream(msg, image);
   }
   waiting_ = true;
   node_->SetState(
@@ -239,11 +243,46 @@ void DecoderNode::Complete() {
   supervisor_.Recorded(id, scan);
 }
 
+void DecoderNode::Stream(const capture_t& msg, const cv::Mat& image) {
+  if (msg.scan_id != stream_id_ || msg.pattern_index < 0) return;
+  if (!stream_begun_) {
+    PatternOptions options;
+    options.projector_size = cv::Size(msg.projector_width, msg.projector_height);
+    std::string why;
+    stream_begun_ = options.Check(&why);
+    if (stream_begun_) stream_sequence_ = MakePatternSequence(options);
+    stream_begun_ = stream_begun_ &&
+                    static_cast<int>(stream_sequence_.patterns.size()) == msg.pattern_count &&
+                    decoder_.Begin(stream_sequence_, image.size()).ok();
+    if (!stream_begun_) {
+      stream_id_ = 0;  // Another sequence: decoded from the folder once complete.
+      return;
+    }
+  }
+  PatternSpec spec;
+  if (!FromMessage(msg.pattern, &spec).ok() ||
+      !(spec == stream_sequence_.patterns[msg.pattern_index]) ||
+      !decoder_.Add(msg.pattern_index, image).ok()) {
+    stream_id_ = 0;
+    stream_begun_ = false;
+  }
+}
+
 Status DecoderNode::Send(int64_t id, const Scan& scan) {
   node_->SetState("busy", id, "decoding");
   std::vector<texture_t> texture = ToMessages(id, scan.texture);
   node_->PublishChunks(channel::kTexture, &texture);
-  const StageReport report = DecodeStage(scan, &decoder_, &decoded_);
+  // Taken up as it came when the whole scan was; else read from its folder as it is decoded
+  // (which ends any other scan's stream: that one is read from its folder in turn).
+  const bool streamed = id == stream_id_ && stream_begun_ &&
+                        decoder_.Received() == static_cast<int>(scan.sequence.patterns.size()) &&
+                        scan.sequence.patterns == stream_sequence_.patterns;
+  stream_id_ = 0;
+  stream_begun_ = false;
+  node_->Count(streamed ? "scans decoded as captured" : "scans decoded from their folder");
+  const StageReport report =
+      DecodeStage(scan, &decoder_, &decoded_,
+                  streamed ? std::string() : ScanFolder::For(options_.data_dir, id).raw());
   if (!report.status.ok()) {
     supervisor_.Failed(id, "decoding failed: " + report.status.message());  // Not sent again.
     node_->Error("scan " + std::to_string(id) + ": " + report.status.message(), id);

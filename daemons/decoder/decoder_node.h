@@ -55,6 +55,11 @@ class DecoderNode {
   void Stop();                                         // No scan is being recorded.
   void Complete();
   Status Send(int64_t id, const Scan& scan);  // Decodes and publishes (the supervisor's Send).
+  // Takes a pattern capture up into the decoder as it comes, while the scan is the station's own
+  // sequence (MakePatternSequence for its projector) and every capture came to this process;
+  // otherwise (a scan resumed from its log, another sequence) the decoder reads the frames from
+  // the scan's folder once it is complete. No frame is held for the whole scan either way.
+  void Stream(const capture_t& msg, const cv::Mat& image);
 
   Node* node_;
   DecoderNodeOptions options_;
@@ -62,6 +67,9 @@ class DecoderNode {
   // Worker thread only:
   Decoder decoder_;  // Keeps its buffers between scans.
   DecodeResult decoded_;
+  int64_t stream_id_ = 0;  // The scan the decoder takes up as it comes; 0: none.
+  bool stream_begun_ = false;
+  PatternSequence stream_sequence_;  // Its sequence, as the station's projector shows it.
   CaptureSet set_;
   int64_t recording_ = 0;  // The scan whose folder is open.
   ScanIdentity identity_;  // Its identity (SCAN_STARTED), for its scan.yaml and report.

@@ -122,6 +122,9 @@ TEST_F(DecoderNodeTest, RecordsAScanAndSendsItDownTheChain) {
   EXPECT_EQ(stages[0].stage, "decode");
   EXPECT_EQ(node.Counter("scans recorded"), 1);
   EXPECT_EQ(node.Counter("scans decoded"), 1);
+  // Each capture was taken up as it came (the station's own sequence), none held to the end.
+  EXPECT_EQ(node.Counter("scans decoded as captured"), 1);
+  EXPECT_EQ(node.Counter("scans decoded from their folder"), 0);
 }
 
 TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {
@@ -219,6 +222,26 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
   heartbeat("vellum-restorer", 301);  // The restorer held it: sent again, from disk.
   ASSERT_TRUE(bus_.RunUntil([&] { return sent(41) == 2; }));
   EXPECT_EQ(node.Counter("scans sent again"), 1);
+  // Decoded as it was captured the first time, read back from its folder the second: the same.
+  EXPECT_EQ(node.Counter("scans decoded as captured"), 1);
+  EXPECT_EQ(node.Counter("scans decoded from their folder"), 1);
+  auto chunks = [&] {
+    return std::count_if(correspondence->begin(), correspondence->end(),
+                         [](const correspondence_t& m) { return m.scan_id == 41; });
+  };
+  ASSERT_TRUE(bus_.RunUntil([&] { return chunks() == 2 * correspondence->front().chunk_count; }));
+  DecodeResult first, second;
+  cv::Size projector;
+  int sends = 0;
+  for (const correspondence_t& m : *correspondence) {
+    if (m.scan_id != 41) continue;
+    sends += m.chunk_index == 0;  // A send's chunks follow its first on the in-memory bus.
+    ASSERT_TRUE(AddChunk(m, sends == 1 ? &first : &second, &projector).ok());
+  }
+  ASSERT_FALSE(first.valid.empty());
+  ASSERT_FALSE(second.valid.empty());
+  EXPECT_EQ(cv::norm(first.valid, second.valid, cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(first.projector_x, second.projector_x, cv::NORM_INF, first.valid), 0);
   EXPECT_EQ(PendingAttempts(ScanFolder::For(data_, 41)), 2);
   // Restored: out of the ledger, and never sent again.
   restored_t done{};
