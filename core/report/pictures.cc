@@ -114,16 +114,18 @@ cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
   }
   max_strain = std::max(max_strain, 1e-6);
   cv::Mat picture(restored.image.size(), CV_8UC3, cv::Scalar::all(255));
-  cv::Mat level(1, 1, CV_8U), colour;
+  // The colour map's 256 colours once (a colour map per quad cost half a second on a fine sheet).
+  cv::Mat levels(1, 256, CV_8U), colours;
+  for (int k = 0; k < 256; ++k) levels.at<uint8_t>(k) = static_cast<uint8_t>(k);
+  cv::applyColorMap(levels, colours, cv::COLORMAP_TURBO);
+  std::vector<cv::Point> corners(4);
   for (size_t q = 0; q < mesh.quads.size(); ++q) {
-    std::vector<cv::Point> corners;
     for (int k = 0; k < 4; ++k) {
       const cv::Point2d p = to_pixel(flat[mesh.quads[q][k]]);
-      corners.emplace_back(cvRound(p.x), cvRound(p.y));
+      corners[k] = cv::Point(cvRound(p.x), cvRound(p.y));
     }
-    level.at<uint8_t>(0) = cv::saturate_cast<uint8_t>(255.0 * sum[q] / count[q] / max_strain);
-    cv::applyColorMap(level, colour, cv::COLORMAP_TURBO);
-    const cv::Vec3b c = colour.at<cv::Vec3b>(0);
+    const int level = cv::saturate_cast<uint8_t>(255.0 * sum[q] / count[q] / max_strain);
+    const cv::Vec3b c = colours.at<cv::Vec3b>(level);
     cv::fillConvexPoly(picture, corners, cv::Scalar(c[0], c[1], c[2]), cv::LINE_AA);
   }
   return WithBar(picture, 0, max_strain, "%.1e", "strain (quad mean)");
