@@ -3,10 +3,14 @@
 // what makes real frames hard to compress) written to the scan's archive the ways a recorder
 // could: appended raw to the capture log (what the station's LCM log does), as PNG at OpenCV's
 // default level and at levels 0 and 1, and as TIFF without compression and with OpenCV's default
-// (LZW). The baseline is the frame interval of a 5 fps camera, 200 ms: a write that takes
-// longer falls behind the camera. Files go to the temporary folder (the same disk as /tmp).
+// (LZW), and as PNG through libvips (libpng) with row filtering off at deflate levels 0 and 1
+// (OpenCV cannot turn filtering off; on noisy frames it costs more than it saves). The baseline
+// is the frame interval of a 5 fps camera, 200 ms: a write that takes longer falls behind the
+// camera. Files go to the temporary folder (the same disk as /tmp).
 #include <benchmark/benchmark.h>
+#include <png.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <cmath>
 #include <cstdio>
@@ -14,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
+#include <vips/vips8>
 
 #include "bench/ratio_reporter.h"
 
@@ -75,7 +80,60 @@ void BM_LogAppendRaw(benchmark::State& state) {
   fs::remove(path);
 }
 
+// PNG through libvips without row filters, at deflate level `compression`.
+void PngUnfiltered(benchmark::State& state, int compression) {
+  const cv::Mat& f = Frame();
+  const std::string path = TempFile(".vips.png");
+  vips::VImage image =
+      vips::VImage::new_from_memory(f.data, f.total(), f.cols, f.rows, 1, VIPS_FORMAT_UCHAR);
+  for (auto _ : state) {
+    image.pngsave(path.c_str(), vips::VImage::option()
+                                    ->set("compression", compression)
+                                    ->set("filter", VIPS_FOREIGN_PNG_FILTER_NONE));
+  }
+  state.counters["MB"] = static_cast<double>(fs::file_size(path)) / 1e6;
+  // Lossless: read back equal.
+  if (cv::norm(cv::imread(path, cv::IMREAD_UNCHANGED), f, cv::NORM_INF) != 0) {
+    state.SkipWithError("the PNG does not read back equal");
+  }
+  fs::remove(path);
+}
+
+// PNG through libpng itself: no row filter, deflate with Huffman coding alone (no string
+// matching, which noisy frames defeat anyway).
+void BM_PngHuffmanOnly(benchmark::State& state) {
+  const cv::Mat& f = Frame();
+  const std::string path = TempFile(".huff.png");
+  for (auto _ : state) {
+    FILE* out = std::fopen(path.c_str(), "wb");
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
+    png_infop info = png_create_info_struct(png);
+    if (setjmp(png_jmpbuf(png))) {
+      state.SkipWithError("libpng failed");
+      break;
+    }
+    png_init_io(png, out);
+    png_set_IHDR(png, info, f.cols, f.rows, 8, PNG_COLOR_TYPE_GRAY, PNG_INTERLACE_NONE,
+                 PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_NONE);
+    png_set_compression_level(png, 1);
+    png_set_compression_strategy(png, Z_HUFFMAN_ONLY);
+    png_write_info(png, info);
+    for (int y = 0; y < f.rows; ++y) png_write_row(png, f.ptr<uint8_t>(y));
+    png_write_end(png, nullptr);
+    png_destroy_write_struct(&png, &info);
+    std::fclose(out);
+  }
+  state.counters["MB"] = static_cast<double>(fs::file_size(path)) / 1e6;
+  if (cv::norm(cv::imread(path, cv::IMREAD_UNCHANGED), f, cv::NORM_INF) != 0) {
+    state.SkipWithError("the PNG does not read back equal");
+  }
+  fs::remove(path);
+}
+
 void BM_PngDefault(benchmark::State& s) { WriteImage(s, ".png", {}); }
+void BM_PngUnfiltered0(benchmark::State& s) { PngUnfiltered(s, 0); }
+void BM_PngUnfiltered1(benchmark::State& s) { PngUnfiltered(s, 1); }
 void BM_PngLevel0(benchmark::State& s) { WriteImage(s, ".png", {cv::IMWRITE_PNG_COMPRESSION, 0}); }
 void BM_PngLevel1(benchmark::State& s) { WriteImage(s, ".png", {cv::IMWRITE_PNG_COMPRESSION, 1}); }
 void BM_TiffNone(benchmark::State& s) { WriteImage(s, ".tif", {cv::IMWRITE_TIFF_COMPRESSION, 1}); }
@@ -93,15 +151,20 @@ BENCHMARK(BM_PngLevel0)->Unit(benchmark::kMillisecond)->UseRealTime()->Iteration
 BENCHMARK(BM_PngLevel1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 BENCHMARK(BM_TiffNone)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 BENCHMARK(BM_TiffLzw)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+BENCHMARK(BM_PngUnfiltered0)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+BENCHMARK(BM_PngUnfiltered1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+BENCHMARK(BM_PngHuffmanOnly)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
+  if (VIPS_INIT(argv[0]) != 0) return 1;
   vellum::RatioReporter reporter;
   Frame();  // Made before the clock runs.
   benchmark::RunSpecifiedBenchmarks(&reporter);
   const double interval = reporter.Time("BM_Baseline_FrameInterval5fps");
-  for (const char* way : {"BM_LogAppendRaw", "BM_PngDefault", "BM_PngLevel0", "BM_PngLevel1",
-                          "BM_TiffNone", "BM_TiffLzw"}) {
+  for (const char* way :
+       {"BM_LogAppendRaw", "BM_PngDefault", "BM_PngLevel0", "BM_PngLevel1", "BM_TiffNone",
+        "BM_TiffLzw", "BM_PngUnfiltered0", "BM_PngUnfiltered1", "BM_PngHuffmanOnly"}) {
     const double t = reporter.Time(way);
     if (t > 0 && interval > 0) {
       std::printf("%-16s %7.1f ms = %.2f of the 5 fps frame interval (%s)\n", way + 3, t,

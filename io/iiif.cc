@@ -7,18 +7,11 @@
 #include <vips/vips8>
 
 #include "core/patterns/scan.h"
+#include "io/vips.h"
 
 namespace vellum {
 namespace fs = std::filesystem;
 namespace {
-
-// libvips is started once per process (it keeps its own thread pool and caches).
-Status StartVips() {
-  static std::once_flag once;
-  static bool ok = false;
-  std::call_once(once, [] { ok = VIPS_INIT("vellum") == 0; });
-  return ok ? Status::Ok() : Status::Error(std::string("libvips: ") + vips_error_buffer());
-}
 
 // An Image API identifier: the path with every byte outside the unreserved set (and '/')
 // percent-encoded.

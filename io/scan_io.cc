@@ -12,7 +12,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <thread>
+#include <vips/vips8>
 
+#include "io/vips.h"
 #include "io/yaml_guard.h"
 
 namespace vellum {
@@ -128,6 +130,23 @@ Status WriteImage(const std::string& path, const cv::Mat& image) {
     return Status::Error(path + ": cannot write image: " + e.what());
   }
   return ok ? Status::Ok() : Status::Error(path + ": cannot write image");
+}
+
+Status WriteFrameImage(const std::string& path, const cv::Mat& frame) {
+  if (frame.type() != CV_8UC1) return WriteImage(path, frame);
+  Status s = StartVips();
+  if (!s.ok()) return Status::Error(path + ": cannot write image: " + s.message());
+  const cv::Mat pixels = frame.isContinuous() ? frame : frame.clone();
+  try {
+    vips::VImage::new_from_memory(pixels.data, pixels.total(), pixels.cols, pixels.rows, 1,
+                                  VIPS_FORMAT_UCHAR)
+        .pngsave(path.c_str(), vips::VImage::option()
+                                   ->set("compression", 0)
+                                   ->set("filter", VIPS_FOREIGN_PNG_FILTER_NONE));
+  } catch (const vips::VError& e) {
+    return Status::Error(path + ": cannot write image: " + e.what());
+  }
+  return Status::Ok();
 }
 
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
@@ -400,7 +419,7 @@ Status WriteScan(const std::string& dir, const Scan& scan) {
   s = WriteImage((root / kTexture).string(), scan.texture);
   if (!s.ok()) return s;
   for (size_t k = 0; k < scan.frames.size(); ++k) {
-    s = WriteImage((root / FrameName(static_cast<int>(k))).string(), scan.frames[k]);
+    s = WriteFrameImage((root / FrameName(static_cast<int>(k))).string(), scan.frames[k]);
     if (!s.ok()) return s;
   }
   return Status::Ok();

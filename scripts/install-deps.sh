@@ -9,7 +9,7 @@ packages=(
   libv4l-dev libsdl2-dev
   googletest libgtest-dev libgmock-dev libbenchmark-dev
   libcgal-dev libsuitesparse-dev nlohmann-json3-dev libexiv2-dev exiv2 libtiff-dev libssl-dev liblcms2-dev clang-format
-  libvips-dev iipimage-server lighttpd libimage-exiftool-perl curl
+  libvips-dev libpng-dev iipimage-server lighttpd libimage-exiftool-perl curl
   default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux nftables
   chromium xvfb xdotool clang libclang-rt-14-dev
 )

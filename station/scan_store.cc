@@ -343,7 +343,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
     if (PathExists(path)) continue;
     cv::Mat image;
     if (FromMessage(c.image, &image).ok()) {
-      s = WriteImage(path, image);
+      s = c.pattern_index < 0 ? WriteImage(path, image) : WriteFrameImage(path, image);
       if (!s.ok()) return s;
     }
   }
@@ -353,7 +353,9 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
 }
 
 Status ScanRecorder::Write(const capture_t& capture, const cv::Mat& image) {
-  return WriteImage((fs::path(folder_.raw()) / ImageName(capture.pattern_index)).string(), image);
+  const std::string path = (fs::path(folder_.raw()) / ImageName(capture.pattern_index)).string();
+  // A frame must be written within the camera's frame interval (WriteFrameImage).
+  return capture.pattern_index < 0 ? WriteImage(path, image) : WriteFrameImage(path, image);
 }
 
 Status ScanRecorder::Write(const calibration_t& calibration) {

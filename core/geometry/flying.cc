@@ -40,26 +40,31 @@ int RejectFlyingPoints(cv::Mat* points, double max_off_mm, int reach) {
             float bend2;
           };
           auto side = [&](int sign) {
-            const cv::Vec3f near = at(sign * reach), far = at(sign * 2 * reach),
-                            farther = at(sign * 3 * reach);
+            const cv::Vec3f near = at(sign * reach), far = at(sign * 2 * reach);
             Side s{std::isfinite(near[2]) && std::isfinite(far[2]), {}, 0.0f};
             if (!s.seen) return s;
             s.miss = at0 - (2 * near - far);
+            // Within the limit the bend cannot matter: most points stop here, two looks a side.
+            if (s.miss.dot(s.miss) <= limit2) return s;
+            const cv::Vec3f farther = at(sign * 3 * reach);
             if (std::isfinite(farther[2])) {
               const cv::Vec3f bend = near - 2 * far + farther;
               s.bend2 = bend.dot(bend);
             }
             return s;
           };
-          const Side before = side(-1), after = side(+1);
-          if (!before.seen && !after.seen) continue;
           // Off a side: past the limit plus that side's own bend.
           auto off = [&](const Side& s) {
             if (!s.seen) return true;
             const float allowance = std::sqrt(limit2) + std::sqrt(s.bend2);
             return s.miss.dot(s.miss) > allowance * allowance;
           };
-          if (!off(before) || !off(after)) continue;
+          // On either side's surface is enough: the other is not looked at.
+          const Side before = side(-1);
+          if (before.seen && !off(before)) continue;
+          const Side after = side(+1);
+          if (!before.seen && !after.seen) continue;
+          if (!off(after)) continue;
           // Off both sides' surfaces is enough. Where a side has no surface, the point must be
           // far off the other (three times the limit), or off along two directions: a mixed
           // pixel is off across its silhouette (straight and both diagonals), while a good point
