@@ -14,6 +14,7 @@
 #include <thread>
 #include <vips/vips8>
 
+#include "core/common/text.h"
 #include "io/vips.h"
 #include "io/yaml_guard.h"
 
@@ -301,10 +302,6 @@ Status ReadTexture(const std::string& dir, cv::Mat* texture) {
 
 namespace {
 
-std::string SizeWords(cv::Size size) {
-  return std::to_string(size.width) + "x" + std::to_string(size.height);
-}
-
 // The frames' expected size and where it was said: scan.yaml's camera_size, else the texture's.
 cv::Size ExpectedSize(const Scan& scan, const char** said_by) {
   *said_by = scan.camera_size.area() > 0 ? "camera_size in scan.yaml" : kTexture;
@@ -329,8 +326,8 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
   const cv::Size expected = ExpectedSize(*scan, &said_by);
   if (scan->texture.size() != expected) {
     return Status::Error((root / kTexture).string() + ": image is " +
-                         SizeWords(scan->texture.size()) + " but " + said_by + " says " +
-                         SizeWords(expected));
+                         SizeText(scan->texture.size()) + " but " + said_by + " says " +
+                         SizeText(expected));
   }
   scan->frames.clear();
   // Every frame is there, an image, of the camera's size (a PNG's header says it without
@@ -343,8 +340,8 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
     s = CheckImageHeader(path, &claimed);
     if (!s.ok()) return s;
     if (!claimed.empty() && claimed != expected) {
-      return Status::Error(path + ": image is " + SizeWords(claimed) + " but " + said_by +
-                           " says " + SizeWords(expected));
+      return Status::Error(path + ": image is " + SizeText(claimed) + " but " + said_by +
+                           " says " + SizeText(expected));
     }
   }
   if (PathExists((root / FrameName(n)).string())) {
@@ -373,8 +370,8 @@ Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& t
       cv::Mat img;
       Status s = PathExists(path) ? ReadImageFile(path, &img) : MissingFrame(path, k, header);
       if (s.ok() && img.size() != expected) {
-        s = Status::Error(path + ": image is " + SizeWords(img.size()) + " but " + said_by +
-                          " says " + SizeWords(expected));
+        s = Status::Error(path + ": image is " + SizeText(img.size()) + " but " + said_by +
+                          " says " + SizeText(expected));
       }
       if (s.ok()) {
         if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
