@@ -340,8 +340,8 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
     s = CheckImageHeader(path, &claimed);
     if (!s.ok()) return s;
     if (!claimed.empty() && claimed != expected) {
-      return Status::Error(path + ": image is " + SizeText(claimed) + " but " + said_by +
-                           " says " + SizeText(expected));
+      return Status::Error(path + ": image is " + SizeText(claimed) + " but " + said_by + " says " +
+                           SizeText(expected));
     }
   }
   if (PathExists((root / FrameName(n)).string())) {
