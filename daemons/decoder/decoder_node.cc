@@ -185,9 +185,20 @@ bool DecoderNode::Begin(int64_t scan_id) {
     Fail(scan_id, "cannot record: " + s.message());
     return false;
   }
-  set_.KeepFrames(false);  // The decoder takes each up (Stream) or reads it from the folder.
-  stream_id_ = resumed == 0 ? scan_id : 0;
+  // The decoder takes each frame up as it comes (Stream), those the log already held (it ran
+  // ahead of this thread, or a restart) first; or it reads them from the folder.
+  stream_id_ = scan_id;
   stream_begun_ = false;
+  if (resumed > 0 && set_.Started()) {
+    const Scan held = set_.ToScan();
+    for (int k = 0; k < static_cast<int>(held.frames.size()); ++k) {
+      if (set_.Has(k)) {
+        StreamFrame(scan_id, held.sequence.projector_size, set_.Expected() - 1, k,
+                    held.sequence.patterns[k], held.frames[k]);
+      }
+    }
+  }
+  set_.KeepFrames(false);
   node_->Log(
       "scan " + std::to_string(scan_id) + ": recording to " + folder.raw() +
       (resumed ? " (continuing: " + std::to_string(resumed) + " captures already there)" : ""));
@@ -244,25 +255,34 @@ void DecoderNode::Complete() {
 }
 
 void DecoderNode::Stream(const capture_t& msg, const cv::Mat& image) {
-  if (msg.scan_id != stream_id_ || msg.pattern_index < 0) return;
+  PatternSpec spec;
+  if (msg.pattern_index < 0) return;
+  if (!FromMessage(msg.pattern, &spec).ok()) {
+    stream_id_ = 0;
+    return;
+  }
+  StreamFrame(msg.scan_id, cv::Size(msg.projector_width, msg.projector_height), msg.pattern_count,
+              msg.pattern_index, spec, image);
+}
+
+void DecoderNode::StreamFrame(int64_t scan_id, cv::Size projector, int count, int index,
+                              const PatternSpec& spec, const cv::Mat& image) {
+  if (scan_id != stream_id_) return;
   if (!stream_begun_) {
     PatternOptions options;
-    options.projector_size = cv::Size(msg.projector_width, msg.projector_height);
+    options.projector_size = projector;
     std::string why;
     stream_begun_ = options.Check(&why);
     if (stream_begun_) stream_sequence_ = MakePatternSequence(options);
-    stream_begun_ = stream_begun_ &&
-                    static_cast<int>(stream_sequence_.patterns.size()) == msg.pattern_count &&
+    stream_begun_ = stream_begun_ && static_cast<int>(stream_sequence_.patterns.size()) == count &&
                     decoder_.Begin(stream_sequence_, image.size()).ok();
     if (!stream_begun_) {
       stream_id_ = 0;  // Another sequence: decoded from the folder once complete.
       return;
     }
   }
-  PatternSpec spec;
-  if (!FromMessage(msg.pattern, &spec).ok() ||
-      !(spec == stream_sequence_.patterns[msg.pattern_index]) ||
-      !decoder_.Add(msg.pattern_index, image).ok()) {
+  if (index < 0 || index >= count || !(spec == stream_sequence_.patterns[index]) ||
+      !decoder_.Add(index, image).ok()) {
     stream_id_ = 0;
     stream_begun_ = false;
   }

@@ -60,6 +60,8 @@ class DecoderNode {
   // otherwise (a scan resumed from its log, another sequence) the decoder reads the frames from
   // the scan's folder once it is complete. No frame is held for the whole scan either way.
   void Stream(const capture_t& msg, const cv::Mat& image);
+  void StreamFrame(int64_t scan_id, cv::Size projector, int count, int index,
+                   const PatternSpec& spec, const cv::Mat& image);
 
   Node* node_;
   DecoderNodeOptions options_;
