@@ -302,10 +302,18 @@ Status ReadTexture(const std::string& dir, cv::Mat* texture) {
 
 namespace {
 
-// The frames' expected size and where it was said: scan.yaml's camera_size, else the texture's.
-cv::Size ExpectedSize(const Scan& scan, const char** said_by) {
-  *said_by = scan.camera_size.area() > 0 ? "camera_size in scan.yaml" : kTexture;
+// The camera's size: scan.yaml's camera_size, else the texture's.
+cv::Size ExpectedSize(const Scan& scan) {
   return scan.camera_size.area() > 0 ? scan.camera_size : scan.texture.size();
+}
+
+// An image of the scan (`path`, of `size`) has the camera's size; the error says who said so.
+Status CheckSize(const std::string& path, cv::Size size, const Scan& scan) {
+  const cv::Size expected = ExpectedSize(scan);
+  if (size == expected) return Status::Ok();
+  return Status::Error(path + ": image is " + SizeText(size) + " but " +
+                       (scan.camera_size.area() > 0 ? "camera_size in scan.yaml" : kTexture) +
+                       " says " + SizeText(expected));
 }
 
 Status MissingFrame(const std::string& path, int k, const Scan& scan) {
@@ -322,13 +330,8 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture);
   if (!s.ok()) return s;
-  const char* said_by = nullptr;
-  const cv::Size expected = ExpectedSize(*scan, &said_by);
-  if (scan->texture.size() != expected) {
-    return Status::Error((root / kTexture).string() + ": image is " +
-                         SizeText(scan->texture.size()) + " but " + said_by + " says " +
-                         SizeText(expected));
-  }
+  s = CheckSize((root / kTexture).string(), scan->texture.size(), *scan);
+  if (!s.ok()) return s;
   scan->frames.clear();
   // Every frame is there, an image, of the camera's size (a PNG's header says it without
   // decoding a pixel): a scan that cannot be decoded is refused before any work.
@@ -339,24 +342,20 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
     cv::Size claimed;
     s = CheckImageHeader(path, &claimed);
     if (!s.ok()) return s;
-    if (!claimed.empty() && claimed != expected) {
-      return Status::Error(path + ": image is " + SizeText(claimed) + " but " + said_by + " says " +
-                           SizeText(expected));
-    }
+    if (!claimed.empty()) s = CheckSize(path, claimed, *scan);
+    if (!s.ok()) return s;
   }
   if (PathExists((root / FrameName(n)).string())) {
     return Status::Error((root / FrameName(n)).string() + ": more frames than the " +
                          std::to_string(n) + " patterns of scan.yaml");
   }
-  scan->camera_size = expected;
+  scan->camera_size = ExpectedSize(*scan);
   return Status::Ok();
 }
 
 Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& take) {
   const fs::path root(dir);
   const int n = static_cast<int>(header.sequence.patterns.size());
-  const char* said_by = nullptr;
-  const cv::Size expected = ExpectedSize(header, &said_by);
   // PNG decoding dominates reading a scan: a few readers decode frames at once, each handing
   // its frame on as soon as it is read, so no more than one frame per reader is in memory.
   const int readers = std::clamp(cv::getNumberOfCPUs(), 1, std::min(n, 4));
@@ -369,10 +368,7 @@ Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& t
       const std::string path = (root / FrameName(k)).string();
       cv::Mat img;
       Status s = PathExists(path) ? ReadImageFile(path, &img) : MissingFrame(path, k, header);
-      if (s.ok() && img.size() != expected) {
-        s = Status::Error(path + ": image is " + SizeText(img.size()) + " but " + said_by +
-                          " says " + SizeText(expected));
-      }
+      if (s.ok()) s = CheckSize(path, img.size(), header);
       if (s.ok()) {
         if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
         const std::lock_guard<std::mutex> lock(take_mutex);

@@ -8,6 +8,7 @@
 #include <opencv2/core/utility.hpp>
 
 #include "core/common/check.h"
+#include "core/common/text.h"
 
 namespace vellum {
 namespace {
@@ -289,6 +290,11 @@ Status Decoder::Begin(const PatternSequence& sequence, cv::Size camera_size) {
   st.black = sequence.Find(PatternKind::kBlack);
   st.axes[0] = PlanAxis(sequence, Axis::kColumn, options_);
   st.axes[1] = PlanAxis(sequence, Axis::kRow, options_);
+  // High-frequency patterns for the direct/global estimate: Gray bits 1 and 2 (stripes of 4
+  // and 8 projector pixels: fine, yet above the defocus) of each axis, with their inverses.
+  // A code without its finest bits uses its two finest; without inverses, no pattern pair lights
+  // every pixel once, and the white and black frames give the light (direct = white - black,
+  // no global light seen).
   st.high_frequency.clear();
   for (const AxisPlan& plan : st.axes) {
     const int low = std::max(1, plan.first_bit);
@@ -300,6 +306,7 @@ Status Decoder::Begin(const PatternSequence& sequence, cv::Size camera_size) {
   }
   const AxisPlan& first = st.axes[0].present ? st.axes[0] : st.axes[1];
   if (st.high_frequency.empty() && first.inverse[first.first_bit] >= 0) {
+    // A projector of 2 or 3 pixels: its only bit.
     st.high_frequency = {first.pattern[first.first_bit], first.inverse[first.first_bit]};
   }
   if (st.high_frequency.empty()) st.high_frequency = {st.white, st.black};
@@ -339,9 +346,7 @@ Status Decoder::Store(int index, const cv::Mat& frame) {
     return fail(frame.empty() ? "is empty"
                 : frame.type() != CV_8UC1
                     ? "is not 8-bit single channel"
-                    : "is " + std::to_string(frame.cols) + "x" + std::to_string(frame.rows) +
-                          ", not the camera's " + std::to_string(st.size.width) + "x" +
-                          std::to_string(st.size.height));
+                    : "is " + SizeText(frame.size()) + ", not the camera's " + SizeText(st.size));
   }
   st.received[index] = 1;
   ++st.count;
@@ -675,12 +680,11 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
                                    std::to_string(sequence.patterns.size()));
     return;
   }
-  // Every frame first, then one pass over the rows takes them all up.
+  // Every frame first; Finish then takes them all up in one pass over the rows.
   for (size_t k = 0; k < frames.size(); ++k) {
     result->status = Store(static_cast<int>(k), frames[k]);
     if (!result->status.ok()) return;
   }
-  Digest();
   Finish(result);
 }
 
