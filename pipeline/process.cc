@@ -54,15 +54,20 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
   }
   const CameraModel& camera = input.calibration.camera;
   next("decode", 0.35);
-  Decoder decoder(options.decode);
   DecodeResult decoded;
-  if (!ran(DecodeStage(input.scan, &decoder, &decoded, input.scan_dir), true)) return out;
+  {
+    // The decoder's running sums and codes (some 40 bytes a camera pixel) go when it is done,
+    // before the point map is made; the decoded maps go once it is.
+    Decoder decoder(options.decode);
+    if (!ran(DecodeStage(input.scan, &decoder, &decoded, input.scan_dir), true)) return out;
+  }
   next("triangulate", 0.5);
   const Triangulator triangulator(input.calibration);
   if (!ran(TriangulateStage(decoded, triangulator, options.triangulate, results, &out.map),
            false)) {
     return out;
   }
+  decoded = DecodeResult();
   if (options.points_only) {
     report.stages.back().Text("options", "until", "points");
     next("report", 0.97);

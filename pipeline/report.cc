@@ -1,6 +1,7 @@
 #include "pipeline/report.h"
 
 #include <algorithm>
+#include <cmath>
 #include <ctime>
 #include <filesystem>
 #include <sstream>
@@ -47,8 +48,10 @@ constexpr Picture kPictures[] = {
 };
 
 // report.json's sections in their order; a section no stage fills is left out.
-constexpr const char* kSections[] = {"options", "sizes", "stages_seconds", "pixels",   "height_mm",
-                                     "outline", "sheet", "flattening",     "restored", "sampling"};
+constexpr const char* kSections[] = {
+    "options",    "sizes",     "stages_seconds", "stages_peak_memory_mb",
+    "pixels",     "height_mm", "outline",        "sheet",
+    "flattening", "restored",  "sampling"};
 
 // A FADGI level as the report says it: "3-star", or "below 1-star".
 std::string StarLevel(int stars) {
@@ -195,11 +198,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
   h << "<tr><th>Sizes</th><td>camera " << HtmlEscape(r.Text("sizes", "camera")) << ", projector "
     << HtmlEscape(r.Text("sizes", "projector")) << ", " << r.Number("sizes", "patterns")
     << " patterns</td></tr>\n";
-  h << "</table>\n<h2>Stage timings</h2>\n<table>\n";
+  h << "</table>\n<h2>Stage timings and memory</h2>\n<table>\n";
   double total = 0;
   for (const StageReport& stage : r.stages) {
     h << "<tr><th>" << HtmlEscape(StageKey(stage)) << "</th><td>" << Number(stage.seconds)
-      << " s</td></tr>\n";
+      << " s</td><td>peak memory " << Number(std::round(stage.peak_memory_mb)) << " MB</td></tr>\n";
     total += stage.seconds;
   }
   h << "<tr><th>total</th><td>" << Number(total) << " s</td></tr>\n</table>\n";
@@ -252,6 +255,11 @@ Json Sections(const ProcessReport& r, const std::string& page) {
         total += stage.seconds;
       }
       s["total"] = JsonNumber(total);
+    }
+    if (std::string(section) == "stages_peak_memory_mb" && page.empty()) {
+      // The process's peak resident memory as each stage ended (it only grows).
+      for (const StageReport& stage : r.stages)
+        s[StageKey(stage)] = JsonNumber(std::round(stage.peak_memory_mb));
     }
     for (const StageReport& stage : r.stages) {
       if (stage.page != page) continue;

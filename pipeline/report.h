@@ -36,6 +36,7 @@ struct StageReport {
   std::string stage;                 // decode, triangulate, outline, mesh, flatten, restore
   std::string page;                  // "" for the scan (or its one leaf); "left", "right".
   double seconds = 0;                // Wall time, writing the stage's products included.
+  double peak_memory_mb = 0;         // The process's peak resident memory when it ended.
   std::vector<ReportValue> values;   // In the order they were set.
   std::vector<std::string> outputs;  // Files written, relative to the results folder.
   std::vector<Warning> warnings;     // What makes its product doubtful.

@@ -1,5 +1,7 @@
 #include "pipeline/stages.h"
 
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -31,6 +33,8 @@ class Stage {
     report_.status = status;
     report_.seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    rusage usage{};
+    if (getrusage(RUSAGE_SELF, &usage) == 0) report_.peak_memory_mb = usage.ru_maxrss / 1024.0;
     return report_;
   }
   // Records one of the stage's files (relative to the results folder) when it was written.

@@ -183,29 +183,6 @@ TEST(Restore, KeepsTheTexturesTypeForGrayColourAnd16Bit) {
       Restore(cv::Mat(10, 10, CV_32F), p.mesh, p.flat.flat, p.gantry->rig().camera).status.ok());
 }
 
-// The camera's true sampling of a page, ppi, from the virtual gantry's exact geometry: at a grid
-// of points (s, t) of the page (uniform in page area, as restored pixels are in flat area),
-// 25.4 times the smallest singular value of d(camera pixel) / d(s, t), by central differences.
-std::vector<double> TrueSampling(const VirtualGantry& gantry, double step_mm) {
-  const Page& page = gantry.pages().front();
-  const cv::Size2d size = page.options().size_mm;
-  const CameraModel& camera = gantry.rig().camera;
-  std::vector<double> out;
-  const double h = 0.05;
-  for (double t = step_mm; t < size.height - step_mm; t += step_mm) {
-    for (double s = step_mm; s < size.width - step_mm; s += step_mm) {
-      const cv::Point2d ds =
-          (camera.Project(page.Point(s + h, t)) - camera.Project(page.Point(s - h, t))) / (2 * h);
-      const cv::Point2d dt =
-          (camera.Project(page.Point(s, t + h)) - camera.Project(page.Point(s, t - h))) / (2 * h);
-      cv::Mat w;
-      cv::SVD::compute(cv::Mat(cv::Matx22d(ds.x, dt.x, ds.y, dt.y)), w);
-      out.push_back(25.4 * w.at<double>(1));
-    }
-  }
-  return out;
-}
-
 double Percentile(std::vector<double> v, double q) {
   const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * v.size()));
   std::nth_element(v.begin(), v.begin() + k, v.end());

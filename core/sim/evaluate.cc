@@ -158,4 +158,24 @@ SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
   return scan;
 }
 
+std::vector<double> TrueSampling(const VirtualGantry& gantry, double step_mm) {
+  const Page& page = gantry.pages().front();
+  const cv::Size2d size = page.options().size_mm;
+  const CameraModel& camera = gantry.rig().camera;
+  std::vector<double> out;
+  const double h = 0.05;
+  for (double t = step_mm; t < size.height - step_mm; t += step_mm) {
+    for (double s = step_mm; s < size.width - step_mm; s += step_mm) {
+      const cv::Point2d ds =
+          (camera.Project(page.Point(s + h, t)) - camera.Project(page.Point(s - h, t))) / (2 * h);
+      const cv::Point2d dt =
+          (camera.Project(page.Point(s, t + h)) - camera.Project(page.Point(s, t - h))) / (2 * h);
+      cv::Mat w;
+      cv::SVD::compute(cv::Mat(cv::Matx22d(ds.x, dt.x, ds.y, dt.y)), w);
+      out.push_back(25.4 * w.at<double>(1));
+    }
+  }
+  return out;
+}
+
 }  // namespace vellum

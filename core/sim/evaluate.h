@@ -59,6 +59,12 @@ SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
 // what processes scans.
 Scan AsScan(const SimulatedScan& sim);
 
+// The camera's true sampling of the gantry's (first) page, ppi, from its exact geometry: at a
+// grid of points (s, t) of the page `step_mm` apart (uniform in page area, as restored pixels
+// are in flat area), 25.4 times the smallest singular value of d(camera pixel) / d(s, t), by
+// central differences.
+std::vector<double> TrueSampling(const VirtualGantry& gantry, double step_mm);
+
 // Intersection over union of two masks (CV_8U, nonzero = in); 0 if both are empty.
 double MaskIoU(const cv::Mat& a, const cv::Mat& b);
 
