@@ -272,12 +272,48 @@ double HeldOutError(const Calibration& without, const std::vector<cv::Point3f>& 
   return ReprojectionRms(object, proj, kp, dp.t(), rp, cv::Mat(tp).clone());
 }
 
+// The scale at which `c` measures one pose's board: its corners triangulated (the camera's ray
+// against the projector's, the midpoint where they pass closest), and the ratio of their spread
+// about their centroid to the board layout's (the scale of the best similarity between them): 1
+// when the calibration measures lengths truly. NaN when fewer than 3 corners triangulate.
+double MeasuredScale(const Calibration& c, const std::vector<cv::Point3f>& object,
+                     const std::vector<cv::Point2f>& cam, const std::vector<cv::Point2f>& proj) {
+  const cv::Vec3d oc = c.camera.Center(), op = c.projector.Center(), w = oc - op;
+  std::vector<cv::Vec3d> points, board;
+  for (size_t k = 0; k < cam.size() && k < proj.size() && k < object.size(); ++k) {
+    const cv::Vec3d a = c.camera.RayDirection(cam[k]), b = c.projector.RayDirection(proj[k]);
+    const double aa = a.dot(a), ab = a.dot(b), bb = b.dot(b), aw = a.dot(w), bw = b.dot(w);
+    const double den = aa * bb - ab * ab;
+    if (!(std::fabs(den) > 1e-12)) continue;  // Parallel rays (or NaN): no point.
+    const double s = (ab * bw - bb * aw) / den, t = (aa * bw - ab * aw) / den;
+    points.push_back(0.5 * ((oc + s * a) + (op + t * b)));
+    board.emplace_back(object[k].x, object[k].y, object[k].z);
+  }
+  if (points.size() < 3) return std::nan("");
+  cv::Vec3d pc(0, 0, 0), bc(0, 0, 0);
+  for (size_t k = 0; k < points.size(); ++k) {
+    pc += points[k] / static_cast<double>(points.size());
+    bc += board[k] / static_cast<double>(points.size());
+  }
+  double ps = 0, bs = 0;
+  for (size_t k = 0; k < points.size(); ++k) {
+    ps += (points[k] - pc).dot(points[k] - pc);
+    bs += (board[k] - bc).dot(board[k] - bc);
+  }
+  return bs > 0 ? std::sqrt(ps / bs) : std::nan("");
+}
+
 double Median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
 }
 
 }  // namespace
+
+double BoardScale(const Calibration& calibration, const BoardSpec& board, const BoardView& view) {
+  return MeasuredScale(calibration, BoardPoints(board), view.camera_corners,
+                       view.projector_corners);
+}
 
 CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
                                      const BoardSpec& board, const CalibrateOptions& options) {
@@ -395,6 +431,7 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
   struct LeftOut {
     size_t n;
     double error_px, deg, mm;
+    double scale;  // MeasuredScale of the pose by the solve without it.
   };
   auto leave_one_out = [&](const PoseSolve& all, std::vector<LeftOut>* out) {
     out->clear();
@@ -411,7 +448,8 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
                .ok()) {
         continue;
       }
-      LeftOut l{n, HeldOutError(without.calibration, object, cam[n], proj[n]), 0, 0};
+      LeftOut l{n, HeldOutError(without.calibration, object, cam[n], proj[n]), 0, 0,
+                MeasuredScale(without.calibration, object, cam[n], proj[n])};
       RelativePoseChange(without.calibration, all.calibration, &l.deg, &l.mm);
       out->push_back(l);
     }
@@ -502,6 +540,26 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
     }
   }
   sol.calibration = solved.calibration;
+  // The scale error: each pose by the solve without it where there is one, else by the whole.
+  double sum_squares = 0;
+  int scaled = 0;
+  for (size_t n = 0; n < used.size(); ++n) {
+    double scale = MeasuredScale(solved.calibration, object, cam[n], proj[n]);
+    for (const LeftOut& l : left_out)
+      if (l.n == n) scale = l.scale;
+    if (std::isnan(scale)) continue;
+    const double error = 100 * (scale - 1);
+    sum_squares += error * error;
+    ++scaled;
+    if (std::fabs(error) >= std::fabs(sol.worst_scale_error_percent)) {
+      sol.worst_scale_error_percent = error;
+      sol.worst_scale_pose = views[used[n]].name;
+    }
+  }
+  if (scaled > 0) {
+    sol.scale_error_percent = std::sqrt(sum_squares / scaled);
+    sol.calibration.scale_error_percent = sol.scale_error_percent;
+  }
   sol.camera_rms_px = solved.camera_rms_px;
   sol.projector_rms_px = solved.projector_rms_px;
   sol.stereo_rms_px = solved.stereo_rms_px;
@@ -575,6 +633,13 @@ std::string FormatCalibrationReport(const CalibrationSolution& s) {
                     "leave one pose out: the projector's pose moves by at most %.3f deg, %.3f mm "
                     "(most without %s)\n",
                     s.leave_one_out_deg, s.leave_one_out_mm, s.leave_one_out_pose.c_str());
+      out += line;
+    }
+    if (!s.worst_scale_pose.empty()) {
+      std::snprintf(line, sizeof(line),
+                    "scale: lengths on the board measured within %.3f%% RMS over the poses "
+                    "(worst %+.3f%%, %s)\n",
+                    s.scale_error_percent, s.worst_scale_error_percent, s.worst_scale_pose.c_str());
       out += line;
     }
     if (!s.over_limits.empty()) out += "over the limits: " + s.over_limits + "\n";

@@ -91,12 +91,23 @@ struct CalibrationSolution {
   // the pose whose absence moves it most.
   double leave_one_out_deg = 0, leave_one_out_mm = 0;
   std::string leave_one_out_pose;
+  // The scale the calibration measures lengths at, against the board's: each pose's corners
+  // triangulated (camera ray against projector ray) by the solve without that pose (leave one
+  // out; the table pose, and every pose when leave-one-out is off, by the whole solve), a
+  // similarity fitted to the board's layout; the RMS of its scale's departure from 1 over the
+  // poses, % (also calibration.scale_error_percent), and the worst pose's.
+  double scale_error_percent = 0, worst_scale_error_percent = 0;
+  std::string worst_scale_pose;
 };
 
 // Solves from the detected poses; views[table] is the pose lying flat on the table.
 CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
                                      const BoardSpec& board,
                                      const CalibrateOptions& options = CalibrateOptions());
+
+// The scale at which `calibration` measures one detected pose's board (its corners in `board`'s
+// layout), triangulated: 1 when it measures lengths truly (CalibrationSolution's scale error).
+double BoardScale(const Calibration& calibration, const BoardSpec& board, const BoardView& view);
 
 // The solution as text for the operator: per-pose and overall errors, corners used, warnings.
 std::string FormatCalibrationReport(const CalibrationSolution& solution);

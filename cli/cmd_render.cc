@@ -17,6 +17,10 @@ int RunRender(const std::vector<std::string>& args) {
       {"calibration", "FILE", "rig calibration YAML (default: the built-in default rig)", ""},
       {"ambient", "FRACTION", "ambient light", "0.08"},
       {"defocus", "PX", "projector defocus sigma, projector pixels", "0.7"},
+      {"texture-bits", "N",
+       "bits per sample of the studio-light texture: 8, or 16 as a camera that gives more than 8 "
+       "(the structured-light frames stay 8-bit)",
+       "8"},
       {"truth", "BOOL", "also write truth_points.tiff and truth_page.tiff", "true"},
   };
   specs = Join(Join(specs, SimFlagSpecs()), PatternFlagSpecs());
@@ -48,6 +52,10 @@ int RunRender(const std::vector<std::string>& args) {
   }
   light.ambient = flags.GetDouble("ambient", 0, 1);
   light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
+  light.texture_bits = flags.GetInt("texture-bits", 8, 16);
+  if (light.texture_bits != 8 && light.texture_bits != 16) {
+    throw UsageError("--texture-bits must be 8 or 16, got " + flags.Get("texture-bits"));
+  }
   const PatternSequence seq =
       MakePatternSequence(PatternOptionsFromFlags(flags, rig.projector.size));
 

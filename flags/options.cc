@@ -175,6 +175,10 @@ std::vector<Flags::Spec> RestoreFlagSpecs() {
        "the leaf's expected size, mm: a restored leaf more than 10% off is "
        "flagged (default: not checked)",
        ""},
+      {"camera-icc", "FILE",
+       "the camera's ICC profile (RGB, or gray for a gray camera), embedded in the masters "
+       "(restored.tif, archival.tif) in place of sRGB (default: sRGB)",
+       ""},
   };
 }
 
@@ -249,6 +253,10 @@ void RestoreGroupFromFlags(const Flags& flags, PipelineOptions* options) {
   if (!flags.Get("leaf-size").empty()) {
     const cv::Size size = flags.GetSize("leaf-size");
     options->limits.expected_leaf_mm = cv::Size2d(size.width, size.height);
+  }
+  if (!flags.Get("camera-icc").empty()) {
+    const Status s = ReadIccFile(flags.Get("camera-icc"), &options->camera_icc);
+    if (!s.ok()) throw UsageError("--camera-icc: " + s.message());
   }
 }
 

@@ -1,5 +1,6 @@
 #include "io/calibration_io.h"
 
+#include <cmath>
 #include <cstdio>
 #include <opencv2/core.hpp>
 
@@ -147,6 +148,7 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
   if (!fs.root().isMap()) {
     return Status::Error(path + ": not a calibration (expected a map of keys, see DESIGN.md)");
   }
+  *calibration = Calibration();  // What the file leaves out takes its default.
   Status s = Status::Ok();
   try {
     s = ReadDevice(fs, path, "camera_", &calibration->camera);
@@ -154,6 +156,15 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
     std::string why;
     if (s.ok() && !ReadVolume(fs["working_volume_z"], calibration, &why)) {
       s = Status::Error(path + ": working_volume_z " + why);
+    }
+    // The optional measured scale error (`vellum calibrate` writes it).
+    const cv::FileNode scale = fs["scale_error_percent"];
+    if (s.ok() && !scale.empty() && !scale.isNone()) {
+      if (!(scale.isReal() || scale.isInt()) || !(static_cast<double>(scale) >= 0)) {
+        s = Status::Error(path + ": scale_error_percent must be a number >= 0 (%)");
+      } else {
+        calibration->scale_error_percent = static_cast<double>(scale);
+      }
     }
   } catch (const std::exception& e) {
     s = Status::Error(path + ": malformed: " + e.what());
@@ -172,6 +183,8 @@ Status WriteCalibration(const std::string& path, const Calibration& calibration)
     WriteDevice(fs, "projector_", calibration.projector);
     fs << "working_volume_z"
        << "[" << calibration.min_z_mm << calibration.max_z_mm << "]";
+    if (std::isfinite(calibration.scale_error_percent))
+      fs << "scale_error_percent" << calibration.scale_error_percent;
   } catch (const cv::Exception& e) {
     return Status::Error(path + ": cannot write the calibration file: " + e.what());
   }
@@ -196,6 +209,8 @@ std::string CalibrationSha256(const Calibration& calibration) {
   }
   add(calibration.min_z_mm);
   add(calibration.max_z_mm);
+  // Only when measured: a calibration without it keeps the checksum it always had.
+  if (std::isfinite(calibration.scale_error_percent)) add(calibration.scale_error_percent);
   return Sha256OfBytes(text);
 }
 

@@ -2,6 +2,7 @@
 #include <tiffio.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -49,6 +50,29 @@ TEST_F(IoTest, CalibrationRoundTrip) {
   EXPECT_LT(cv::norm(r.camera.translation - c.camera.translation), 1e-9);
   EXPECT_EQ(r.min_z_mm, c.min_z_mm);
   EXPECT_EQ(r.max_z_mm, c.max_z_mm);
+}
+
+// The optional measured scale error (`vellum calibrate` writes it): kept through a round trip
+// and in the checksum; absent, unknown (NaN) and the checksum the file always had; wrong, named.
+TEST_F(IoTest, CalibrationScaleError) {
+  Calibration c = DefaultRig();
+  ASSERT_TRUE(std::isnan(c.scale_error_percent));
+  const std::string plain = CalibrationSha256(c);
+  c.scale_error_percent = 0.0125;
+  ASSERT_TRUE(WriteCalibration(Path("scaled.yaml"), c).ok());
+  Calibration r;
+  Status s = ReadCalibration(Path("scaled.yaml"), &r);
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(r.scale_error_percent, 0.0125);
+  EXPECT_NE(CalibrationSha256(r), plain);
+  ASSERT_TRUE(WriteCalibration(Path("plain.yaml"), DefaultRig()).ok());
+  ASSERT_TRUE(ReadCalibration(Path("plain.yaml"), &r).ok());
+  EXPECT_TRUE(std::isnan(r.scale_error_percent));
+  EXPECT_EQ(CalibrationSha256(r), plain);
+  std::ofstream(Path("plain.yaml"), std::ios::app) << "scale_error_percent: -1\n";
+  s = ReadCalibration(Path("plain.yaml"), &r);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("plain.yaml: scale_error_percent"), std::string::npos) << s.message();
 }
 
 // The optional working volume: a sequence or a 1x2 matrix; absent, the default; wrong, named.
@@ -434,6 +458,27 @@ TEST_F(IoTest, TheRestoredTiffCarriesItsIdentityInXmpBesideItsPixelsAndDpi) {
   fs::create_directories(dir_ / "gray");
   ASSERT_TRUE(WriteRestored((dir_ / "gray").string(), restored, id).ok());
   EXPECT_EQ(icc_space(Path("gray/restored.tif")), "GRAY");
+  // A camera's own profile goes in as given; one for the other kind of image, or bytes that are
+  // no profile, are refused, named.
+  IccProfile camera;
+  ASSERT_TRUE(ParseIccProfile(MakeSrgbProfile(1), "camera.icc", &camera).ok());
+  EXPECT_EQ(camera.channels, 1);
+  fs::create_directories(dir_ / "camera");
+  ASSERT_TRUE(WriteRestored((dir_ / "camera").string(), restored, id, {}, camera).ok());
+  std::string embedded;
+  ASSERT_TRUE(ReadIccProfile(Path("camera/restored.tif"), &embedded).ok());
+  EXPECT_EQ(embedded, camera.bytes);
+  cv::cvtColor(restored.image, restored.image, cv::COLOR_GRAY2BGR);
+  const Status mismatched = WriteRestored((dir_ / "camera").string(), restored, id, {}, camera);
+  EXPECT_FALSE(mismatched.ok());
+  EXPECT_NE(mismatched.message().find("describes gray images, this one is colour"),
+            std::string::npos)
+      << mismatched.message();
+  IccProfile junk;
+  const Status not_icc = ParseIccProfile("no profile here", "junk.icc", &junk);
+  EXPECT_FALSE(not_icc.ok());
+  EXPECT_NE(not_icc.message().find("junk.icc: not an ICC profile"), std::string::npos)
+      << not_icc.message();
 
   const Status missing = ReadXmp(Path("none.tif"), &xmp);
   EXPECT_FALSE(missing.ok());

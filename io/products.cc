@@ -63,10 +63,10 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
 namespace {
 
 // Writes `image` as the TIFF `tif` (with OpenCV's `params`), then its XMP and ICC profile: the
-// identity, vellum's name and version, `figures`, and an sRGB profile (no camera profile is
-// configured yet).
+// identity, vellum's name and version, `figures`, and `icc` (sRGB when it is empty).
 Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::vector<int>& params,
-                       const ScanIdentity& identity, std::map<std::string, std::string> figures) {
+                       const ScanIdentity& identity, std::map<std::string, std::string> figures,
+                       const IccProfile& icc) {
   try {
     if (!cv::imwrite(tif, image, params)) return Status::Error(tif + ": cannot write image");
   } catch (const cv::Exception& e) {
@@ -77,21 +77,22 @@ Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::
   xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
   xmp.figures = std::move(figures);
   xmp.icc_channels = image.channels();
+  xmp.icc_profile = icc;
   return WriteXmp(tif, xmp);
 }
 
 }  // namespace
 
 Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
-                           const ScanIdentity& identity) {
+                           const ScanIdentity& identity, const IccProfile& icc) {
   return WriteTiffMaster(
       (fs::path(dir) / "archival.tif").string(), texture, {}, identity,
-      {{"view", "camera"}, {"master", "archival: the texture as captured, not flattened"}});
+      {{"view", "camera"}, {"master", "archival: the texture as captured, not flattened"}}, icc);
 }
 
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
                      const ScanIdentity& identity,
-                     const std::map<std::string, std::string>& provenance) {
+                     const std::map<std::string, std::string>& provenance, const IccProfile& icc) {
   std::vector<int> tiff_params;
   if (restored.view == RestoreView::kOrthographic) {
     const int dpi = static_cast<int>(std::lround(restored.dpi));
@@ -125,7 +126,7 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
     figures["dpi"] = JsonNumber(restored.dpi).dump();
     figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
   }
-  const Status written = WriteTiffMaster(tif, restored.image, tiff_params, identity, figures);
+  const Status written = WriteTiffMaster(tif, restored.image, tiff_params, identity, figures, icc);
   if (!written.ok()) return written;
   Json r;
   Json id = Json::object();

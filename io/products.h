@@ -13,6 +13,7 @@
 #include "core/mesh/mesh.h"
 #include "core/patterns/scan.h"
 #include "core/restore/restore.h"
+#include "io/xmp.h"
 
 namespace vellum {
 
@@ -26,18 +27,20 @@ Status WritePointProducts(const std::string& dir, const cv::Mat& points, double*
 // mesh.ply (3D) and flat.ply (z = 0): the sheet's active nodes in the same order, quad faces.
 Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat);
 // The archival master: the texture as captured (unflattened, the camera's own pixels), as
-// archival.tif in `dir`, with the same identity, XMP and ICC profile as the restored page.
+// archival.tif in `dir`, with the same identity, XMP and ICC profile as the restored page
+// (`icc`: the camera's profile; empty: sRGB).
 Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
-                           const ScanIdentity& identity);
+                           const ScanIdentity& identity, const IccProfile& icc = IccProfile());
 
 // restored.tif (TIFF dpi tags in orthographic view), restored_mask.png (when the leaf's mask was
 // restored: 255 on the leaf), sampling_ppi.tif (the true sampling map, 32-bit float ppi, 0 off
 // the leaf; orthographic view) and restored.json (the map from flat mm to pixels, the turn, the
 // scan's catalogue identity when it has one, and `provenance`). `provenance` (key -> text: the
 // scale and its error, the calibration's checksum, the options) goes into restored.json and
-// the TIFF's XMP beside the dpi.
+// the TIFF's XMP beside the dpi. The TIFF embeds `icc` (the camera's profile; empty: sRGB).
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
                      const ScanIdentity& identity = ScanIdentity(),
-                     const std::map<std::string, std::string>& provenance = {});
+                     const std::map<std::string, std::string>& provenance = {},
+                     const IccProfile& icc = IccProfile());
 
 }  // namespace vellum

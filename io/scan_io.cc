@@ -54,8 +54,8 @@ bool PngHeader(const std::string& path, uint32_t* width, uint32_t* height, int* 
 
 // What an image file's header says, before its pixels are decoded: a PNG's size (*size), or an
 // empty size for another format OpenCV reads; an error for a claim too large, a PNG deeper than
-// 8 bits, or a file no reader knows.
-Status CheckImageHeader(const std::string& path, cv::Size* size) {
+// `max_bits`, or a file no reader knows.
+Status CheckImageHeader(const std::string& path, cv::Size* size, int max_bits = 8) {
   *size = cv::Size();
   uint32_t width = 0, height = 0;
   int bit_depth = 0;
@@ -68,18 +68,21 @@ Status CheckImageHeader(const std::string& path, cv::Size* size) {
                          std::to_string(height) + " pixels (at most " +
                          std::to_string(kMaxImageSide) + " each way); not read");
   }
-  if (bit_depth > 8) {
-    return Status::Error(path + ": must be an 8-bit image (its header says " +
-                         std::to_string(bit_depth) + "-bit); not read");
+  if (bit_depth > max_bits) {
+    return Status::Error(path + ": must be " + (max_bits == 8 ? "an 8" : "an 8- or 16") +
+                         "-bit image (its header says " + std::to_string(bit_depth) +
+                         "-bit); not read");
   }
   *size = cv::Size(static_cast<int>(width), static_cast<int>(height));
   return Status::Ok();
 }
 
-Status ReadImageFile(const std::string& path, cv::Mat* image) {
+// An image of 8 bits a sample, or of 8 or 16 when `max_bits` is 16 (the texture of a camera
+// that gives more than 8).
+Status ReadImageFile(const std::string& path, cv::Mat* image, int max_bits = 8) {
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
   cv::Size claimed;
-  const Status header = CheckImageHeader(path, &claimed);
+  const Status header = CheckImageHeader(path, &claimed, max_bits);
   if (!header.ok()) return header;
   cv::Mat img;
   try {
@@ -88,7 +91,10 @@ Status ReadImageFile(const std::string& path, cv::Mat* image) {
     img.release();
   }
   if (img.empty()) return Status::Error(path + ": not a readable image");
-  if (img.depth() != CV_8U) return Status::Error(path + ": must be an 8-bit image");
+  if (img.depth() != CV_8U && !(max_bits == 16 && img.depth() == CV_16U)) {
+    return Status::Error(
+        path + (max_bits == 8 ? ": must be an 8-bit image" : ": must be an 8- or 16-bit image"));
+  }
   if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_BGRA2BGR);
   if (img.channels() != 1 && img.channels() != 3) {
     return Status::Error(path + ": must be gray or colour");
@@ -297,7 +303,7 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
 }
 
 Status ReadTexture(const std::string& dir, cv::Mat* texture) {
-  return ReadImageFile((fs::path(dir) / kTexture).string(), texture);
+  return ReadImageFile((fs::path(dir) / kTexture).string(), texture, 16);
 }
 
 namespace {
@@ -328,7 +334,7 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
   Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity);
   if (!s.ok()) return s;
   const fs::path root(dir);
-  s = ReadImageFile((root / kTexture).string(), &scan->texture);
+  s = ReadImageFile((root / kTexture).string(), &scan->texture, 16);
   if (!s.ok()) return s;
   s = CheckSize((root / kTexture).string(), scan->texture.size(), *scan);
   if (!s.ok()) return s;

@@ -3,8 +3,10 @@
 #include <lcms2.h>
 
 #include <exiv2/exiv2.hpp>
+#include <fstream>
 #include <memory>
 #include <mutex>
+#include <sstream>
 
 namespace vellum {
 namespace {
@@ -74,6 +76,33 @@ std::string MakeSrgbProfile(int channels) {
   return bytes;
 }
 
+Status ParseIccProfile(const std::string& bytes, const std::string& where, IccProfile* profile) {
+  *profile = IccProfile();
+  cmsHPROFILE h = cmsOpenProfileFromMem(bytes.data(), static_cast<cmsUInt32Number>(bytes.size()));
+  if (!h) return Status::Error(where + ": not an ICC profile (Little CMS cannot read it)");
+  const cmsColorSpaceSignature space = cmsGetColorSpace(h);
+  char text[256] = "";
+  cmsGetProfileInfoASCII(h, cmsInfoDescription, "en", "US", text, sizeof(text));
+  cmsCloseProfile(h);
+  if (space != cmsSigRgbData && space != cmsSigGrayData) {
+    return Status::Error(where + ": an ICC profile of neither RGB nor gray images ('" +
+                         std::string(text) + "'): a camera's profile describes one of them");
+  }
+  profile->bytes = bytes;
+  profile->description = text;
+  profile->source = where;
+  profile->channels = space == cmsSigRgbData ? 3 : 1;
+  return Status::Ok();
+}
+
+Status ReadIccFile(const std::string& path, IccProfile* profile) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::Error(path + ": cannot read the ICC profile");
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  return ParseIccProfile(bytes.str(), path, profile);
+}
+
 Status WriteXmp(const std::string& path, const XmpFields& fields) {
   std::lock_guard<std::mutex> lock(ExivMutex());
   try {
@@ -94,7 +123,13 @@ Status WriteXmp(const std::string& path, const XmpFields& fields) {
     }
     AddText(xmp, "Xmp.xmp.CreatorTool", Exiv2::xmpText, fields.creator_tool);
     if (fields.icc_channels == 1 || fields.icc_channels == 3) {
-      const std::string icc = MakeSrgbProfile(fields.icc_channels);
+      const IccProfile& given = fields.icc_profile;
+      if (!given.empty() && given.channels != fields.icc_channels) {
+        return Status::Error(path + ": the ICC profile '" + given.description + "' describes " +
+                             (given.channels == 3 ? "colour" : "gray") + " images, this one is " +
+                             (fields.icc_channels == 3 ? "colour" : "gray"));
+      }
+      const std::string icc = given.empty() ? MakeSrgbProfile(fields.icc_channels) : given.bytes;
       if (icc.empty()) return Status::Error(path + ": cannot make its ICC profile");
       Exiv2::DataBuf buffer(reinterpret_cast<const Exiv2::byte*>(icc.data()),
                             static_cast<long>(icc.size()));

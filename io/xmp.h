@@ -16,6 +16,22 @@ namespace vellum {
 // per measured figure. The host name is reserved (RFC 2606): it names, it does not resolve.
 inline constexpr const char* kVellumXmpNamespace = "http://vellum.invalid/ns/scan/1.0/";
 
+// An ICC colour profile, checked by Little CMS: its bytes, its description (the profile's
+// description tag, as exiftool's ProfileDescription says it) and the channels of the images it
+// describes (3: RGB, 1: gray).
+struct IccProfile {
+  std::string bytes, description;
+  int channels = 0;
+  std::string source;  // Where it was read from (a file), for errors.
+  bool empty() const { return bytes.empty(); }
+};
+
+// The profile in `bytes` (`where` names it in an error: a file, a flag): an error unless Little
+// CMS reads it as a profile of RGB or gray images.
+Status ParseIccProfile(const std::string& bytes, const std::string& where, IccProfile* profile);
+// The profile in the file at `path` (e.g. the camera's, from its maker or a colour target).
+Status ReadIccFile(const std::string& path, IccProfile* profile);
+
 // What goes into a file's XMP packet. Dublin Core carries the catalogue identity as any
 // reader expects it: dc:identifier = shelfmark, dc:title = IdentityTitle (shelfmark, folio,
 // side), dc:description = note, dc:contributor = operator; vellum:<key> repeats each identity
@@ -24,9 +40,11 @@ struct XmpFields {
   ScanIdentity identity;
   std::map<std::string, std::string> figures;
   std::string creator_tool;  // xmp:CreatorTool, e.g. "vellum 0.1.0"
-  // The ICC profile to embed: 3 = sRGB (a colour image), 1 = gray with sRGB's tone curve and
-  // white (a gray image), 0 = none.
+  // The image's channels, for its ICC profile: 3 (colour) or 1 (gray); 0 = no profile.
   int icc_channels = 0;
+  // The profile to embed (the camera's); its channels must be the image's. Empty: sRGB (a
+  // colour image), or gray with sRGB's tone curve and white (a gray image).
+  IccProfile icc_profile;
 };
 
 // Adds the packet (and the profile) to the image file at `path` (TIFF, PNG or JPEG), keeping

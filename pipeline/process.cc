@@ -52,6 +52,16 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     out.status = s;
     return out;
   }
+  const IccProfile& icc = options.camera_icc;
+  if (!icc.empty() && !input.scan.texture.empty() &&
+      icc.channels != input.scan.texture.channels()) {
+    // Said before any work: the masters could not be written.
+    out.status = Status::Error(icc.source + ": the camera's ICC profile '" + icc.description +
+                               "' describes " + (icc.channels == 3 ? "colour" : "gray") +
+                               " images, but " + input.scan_dir + "/texture.png is " +
+                               (icc.channels == 3 ? "gray" : "colour"));
+    return out;
+  }
   const CameraModel& camera = input.calibration.camera;
   next("decode", 0.35);
   DecodeResult decoded;
@@ -98,15 +108,17 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     }
     next("restore", done + (slow ? 0.8 : 0.3) * share);
     if (!ran(RestoreStage(input.scan.texture, mask, page.mesh, page.flat.flat, camera,
-                          options.restore, options.limits, report.stages, results, page.name,
-                          &page.restored),
+                          options.restore, options.limits, options.camera_icc, report.stages,
+                          results, page.name, &page.restored),
              true)) {
       return out;
     }
     out.pages.push_back(std::move(page));
   }
   next("archive", 0.96);
-  if (!ran(ArchiveStage(input.scan.texture, input.scan.identity, results), true)) return out;
+  if (!ran(ArchiveStage(input.scan.texture, input.scan.identity, options.camera_icc, results),
+           true))
+    return out;
   next("report", 0.97);
   out.status = WriteReports(results, input.scan_dir, &report);
   return out;

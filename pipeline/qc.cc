@@ -64,8 +64,11 @@ std::vector<FadgiPage> AssessFadgi(const ProcessReport& report) {
       scale.value = text;
       scale.stars = Stars([&](const FadgiLevel& l) { return error <= l.scale_error_percent; });
       scale.basis =
-          "the flattening's mean relative length error; the calibration's own scale error is "
-          "not measured here";
+          report.Find("restored", "scale_error_calibration_percent", page)
+              ? "the calibration's measured scale error (vellum calibrate, on its board) plus the "
+                "flattening's mean relative length error"
+              : "the flattening's mean relative length error; the calibration's own is not "
+                "known (its file has no scale_error_percent: vellum calibrate measures it)";
     }
     p.figures.push_back(scale);
     p.stars = 4;

@@ -202,7 +202,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
   double total = 0;
   for (const StageReport& stage : r.stages) {
     h << "<tr><th>" << HtmlEscape(StageKey(stage)) << "</th><td>" << Number(stage.seconds)
-      << " s</td><td>peak memory " << Number(std::round(stage.peak_memory_mb)) << " MB</td></tr>\n";
+      << " s</td><td>"
+      << (stage.peak_memory_mb > 0
+              ? "peak memory " + Number(std::round(stage.peak_memory_mb)) + " MB"
+              : std::string())
+      << "</td></tr>\n";
     total += stage.seconds;
   }
   h << "<tr><th>total</th><td>" << Number(total) << " s</td></tr>\n</table>\n";
@@ -257,9 +261,12 @@ Json Sections(const ProcessReport& r, const std::string& page) {
       s["total"] = JsonNumber(total);
     }
     if (std::string(section) == "stages_peak_memory_mb" && page.empty()) {
-      // The process's peak resident memory as each stage ended (it only grows).
-      for (const StageReport& stage : r.stages)
-        s[StageKey(stage)] = JsonNumber(std::round(stage.peak_memory_mb));
+      // The process's peak resident memory as each stage ended (it only grows); a stage run in
+      // another process (a daemon's, reported over the bus) has none.
+      for (const StageReport& stage : r.stages) {
+        if (stage.peak_memory_mb > 0)
+          s[StageKey(stage)] = JsonNumber(std::round(stage.peak_memory_mb));
+      }
     }
     for (const StageReport& stage : r.stages) {
       if (stage.page != page) continue;

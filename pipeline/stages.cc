@@ -152,6 +152,8 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   r.Number("options", "max_flying_mm", options.max_flying_mm);
   const Calibration& c = triangulator.calibration();
   r.Text("provenance", "calibration_sha256", CalibrationSha256(c));
+  if (std::isfinite(c.scale_error_percent))
+    r.Number("provenance", "calibration_scale_error_percent", c.scale_error_percent);
   r.Number("options", "volume_low_mm",
            std::isnan(options.min_z_mm) ? c.min_z_mm : options.min_z_mm);
   r.Number("options", "volume_high_mm",
@@ -334,6 +336,7 @@ std::map<std::string, std::string> Provenance(const RestoreResult& restored,
       out["true_" + v.key] = JsonNumber(v.number).dump();
     if (v.section == "restored" && v.key == "scale_error_percent")
       out[v.key] = JsonNumber(v.number).dump();
+    if (v.section == "restored" && v.key == "icc_profile") out[v.key] = v.text;
   }
   const ReportValue* calibration = FindValue(earlier, "provenance", "calibration_sha256");
   if (calibration) out["calibration_sha256"] = calibration->text;
@@ -353,17 +356,18 @@ std::map<std::string, std::string> Provenance(const RestoreResult& restored,
 }  // namespace
 
 StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
-                         const std::string& results) {
+                         const IccProfile& camera_icc, const std::string& results) {
   Stage stage("archive");
   return stage.Finish(
-      stage.Output("archival.tif", WriteArchivalMaster(results, texture, identity)));
+      stage.Output("archival.tif", WriteArchivalMaster(results, texture, identity, camera_icc)));
 }
 
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const std::vector<StageReport>& earlier, const std::string& results,
-                         const std::string& page, RestoreResult* restored) {
+                         const IccProfile& camera_icc, const std::vector<StageReport>& earlier,
+                         const std::string& results, const std::string& page,
+                         RestoreResult* restored) {
   Stage stage("restore", page);
   StageReport& r = stage.report();
   r.Text("options", "view", ToString(options.view));
@@ -375,11 +379,24 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   r.Number("restored", "dpi", restored->dpi);
   r.Number("restored", "rotation_deg", restored->rotation_deg);
   r.Number("restored", "bits_per_channel", texture.depth() == CV_16U ? 16 : 8);
+  r.Text("restored", "icc_profile",
+         camera_icc.empty()
+             ? std::string(texture.channels() == 3 ? "sRGB" : "gray, sRGB tone curve") +
+                   " (no camera profile configured)"
+             : camera_icc.description);
   if (const ReportValue* strain = FindValue(earlier, "flattening", "mean_strain", page);
       strain && restored->view == RestoreView::kOrthographic) {
-    // The flat page's lengths against the measured surface's: the flattening's share of the
-    // reproduction scale error (the calibration's own is not measured here).
-    r.Number("restored", "scale_error_percent", 100 * strain->number);
+    // The reproduction scale error: the flat page's lengths against the measured surface's
+    // (the flattening's mean strain) plus the calibration's measured error of every length
+    // (`vellum calibrate`), when its file carries one. They add: the one is a bias of every
+    // length, the other a mean departure from it.
+    const double flattening = 100 * strain->number;
+    const ReportValue* calibration =
+        FindValue(earlier, "provenance", "calibration_scale_error_percent");
+    r.Number("restored", "scale_error_flattening_percent", flattening);
+    if (calibration) r.Number("restored", "scale_error_calibration_percent", calibration->number);
+    r.Number("restored", "scale_error_percent",
+             flattening + (calibration ? calibration->number : 0));
   }
   if (!restored->sampling.empty()) {
     // What the camera truly saw of the page, beside the dpi it is written at.
@@ -426,7 +443,7 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   const ScanIdentity identity = ReportedIdentity(earlier);
   if (s.ok()) {
     s = WriteRestored(dir, *restored, page.empty() ? identity : PageIdentity(identity, page),
-                      provenance);
+                      provenance, camera_icc);
   }
   if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back(PageFile(page, "restored.tif"));

@@ -19,6 +19,7 @@
 #include "core/outline/outline.h"
 #include "core/patterns/scan.h"
 #include "core/restore/restore.h"
+#include "io/xmp.h"
 #include "pipeline/report.h"
 
 namespace vellum {
@@ -61,6 +62,8 @@ struct PipelineOptions {
   WarningLimits limits;
   // Stop after the point cloud (points.ply, depth.png): an object that is not a page.
   bool points_only = false;
+  // The camera's ICC profile, embedded in the masters (--camera-icc); empty: sRGB.
+  IccProfile camera_icc;
 
   bool Check(std::string* why) const;
 };
@@ -105,9 +108,10 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
                          const std::string& page, FlattenResult* flat);
 
 // The archival master of the scan: the texture as captured, as archival.tif in `results`, with
-// the scan's identity (WriteArchivalMaster). Once per scan, after its pages.
+// the scan's identity and the camera's ICC profile (`camera_icc`; empty: sRGB)
+// (WriteArchivalMaster). Once per scan, after its pages.
 StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
-                         const std::string& results);
+                         const IccProfile& camera_icc, const std::string& results);
 
 // Restore (3.10): the texture through the flattened sheet, with the page's mask (cropped to the
 // leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
@@ -116,11 +120,13 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 // picture). Warns of a leaf whose size is not the one expected, and of a dpi asked above the
 // true sampling. `earlier` are the scan's stages so far: the scan's identity (a spread's page
 // gets its own, PageIdentity), its calibration's checksum, the page's flattening residual and
-// every stage's options go into restored.json and the TIFF's XMP.
+// every stage's options go into restored.json and the TIFF's XMP. The TIFF embeds the camera's
+// ICC profile `camera_icc` (empty: sRGB), named in the report.
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const std::vector<StageReport>& earlier, const std::string& results,
-                         const std::string& page, RestoreResult* restored);
+                         const IccProfile& camera_icc, const std::vector<StageReport>& earlier,
+                         const std::string& results, const std::string& page,
+                         RestoreResult* restored);
 
 }  // namespace vellum

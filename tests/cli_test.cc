@@ -2,6 +2,7 @@
 // and bad input (missing frame, mixed sizes, non-image, wrong calibration) giving one clear
 // error that names the file and the problem, a non-zero exit, and never a crash.
 #include <gtest/gtest.h>
+#include <lcms2.h>
 #include <sys/wait.h>
 
 #include <cmath>
@@ -16,6 +17,7 @@
 #include "io/calibration_io.h"
 #include "io/ply.h"
 #include "io/scan_io.h"
+#include "io/xmp.h"
 #include "tests/shell.h"
 
 namespace vellum {
@@ -338,6 +340,111 @@ void ExpectCleanError(const Result& r, const std::string& file, const std::strin
   EXPECT_NE(r.output.find(problem), std::string::npos) << r.output;
   // One clear line, not a stack of messages.
   EXPECT_LE(std::count(r.output.begin(), r.output.end(), '\n'), 2) << r.output;
+}
+
+// Writes an ICC profile as a colour target's software would for a camera: gray (the gantry's
+// camera is gray) or RGB (Adobe RGB (1998) primaries), gamma 2.2, D65 white, named `name`.
+void WriteCameraProfile(const fs::path& file, bool rgb, const char* name) {
+  cmsToneCurve* gamma = cmsBuildGamma(nullptr, 2.2);
+  cmsCIExyY d65;
+  cmsWhitePointFromTemp(&d65, 6504);
+  cmsHPROFILE profile = nullptr;
+  if (rgb) {
+    const cmsCIExyYTRIPLE primaries = {{0.64, 0.33, 1}, {0.21, 0.71, 1}, {0.15, 0.06, 1}};
+    cmsToneCurve* curves[3] = {gamma, gamma, gamma};
+    profile = cmsCreateRGBProfile(&d65, &primaries, curves);
+  } else {
+    profile = cmsCreateGrayProfile(&d65, gamma);
+  }
+  cmsMLU* description = cmsMLUalloc(nullptr, 1);
+  cmsMLUsetASCII(description, "en", "US", name);
+  cmsWriteTag(profile, cmsSigProfileDescriptionTag, description);
+  cmsMLUfree(description);
+  ASSERT_TRUE(cmsSaveProfileToFile(profile, file.c_str()));
+  cmsCloseProfile(profile);
+  cmsFreeToneCurve(gamma);
+}
+
+// Issue 16: the camera's own ICC profile (--camera-icc) goes as is into the production and the
+// archival master in place of sRGB, and is named in report.json; exiftool (a reader vellum did
+// not write) reads its name. A profile for colour images on a gray camera's scan, and a file
+// that is not a profile, are refused before any work, naming the file.
+TEST_F(CliTest, TheCamerasIccProfileGoesIntoBothMasters) {
+  const fs::path gray = root_ / "camera_gray.icc", rgb = root_ / "camera_rgb.icc";
+  WriteCameraProfile(gray, false, "Gantry camera 7, gray, gamma 2.2");
+  WriteCameraProfile(rgb, true, "Gantry camera 7, Adobe RGB primaries");
+  const std::string out = (root_ / "out_icc").string();
+  const Result r =
+      RunVellum(Process((root_ / "scan").string(), Rig()) + "_icc --camera-icc " + gray.string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string made = FileBytes(gray);
+  for (const char* master : {"restored.tif", "archival.tif"}) {
+    std::string embedded;
+    ASSERT_TRUE(ReadIccProfile((fs::path(out) / master).string(), &embedded).ok()) << master;
+    EXPECT_EQ(embedded, made) << master << ": not the camera's profile as given";
+    const Result exif = Shell("exiftool -s3 -ProfileDescription " + out + "/" + master);
+    ASSERT_EQ(exif.exit_code, 0) << exif.output;
+    EXPECT_EQ(exif.output, "Gantry camera 7, gray, gamma 2.2\n") << master;
+  }
+  const std::string report = FileBytes(fs::path(out) / "report.json");
+  EXPECT_NE(report.find("\"icc_profile\": \"Gantry camera 7, gray, gamma 2.2\""), std::string::npos)
+      << report;
+
+  ExpectCleanError(RunVellum(Process((root_ / "scan").string(), Rig()) + "_icc_rgb --camera-icc " +
+                             rgb.string()),
+                   rgb.string(), "describes colour images, but");
+  EXPECT_FALSE(fs::exists(root_ / "out_icc_rgb" / "points.ply")) << "work done before the check";
+  std::ofstream(root_ / "junk.icc") << "not a colour profile";
+  const Result junk = RunVellum(Process((root_ / "scan").string(), Rig()) +
+                                "_icc_junk --camera-icc " + (root_ / "junk.icc").string());
+  EXPECT_EQ(junk.exit_code, 2) << junk.output;
+  EXPECT_NE(junk.output.find("junk.icc: not an ICC profile"), std::string::npos) << junk.output;
+}
+
+// Issue 16: a camera that gives more than 8 bits (the virtual gantry's texture at 16) gives
+// 16-bit masters: restored.tif and archival.tif at 16 bits a sample (as exiftool reads them),
+// the report's bit depth 16 (FADGI's 4-star figure). The structured-light frames are the same
+// 8-bit frames, so the geometry is the same as the 8-bit scan's: the 16-bit restored page,
+// scaled to 8 bits, is the 8-bit one within its rounding (under 1 DN; the noise is the same
+// draw). The bus carries 8-bit images: `vellum import` refuses the scan, naming the texture.
+TEST_F(CliTest, ASixteenBitTextureGivesSixteenBitMasters) {
+  const std::string scan16 = (root_ / "scan16").string();
+  Result r =
+      RunVellum("render --page curl --texture-bits 16 --calibration " + Rig() + " --out " + scan16);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string out8 = (root_ / "out_8bit").string(), out16 = (root_ / "out_16bit").string();
+  r = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " + Rig() +
+                " --out " + out8);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = RunVellum("process --scan " + scan16 + " --calibration " + Rig() + " --out " + out16);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const char* master : {"restored.tif", "archival.tif"}) {
+    const Result exif = Shell("exiftool -s3 -BitsPerSample " + out16 + "/" + master);
+    ASSERT_EQ(exif.exit_code, 0) << exif.output;
+    EXPECT_EQ(exif.output, "16\n") << master;
+  }
+  const nlohmann::json report = nlohmann::json::parse(FileBytes(fs::path(out16) / "report.json"));
+  EXPECT_EQ(report.at("restored").at("bits_per_channel"), 16);
+  bool four_star_depth = false;
+  for (const auto& figure : report.at("fadgi").at(0).at("figures")) {
+    if (figure.at("name") == "bit depth") four_star_depth = figure.at("stars") == 4;
+  }
+  EXPECT_TRUE(four_star_depth) << report.at("fadgi").dump();
+  const cv::Mat a = cv::imread(out8 + "/restored.tif", cv::IMREAD_UNCHANGED);
+  const cv::Mat b = cv::imread(out16 + "/restored.tif", cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(a.type(), CV_8U);
+  ASSERT_EQ(b.type(), CV_16U);
+  ASSERT_EQ(a.size(), b.size());
+  cv::Mat a16, scaled;
+  a.convertTo(a16, CV_32F);
+  b.convertTo(scaled, CV_32F, 1.0 / 257);
+  EXPECT_LT(cv::norm(a16, scaled, cv::NORM_INF), 1.0);
+  EXPECT_GT(cv::norm(a16, scaled, cv::NORM_L1) / a16.total(), 0.05) << "no finer samples at all";
+  r = RunVellum("import " + scan16 + " " + (root_ / "scan16.lcmlog").string());
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("scan16/texture.png: a 16-bit texture cannot go on the bus"),
+            std::string::npos)
+      << r.output;
 }
 
 TEST_F(CliTest, MissingFrame) {

@@ -29,6 +29,7 @@
 #include "io/xmp.h"
 #include "station/scan_log.h"
 #include "station/scan_store.h"
+#include "tests/report_keys.h"
 #include "tests/station_harness.h"
 #include "tests/xwd.h"
 #include "vellum/calibration_t.hpp"
@@ -57,14 +58,6 @@ const std::string kDemoLog = kBuild + "/tests/data/demo_leaf.lcmlog";  // What t
 
 std::string Daemon(const std::string& name) { return kBuild + "/daemons/" + name; }
 
-// The keys of a JSON object, recursively ("pixels/valid").
-void JsonKeys(const nlohmann::json& j, const std::string& prefix, std::set<std::string>* keys) {
-  if (!j.is_object()) return;
-  for (auto it = j.begin(); it != j.end(); ++it) {
-    keys->insert(prefix + it.key());
-    JsonKeys(it.value(), prefix + it.key() + "/", keys);
-  }
-}
 std::string Tool() { return kBuild + "/cli/vellum"; }
 
 // How long the projector waits for each CAPTURE from the sim camera: the camera renders every
@@ -173,10 +166,8 @@ class StationTest : public ::testing::Test {
     auto section_of = [](const nlohmann::json& j, const char* key) {
       return j.contains(key) ? j[key] : nlohmann::json();
     };
-    std::set<std::string> station_keys, process_keys;
-    JsonKeys(station, "", &station_keys);
-    JsonKeys(process, "", &process_keys);
-    EXPECT_EQ(station_keys, process_keys);
+    const std::set<std::string> station_keys = ComparableReportKeys(station);
+    EXPECT_EQ(station_keys, ComparableReportKeys(process));
     for (const char* section :
          {"identity", "options", "sizes", "pixels", "sheet", "flattening", "outputs"}) {
       EXPECT_EQ(section_of(station, section), section_of(process, section)) << section;

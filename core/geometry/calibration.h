@@ -3,6 +3,7 @@
 // (mm, z = 0 on the table, +z towards the camera), with OpenCV's 5-term lens distortion.
 #pragma once
 
+#include <limits>
 #include <opencv2/core.hpp>
 #include <string>
 
@@ -33,6 +34,10 @@ struct Calibration {
   // The heights a scanned object may have, mm (world z, the table at 0): points outside are
   // rejected as mistriangulated. Calibration key `working_volume_z` (optional).
   double min_z_mm = -20.0, max_z_mm = 300.0;
+  // How far the lengths this calibration measures are from the truth, %: measured by `vellum
+  // calibrate` on its board (the corners triangulated against the board's own layout), NaN when
+  // not measured. Calibration key `scale_error_percent` (optional).
+  double scale_error_percent = std::numeric_limits<double>::quiet_NaN();
 
   bool Check(std::string* why) const;
 };

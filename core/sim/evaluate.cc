@@ -148,10 +148,10 @@ double MaskIoU(const cv::Mat& a, const cv::Mat& b) {
 }
 
 SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
-                           const TextureOptions& texture, const SceneOptions& scene,
-                           uint64_t seed) {
+                           const TextureOptions& texture, const SceneOptions& scene, uint64_t seed,
+                           const LightOptions& light) {
   SimulatedScan scan;
-  scan.gantry = std::make_unique<VirtualGantry>(rig, page, texture, LightOptions(), scene);
+  scan.gantry = std::make_unique<VirtualGantry>(rig, page, texture, light, scene);
   scan.sequence = MakePatternSequence(PatternOptions{rig.projector.size});
   scan.frames = RenderSequence(*scan.gantry, scan.sequence, seed);
   scan.texture = scan.gantry->RenderTexture(seed);

@@ -52,9 +52,10 @@ struct SimulatedScan {
 };
 SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t seed,
                            const TextureOptions& texture = TextureOptions());
-// The same for any page, in any scene.
+// The same for any page, in any scene, under any light.
 SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
-                           const TextureOptions& texture, const SceneOptions& scene, uint64_t seed);
+                           const TextureOptions& texture, const SceneOptions& scene, uint64_t seed,
+                           const LightOptions& light = LightOptions());
 // The simulated scan as a scan directory holds it (sequence, camera size, texture, frames), for
 // what processes scans.
 Scan AsScan(const SimulatedScan& sim);

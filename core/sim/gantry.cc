@@ -254,12 +254,27 @@ void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
   gain_.create(size, CV_32F);
   offset_.create(size, CV_32F);
   albedo_.create(size, CV_32F);
+  studio_.create(size, CV_32F);
   const bool coloured = std::any_of(textures.begin(), textures.end(),
                                     [](const PageTexture& t) { return t.coloured(); });
   if (coloured) colour_albedo_.create(size, CV_32FC3);
   truth_.lit.create(size, CV_8U);
   const cv::Vec3d prj_centre = prj.Center();
   const int ss = std::max(1, light_.albedo_supersampling);
+  // The projector's fall-off (LightOptions::projector_falloff) and the studio lamps' light.
+  const double d0 = cv::norm(prj_centre);
+  const cv::Point2d prj_middle(prj.matrix(0, 2), prj.matrix(1, 2));
+  const double half_diagonal = 0.5 * std::hypot(prj.size.width, prj.size.height);
+  auto lamps_at = [&](const cv::Vec3d& x, const cv::Vec3d& n) {
+    double sum = 0;
+    for (const cv::Vec3d& lamp : light_.studio_lamps) {
+      const cv::Vec3d to = lamp - x;
+      const double d2 = to.dot(to);
+      sum += std::max(0.0, n.dot(to) / std::sqrt(d2)) / d2;
+    }
+    return sum;
+  };
+  const double lamps_at_origin = lamps_at(cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 1));
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
       for (int u = 0; u < size.width; ++u) {
@@ -312,8 +327,18 @@ void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
         projector_map_.at<cv::Vec2f>(v, u) =
             cv::Vec2f(static_cast<float>(p.x), static_cast<float>(p.y));
         albedo_.at<float>(v, u) = static_cast<float>(albedo);
+        double falloff = 1;
+        if (light_.projector_falloff && lit) {
+          const double d = cv::norm(x - prj_centre);
+          const double r = cv::norm(p - prj_middle) / half_diagonal;
+          falloff = (d0 * d0) / (d * d) * (1 - light_.projector_vignetting * r * r);
+        }
         gain_.at<float>(v, u) =
-            lit ? static_cast<float>(255.0 * albedo * light_.projector_gain * cos_in) : 0.0f;
+            lit ? static_cast<float>(255.0 * albedo * light_.projector_gain * cos_in * falloff)
+                : 0.0f;
+        studio_.at<float>(v, u) = light_.studio_lamps.empty() || !(lamps_at_origin > 0)
+                                      ? 1.0f
+                                      : static_cast<float>(lamps_at(x, normal) / lamps_at_origin);
         offset_.at<float>(v, u) = static_cast<float>(255.0 * albedo * light_.ambient);
         truth_.lit.at<uint8_t>(v, u) = lit ? 255 : 0;
       }
@@ -369,8 +394,22 @@ cv::Mat VirtualGantry::RenderTexture(uint64_t seed) const {
   cv::RNG rng(seed);
   rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
   cv::Mat frame;
-  cv::Mat light = albedo * (255.0 * light_.studio_light) + noise;
-  light.convertTo(frame, CV_8U);  // Rounds and saturates.
+  cv::Mat lit = albedo.clone();
+  if (!light_.studio_lamps.empty()) {
+    if (lit.channels() == 1) {
+      lit = lit.mul(studio_);
+    } else {
+      cv::Mat studio3;
+      cv::merge(std::vector<cv::Mat>{studio_, studio_, studio_}, studio3);
+      lit = lit.mul(studio3);
+    }
+  }
+  cv::Mat light = lit * (255.0 * light_.studio_light) + noise;
+  if (light_.texture_bits == 16) {
+    light.convertTo(frame, CV_16U, 65535.0 / 255.0);  // Rounds and saturates.
+  } else {
+    light.convertTo(frame, CV_8U);
+  }
   return frame;
 }
 

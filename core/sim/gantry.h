@@ -25,6 +25,20 @@ struct LightOptions {
   double table_albedo = 0.35;     // Reflectance of the table around the page.
   double shadow_bias_mm = 1.0;    // Depth tolerance of the projector shadow test, mm.
   int albedo_supersampling = 4;   // Albedo samples per pixel side (area-integrates ink edges).
+  // The studio-light texture's bits per sample: 8, or 16 (a camera that gives more than 8 bits,
+  // its full scale at 65535; the noise in the same DN of an 8-bit full scale). The structured
+  // light frames are 8-bit either way.
+  int texture_bits = 8;
+  // The projector's light as a real one gives it (issue 17), off by default: its irradiance
+  // falls with the square of the distance from its centre (relative to the distance to the
+  // world's origin on the table) and towards the edges of its image (1 - vignetting r^2, r = 1
+  // at the image's corner).
+  bool projector_falloff = false;
+  double projector_vignetting = 0.3;
+  // Studio lamps for the texture (world mm, point sources): each lights a surface point by
+  // cos(incidence) / distance^2 (no shadows), the sum scaled to 1 at the world's origin on the
+  // table. None: the texture is lit evenly, as before.
+  std::vector<cv::Vec3d> studio_lamps;
 };
 
 // What the page lies on and among: the table (z = 0) and, on it, optionally a support board
@@ -68,6 +82,8 @@ class VirtualGantry {
                 const SceneOptions& scene = SceneOptions());
 
   const GroundTruth& truth() const { return truth_; }
+  // The albedo each camera pixel sees (CV_32F, averaged over the pixel's footprint).
+  const cv::Mat& albedo() const { return albedo_; }
   const Calibration& rig() const { return rig_; }
   // The pages in the scene (one leaf, or the two pages of a spread, left then right).
   const std::vector<Page>& pages() const { return pages_; }
@@ -96,6 +112,7 @@ class VirtualGantry {
   cv::Mat gain_;           // CV_32F DN per unit projector intensity (0 in shadow).
   cv::Mat offset_;         // CV_32F DN of the ambient light.
   cv::Mat albedo_;         // CV_32F albedo seen by each pixel.
+  cv::Mat studio_;         // CV_32F the studio lamps' light on each pixel's point (1: even).
   cv::Mat colour_albedo_;  // CV_32FC3 its albedo per channel (B, G, R); empty when all gray.
 };
 

@@ -62,7 +62,7 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   RestoreResult restored;
   StageReport restore =
       RestoreStage(texture, sheet_page.mask, sheet_.mesh, sheet_.flat, camera, o.restore, o.limits,
-                   stages, folder.results(), name, &restored);
+                   o.camera_icc, stages, folder.results(), name, &restored);
   if (!restore.status.ok()) {
     scans_.erase(id);
     return node_->FailScan(id, restore.status.message());
@@ -93,8 +93,8 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   cv::Mat texture;
   Status s = textures_.Get(id, &texture);
   if (s.ok()) {
-    const StageReport archive =
-        ArchiveStage(texture, ReportedIdentity(pages->common), folder.results());
+    const StageReport archive = ArchiveStage(texture, ReportedIdentity(pages->common),
+                                             options_.pipeline.camera_icc, folder.results());
     report.stages.push_back(archive);
     s = archive.status;
   }
