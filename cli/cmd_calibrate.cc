@@ -1,4 +1,4 @@
-// vellum calibrate: capture (cmd_station.cc) and solve.
+// vellum calibrate: capture (cmd_station.cc), solve and flatfield.
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -6,6 +6,10 @@
 
 #include "calib/calibrate.h"
 #include "cli/commands.h"
+#include "core/common/text.h"
+#include "core/decode/decode.h"
+#include "core/geometry/triangulate.h"
+#include "core/shading/albedo.h"
 #include "io/calibration_io.h"
 #include "io/scan_io.h"
 
@@ -94,13 +98,66 @@ int RunCalibrateSolve(const std::vector<std::string>& args) {
   return 0;
 }
 
+int RunCalibrateFlatField(const std::vector<std::string>& args) {
+  Flags flags(
+      "vellum calibrate flatfield",
+      "Measures the projector's own light (its fall-off, vignetting and response, as the\n"
+      "camera sees it) from a scan of a white target lying flat on the table and covering\n"
+      "the camera's view (white card, or a reflectance standard for the best figures), for\n"
+      "the page's albedo: `vellum process --flatfield FILE` then writes restored_albedo.tif.\n"
+      "Writes the flat field YAML to --out. Scan the target again whenever the projector,\n"
+      "its lamp or the camera's exposure changes.",
+      {
+          {"scan", "DIR", "the white target's scan directory", ""},
+          {"calibration", "FILE", "the station's calibration", ""},
+          {"albedo", "A", "the target's reflectance, 0..1 (its maker's figure)", "0.9"},
+          {"out", "FILE", "the flat field YAML to write", ""},
+      });
+  if (!flags.Parse(args)) return 0;
+  const std::string dir = flags.Require("scan"), out = flags.Require("out");
+  FlatFieldOptions options;
+  options.target_albedo = flags.GetDouble("albedo", 0.01, 1);
+  Calibration calibration;
+  Scan scan;
+  Status s = ReadCalibration(flags.Require("calibration"), &calibration);
+  if (s.ok()) s = ReadScan(dir, &scan);
+  if (s.ok() && scan.camera_size != calibration.camera.size) {
+    s = Status::Error(dir + ": camera images are " + SizeText(scan.camera_size) +
+                      " but the calibration's camera is " + SizeText(calibration.camera.size));
+  }
+  FlatField field;
+  if (s.ok()) {
+    const DecodeResult decoded = Decode(scan.sequence, scan.frames);
+    s = decoded.status;
+    if (s.ok()) {
+      const PointMap map = Triangulator(calibration).Triangulate(decoded);
+      s = map.status;
+      if (s.ok()) field = MeasureFlatField(decoded.amplitude, map.points, calibration, options, &s);
+    }
+  }
+  if (s.ok()) s = WriteFlatField(out, field);
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum calibrate flatfield: %s\n", s.message().c_str());
+    return 1;
+  }
+  double low = 0, high = 0;
+  cv::minMaxIdx(field.gain, &low, &high, nullptr, nullptr, field.gain == field.gain);
+  const int measured = cv::countNonZero(field.gain == field.gain);
+  std::printf(
+      "flat field: %d of %d projector cells (%d px each) measured; the projector's light there "
+      "runs from %.0f%% to 100%% of its brightest; written to %s\n",
+      measured, static_cast<int>(field.gain.total()), field.cell_px, 100 * low / high, out.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int RunCalibrate(const std::vector<std::string>& args) {
   const std::string usage =
       "usage: vellum calibrate capture --out DIR [--url URL]   record one board pose\n"
       "       vellum calibrate solve --board COLSxROWS --square MM --table DIR --out FILE DIR...\n"
-      "Run 'vellum calibrate capture --help' or 'vellum calibrate solve --help' for details.\n";
+      "       vellum calibrate flatfield --scan DIR --calibration FILE --albedo A --out FILE\n"
+      "Run 'vellum calibrate STEP --help' (capture, solve, flatfield) for details.\n";
   if (args.empty() || args[0] == "--help") {
     std::fputs(usage.c_str(), args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
@@ -108,6 +165,7 @@ int RunCalibrate(const std::vector<std::string>& args) {
   const std::vector<std::string> rest(args.begin() + 1, args.end());
   if (args[0] == "capture") return RunCalibrateCapture(rest);
   if (args[0] == "solve") return RunCalibrateSolve(rest);
+  if (args[0] == "flatfield") return RunCalibrateFlatField(rest);
   std::fprintf(stderr, "vellum calibrate: unknown step '%s'\n%s", args[0].c_str(), usage.c_str());
   return 2;
 }

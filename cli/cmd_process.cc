@@ -4,6 +4,7 @@
 #include "cli/progress.h"
 #include "core/common/text.h"
 #include "flags/options.h"
+#include "io/calibration_io.h"
 #include "pipeline/process.h"
 #include "pipeline/qc.h"
 
@@ -19,6 +20,10 @@ int RunProcess(const std::vector<std::string>& args) {
            "restored (every stage), or points: stop after the point cloud (points.ply, "
            "depth.png, the report), for an object that is not a page",
            "restored"},
+          {"flatfield", "FILE",
+           "the projector's flat field (vellum calibrate flatfield): also writes each page's "
+           "albedo, its reflectance without the shading, as restored_albedo.tif",
+           ""},
       },
       PipelineFlagSpecs());
   Flags flags(
@@ -46,6 +51,10 @@ int RunProcess(const std::vector<std::string>& args) {
     throw UsageError("--until must be restored or points, got '" + until + "'");
   }
   options.points_only = until == "points";
+  if (!flags.Get("flatfield").empty()) {
+    const Status read = ReadFlatField(flags.Get("flatfield"), &options.flat_field);
+    if (!read.ok()) throw UsageError("--flatfield: " + read.message());
+  }
 
   Progress progress;
   progress.Update("read", 0);

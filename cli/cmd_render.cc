@@ -17,6 +17,10 @@ int RunRender(const std::vector<std::string>& args) {
       {"calibration", "FILE", "rig calibration YAML (default: the built-in default rig)", ""},
       {"ambient", "FRACTION", "ambient light", "0.08"},
       {"defocus", "PX", "projector defocus sigma, projector pixels", "0.7"},
+      {"projector-falloff", "BOOL",
+       "the projector's light falls with the square of the distance and towards its image's "
+       "corners, as a real projector's does (off by default: the scans the tests were set on)",
+       "false"},
       {"texture-bits", "N",
        "bits per sample of the studio-light texture: 8, or 16 as a camera that gives more than 8 "
        "(the structured-light frames stay 8-bit)",
@@ -53,6 +57,7 @@ int RunRender(const std::vector<std::string>& args) {
   light.ambient = flags.GetDouble("ambient", 0, 1);
   light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
   light.texture_bits = flags.GetInt("texture-bits", 8, 16);
+  light.projector_falloff = flags.GetBool("projector-falloff");
   if (light.texture_bits != 8 && light.texture_bits != 16) {
     throw UsageError("--texture-bits must be 8 or 16, got " + flags.Get("texture-bits"));
   }

@@ -191,6 +191,60 @@ Status WriteCalibration(const std::string& path, const Calibration& calibration)
   return Status::Ok();
 }
 
+Status ReadFlatField(const std::string& path, FlatField* field) {
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
+  *field = FlatField();
+  try {
+    cv::FileStorage fs;
+    if (!fs.open(path, cv::FileStorage::READ)) {
+      return Status::Error(path + ": cannot open the flat field");
+    }
+    if (!fs.root().isMap()) return Status::Error(path + ": not a flat field (expected keys)");
+    cv::Size size;
+    fs["projector_size"] >> size;
+    const cv::FileNode cell = fs["cell_px"], reference = fs["reference_mm"];
+    cv::Mat gain;
+    fs["gain"] >> gain;
+    if (size.area() <= 0) return Status::Error(path + ": projector_size missing or empty");
+    if (!cell.isInt() || static_cast<int>(cell) < 1) {
+      return Status::Error(path + ": cell_px must be an integer >= 1");
+    }
+    if (!(reference.isReal() || reference.isInt()) || !(static_cast<double>(reference) > 0)) {
+      return Status::Error(path + ": reference_mm must be a number > 0");
+    }
+    const int c = static_cast<int>(cell);
+    const cv::Size cells((size.width + c - 1) / c, (size.height + c - 1) / c);
+    if (gain.empty() || gain.size() != cells) {
+      return Status::Error(path + ": gain must be a " + std::to_string(cells.width) + "x" +
+                           std::to_string(cells.height) + " matrix (a value per " +
+                           std::to_string(c) + " px cell of the projector)");
+    }
+    gain.convertTo(field->gain, CV_32F);
+    field->cell_px = c;
+    field->reference_mm = static_cast<double>(reference);
+    field->projector_size = size;
+  } catch (const std::exception& e) {
+    *field = FlatField();
+    return Status::Error(path + ": malformed flat field: " + e.what());
+  }
+  return Status::Ok();
+}
+
+Status WriteFlatField(const std::string& path, const FlatField& field) {
+  try {
+    cv::FileStorage fs(path, cv::FileStorage::WRITE);
+    if (!fs.isOpened()) return Status::Error(path + ": cannot write the flat field");
+    fs << "projector_size" << field.projector_size;
+    fs << "cell_px" << field.cell_px;
+    fs << "reference_mm" << field.reference_mm;
+    fs << "gain" << field.gain;
+  } catch (const cv::Exception& e) {
+    return Status::Error(path + ": cannot write the flat field: " + e.what());
+  }
+  return Status::Ok();
+}
+
 std::string CalibrationSha256(const Calibration& calibration) {
   std::string text;
   auto add = [&](double v) {

@@ -6,6 +6,7 @@
 
 #include "core/common/status.h"
 #include "core/geometry/calibration.h"
+#include "core/shading/albedo.h"
 
 namespace vellum {
 
@@ -18,5 +19,11 @@ Status WriteCalibration(const std::string& path, const Calibration& calibration)
 // same calibration gives the same checksum from a file, the station's message or a rig (zero
 // counts as zero whatever its sign).
 std::string CalibrationSha256(const Calibration& calibration);
+
+// The projector's flat field (`vellum calibrate flatfield`, core/shading/albedo.h) as YAML
+// (cv::FileStorage): projector_size, cell_px, reference_mm and gain (a CV_32F matrix, one value
+// per cell, .nan where not measured). Errors name the file and the key.
+Status ReadFlatField(const std::string& path, FlatField* field);
+Status WriteFlatField(const std::string& path, const FlatField& field);
 
 }  // namespace vellum

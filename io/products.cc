@@ -83,6 +83,28 @@ Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::
 
 }  // namespace
 
+Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
+                           const ScanIdentity& identity,
+                           const std::map<std::string, std::string>& figures) {
+  const std::string tif = (fs::path(dir) / "restored_albedo.tif").string();
+  std::vector<int> params;
+  if (albedo.view == RestoreView::kOrthographic) {
+    const int dpi = static_cast<int>(std::lround(albedo.dpi));
+    params = {cv::IMWRITE_TIFF_RESUNIT, 2, cv::IMWRITE_TIFF_XDPI, dpi, cv::IMWRITE_TIFF_YDPI, dpi};
+  }
+  try {
+    if (!cv::imwrite(tif, albedo.image, params)) return Status::Error(tif + ": cannot write image");
+  } catch (const cv::Exception& e) {
+    return Status::Error(tif + ": cannot write image: " + e.what());
+  }
+  XmpFields xmp;
+  xmp.identity = identity;
+  xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
+  xmp.figures = figures;
+  xmp.figures["encoding"] = "linear reflectance: 65535 = albedo 1; 0 = not measured";
+  return WriteXmp(tif, xmp);
+}
+
 Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
                            const ScanIdentity& identity, const IccProfile& icc) {
   return WriteTiffMaster(

@@ -62,6 +62,13 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
                                (icc.channels == 3 ? "gray" : "colour"));
     return out;
   }
+  const FlatField& field = options.flat_field;
+  if (!field.empty() && field.projector_size != input.calibration.projector.size) {
+    out.status = Status::Error("the flat field is for a " + SizeText(field.projector_size) +
+                               " projector, but " + input.calibration_path + " calibrates a " +
+                               SizeText(input.calibration.projector.size) + " one");
+    return out;
+  }
   const CameraModel& camera = input.calibration.camera;
   next("decode", 0.35);
   DecodeResult decoded;
@@ -71,6 +78,8 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     Decoder decoder(options.decode);
     if (!ran(DecodeStage(input.scan, &decoder, &decoded, input.scan_dir), true)) return out;
   }
+  // The light the projector gave each pixel (white less black), for the albedo.
+  const cv::Mat amplitude = options.flat_field.empty() ? cv::Mat() : decoded.amplitude;
   next("triangulate", 0.5);
   const Triangulator triangulator(input.calibration);
   if (!ran(TriangulateStage(decoded, triangulator, options.triangulate, results, &out.map),
@@ -112,6 +121,15 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
                           results, page.name, &page.restored),
              true)) {
       return out;
+    }
+    if (!options.flat_field.empty() && !options.points_only) {
+      next("albedo", done + 0.9 * share);
+      if (!ran(AlbedoStage(amplitude, out.map.points, mask, input.calibration, options.flat_field,
+                           page.mesh, page.flat.flat, options.restore, page.restored, report.stages,
+                           results, page.name, &page.albedo),
+               true)) {
+        return out;
+      }
     }
     out.pages.push_back(std::move(page));
   }

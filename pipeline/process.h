@@ -32,6 +32,7 @@ struct PageResult {
   Mesh mesh;
   FlattenResult flat;
   RestoreResult restored;
+  RestoreResult albedo;  // With a flat field: the page's albedo, restored as `restored` is.
 };
 
 struct ProcessResult {

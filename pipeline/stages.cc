@@ -472,4 +472,58 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   return stage.Finish(s);
 }
 
+StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
+                        const Calibration& calibration, const FlatField& flat_field,
+                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                        const RestoreOptions& options, const RestoreResult& restored,
+                        const std::vector<StageReport>& earlier, const std::string& results,
+                        const std::string& page, RestoreResult* albedo) {
+  Stage stage("albedo", page);
+  StageReport& r = stage.report();
+  const AlbedoResult a = EstimateAlbedo(amplitude, points, page_mask, calibration, flat_field);
+  if (!a.status.ok()) return stage.Finish(a.status);
+  const double page_px = std::max(1, cv::countNonZero(page_mask));
+  r.Number("albedo", "estimated_share", a.estimated / page_px);
+  r.Number("albedo", "marked_unmeasured_share", a.shadowed / page_px);
+  r.Number("albedo", "marked_rim_share", a.rim / page_px);
+  r.Number("albedo", "marked_grazing_share", a.grazing / page_px);
+  r.Number("albedo", "marked_outside_flat_field_share", a.outside_flat_field / page_px);
+  const int above_one = cv::countNonZero((a.albedo > 1.0f) & a.valid);
+  r.Number("albedo", "above_one_share", above_one / page_px);
+  // Restored as the page was: the same sheet and options, at the dpi it was written at.
+  RestoreOptions same = options;
+  if (restored.view == RestoreView::kOrthographic) same.dpi = restored.dpi;
+  const CameraModel& camera = calibration.camera;
+  cv::Mat albedo16;
+  a.albedo.convertTo(albedo16, CV_16U, 65535.0);  // Saturates above 1 (gloss, fluorescence).
+  *albedo = Restore(albedo16, mesh, flat, camera, same, page_mask);
+  if (!albedo->status.ok()) return stage.Finish(albedo->status);
+  const RestoreResult valid = Restore(a.valid, mesh, flat, camera, same, page_mask);
+  if (!valid.status.ok()) return stage.Finish(valid.status);
+  if (valid.image.size() != albedo->image.size() || albedo->image.size() != restored.image.size()) {
+    return stage.Finish(Status::Error("the restored albedo is " + SizeText(albedo->image.size()) +
+                                      ", the restored page " + SizeText(restored.image.size())));
+  }
+  // A restored pixel that drew on any marked camera pixel is marked too.
+  albedo->image.setTo(0, valid.image < 255);
+  const cv::Mat measured = albedo->image > 0;
+  r.Number("albedo", "mean", cv::mean(albedo->image, measured)[0] / 65535.0);
+  const std::string dir = PageDir(results, page);
+  Status s = MakeDirectories(dir);
+  if (s.ok()) {
+    const ScanIdentity identity = ReportedIdentity(earlier);
+    std::map<std::string, std::string> figures;
+    figures["view"] = ToString(albedo->view);
+    if (albedo->view == RestoreView::kOrthographic) figures["dpi"] = JsonNumber(albedo->dpi).dump();
+    figures["model"] =
+        "Lambertian, lit by the projector alone (white less black), its flat field from a white "
+        "target on the table; interreflection and gloss not modelled";
+    s = stage.Output(
+        PageFile(page, "restored_albedo.tif"),
+        WriteRestoredAlbedo(dir, *albedo, page.empty() ? identity : PageIdentity(identity, page),
+                            figures));
+  }
+  return stage.Finish(s);
+}
+
 }  // namespace vellum

@@ -19,6 +19,7 @@
 #include "core/outline/outline.h"
 #include "core/patterns/scan.h"
 #include "core/restore/restore.h"
+#include "core/shading/albedo.h"
 #include "io/xmp.h"
 #include "pipeline/report.h"
 
@@ -64,6 +65,8 @@ struct PipelineOptions {
   bool points_only = false;
   // The camera's ICC profile, embedded in the masters (--camera-icc); empty: sRGB.
   IccProfile camera_icc;
+  // The projector's flat field (--flatfield); with it, each page's albedo (AlbedoStage).
+  FlatField flat_field;
 
   bool Check(std::string* why) const;
 };
@@ -128,5 +131,17 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
                          const IccProfile& camera_icc, const std::vector<StageReport>& earlier,
                          const std::string& results, const std::string& page,
                          RestoreResult* restored);
+
+// Albedo (issue 17): the page's reflectance from the projector's light (core/shading/albedo.h:
+// `amplitude` is the decoder's, `points` the point map), restored through the page's sheet
+// exactly as `restored` was (same options, at its dpi): restored_albedo.tif in the page's
+// folder, 16-bit gray, linear (65535 = albedo 1), 0 where the model does not hold (marked:
+// the projector's shadow, the page's rim, grazing light, outside the flat field).
+StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
+                        const Calibration& calibration, const FlatField& flat_field,
+                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                        const RestoreOptions& options, const RestoreResult& restored,
+                        const std::vector<StageReport>& earlier, const std::string& results,
+                        const std::string& page, RestoreResult* albedo);
 
 }  // namespace vellum

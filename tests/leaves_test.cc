@@ -22,7 +22,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/decode/decode.h"
 #include "core/geometry/rigid2d.h"
+#include "core/geometry/triangulate.h"
+#include "core/shading/albedo.h"
 #include "core/sim/evaluate.h"
 #include "io/calibration_io.h"
 #include "pipeline/process.h"
@@ -52,12 +55,13 @@ struct Scanned {
 };
 
 // Scans `page` on the virtual gantry `rig` and runs `vellum process`'s pipeline on it, the
-// studio-light texture scaled by `texture_gain` (over-exposed and clipped above 1).
+// studio-light texture scaled by `texture_gain` (over-exposed and clipped above 1), under `light`.
 Scanned ProcessOn(const Calibration& rig, const PageOptions& page, const TextureOptions& texture,
                   const SceneOptions& scene, uint64_t seed, const PipelineOptions& options,
-                  const std::string& name, double texture_gain = 1) {
+                  const std::string& name, double texture_gain = 1,
+                  const LightOptions& light = LightOptions()) {
   Scanned run;
-  run.scan = SimulateScan(rig, page, texture, scene, seed);
+  run.scan = SimulateScan(rig, page, texture, scene, seed, light);
   ProcessInput input;
   input.scan_dir = name;
   input.calibration_path = "the virtual gantry's rig";
@@ -592,6 +596,72 @@ TEST(Masters, ACurledLeafFromThe24MpCameraAt400PpiMeetsTheBars) {
   EXPECT_LE(run.result.report.Number("restored", "scale_error_percent"), 0.1);
   EXPECT_GE(map_at_390, 0.95);
   EXPECT_GE(exact_at_390, 0.95);
+}
+
+// Issue 17: reflectance, not shading. The gantry's light as real lights give it: the projector's
+// falls with the square of the distance and towards its image's corners, and two studio lamps
+// shade the texture (a slope facing away from them is darker). The projector's flat field is
+// measured on a white target (albedo 0.85) lying on the table, as `vellum calibrate flatfield`
+// does; each plain white leaf (albedo 0.85), curled, folded or rolled into a cone, then goes
+// through the whole pipeline with it. Its restored albedo is even where its restored texture
+// is shaded.
+//
+// Why 1% holds: (white - black) has 2.1 DN of noise on ~160 DN of paper, 1.3% a camera pixel;
+// the restoration takes 2 x 2 samples a restored pixel at the page's own sampling, which
+// halves it where the page faces the projector; the normals come from 9 x 9 pixel windows of
+// points good to ~0.02 mm, a few hundredths of a degree. The residue is the noise where the
+// page turns from the projector (less light, more noise), under 1% (the issue's bar) over the
+// leaf. The texture's unevenness is the lamps' shading, 10-20%.
+TEST(Shading, TheRestoredAlbedoOfAPlainLeafIsEvenWhereItsTextureIsShaded) {
+  LightOptions light;
+  light.projector_falloff = true;
+  light.studio_lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
+  TextureOptions plain;
+  plain.kind = TextureKind::kPlain;
+  plain.paper_albedo = 0.85;
+  PageOptions target;
+  target.size_mm = {420, 320};  // More than the camera's view.
+  const SimulatedScan white = SimulateScan(DefaultRig(), target, plain, SceneOptions(), 41, light);
+  const DecodeResult decoded = Decode(white.sequence, white.frames);
+  const PointMap map = Triangulator(DefaultRig()).Triangulate(decoded);
+  FlatFieldOptions field_options;
+  field_options.target_albedo = plain.paper_albedo;
+  Status s = Status::Ok();
+  PipelineOptions options;
+  options.flat_field =
+      MeasureFlatField(decoded.amplitude, map.points, DefaultRig(), field_options, &s);
+  ASSERT_TRUE(s.ok()) << s.message();
+  for (PageShape shape : {PageShape::kCurl, PageShape::kFold, PageShape::kCone}) {
+    SCOPED_TRACE(ToString(shape));
+    PageOptions page;
+    page.shape = shape;
+    const Scanned run = ProcessOn(DefaultRig(), page, plain, SceneOptions(), 7, options,
+                                  std::string("albedo_") + ToString(shape), 1, light);
+    ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
+    ASSERT_EQ(run.result.pages.size(), 1u);
+    const PageResult& leaf = run.result.pages[0];
+    const cv::Mat& albedo = leaf.albedo.image;
+    ASSERT_EQ(albedo.type(), CV_16U);
+    ASSERT_EQ(albedo.size(), leaf.restored.image.size());
+    const cv::Mat measured = albedo > 0;
+    cv::Mat a, t;
+    albedo.convertTo(a, CV_64F, 1.0 / 65535);
+    leaf.restored.image.convertTo(t, CV_64F);
+    cv::Scalar a_mean, a_sd, t_mean, t_sd;
+    cv::meanStdDev(a, a_mean, a_sd, measured);
+    cv::meanStdDev(t, t_mean, t_sd, measured);
+    const double leaf_px = cv::countNonZero(leaf.restored.mask);
+    std::printf(
+        "[shading] %-5s restored albedo %.4f (true %.2f), non-uniformity %.2f%%; restored "
+        "texture %.2f%%; marked %.1f%% of the leaf\n",
+        ToString(shape), a_mean[0], plain.paper_albedo, 100 * a_sd[0] / a_mean[0],
+        100 * t_sd[0] / t_mean[0], 100 * (1 - cv::countNonZero(measured) / leaf_px));
+    EXPECT_NEAR(a_mean[0] / plain.paper_albedo, 1.0, 0.01);
+    EXPECT_LE(a_sd[0] / a_mean[0], 0.01);
+    EXPECT_GT(t_sd[0] / t_mean[0], 5 * a_sd[0] / a_mean[0]) << "the lamps should shade it";
+    EXPECT_LT(cv::countNonZero(measured), leaf_px) << "the rim is marked";
+    EXPECT_GT(cv::countNonZero(measured), 0.9 * leaf_px);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Scenes, Leaves,

@@ -386,10 +386,12 @@ bool TouchesBorder(const cv::Mat& leaf, int border) {
 }
 
 // An open book's gutter: a straight valley down the leaf from which the surface rises at least
-// `rise` mm on both sides. Splits the leaf into its left and right pages; false if there is no
-// such valley.
-bool SplitAtGutter(const cv::Mat& z, const cv::Mat& leaf, double rise, cv::Vec4f* line,
-                   cv::Mat* left, cv::Mat* right) {
+// `options.gutter_rise_mm` on both sides, a crease (within gutter_width_mm each side rises
+// gutter_crease_mm, or is hidden from view), not a trough. Splits the leaf into its left and
+// right pages; false if there is no such valley.
+bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
+                   const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right) {
+  const double rise = options.gutter_rise_mm;
   const cv::Rect box = cv::boundingRect(leaf);
   if (box.width < 20 || box.height < 20) return false;
   std::vector<cv::Point2f> valley;
@@ -408,7 +410,21 @@ bool SplitAtGutter(const cv::Mat& z, const cv::Mat& leaf, double rise, cv::Vec4f
       if (u < lowest) high_left = std::max(high_left, row[u]);
       if (u > lowest) high_right = std::max(high_right, row[u]);
     }
-    if (high_left - row[lowest] >= rise && high_right - row[lowest] >= rise) {
+    if (!(high_left - row[lowest] >= rise && high_right - row[lowest] >= rise)) continue;
+    // A crease: near the valley, each side rises steeply or is out of sight.
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    const cv::Point2f bottom(p[lowest][0], p[lowest][1]);
+    if (!std::isfinite(bottom.x) || !std::isfinite(bottom.y)) continue;
+    float near_left = kNoData, near_right = kNoData;
+    for (int u = box.x; u < box.x + box.width; ++u) {
+      if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
+      if (cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom) > options.gutter_width_mm) continue;
+      (u < lowest ? near_left : near_right) = std::max(u < lowest ? near_left : near_right, row[u]);
+    }
+    auto steep = [&](float near) {
+      return near == kNoData || near - row[lowest] >= options.gutter_crease_mm;
+    };
+    if (steep(near_left) && steep(near_right)) {
       valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
     }
   }
@@ -440,8 +456,11 @@ bool SplitAtGutter(const cv::Mat& z, const cv::Mat& leaf, double rise, cv::Vec4f
 
 bool OutlineOptions::Check(std::string* why) const {
   if (!(step_mm > 0) || gap_px < 0 || gap_px > 10 || !(min_area > 0 && min_area < 1) ||
-      border_px < 0 || !(gutter_rise_mm > 0)) {
-    *why = "step_mm and gutter_rise_mm must be > 0, gap_px in [0, 10], min_area in (0, 1)";
+      border_px < 0 || !(gutter_rise_mm > 0) || !(gutter_width_mm > 0) ||
+      !(gutter_crease_mm >= 0)) {
+    *why =
+        "step_mm, gutter_rise_mm and gutter_width_mm must be > 0, gutter_crease_mm >= 0, "
+        "gap_px in [0, 10], min_area in (0, 1)";
     return false;
   }
   return true;
@@ -569,8 +588,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   out.mask = leaf;
   cv::Mat left, right;
-  if (options.find_spread &&
-      SplitAtGutter(z, leaf, options.gutter_rise_mm, &out.gutter, &left, &right)) {
+  if (options.find_spread && SplitAtGutter(points, z, leaf, options, &out.gutter, &left, &right)) {
     out.pages = {left, right};
   } else {
     out.pages = {leaf};

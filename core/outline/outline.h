@@ -30,6 +30,11 @@ struct OutlineOptions {
   int border_px = 2;           // A leaf within this of the image border runs off the view.
   bool find_spread = true;     // Look for two pages meeting at a gutter.
   double gutter_rise_mm = 15;  // A spread's pages rise at least this much from the gutter, mm.
+  // A gutter is a crease, not a trough: within gutter_width_mm of it each page rises at least
+  // gutter_crease_mm (or is hidden in it). A leaf rolled into a trough (a cone, a roll) rises
+  // gently from its lowest line and stays one leaf.
+  double gutter_width_mm = 10;
+  double gutter_crease_mm = 3;
 
   bool Check(std::string* why) const;
 };

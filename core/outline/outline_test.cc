@@ -112,7 +112,11 @@ INSTANTIATE_TEST_SUITE_P(
         Scene{"checkerboard, paper frame", PageShape::kCurl, false, true, false,
               OutlineKind::kRectangle, TextureKind::kCheckerboard},
         Scene{"brown checkerboard, burnt, on support", PageShape::kCurl, true, false, false,
-              OutlineKind::kBurnt, TextureKind::kCheckerboard, 0.3}),
+              OutlineKind::kBurnt, TextureKind::kCheckerboard, 0.3},
+        // A blank leaf rolled into a trough is one leaf: its lowest line is no gutter (it rises
+        // gently from it, where a book's pages turn steeply into theirs).
+        Scene{"blank leaf, cone", PageShape::kCone, false, false, false, OutlineKind::kRectangle,
+              TextureKind::kPlain}),
     [](const ::testing::TestParamInfo<Scene>& info) {
       std::string name = info.param.name;
       for (char& c : name) {

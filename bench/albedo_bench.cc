@@ -1,0 +1,114 @@
+// Issue 17: what the albedo adds to the restore stage, on a 1600 x 1200 scan (default rig, a
+// plain curled leaf under the projector's real fall-off), beside the plain restoration in the
+// same run: the baseline restores the texture through the flattened sheet (with the leaf's mask
+// and the sampling map, as the pipeline's restore stage does); the albedo adds the normals, the
+// albedo of every leaf pixel and two more restorations through the same sheet (the albedo and
+// its validity). The issue's bar: albedo and two extra textures add at most 50%.
+//
+//   ./build/bench/albedo_bench
+#include <benchmark/benchmark.h>
+
+#include <cstdio>
+
+#include "bench/ratio_reporter.h"
+#include "core/decode/decode.h"
+#include "core/flatten/flatten.h"
+#include "core/geometry/triangulate.h"
+#include "core/mesh/mesh.h"
+#include "core/outline/outline.h"
+#include "core/restore/restore.h"
+#include "core/shading/albedo.h"
+#include "core/sim/evaluate.h"
+
+namespace vellum {
+namespace {
+
+struct Fixture {
+  Fixture() {
+    LightOptions light;
+    light.projector_falloff = true;
+    TextureOptions plain;
+    plain.kind = TextureKind::kPlain;
+    PageOptions target;
+    target.size_mm = {420, 320};
+    const SimulatedScan white =
+        SimulateScan(DefaultRig(), target, plain, SceneOptions(), 41, light);
+    const DecodeResult wd = Decode(white.sequence, white.frames);
+    Status s = Status::Ok();
+    FlatFieldOptions fo;
+    fo.target_albedo = plain.paper_albedo;
+    field = MeasureFlatField(wd.amplitude, Triangulator(DefaultRig()).Triangulate(wd).points,
+                             DefaultRig(), fo, &s);
+    PageOptions page;
+    page.shape = PageShape::kCurl;
+    const SimulatedScan scan = SimulateScan(DefaultRig(), page, plain, SceneOptions(), 5, light);
+    texture = scan.texture;
+    const DecodeResult decoded = Decode(scan.sequence, scan.frames);
+    amplitude = decoded.amplitude;
+    points = Triangulator(DefaultRig()).Triangulate(decoded).points;
+    leaf = FindLeaf(points, texture).mask;
+    const CameraModel& camera = DefaultRig().camera;
+    mesh = BuildMesh(points, leaf, MeshOptions(),
+                     [&](const cv::Vec3d& x) { return camera.Project(x); });
+    flat = Flatten(mesh, FlattenOptions()).flat;
+  }
+  FlatField field;
+  cv::Mat texture, amplitude, points, leaf;
+  Mesh mesh;
+  std::vector<cv::Point2d> flat;
+};
+
+Fixture& Shared() {
+  static Fixture f;
+  return f;
+}
+
+void BM_Baseline_RestoreTexture(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) {
+    const RestoreResult r =
+        Restore(f.texture, f.mesh, f.flat, DefaultRig().camera, RestoreOptions(), f.leaf);
+    if (!r.status.ok()) state.SkipWithError(r.status.message().c_str());
+    benchmark::DoNotOptimize(r.image.data);
+  }
+}
+
+void BM_Vellum_RestoreTextureAndAlbedo(benchmark::State& state) {
+  const Fixture& f = Shared();
+  const CameraModel& camera = DefaultRig().camera;
+  for (auto _ : state) {
+    const RestoreResult r = Restore(f.texture, f.mesh, f.flat, camera, RestoreOptions(), f.leaf);
+    const AlbedoResult a = EstimateAlbedo(f.amplitude, f.points, f.leaf, DefaultRig(), f.field);
+    if (!r.status.ok() || !a.status.ok()) state.SkipWithError("restore or albedo failed");
+    cv::Mat albedo16;
+    a.albedo.convertTo(albedo16, CV_16U, 65535.0);
+    RestoreOptions same;
+    same.dpi = r.dpi;
+    const RestoreResult ra = Restore(albedo16, f.mesh, f.flat, camera, same, f.leaf);
+    const RestoreResult rv = Restore(a.valid, f.mesh, f.flat, camera, same, f.leaf);
+    benchmark::DoNotOptimize(ra.image.data);
+    benchmark::DoNotOptimize(rv.image.data);
+  }
+}
+
+BENCHMARK(BM_Baseline_RestoreTexture)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+BENCHMARK(BM_Vellum_RestoreTextureAndAlbedo)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+
+}  // namespace
+}  // namespace vellum
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  vellum::RatioReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  const double base = reporter.Time("BM_Baseline_RestoreTexture");
+  const double with = reporter.Time("BM_Vellum_RestoreTextureAndAlbedo");
+  if (base > 0 && with > 0) {
+    std::printf(
+        "restore %.1f ms; with the albedo %.1f ms: +%.0f%% (bar: +50%% with two extra "
+        "textures)\n",
+        base, with, 100 * (with / base - 1));
+  }
+  benchmark::Shutdown();
+  return 0;
+}
