@@ -1,6 +1,7 @@
 #include "core/shading/albedo.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
@@ -190,39 +191,51 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
       Normals(points, page, options.normal_window_px, calibration.camera.Center());
   out.albedo = cv::Mat::zeros(points.size(), CV_32F);
   out.valid = cv::Mat::zeros(points.size(), CV_8U);
-  int estimated = 0, shadowed = 0, rim = 0, grazing = 0, outside = 0;
-  for (int v = 0; v < points.rows; ++v) {
-    for (int u = 0; u < points.cols; ++u) {
-      if (!page.empty() && !page.at<uint8_t>(v, u)) continue;
-      const cv::Vec3f pf = points.at<cv::Vec3f>(v, u);
-      if (!std::isfinite(pf[2])) {
-        ++shadowed;  // Not measured: the projector's shadow, or a pixel it could not decode.
-        continue;
+  std::atomic<int> estimated{0}, shadowed{0}, rim{0}, grazing{0}, outside{0};
+  cv::parallel_for_(cv::Range(0, points.rows), [&](const cv::Range& range) {
+    int n_estimated = 0, n_shadowed = 0, n_rim = 0, n_grazing = 0, n_outside = 0;
+    for (int v = range.start; v < range.end; ++v) {
+      const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+      const cv::Vec3f* nv = normals.ptr<cv::Vec3f>(v);
+      const float* amp = amplitude.ptr<float>(v);
+      const uint8_t* in = page.empty() ? nullptr : page.ptr<uint8_t>(v);
+      float* albedo = out.albedo.ptr<float>(v);
+      uint8_t* ok = out.valid.ptr<uint8_t>(v);
+      for (int u = 0; u < points.cols; ++u) {
+        if (in && !in[u]) continue;
+        if (!std::isfinite(p[u][2])) {
+          ++n_shadowed;  // Not measured: the projector's shadow, or a pixel it could not decode.
+          continue;
+        }
+        if (!std::isfinite(nv[u][0])) {
+          ++n_rim;
+          continue;
+        }
+        const cv::Vec3d x(p[u][0], p[u][1], p[u][2]), n(nv[u]);
+        const cv::Vec3d to = centre - x;
+        const double d = cv::norm(to);
+        const double cos_in = n.dot(to) / d;
+        if (!(cos_in >= options.min_cos)) {
+          ++n_grazing;
+          continue;
+        }
+        const double g = flat_field.At(projector.Project(x));
+        if (!(g > 0)) {
+          ++n_outside;
+          continue;
+        }
+        const double d0 = flat_field.reference_mm;
+        albedo[u] = static_cast<float>(2.0 * amp[u] * (d * d) / (g * cos_in * d0 * d0));
+        ok[u] = 255;
+        ++n_estimated;
       }
-      const cv::Vec3f nf = normals.at<cv::Vec3f>(v, u);
-      const cv::Vec3d x(pf[0], pf[1], pf[2]);
-      const cv::Vec3d to = centre - x;
-      if (!std::isfinite(nf[0])) {
-        ++rim;
-        continue;
-      }
-      const double cos_in = cv::Vec3d(nf).dot(to) / cv::norm(to);
-      if (!(cos_in >= options.min_cos)) {
-        ++grazing;
-        continue;
-      }
-      const double g = flat_field.At(projector.Project(x));
-      if (!(g > 0)) {
-        ++outside;
-        continue;
-      }
-      const double geometry = Geometry(x, cv::Vec3d(nf), centre, flat_field.reference_mm);
-      out.albedo.at<float>(v, u) =
-          static_cast<float>(2.0 * amplitude.at<float>(v, u) / (g * geometry));
-      out.valid.at<uint8_t>(v, u) = 255;
-      ++estimated;
     }
-  }
+    estimated += n_estimated;
+    shadowed += n_shadowed;
+    rim += n_rim;
+    grazing += n_grazing;
+    outside += n_outside;
+  });
   out.estimated = estimated;
   out.shadowed = shadowed;
   out.rim = rim;
