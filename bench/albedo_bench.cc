@@ -91,8 +91,19 @@ void BM_Vellum_RestoreTextureAndAlbedo(benchmark::State& state) {
   }
 }
 
+// The albedo of every leaf pixel alone (the normals included), without restoring it.
+void BM_Vellum_EstimateAlbedo(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) {
+    const AlbedoResult a = EstimateAlbedo(f.amplitude, f.points, f.leaf, DefaultRig(), f.field);
+    if (!a.status.ok()) state.SkipWithError(a.status.message().c_str());
+    benchmark::DoNotOptimize(a.albedo.data);
+  }
+}
+
 BENCHMARK(BM_Baseline_RestoreTexture)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 BENCHMARK(BM_Vellum_RestoreTextureAndAlbedo)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+BENCHMARK(BM_Vellum_EstimateAlbedo)->Unit(benchmark::kMillisecond)->MinTime(2.0);
 
 }  // namespace
 }  // namespace vellum
