@@ -122,7 +122,7 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
              true)) {
       return out;
     }
-    if (!options.flat_field.empty() && !options.points_only) {
+    if (!options.flat_field.empty()) {
       next("albedo", done + 0.9 * share);
       if (!ran(AlbedoStage(amplitude, out.map.points, mask, input.calibration, options.flat_field,
                            page.mesh, page.flat.flat, options.restore, page.restored, report.stages,

@@ -61,47 +61,50 @@ struct Uniformity {
   int pixels = 0;
 };
 
+// Sums values into a Uniformity.
+class Moments {
+ public:
+  void Add(double a) {
+    sum_ += a;
+    sum2_ += a * a;
+    ++n_;
+  }
+  Uniformity Result() const {
+    Uniformity out;
+    out.pixels = n_;
+    if (n_ == 0) return out;
+    out.mean = sum_ / n_;
+    out.spread = std::sqrt(std::max(0.0, sum2_ / n_ - out.mean * out.mean)) / out.mean;
+    return out;
+  }
+
+ private:
+  double sum_ = 0, sum2_ = 0;
+  int n_ = 0;
+};
+
+// Over the pixels in `where` (CV_8U) of `values` (CV_32F).
+Uniformity Measure(const cv::Mat& values, const cv::Mat& where) {
+  Moments m;
+  for (int v = 0; v < values.rows; ++v) {
+    for (int u = 0; u < values.cols; ++u) {
+      if (where.at<uint8_t>(v, u)) m.Add(values.at<float>(v, u));
+    }
+  }
+  return m.Result();
+}
+
 // The same over blocks of `block` x `block` pixels wholly in `where`, each its mean: the light's
 // unevenness without the camera's pixel noise.
 Uniformity MeasureBlocks(const cv::Mat& values, const cv::Mat& where, int block) {
-  double sum = 0, sum2 = 0;
-  int n = 0;
+  Moments m;
   for (int v = 0; v + block <= values.rows; v += block) {
     for (int u = 0; u + block <= values.cols; u += block) {
       const cv::Rect r(u, v, block, block);
-      if (cv::countNonZero(where(r)) < r.area()) continue;
-      const double a = cv::mean(values(r))[0];
-      sum += a;
-      sum2 += a * a;
-      ++n;
+      if (cv::countNonZero(where(r)) == r.area()) m.Add(cv::mean(values(r))[0]);
     }
   }
-  Uniformity out;
-  out.pixels = n;
-  if (n == 0) return out;
-  out.mean = sum / n;
-  out.spread = std::sqrt(std::max(0.0, sum2 / n - out.mean * out.mean)) / out.mean;
-  return out;
-}
-
-Uniformity Measure(const cv::Mat& values, const cv::Mat& where) {
-  double sum = 0, sum2 = 0;
-  int n = 0;
-  for (int v = 0; v < values.rows; ++v) {
-    for (int u = 0; u < values.cols; ++u) {
-      if (!where.at<uint8_t>(v, u)) continue;
-      const double a = values.at<float>(v, u);
-      sum += a;
-      sum2 += a * a;
-      ++n;
-    }
-  }
-  Uniformity out;
-  out.pixels = n;
-  if (n == 0) return out;
-  out.mean = sum / n;
-  out.spread = std::sqrt(std::max(0.0, sum2 / n - out.mean * out.mean)) / out.mean;
-  return out;
+  return m.Result();
 }
 
 // A plain white leaf (albedo 0.85) flat, curled, folded and rolled: its albedo in the camera's
