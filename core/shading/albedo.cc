@@ -129,8 +129,8 @@ FlatField MeasureFlatField(const cv::Mat& amplitude, const cv::Mat& points,
       const cv::Vec3f pf = points.at<cv::Vec3f>(v, u);
       const float a = amplitude.at<float>(v, u);
       if (!std::isfinite(pf[2]) || !(a > 0)) continue;
-      // On the table: the point where the camera's ray meets it (steadier than the measured
-      // height, which is 0 up to its noise).
+      // The measured point put on the table (z = 0): the target lies there, and its measured
+      // height is 0 up to its noise.
       const cv::Vec3d x(pf[0], pf[1], 0.0);
       const cv::Point2d p = projector.Project(x);
       const int cx = static_cast<int>(std::floor((p.x + 0.5) / options.cell_px));
