@@ -496,16 +496,17 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
   const CameraModel& camera = calibration.camera;
   cv::Mat albedo16;
   a.albedo.convertTo(albedo16, CV_16U, 65535.0);  // Saturates above 1 (gloss, fluorescence).
-  *albedo = Restore(albedo16, mesh, flat, camera, same, page_mask);
+  // The albedo and where it holds, through one warp.
+  *albedo = Restore(albedo16, mesh, flat, camera, same, page_mask, {a.valid});
   if (!albedo->status.ok()) return stage.Finish(albedo->status);
-  const RestoreResult valid = Restore(a.valid, mesh, flat, camera, same, page_mask);
-  if (!valid.status.ok()) return stage.Finish(valid.status);
-  if (valid.image.size() != albedo->image.size() || albedo->image.size() != restored.image.size()) {
+  const cv::Mat valid = albedo->extras.at(0);
+  albedo->extras.clear();
+  if (albedo->image.size() != restored.image.size()) {
     return stage.Finish(Status::Error("the restored albedo is " + SizeText(albedo->image.size()) +
                                       ", the restored page " + SizeText(restored.image.size())));
   }
   // A restored pixel that drew on any marked camera pixel is marked too.
-  albedo->image.setTo(0, valid.image < 255);
+  albedo->image.setTo(0, valid < 255);
   const cv::Mat measured = albedo->image > 0;
   r.Number("albedo", "mean", cv::mean(albedo->image, measured)[0] / 65535.0);
   const std::string dir = PageDir(results, page);

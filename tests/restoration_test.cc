@@ -183,6 +183,36 @@ TEST(Restore, KeepsTheTexturesTypeForGrayColourAnd16Bit) {
       Restore(cv::Mat(10, 10, CV_32F), p.mesh, p.flat.flat, p.gantry->rig().camera).status.ok());
 }
 
+// Other images of the page from the same pose (another light, the albedo, a mask) go through the
+// same warp as the texture: each extra comes out exactly as it would as the texture, of its own
+// type, cropped and turned alike (a leaf mask given), so the restorations register pixel for
+// pixel. An extra of another size is refused.
+TEST(Restore, ExtrasGoThroughTheSameWarp) {
+  const Pipeline p = RunPipeline(PageShape::kCurl);
+  const CameraModel& camera = p.gantry->rig().camera;
+  RestoreOptions options;
+  options.deskew = options.crop_to_leaf = true;
+  const cv::Mat leaf = SegmentPage(p.texture);
+  cv::Mat flipped, wide;
+  cv::flip(p.texture, flipped, 1);  // Any other image of the texture's size.
+  p.texture.convertTo(wide, CV_16U, 257.0);
+  const RestoreResult all =
+      Restore(p.texture, p.mesh, p.flat.flat, camera, options, leaf, {flipped, wide});
+  ASSERT_TRUE(all.status.ok()) << all.status.message();
+  ASSERT_EQ(all.extras.size(), 2u);
+  const RestoreResult alone = Restore(flipped, p.mesh, p.flat.flat, camera, options, leaf);
+  ASSERT_EQ(all.extras[0].size(), alone.image.size());
+  EXPECT_EQ(cv::norm(all.extras[0], alone.image, cv::NORM_INF), 0.0);
+  ASSERT_EQ(all.extras[1].type(), CV_16U);
+  cv::Mat back;
+  all.extras[1].convertTo(back, CV_8U, 1.0 / 257.0);
+  EXPECT_LE(cv::norm(back, all.image, cv::NORM_INF), 1.0);
+  const RestoreResult bad =
+      Restore(p.texture, p.mesh, p.flat.flat, camera, options, leaf, {cv::Mat(10, 10, CV_8U)});
+  EXPECT_FALSE(bad.status.ok());
+  EXPECT_NE(bad.status.message().find("extra image 0"), std::string::npos) << bad.status.message();
+}
+
 double Percentile(std::vector<double> v, double q) {
   const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * v.size()));
   std::nth_element(v.begin(), v.begin() + k, v.end());

@@ -257,17 +257,29 @@ double UprightAngle(const cv::Mat& mask) {
 
 RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
                       const std::vector<cv::Point2d>& flat, const CameraModel& camera,
-                      const RestoreOptions& options, const cv::Mat& leaf) {
+                      const RestoreOptions& options, const cv::Mat& leaf,
+                      const std::vector<cv::Mat>& extras) {
   RestoreResult result;
   std::string why;
   if (!options.Check(&why)) {
     result.status = Status::Error("restore options: " + why);
     return result;
   }
-  if (texture.empty() || (texture.depth() != CV_8U && texture.depth() != CV_16U) ||
-      (texture.channels() != 1 && texture.channels() != 3)) {
+  auto restorable = [](const cv::Mat& image) {
+    return !image.empty() && (image.depth() == CV_8U || image.depth() == CV_16U) &&
+           (image.channels() == 1 || image.channels() == 3);
+  };
+  if (!restorable(texture)) {
     result.status = Status::Error("the texture must be an 8 or 16 bit gray or colour image");
     return result;
+  }
+  for (size_t k = 0; k < extras.size(); ++k) {
+    if (!restorable(extras[k]) || extras[k].size() != texture.size()) {
+      result.status = Status::Error("extra image " + std::to_string(k) +
+                                    " must be an 8 or 16 bit gray or colour image of the "
+                                    "texture's size");
+      return result;
+    }
   }
   if (!mesh.status.ok() || mesh.quads.empty() || flat.size() != mesh.kind.size()) {
     result.status = Status::Error("restore needs a built mesh and its flattened positions");
@@ -378,7 +390,6 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
         std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
     tris.push_back(tri);
   }
-  result.image = cv::Mat::zeros(size, texture.type());
   if (!leaf.empty()) {
     // The mask is thresholded at half: one bilinear sample per pixel decides it (supersampling
     // would only smooth what the threshold takes away).
@@ -387,20 +398,27 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     Render<uint8_t, 1>(leaf255, tris, &restored_leaf, 1);
     result.mask = restored_leaf >= 128;
   }
-  switch (texture.type()) {
-    case CV_8UC1:
-      Render<uint8_t, 1>(texture, tris, &result.image);
-      break;
-    case CV_8UC3:
-      Render<uint8_t, 3>(texture, tris, &result.image);
-      break;
-    case CV_16UC1:
-      Render<uint16_t, 1>(texture, tris, &result.image);
-      break;
-    case CV_16UC3:
-      Render<uint16_t, 3>(texture, tris, &result.image);
-      break;
-  }
+  // Each image through the triangles, by its type.
+  auto render = [&](const cv::Mat& src, cv::Mat* dst) {
+    *dst = cv::Mat::zeros(size, src.type());
+    switch (src.type()) {
+      case CV_8UC1:
+        Render<uint8_t, 1>(src, tris, dst);
+        break;
+      case CV_8UC3:
+        Render<uint8_t, 3>(src, tris, dst);
+        break;
+      case CV_16UC1:
+        Render<uint16_t, 1>(src, tris, dst);
+        break;
+      case CV_16UC3:
+        Render<uint16_t, 3>(src, tris, dst);
+        break;
+    }
+  };
+  render(texture, &result.image);
+  result.extras.resize(extras.size());
+  for (size_t k = 0; k < extras.size(); ++k) render(extras[k], &result.extras[k]);
   if (options.view == RestoreView::kOrthographic) {
     // The sampling map: each triangle filled with its true sampling, in the renderer's order (the
     // last triangle covering a pixel gives it), subpixel corners (4 fractional bits).
@@ -421,6 +439,7 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     box = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) &
           cv::Rect(0, 0, size.width, size.height);
     result.image = result.image(box).clone();
+    for (cv::Mat& extra : result.extras) extra = extra(box).clone();
     result.mask = result.mask(box).clone();
     result.sampling = result.sampling(box).clone();
     result.pixel_from_flat(0, 2) -= box.x;

@@ -55,6 +55,9 @@ struct RestoreResult {
   // The sheet's finest true sampling, ppi: the 95th percentile by flat area (5% of the sheet is
   // sampled more finely).
   double finest_ppi = 0;
+  // Restore's `extras`, each through the same warp as `image` (the same triangles and samples,
+  // the same crop), so they register to it pixel for pixel; each of its own type.
+  std::vector<cv::Mat> extras;
 };
 
 // How finely a restored page was truly sampled (from RestoreResult::sampling, over its nonzero
@@ -74,11 +77,13 @@ double NativeDpi(const CameraModel& camera);
 
 // `flat` holds the flattened (x, y) of every node, in mm, aligned to the page's original
 // position (as Flatten returns it). `leaf` (optional, CV_8U of the texture's size, nonzero on
-// the leaf) is restored alongside into RestoreResult::mask.
+// the leaf) is restored alongside into RestoreResult::mask. `extras` (optional: other images of
+// the same page from the same pose, of the texture's size, 8 or 16 bit, gray or colour: another
+// light, the albedo, a mask) are restored through the same warp into RestoreResult::extras.
 RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
                       const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                       const RestoreOptions& options = RestoreOptions(),
-                      const cv::Mat& leaf = cv::Mat());
+                      const cv::Mat& leaf = cv::Mat(), const std::vector<cv::Mat>& extras = {});
 
 // The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the
 // direction of its straight edges when they make up most of its outline, else the sides of its
