@@ -62,11 +62,20 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
 
 namespace {
 
-// Writes `image` as the TIFF `tif` (with OpenCV's `params`), then its XMP and ICC profile: the
-// identity, vellum's name and version, `figures`, and `icc` (sRGB when it is empty).
+// OpenCV's TIFF parameters for a restored image: its dpi in the resolution tags in
+// orthographic view, none in camera view.
+std::vector<int> DpiParams(const RestoreResult& restored) {
+  if (restored.view != RestoreView::kOrthographic) return {};
+  const int dpi = static_cast<int>(std::lround(restored.dpi));
+  return {cv::IMWRITE_TIFF_RESUNIT, 2, cv::IMWRITE_TIFF_XDPI, dpi, cv::IMWRITE_TIFF_YDPI, dpi};
+}
+
+// Writes `image` as the TIFF `tif` (with OpenCV's `params`), then its XMP and, with `profile`,
+// its ICC profile: the identity, vellum's name and version, `figures`, and `icc` (sRGB when it
+// is empty).
 Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::vector<int>& params,
                        const ScanIdentity& identity, std::map<std::string, std::string> figures,
-                       const IccProfile& icc) {
+                       const IccProfile& icc, bool profile = true) {
   try {
     if (!cv::imwrite(tif, image, params)) return Status::Error(tif + ": cannot write image");
   } catch (const cv::Exception& e) {
@@ -76,7 +85,7 @@ Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::
   xmp.identity = identity;
   xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
   xmp.figures = std::move(figures);
-  xmp.icc_channels = image.channels();
+  xmp.icc_channels = profile ? image.channels() : 0;
   xmp.icc_profile = icc;
   return WriteXmp(tif, xmp);
 }
@@ -86,23 +95,11 @@ Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::
 Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
                            const ScanIdentity& identity,
                            const std::map<std::string, std::string>& figures) {
-  const std::string tif = (fs::path(dir) / "restored_albedo.tif").string();
-  std::vector<int> params;
-  if (albedo.view == RestoreView::kOrthographic) {
-    const int dpi = static_cast<int>(std::lround(albedo.dpi));
-    params = {cv::IMWRITE_TIFF_RESUNIT, 2, cv::IMWRITE_TIFF_XDPI, dpi, cv::IMWRITE_TIFF_YDPI, dpi};
-  }
-  try {
-    if (!cv::imwrite(tif, albedo.image, params)) return Status::Error(tif + ": cannot write image");
-  } catch (const cv::Exception& e) {
-    return Status::Error(tif + ": cannot write image: " + e.what());
-  }
-  XmpFields xmp;
-  xmp.identity = identity;
-  xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
-  xmp.figures = figures;
-  xmp.figures["encoding"] = "linear reflectance: 65535 = albedo 1; 0 = not measured";
-  return WriteXmp(tif, xmp);
+  std::map<std::string, std::string> with_encoding = figures;
+  with_encoding["encoding"] = "linear reflectance: 65535 = albedo 1; 0 = not measured";
+  return WriteTiffMaster((fs::path(dir) / "restored_albedo.tif").string(), albedo.image,
+                         DpiParams(albedo), identity, with_encoding, IccProfile(),
+                         /*profile=*/false);
 }
 
 Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
@@ -115,12 +112,6 @@ Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
 Status WriteRestored(const std::string& dir, const RestoreResult& restored,
                      const ScanIdentity& identity,
                      const std::map<std::string, std::string>& provenance, const IccProfile& icc) {
-  std::vector<int> tiff_params;
-  if (restored.view == RestoreView::kOrthographic) {
-    const int dpi = static_cast<int>(std::lround(restored.dpi));
-    tiff_params = {cv::IMWRITE_TIFF_RESUNIT, 2,  cv::IMWRITE_TIFF_XDPI, dpi,
-                   cv::IMWRITE_TIFF_YDPI,    dpi};
-  }
   const std::string tif = (fs::path(dir) / "restored.tif").string();
   if (!restored.mask.empty()) {
     const Status s = WriteImage((fs::path(dir) / "restored_mask.png").string(), restored.mask);
@@ -148,7 +139,8 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
     figures["dpi"] = JsonNumber(restored.dpi).dump();
     figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
   }
-  const Status written = WriteTiffMaster(tif, restored.image, tiff_params, identity, figures, icc);
+  const Status written =
+      WriteTiffMaster(tif, restored.image, DpiParams(restored), identity, figures, icc);
   if (!written.ok()) return written;
   Json r;
   Json id = Json::object();

@@ -224,8 +224,8 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
           ++n_outside;
           continue;
         }
-        const double d0 = flat_field.reference_mm;
-        albedo[u] = static_cast<float>(2.0 * amp[u] * (d * d) / (g * cos_in * d0 * d0));
+        albedo[u] = static_cast<float>(2.0 * amp[u] /
+                                       (g * Geometry(x, n, centre, flat_field.reference_mm)));
         ok[u] = 255;
         ++n_estimated;
       }

@@ -37,6 +37,17 @@ Measured Scan(const PageOptions& page, const TextureOptions& texture, uint64_t s
   return m;
 }
 
+// The albedo of the scan's leaf (found by its shape, as the pipeline finds it).
+AlbedoResult AlbedoOfLeaf(const Measured& m, const FlatField& field) {
+  const Outline leaf = FindLeaf(m.points, m.scan.texture);
+  if (!leaf.status.ok()) {
+    AlbedoResult failed;
+    failed.status = leaf.status;
+    return failed;
+  }
+  return EstimateAlbedo(m.decoded.amplitude, m.points, leaf.mask, DefaultRig(), field);
+}
+
 // The white target: a plain sheet of albedo 0.85 larger than the camera's view, on the table.
 const FlatField& TableFlatField() {
   static const FlatField field = [] {
@@ -119,10 +130,7 @@ TEST(Albedo, APlainCurledLeafIsEvenWhereItsTextureIsShaded) {
     TextureOptions texture;
     texture.kind = TextureKind::kPlain;
     const Measured m = Scan(page, texture, 7);
-    const Outline leaf = FindLeaf(m.points, m.scan.texture);
-    ASSERT_TRUE(leaf.status.ok()) << leaf.status.message();
-    const AlbedoResult a =
-        EstimateAlbedo(m.decoded.amplitude, m.points, leaf.mask, DefaultRig(), field);
+    const AlbedoResult a = AlbedoOfLeaf(m, field);
     ASSERT_TRUE(a.status.ok()) << a.status.message();
     const GroundTruth& truth = m.scan.gantry->truth();
     cv::Mat on_page = truth.on_page & a.valid;
@@ -161,10 +169,7 @@ TEST(Albedo, CheckerboardSquaresHaveTheirTrueAlbedo) {
     page.shape = shape;
     const TextureOptions texture;  // The checkerboard.
     const Measured m = Scan(page, texture, 9);
-    const Outline leaf = FindLeaf(m.points, m.scan.texture);
-    ASSERT_TRUE(leaf.status.ok()) << leaf.status.message();
-    const AlbedoResult a =
-        EstimateAlbedo(m.decoded.amplitude, m.points, leaf.mask, DefaultRig(), field);
+    const AlbedoResult a = AlbedoOfLeaf(m, field);
     ASSERT_TRUE(a.status.ok()) << a.status.message();
     const cv::Mat& truth = m.scan.gantry->albedo();
     const cv::Mat on_page = m.scan.gantry->truth().on_page & a.valid;
