@@ -25,6 +25,12 @@ int RunRender(const std::vector<std::string>& args) {
        "bits per sample of the studio-light texture: 8, or 16 as a camera that gives more than 8 "
        "(the structured-light frames stay 8-bit)",
        "8"},
+      {"raking", "N",
+       "also capture the page under N raking lights evenly around it (light_raking-000.png, ...; "
+       "their directions in scan.yaml)",
+       "0"},
+      {"raking-elevation", "DEG", "the raking lights' elevation above the table", "30"},
+      {"uv", "BOOL", "also capture the page's UV fluorescence (light_uv.png)", "false"},
       {"truth", "BOOL", "also write truth_points.tiff and truth_page.tiff", "true"},
   };
   specs = Join(Join(specs, SimFlagSpecs()), PatternFlagSpecs());
@@ -32,7 +38,8 @@ int RunRender(const std::vector<std::string>& args) {
               "Renders a scan of a warped page with the virtual gantry: scan.yaml, texture.png,\n"
               "frame_000.png, ..., the rig's calibration.yaml, and the ground truth of every\n"
               "camera pixel (truth_points.tiff: x y z mm; truth_page.tiff: s t mm and the page:\n"
-              "1, on a spread 1 left and 2 right, 0 off it).",
+              "1, on a spread 1 left and 2 right, 0 off it); with --raking or --uv, the page\n"
+              "under those lights too (light_<name>.png, named in scan.yaml).",
               specs);
   if (!flags.Parse(args)) return 0;
   const std::string out = flags.Require("out");
@@ -71,6 +78,11 @@ int RunRender(const std::vector<std::string>& args) {
   scan.sequence = seq;
   scan.camera_size = rig.camera.size;
   scan.texture = gantry.RenderTexture(seed);
+  std::vector<SceneLight> lights =
+      RakingLights(flags.GetInt("raking", 0, 36), flags.GetDouble("raking-elevation", 1, 89));
+  if (flags.GetBool("uv")) lights.push_back(UvLight());
+  if (!lights.empty()) std::fprintf(stderr, "render: %zu lights...\n", lights.size());
+  scan.lights = RenderLights(gantry, lights, seed);
   std::fprintf(stderr, "render: %zu frames...\n", seq.patterns.size());
   scan.frames = RenderSequence(gantry, seq, seed);
   Status s = WriteScan(out, scan);

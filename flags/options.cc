@@ -62,6 +62,10 @@ std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
       {"outline", "KIND", prefix + "the leaf's outline: rectangle, or burnt (eaten edges, holes)",
        "rectangle"},
       {"thickness", "MM", prefix + "the leaf's thickness, mm", "0.2"},
+      {"ridge", "HEIGHT,T",
+       prefix + "an embossed line across the page at T mm from its top edge, HEIGHT mm high "
+                "(sigma 0.5 mm; in the shading only, as a raking light shows it); 0,0: none",
+       "0,0"},
       {"table-albedo", "A", prefix + "the table's reflectance, 0..1", "0.35"},
       {"scene-albedo", "A", prefix + "the support's or frame's reflectance, 0..1", "0.8"},
       {"pose", "RX,RY,RZ,X,Y,Z",
@@ -89,6 +93,15 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   }
   page->outline = outline == "burnt" ? OutlineKind::kBurnt : OutlineKind::kRectangle;
   page->thickness_mm = flags.GetDouble("thickness", 0, 10);
+  double ridge[2];
+  char ridge_end = 0;
+  if (std::sscanf(flags.Get("ridge").c_str(), "%lf,%lf%c", &ridge[0], &ridge[1], &ridge_end) != 2 ||
+      !std::isfinite(ridge[0] + ridge[1]) || std::fabs(ridge[0]) > 5) {
+    throw UsageError("--ridge must be HEIGHT,T in mm (height within 5 mm), got '" +
+                     flags.Get("ridge") + "'");
+  }
+  page->ridge_height_mm = ridge[0];
+  page->ridge_t_mm = ridge[1];
   if (!ParsePageShape(flags.Get("page"), &page->shape)) {
     throw UsageError("--page must be flat, curl, fold, cone, bump, ripple or gutter, got '" +
                      flags.Get("page") + "'");

@@ -102,6 +102,31 @@ Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
                          /*profile=*/false);
 }
 
+Status WriteRestoredLight(const std::string& dir, const std::string& name, const cv::Mat& image,
+                          const RestoreResult& restored, const ScanIdentity& identity,
+                          const std::map<std::string, std::string>& figures,
+                          const IccProfile& icc) {
+  const fs::path folder = fs::path(dir) / "lights";
+  const Status s = MakeDirectories(folder.string());
+  if (!s.ok()) return s;
+  std::map<std::string, std::string> with_light = figures;
+  with_light["light"] = name;
+  return WriteTiffMaster((folder / (name + ".tif")).string(), image, DpiParams(restored), identity,
+                         with_light, icc);
+}
+
+Status WriteNormalMap(const std::string& dir, const cv::Mat& normal_map,
+                      const RestoreResult& restored, const ScanIdentity& identity,
+                      const std::map<std::string, std::string>& figures) {
+  std::map<std::string, std::string> with_encoding = figures;
+  with_encoding["encoding"] =
+      "normal map: red, green, blue = x (right), y (up), z (out of the page), each (c + 1) / 2 "
+      "of 65535; 0 = not measured";
+  return WriteTiffMaster((fs::path(dir) / "normals.tif").string(), normal_map,
+                         DpiParams(restored), identity, with_encoding, IccProfile(),
+                         /*profile=*/false);
+}
+
 Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
                            const ScanIdentity& identity, const IccProfile& icc) {
   return WriteTiffMaster(

@@ -50,4 +50,19 @@ Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
                            const ScanIdentity& identity,
                            const std::map<std::string, std::string>& figures);
 
+// lights/<name>.tif in `dir`: one of the scan's extra lights restored with the page (as
+// captured: 8 or 16 bit, gray or colour), with the dpi tags of `restored`, the identity and
+// `figures` in its XMP, and the camera's ICC profile `icc` (empty: sRGB).
+Status WriteRestoredLight(const std::string& dir, const std::string& name, const cv::Mat& image,
+                          const RestoreResult& restored, const ScanIdentity& identity,
+                          const std::map<std::string, std::string>& figures,
+                          const IccProfile& icc = IccProfile());
+
+// normals.tif in `dir`: the page's photometric normals as a normal map (NormalMapImage: 16-bit,
+// R, G, B = x right, y up, z out of the page, each (c + 1) / 2 of full scale; 0 where marked),
+// with the dpi tags of `restored`, the identity and `figures` in its XMP, no colour profile.
+Status WriteNormalMap(const std::string& dir, const cv::Mat& normal_map,
+                      const RestoreResult& restored, const ScanIdentity& identity,
+                      const std::map<std::string, std::string>& figures);
+
 }  // namespace vellum

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -156,8 +157,10 @@ Status WriteFrameImage(const std::string& path, const cv::Mat& frame) {
   return Status::Ok();
 }
 
+std::string LightFileName(const std::string& name) { return "light_" + name + ".png"; }
+
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
-                     const ScanIdentity& identity) {
+                     const ScanIdentity& identity, const std::vector<ScanLight>& lights) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   try {
     cv::FileStorage out(path, cv::FileStorage::WRITE);
@@ -170,6 +173,18 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
       if (!value.empty()) out << key << value;
     });
     out << "texture" << kTexture;
+    if (!lights.empty()) {
+      out << "lights"
+          << "[";
+      for (const ScanLight& light : lights) {
+        out << "{"
+            << "name" << light.name;
+        if (light.directed()) out << "direction" << std::vector<double>(light.direction.val,
+                                                                        light.direction.val + 3);
+        out << "}";
+      }
+      out << "]";
+    }
     out << "patterns"
         << "[";
     for (const PatternSpec& s : sequence.patterns) {
@@ -191,7 +206,7 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
 }
 
 Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity) {
+                    ScanIdentity* identity, std::vector<ScanLight>* lights) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
@@ -253,6 +268,45 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
       });
       if (!bad.empty()) return Status::Error(path + ": key '" + bad + "' must be text");
       *identity = SanitizedIdentity(read);
+    }
+    if (lights) {
+      lights->clear();
+      const cv::FileNode list = in["lights"];
+      if (!list.empty() && !list.isNone() && !list.isSeq()) {
+        return Status::Error(path + ": key 'lights' must be a sequence of {name, direction}");
+      }
+      for (const cv::FileNode& n : list) {
+        const std::string where = path + ": light " + std::to_string(lights->size());
+        ScanLight light;
+        if (!n.isMap() || !n["name"].isString() ||
+            !ValidLightName(light.name = static_cast<std::string>(n["name"]))) {
+          return Status::Error(where +
+                               ": 'name' must be 1 to 32 of a-z, 0-9, '-' and '_', starting with "
+                               "a letter or digit");
+        }
+        for (const ScanLight& earlier : *lights) {
+          if (earlier.name == light.name) {
+            return Status::Error(where + ": the name '" + light.name + "' is given twice");
+          }
+        }
+        const cv::FileNode d = n["direction"];
+        if (!d.empty() && !d.isNone()) {
+          auto number = [](const cv::FileNode& x) { return x.isReal() || x.isInt(); };
+          if (!d.isSeq() || d.size() != 3 || !number(d[0]) || !number(d[1]) || !number(d[2])) {
+            return Status::Error(where + " ('" + light.name +
+                                 "'): 'direction' must be [ x, y, z ], towards the light");
+          }
+          const cv::Vec3d v(static_cast<double>(d[0]), static_cast<double>(d[1]),
+                            static_cast<double>(d[2]));
+          const double norm = cv::norm(v);
+          if (!std::isfinite(norm) || norm < 1e-9 || v[2] <= 0) {
+            return Status::Error(where + " ('" + light.name +
+                                 "'): 'direction' must point up from the table (z > 0)");
+          }
+          light.direction = v / norm;
+        }
+        lights->push_back(light);
+      }
     }
     const cv::FileNode list = in["patterns"];
     if (!list.isSeq() || list.size() == 0) {
@@ -331,13 +385,23 @@ Status MissingFrame(const std::string& path, int k, const Scan& scan) {
 }  // namespace
 
 Status ReadScanHeader(const std::string& dir, Scan* scan) {
-  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity);
+  Status s =
+      ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture, 16);
   if (!s.ok()) return s;
   s = CheckSize((root / kTexture).string(), scan->texture.size(), *scan);
   if (!s.ok()) return s;
+  for (ScanLight& light : scan->lights) {
+    const std::string path = (root / LightFileName(light.name)).string();
+    if (!PathExists(path)) {
+      return Status::Error(path + ": file is missing (light '" + light.name + "' of scan.yaml)");
+    }
+    s = ReadImageFile(path, &light.image, 16);
+    if (s.ok()) s = CheckSize(path, light.image.size(), *scan);
+    if (!s.ok()) return s;
+  }
   scan->frames.clear();
   // Every frame is there, an image, of the camera's size (a PNG's header says it without
   // decoding a pixel): a scan that cannot be decoded is refused before any work.
@@ -412,11 +476,20 @@ Status ReadScan(const std::string& dir, Scan* scan) {
 Status WriteScan(const std::string& dir, const Scan& scan) {
   Status s = MakeDirectories(dir);
   if (!s.ok()) return s;
-  s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity);
+  for (const ScanLight& light : scan.lights) {
+    if (!ValidLightName(light.name)) {
+      return Status::Error(dir + ": light name '" + light.name + "' is not a valid name");
+    }
+  }
+  s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity, scan.lights);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = WriteImage((root / kTexture).string(), scan.texture);
   if (!s.ok()) return s;
+  for (const ScanLight& light : scan.lights) {
+    s = WriteImage((root / LightFileName(light.name)).string(), light.image);
+    if (!s.ok()) return s;
+  }
   for (size_t k = 0; k < scan.frames.size(); ++k) {
     s = WriteFrameImage((root / FrameName(static_cast<int>(k))).string(), scan.frames[k]);
     if (!s.ok()) return s;

@@ -16,15 +16,21 @@ namespace vellum {
 std::string FrameName(int index);    // "frame_007.png"
 std::string PatternName(int index);  // "pattern_007.png"
 
-// Reads scan.yaml only; its identity keys (shelfmark, folio, side, operator, note, label; any may
-// be absent) into *identity when given, sanitised (SanitizedIdentity).
-Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity = nullptr);
-// Writes scan.yaml; camera_size may be empty; identity keys only when set.
-Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
-                     const ScanIdentity& identity = ScanIdentity());
+std::string LightFileName(const std::string& name);  // "light_raking-090.png"
 
-// Reads scan.yaml and texture.png, and checks that every frame file is there, an image, of the
+// Reads scan.yaml only; its identity keys (shelfmark, folio, side, operator, note, label; any may
+// be absent) into *identity when given, sanitised (SanitizedIdentity); its extra lights (key
+// `lights`: a sequence of {name, direction: [x, y, z]}, direction optional) into *lights when
+// given, names and directions only (the images are light_<name>.png).
+Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
+                    ScanIdentity* identity = nullptr, std::vector<ScanLight>* lights = nullptr);
+// Writes scan.yaml; camera_size may be empty; identity keys only when set; `lights` by name and
+// direction.
+Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
+                     const ScanIdentity& identity = ScanIdentity(),
+                     const std::vector<ScanLight>& lights = {});
+
+// Reads scan.yaml, texture.png and the lights' images, and checks that every frame file is there, an image, of the
 // camera's size (from its PNG header, no pixel decoded); scan->frames is left empty. Errors
 // name the file and the problem.
 Status ReadScanHeader(const std::string& dir, Scan* scan);
@@ -39,7 +45,7 @@ Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& t
 Status ReadScan(const std::string& dir, Scan* scan);
 // Reads the scan directory's texture.png alone.
 Status ReadTexture(const std::string& dir, cv::Mat* texture);
-// Writes scan.yaml, texture.png and the frames (creating the directory).
+// Writes scan.yaml, texture.png, the lights' images and the frames (creating the directory).
 Status WriteScan(const std::string& dir, const Scan& scan);
 // Writes the projector images pattern_000.png, ... and scan.yaml (no camera size).
 Status WritePatterns(const std::string& dir, const PatternSequence& sequence);

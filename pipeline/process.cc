@@ -131,6 +131,15 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
         return out;
       }
     }
+    if (!input.scan.lights.empty()) {
+      next("lights", done + 0.95 * share);
+      if (!ran(LightsStage(input.scan.lights, mask, page.mesh, page.flat.flat, camera,
+                           options.restore, options.camera_icc, page.restored, report.stages,
+                           results, page.name, &page.lights),
+               true)) {
+        return out;
+      }
+    }
     out.pages.push_back(std::move(page));
   }
   next("archive", 0.96);

@@ -527,4 +527,79 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
   return stage.Finish(s);
 }
 
+StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
+                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                        const CameraModel& camera, const RestoreOptions& options,
+                        const IccProfile& camera_icc, const RestoreResult& restored,
+                        const std::vector<StageReport>& earlier, const std::string& results,
+                        const std::string& page, LightsResult* out) {
+  Stage stage("lights", page);
+  StageReport& r = stage.report();
+  *out = LightsResult();
+  // The lights of known direction give the normals, in the camera's pixels.
+  std::vector<cv::Mat> directed;
+  std::vector<cv::Vec3d> directions;
+  for (const ScanLight& light : lights) {
+    if (light.directed()) directed.push_back(light.image), directions.push_back(light.direction);
+  }
+  const bool photometric = directed.size() >= 3 && restored.view == RestoreView::kOrthographic;
+  std::vector<cv::Mat> extras;
+  for (const ScanLight& light : lights) extras.push_back(light.image);
+  const double page_px = std::max(1, cv::countNonZero(page_mask));
+  if (photometric) {
+    const PhotometricResult normals = PhotometricNormals(directed, directions, page_mask);
+    if (!normals.status.ok()) return stage.Finish(normals.status);
+    r.Number("normals", "solved_share", normals.solved / page_px);
+    r.Number("normals", "lights", static_cast<double>(directed.size()));
+    extras.push_back(normals.normals);
+  }
+  // Restored as the page was: the same sheet and options, at the dpi it was written at.
+  RestoreOptions same = options;
+  if (restored.view == RestoreView::kOrthographic) same.dpi = restored.dpi;
+  if (lights.empty()) return stage.Finish(Status::Error("the scan has no lights"));
+  RestoreResult through = Restore(lights.front().image, mesh, flat, camera, same, page_mask,
+                                  std::vector<cv::Mat>(extras.begin() + 1, extras.end()));
+  if (!through.status.ok()) return stage.Finish(through.status);
+  if (through.image.size() != restored.image.size()) {
+    return stage.Finish(Status::Error("the restored lights are " + SizeText(through.image.size()) +
+                                      ", the restored page " + SizeText(restored.image.size())));
+  }
+  std::vector<cv::Mat> images = {through.image};
+  images.insert(images.end(), through.extras.begin(), through.extras.end());
+  const std::string dir = PageDir(results, page);
+  Status s = MakeDirectories(dir);
+  const ScanIdentity identity = ReportedIdentity(earlier);
+  const ScanIdentity page_identity = page.empty() ? identity : PageIdentity(identity, page);
+  std::map<std::string, std::string> figures;
+  figures["view"] = ToString(restored.view);
+  if (restored.view == RestoreView::kOrthographic) figures["dpi"] = JsonNumber(restored.dpi).dump();
+  for (size_t k = 0; k < lights.size() && s.ok(); ++k) {
+    std::map<std::string, std::string> light_figures = figures;
+    if (lights[k].directed()) {
+      const cv::Vec3d& d = lights[k].direction;
+      light_figures["direction"] = JsonNumber(d[0]).dump() + " " + JsonNumber(d[1]).dump() + " " +
+                                   JsonNumber(d[2]).dump();
+    }
+    images[k].setTo(0, through.mask == 0);
+    s = stage.Output(PageFile(page, "lights/" + lights[k].name + ".tif"),
+                     WriteRestoredLight(dir, lights[k].name, images[k], restored, page_identity,
+                                        light_figures, camera_icc));
+    out->names.push_back(lights[k].name);
+    out->images.push_back(images[k]);
+  }
+  if (s.ok() && photometric) {
+    const SheetFrame frame = RestoredSheetFrame(mesh, flat, restored);
+    out->normals = NormalsOnPage(images.back(), frame.right, frame.up, frame.normal);
+    out->normals.setTo(0, restored.mask.empty() ? cv::Mat() : restored.mask == 0);
+    figures["model"] =
+        "photometric stereo: Lambertian, distant lights of equal strength, a linear camera; "
+        "normals in the flat page's frame";
+    s = stage.Output(PageFile(page, "normals.tif"),
+                     WriteNormalMap(dir, NormalMapImage(out->normals), restored, page_identity,
+                                    figures));
+    if (s.ok()) s = stage.Picture(results, "relief", ReliefPicture(out->normals));
+  }
+  return stage.Finish(s);
+}
+
 }  // namespace vellum

@@ -20,6 +20,7 @@
 #include "core/patterns/scan.h"
 #include "core/restore/restore.h"
 #include "core/shading/albedo.h"
+#include "core/shading/photometric.h"
 #include "io/xmp.h"
 #include "pipeline/report.h"
 
@@ -143,5 +144,23 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
                         const RestoreOptions& options, const RestoreResult& restored,
                         const std::vector<StageReport>& earlier, const std::string& results,
                         const std::string& page, RestoreResult* albedo);
+
+// Lights (issue 17): the scan's extra images (`lights`, Scan::lights) restored through the page's
+// sheet exactly as `restored` was (same options, at its dpi), so they register to it and to
+// each other pixel for pixel: lights/<name>.tif in the page's folder (as captured, with the
+// camera's ICC profile `camera_icc`). With three or more lights of known direction, the page's
+// photometric normals (core/shading/photometric.h) on the flat page in its own frame:
+// normals.tif (WriteNormalMap) and a picture of the relief lit from the top left.
+struct LightsResult {
+  std::vector<std::string> names;  // The lights restored, in the scan's order.
+  std::vector<cv::Mat> images;     // Each restored, registered to the restored page.
+  cv::Mat normals;  // CV_32FC3 on the restored page (x right, y up, z out); empty without.
+};
+StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
+                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                        const CameraModel& camera, const RestoreOptions& options,
+                        const IccProfile& camera_icc, const RestoreResult& restored,
+                        const std::vector<StageReport>& earlier, const std::string& results,
+                        const std::string& page, LightsResult* out);
 
 }  // namespace vellum

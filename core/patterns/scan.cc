@@ -181,4 +181,11 @@ std::string IdentitySlug(const ScanIdentity& identity) {
   return slug;
 }
 
+bool ValidLightName(const std::string& name) {
+  if (name.empty() || name.size() > 32 || name[0] == '-' || name[0] == '_') return false;
+  return std::all_of(name.begin(), name.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-' || c == '_';
+  });
+}
+
 }  // namespace vellum

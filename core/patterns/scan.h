@@ -76,12 +76,30 @@ inline constexpr size_t kMaxSlug = 64;
 // '_', at most kMaxSlug bytes; "" when nothing is left ("MS 12", "3", "recto" -> "MS-12_3_recto").
 std::string IdentitySlug(const ScanIdentity& identity);
 
+// An extra image of the page in the scan's pose under another light (issue 17): raking light
+// from one side, UV fluorescence, infrared, or the operator's own. Restored through the same
+// sheet as the texture, so all register to each other.
+struct ScanLight {
+  std::string name;  // ValidLightName: its file is light_<name>.png.
+  // Unit vector from the page towards a distant light (world); zero when it is not one (UV
+  // flood lamps) or not known. Three or more lights with a direction give photometric normals.
+  cv::Vec3d direction{0.0, 0.0, 0.0};
+  cv::Mat image;  // 8 or 16 bit, gray or BGR, the camera's size.
+
+  bool directed() const { return direction.dot(direction) > 0; }
+};
+
+// A light's name: 1 to 32 of a-z, 0-9, '-' and '_', starting with a letter or digit (a file
+// name on any system, and a key in report.json).
+bool ValidLightName(const std::string& name);
+
 struct Scan {
   PatternSequence sequence;
   cv::Size camera_size;         // 0x0 when unknown (a pattern set not yet captured).
-  cv::Mat texture;              // 8-bit gray or BGR.
+  cv::Mat texture;              // 8 or 16 bit, gray or BGR.
   std::vector<cv::Mat> frames;  // 8-bit gray, one per pattern.
   ScanIdentity identity;
+  std::vector<ScanLight> lights;  // Extra images under other lights, each named once.
 };
 
 }  // namespace vellum

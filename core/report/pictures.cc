@@ -264,4 +264,23 @@ cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<
   return out;
 }
 
+cv::Mat ReliefPicture(const cv::Mat& normals) {
+  CV_Assert(normals.type() == CV_32FC3);
+  const double e = 30 * M_PI / 180;
+  const cv::Vec3f light(static_cast<float>(-std::cos(e) * M_SQRT1_2),
+                        static_cast<float>(std::cos(e) * M_SQRT1_2), static_cast<float>(std::sin(e)));
+  // A flat page shows mid-gray; a slope facing the light up to white.
+  const float flat = light[2];
+  cv::Mat out = cv::Mat::zeros(normals.size(), CV_8U);
+  for (int v = 0; v < normals.rows; ++v) {
+    const cv::Vec3f* n = normals.ptr<cv::Vec3f>(v);
+    uint8_t* o = out.ptr<uint8_t>(v);
+    for (int u = 0; u < normals.cols; ++u) {
+      if (n[u].dot(n[u]) < 0.25f) continue;
+      o[u] = cv::saturate_cast<uint8_t>(128.0f + 127.0f * (n[u].dot(light) - flat) / (1 - flat));
+    }
+  }
+  return out;
+}
+
 }  // namespace vellum

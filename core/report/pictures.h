@@ -48,4 +48,9 @@ cv::Mat RestoredWithScaleBar(const RestoreResult& restored, int max_width, doubl
 cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                     const RestoreResult& restored, const CameraModel& camera, double size_mm = 50);
 
+// Photometric normals on the flat page (CV_32FC3: x right, y up, z out; 0 where marked) as a
+// relief lit from the top left at 30 degrees, the way fine relief is looked at: gray, 8-bit,
+// marked pixels black.
+cv::Mat ReliefPicture(const cv::Mat& normals);
+
 }  // namespace vellum

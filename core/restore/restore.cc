@@ -274,10 +274,12 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     return result;
   }
   for (size_t k = 0; k < extras.size(); ++k) {
-    if (!restorable(extras[k]) || extras[k].size() != texture.size()) {
+    const cv::Mat& e = extras[k];
+    const bool real = !e.empty() && e.depth() == CV_32F && (e.channels() == 1 || e.channels() == 3);
+    if (!(restorable(e) || real) || e.size() != texture.size()) {
       result.status = Status::Error("extra image " + std::to_string(k) +
-                                    " must be an 8 or 16 bit gray or colour image of the "
-                                    "texture's size");
+                                    " must be an 8, 16 or 32-bit float gray or three-channel "
+                                    "image of the texture's size");
       return result;
     }
   }
@@ -414,6 +416,12 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
       case CV_16UC3:
         Render<uint16_t, 3>(src, tris, dst);
         break;
+      case CV_32FC1:
+        Render<float, 1>(src, tris, dst);
+        break;
+      case CV_32FC3:
+        Render<float, 3>(src, tris, dst);
+        break;
     }
   };
   render(texture, &result.image);
@@ -447,6 +455,79 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   }
   result.status = Status::Ok();
   return result;
+}
+
+SheetFrame RestoredSheetFrame(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                              const RestoreResult& restored) {
+  SheetFrame frame;
+  const cv::Size size = restored.image.size();
+  frame.right = cv::Mat::zeros(size, CV_32FC3);
+  frame.up = cv::Mat::zeros(size, CV_32FC3);
+  frame.normal = cv::Mat::zeros(size, CV_32FC3);
+  if (restored.view != RestoreView::kOrthographic || flat.size() != mesh.point.size()) return frame;
+  const cv::Matx23d& a = restored.pixel_from_flat;
+  auto pixel = [&](int k) {
+    return cv::Point2d(a(0, 0) * flat[k].x + a(0, 1) * flat[k].y + a(0, 2),
+                       a(1, 0) * flat[k].x + a(1, 1) * flat[k].y + a(1, 2));
+  };
+  double area_sum = 0;
+  int area_count = 0;
+  for (const cv::Vec3i& t : SheetTriangles(mesh)) {
+    const cv::Point2d d0 = pixel(t[0]), d1 = pixel(t[1]), d2 = pixel(t[2]);
+    const cv::Matx22d dm(d1.x - d0.x, d2.x - d0.x, d1.y - d0.y, d2.y - d0.y);
+    if (std::fabs(cv::determinant(dm)) < 1e-12) continue;
+    area_sum += std::fabs(cv::determinant(dm));  // Twice the triangle's: one cell of the grid.
+    ++area_count;
+    const cv::Vec3d e1 = mesh.point[t[1]] - mesh.point[t[0]];
+    const cv::Vec3d e2 = mesh.point[t[2]] - mesh.point[t[0]];
+    const cv::Matx32d edges(e1[0], e2[0], e1[1], e2[1], e1[2], e2[2]);
+    const cv::Matx32d j = edges * dm.inv();  // World mm per restored pixel, along x and y.
+    const cv::Vec3d right = cv::normalize(cv::Vec3d(j(0, 0), j(1, 0), j(2, 0)));
+    cv::Vec3d up(-j(0, 1), -j(1, 1), -j(2, 1));  // Rows run down the page.
+    up = cv::normalize(up - up.dot(right) * right);
+    const cv::Vec3d normal = right.cross(up);
+    cv::Point corners[3];
+    const cv::Point2d d[3] = {d0, d1, d2};
+    for (int c = 0; c < 3; ++c) corners[c] = cv::Point(cvRound(d[c].x * 16), cvRound(d[c].y * 16));
+    cv::fillConvexPoly(frame.right, corners, 3, cv::Scalar(right[0], right[1], right[2]),
+                       cv::LINE_8, 4);
+    cv::fillConvexPoly(frame.up, corners, 3, cv::Scalar(up[0], up[1], up[2]), cv::LINE_8, 4);
+    cv::fillConvexPoly(frame.normal, corners, 3, cv::Scalar(normal[0], normal[1], normal[2]),
+                       cv::LINE_8, 4);
+  }
+  if (area_count == 0) return frame;
+  // Smoothed over about a cell of the grid (normalised within the sheet), so the frame turns
+  // evenly from facet to facet instead of in steps at their edges; then made orthonormal again.
+  const double sigma = 0.5 * std::sqrt(area_sum / area_count);
+  cv::Mat weight;
+  cv::extractChannel(frame.normal, weight, 2);
+  weight = weight != 0;
+  weight.convertTo(weight, CV_32F, 1.0 / 255);
+  cv::Mat spread;
+  cv::GaussianBlur(weight, spread, cv::Size(), sigma);
+  cv::max(spread, 1e-6, spread);
+  cv::Mat spread3;
+  cv::merge(std::vector<cv::Mat>{spread, spread, spread}, spread3);
+  for (cv::Mat* m : {&frame.right, &frame.normal}) {
+    cv::GaussianBlur(*m, *m, cv::Size(), sigma);
+    cv::divide(*m, spread3, *m);
+  }
+  for (int v = 0; v < size.height; ++v) {
+    const float* w = weight.ptr<float>(v);
+    cv::Vec3f* r = frame.right.ptr<cv::Vec3f>(v);
+    cv::Vec3f* p = frame.up.ptr<cv::Vec3f>(v);
+    cv::Vec3f* n = frame.normal.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < size.width; ++u) {
+      if (w[u] == 0) {
+        r[u] = p[u] = n[u] = cv::Vec3f(0, 0, 0);
+        continue;
+      }
+      n[u] = cv::normalize(n[u]);
+      r[u] = cv::normalize(r[u] - r[u].dot(n[u]) * n[u]);
+      p[u] = n[u].cross(r[u]);
+    }
+  }
+  return frame;
 }
 
 }  // namespace vellum

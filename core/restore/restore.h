@@ -78,12 +78,25 @@ double NativeDpi(const CameraModel& camera);
 // `flat` holds the flattened (x, y) of every node, in mm, aligned to the page's original
 // position (as Flatten returns it). `leaf` (optional, CV_8U of the texture's size, nonzero on
 // the leaf) is restored alongside into RestoreResult::mask. `extras` (optional: other images of
-// the same page from the same pose, of the texture's size, 8 or 16 bit, gray or colour: another
-// light, the albedo, a mask) are restored through the same warp into RestoreResult::extras.
+// the same page from the same pose, of the texture's size, 8 or 16 bit or float, gray or
+// three-channel: another light, the albedo, a mask, normals) are restored through the same warp
+// into RestoreResult::extras.
 RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
                       const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                       const RestoreOptions& options = RestoreOptions(),
                       const cv::Mat& leaf = cv::Mat(), const std::vector<cv::Mat>& extras = {});
+
+// The sheet's own axes at each pixel of an orthographic restored page (`restored`, from
+// Restore of this mesh and flat): the world directions in which the page runs to the image's
+// right (along its columns) and up (against its rows), and its normal (towards the camera,
+// right x up), each CV_32FC3, unit, from each triangle of the sheet smoothed over about one
+// cell of its grid, zero off it. A
+// world vector v reads (v . right, v . up, v . normal) in the flat page's own frame.
+struct SheetFrame {
+  cv::Mat right, up, normal;
+};
+SheetFrame RestoredSheetFrame(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                              const RestoreResult& restored);
 
 // The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the
 // direction of its straight edges when they make up most of its outline, else the sides of its

@@ -132,6 +132,21 @@ SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t see
   return SimulateScan(rig, page, texture, SceneOptions(), seed);
 }
 
+std::vector<ScanLight> RenderLights(const VirtualGantry& gantry,
+                                    const std::vector<SceneLight>& lights, uint64_t seed) {
+  std::vector<ScanLight> out;
+  for (size_t k = 0; k < lights.size(); ++k) {
+    ScanLight light;
+    light.name = lights[k].name;
+    if (lights[k].kind == SceneLight::Kind::kDistant) {
+      light.direction = cv::normalize(lights[k].direction);
+    }
+    light.image = gantry.RenderLight(lights[k], seed + 1001 + k);
+    out.push_back(light);
+  }
+  return out;
+}
+
 Scan AsScan(const SimulatedScan& sim) {
   Scan scan;
   scan.sequence = sim.sequence;

@@ -56,6 +56,10 @@ SimulatedScan SimulateScan(const Calibration& rig, PageShape shape, uint64_t see
 SimulatedScan SimulateScan(const Calibration& rig, const PageOptions& page,
                            const TextureOptions& texture, const SceneOptions& scene, uint64_t seed,
                            const LightOptions& light = LightOptions());
+// The scan's extra images under `lights` (VirtualGantry::RenderLight, noise seed seed + 1001 +
+// k), named as they are, each distant light with its direction (a fluorescence none).
+std::vector<ScanLight> RenderLights(const VirtualGantry& gantry,
+                                    const std::vector<SceneLight>& lights, uint64_t seed);
 // The simulated scan as a scan directory holds it (sequence, camera size, texture, frames), for
 // what processes scans.
 Scan AsScan(const SimulatedScan& sim);

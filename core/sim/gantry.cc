@@ -255,6 +255,7 @@ void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
   offset_.create(size, CV_32F);
   albedo_.create(size, CV_32F);
   studio_.create(size, CV_32F);
+  normal_.create(size, CV_32FC3);
   const bool coloured = std::any_of(textures.begin(), textures.end(),
                                     [](const PageTexture& t) { return t.coloured(); });
   if (coloured) colour_albedo_.create(size, CV_32FC3);
@@ -341,6 +342,7 @@ void VirtualGantry::ShadeSetup(const std::vector<PageTexture>& textures) {
                                       : static_cast<float>(lamps_at(x, normal) / lamps_at_origin);
         offset_.at<float>(v, u) = static_cast<float>(255.0 * albedo * light_.ambient);
         truth_.lit.at<uint8_t>(v, u) = lit ? 255 : 0;
+        normal_.at<cv::Vec3f>(v, u) = cv::Vec3f(normal);
       }
     }
   });
@@ -384,6 +386,56 @@ cv::Mat VirtualGantry::RenderFrame(const cv::Mat& projector_image, uint64_t seed
       }
     }
   });
+  return frame;
+}
+
+std::vector<SceneLight> RakingLights(int count, double elevation_deg, double azimuth_deg) {
+  std::vector<SceneLight> lights;
+  const double e = elevation_deg * M_PI / 180;
+  for (int k = 0; k < count; ++k) {
+    const double a_deg = std::fmod(azimuth_deg + 360.0 * k / count + 360.0, 360.0);
+    const double a = a_deg * M_PI / 180;
+    SceneLight light;
+    const std::string degrees = std::to_string(static_cast<int>(std::lround(a_deg)) % 360);
+    light.name = "raking-" + std::string(3 - std::min<size_t>(3, degrees.size()), '0') + degrees;
+    light.direction = cv::Vec3d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
+    for (double& c : light.direction.val) c = std::round(c * 1e12) / 1e12;  // sin(pi) is 0.
+    lights.push_back(light);
+  }
+  return lights;
+}
+
+SceneLight UvLight() {
+  SceneLight light;
+  light.name = "uv";
+  light.kind = SceneLight::Kind::kFluorescence;
+  light.intensity = 0.6;
+  return light;
+}
+
+cv::Mat VirtualGantry::RenderLight(const SceneLight& light, uint64_t seed) const {
+  cv::Mat level(rig_.camera.size, CV_32F);
+  const cv::Vec3f l(cv::normalize(light.direction));
+  for (int v = 0; v < level.rows; ++v) {
+    const float* albedo = albedo_.ptr<float>(v);
+    const cv::Vec3f* n = normal_.ptr<cv::Vec3f>(v);
+    float* out = level.ptr<float>(v);
+    for (int u = 0; u < level.cols; ++u) {
+      const float shade =
+          light.kind == SceneLight::Kind::kDistant ? std::max(0.0f, n[u].dot(l)) : 1.0f;
+      out[u] = static_cast<float>(255.0 * light.intensity) * albedo[u] * shade;
+    }
+  }
+  cv::Mat noise(level.size(), CV_32F);
+  cv::RNG rng(seed);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
+  level += noise;
+  cv::Mat frame;
+  if (light_.texture_bits == 16) {
+    level.convertTo(frame, CV_16U, 65535.0 / 255.0);
+  } else {
+    level.convertTo(frame, CV_8U);
+  }
   return frame;
 }
 

@@ -41,6 +41,32 @@ struct LightOptions {
   std::vector<cv::Vec3d> studio_lamps;
 };
 
+// A light of the station other than the texture's studio lights (issue 17), each giving one
+// extra image of the page in the scan's pose: a distant light from one direction (raking light
+// from a side), or the page's UV fluorescence. The page's normal includes its relief
+// (PageOptions::ridge_height_mm). Not modelled: the shadow one part of the page casts on
+// another (a curl's on the flat part) and light the page throws on itself; a point turned away
+// from the light is dark.
+struct SceneLight {
+  enum class Kind { kDistant, kFluorescence };
+  std::string name;
+  Kind kind = Kind::kDistant;
+  // kDistant: unit vector from the page towards the light, world.
+  cv::Vec3d direction{0.0, 0.0, 1.0};
+  // kDistant: the camera's level, as a fraction of full scale, for albedo 1 lit square on.
+  // kFluorescence: for albedo 1 under the UV lamps, which light the page evenly; the paper
+  // fluoresces in proportion to its albedo (ink quenches it).
+  double intensity = 1.0;
+};
+
+// `count` raking lights at `elevation_deg` above the table, evenly around it starting at
+// `azimuth_deg` (0: from +x, counter-clockwise seen from above), named raking-<azimuth>
+// ("raking-000", "raking-090", ...).
+std::vector<SceneLight> RakingLights(int count, double elevation_deg = 30.0,
+                                     double azimuth_deg = 0.0);
+// UV fluorescence, named "uv".
+SceneLight UvLight();
+
 // What the page lies on and among: the table (z = 0) and, on it, optionally a support board
 // under the page and a flat paper frame (mount) whose window the leaf lies in; or, instead of
 // one page, an open book. (The board's and frame's sides are not modelled: their tops only.)
@@ -93,6 +119,9 @@ class VirtualGantry {
   cv::Mat RenderFrame(const cv::Mat& projector_image, uint64_t seed) const;
   // Camera frame under studio light, projector black.
   cv::Mat RenderTexture(uint64_t seed) const;
+  // Camera frame under `light` alone (projector black, studio lights off), gray, of the
+  // texture's bit depth (LightOptions::texture_bits), with the camera's noise.
+  cv::Mat RenderLight(const SceneLight& light, uint64_t seed) const;
 
  private:
   void TraceCamera();
@@ -113,6 +142,7 @@ class VirtualGantry {
   cv::Mat offset_;         // CV_32F DN of the ambient light.
   cv::Mat albedo_;         // CV_32F albedo seen by each pixel.
   cv::Mat studio_;         // CV_32F the studio lamps' light on each pixel's point (1: even).
+  cv::Mat normal_;         // CV_32FC3 the surface's normal at each pixel's point, with relief.
   cv::Mat colour_albedo_;  // CV_32FC3 its albedo per channel (B, G, R); empty when all gray.
 };
 

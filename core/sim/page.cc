@@ -234,12 +234,20 @@ cv::Vec3d Page::ShapePoint(double s, double t) const {
   return {0, 0, 0};
 }
 
-cv::Vec3d Page::Normal(double s, double t) const {
+cv::Vec3d Page::Normal(double s, double t, bool relief) const {
   const double e = 1e-3;
   const cv::Vec3d ds = Point(s + e, t) - Point(s - e, t);
   const cv::Vec3d dt = Point(s, t + e) - Point(s, t - e);
   cv::Vec3d n = cv::normalize(ds.cross(dt));
   if (n[2] < 0) n = -n;
+  const PageOptions& o = options_;
+  if (relief && o.ridge_height_mm != 0 && o.ridge_sigma_mm > 0) {
+    // The shape is an isometry of the flat page, so dt / (2e) is the unit tangent along t: the
+    // relief h(t) tilts the normal against it by its slope h'(t).
+    const double d = (t - o.ridge_t_mm) / o.ridge_sigma_mm;
+    const double slope = -o.ridge_height_mm * d / o.ridge_sigma_mm * std::exp(-0.5 * d * d);
+    n = cv::normalize(n - slope * cv::normalize(dt));
+  }
   return n;
 }
 

@@ -53,6 +53,13 @@ struct PageOptions {
   double burn_depth_mm = 10.0;  // kBurnt: the deepest the edges are eaten, mm.
   int holes = 3;                // kBurnt: holes burnt through the leaf.
   uint64_t outline_seed = 1;    // kBurnt: the same seed gives the same outline.
+  // An embossed line (a ruling, a pricking line) across the page at t = ridge_t_mm, along s: a
+  // Gaussian ridge of this height and sigma, mm. It is in the page's normal (the shading: what a
+  // raking light shows) only, not in its points: its height is below what the structured light
+  // resolves. 0: none.
+  double ridge_height_mm = 0.0;
+  double ridge_t_mm = 0.0;
+  double ridge_sigma_mm = 0.5;
   // A rigid motion applied after the shape (a calibration board held in a pose above the
   // table): world = pose_rotation * shaped point + pose_translation.
   cv::Matx33d pose_rotation = cv::Matx33d::eye();
@@ -69,8 +76,9 @@ class Page {
   const PageOptions& options() const { return options_; }
   // World point (mm) of flat page coordinate (s, t) in [0, width] x [0, height], mm.
   cv::Vec3d Point(double s, double t) const;
-  // Unit surface normal with +z component (towards the camera), by central differences.
-  cv::Vec3d Normal(double s, double t) const;
+  // Unit surface normal with +z component (towards the camera), by central differences; with
+  // the relief (ridge_height_mm) when `relief`.
+  cv::Vec3d Normal(double s, double t, bool relief = true) const;
   // Whether (s, t) is leaf: inside the page and its outline, not in a hole.
   bool Contains(double s, double t) const;
 

@@ -1,0 +1,130 @@
+#include "core/shading/photometric.h"
+
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+#include <string>
+
+namespace vellum {
+
+PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
+                                     const std::vector<cv::Vec3d>& directions, const cv::Mat& mask,
+                                     const PhotometricOptions& options) {
+  PhotometricResult result;
+  if (images.size() < 3 || images.size() != directions.size()) {
+    result.status = Status::Error("photometric normals need three or more lights, each with a "
+                                  "direction (got " + std::to_string(images.size()) +
+                                  " images and " + std::to_string(directions.size()) +
+                                  " directions)");
+    return result;
+  }
+  const cv::Size size = images[0].size();
+  // Each image as a share of its full scale, gray.
+  std::vector<cv::Mat> levels(images.size());
+  for (size_t k = 0; k < images.size(); ++k) {
+    const cv::Mat& im = images[k];
+    if (im.empty() || im.size() != size || (im.depth() != CV_8U && im.depth() != CV_16U) ||
+        (im.channels() != 1 && im.channels() != 3)) {
+      result.status = Status::Error("light image " + std::to_string(k) +
+                                    " must be 8 or 16 bit, gray or colour, of the first's size");
+      return result;
+    }
+    cv::Mat gray = im;
+    if (im.channels() == 3) cv::cvtColor(im, gray, cv::COLOR_BGR2GRAY);
+    gray.convertTo(levels[k], CV_32F, im.depth() == CV_8U ? 1.0 / 255 : 1.0 / 65535);
+    const double norm = cv::norm(directions[k]);
+    if (!(norm > 1e-9)) {
+      result.status = Status::Error("light " + std::to_string(k) + " has no direction");
+      return result;
+    }
+  }
+  if (!mask.empty() && (mask.type() != CV_8U || mask.size() != size)) {
+    result.status = Status::Error("the mask must be CV_8U of the images' size");
+    return result;
+  }
+  std::vector<cv::Vec3d> l(directions.size());
+  for (size_t k = 0; k < l.size(); ++k) l[k] = cv::normalize(directions[k]);
+  result.normals = cv::Mat::zeros(size, CV_32FC3);
+  result.albedo = cv::Mat::zeros(size, CV_32F);
+  result.valid = cv::Mat::zeros(size, CV_8U);
+  const float lo = static_cast<float>(options.min_level), hi = static_cast<float>(options.max_level);
+  const int n = static_cast<int>(l.size());
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+    std::vector<const float*> rows(n);
+    for (int v = range.start; v < range.end; ++v) {
+      for (int k = 0; k < n; ++k) rows[k] = levels[k].ptr<float>(v);
+      const uint8_t* m = mask.empty() ? nullptr : mask.ptr<uint8_t>(v);
+      cv::Vec3f* normal = result.normals.ptr<cv::Vec3f>(v);
+      float* albedo = result.albedo.ptr<float>(v);
+      uint8_t* valid = result.valid.ptr<uint8_t>(v);
+      for (int u = 0; u < size.width; ++u) {
+        if (m && !m[u]) continue;
+        // Normal equations over the lights that light the pixel: (sum l l^T) g = sum level l.
+        cv::Matx33d a = cv::Matx33d::zeros();
+        cv::Vec3d b(0, 0, 0);
+        int used = 0;
+        for (int k = 0; k < n; ++k) {
+          const float level = rows[k][u];
+          if (level < lo || level > hi) continue;
+          a += l[k] * l[k].t();
+          b += level * l[k];
+          ++used;
+        }
+        if (used < 3) continue;
+        // Lights (nearly) in one plane cannot fix the normal.
+        if (!(std::fabs(cv::determinant(a)) > 1e-6)) continue;
+        const cv::Vec3d g = a.solve(b, cv::DECOMP_CHOLESKY);
+        const double rho = cv::norm(g);
+        if (!(rho > 1e-9)) continue;
+        cv::Vec3d nn = g / rho;
+        if (nn[2] < 0) continue;  // Facing away from the camera: not a surface it sees.
+        normal[u] = cv::Vec3f(nn);
+        albedo[u] = static_cast<float>(rho);
+        valid[u] = 255;
+      }
+    }
+  });
+  result.solved = cv::countNonZero(result.valid);
+  const int wanted = mask.empty() ? size.area() : cv::countNonZero(mask);
+  result.marked = wanted - result.solved;
+  result.status = Status::Ok();
+  return result;
+}
+
+cv::Mat NormalsOnPage(const cv::Mat& normals, const cv::Mat& right, const cv::Mat& up,
+                      const cv::Mat& normal) {
+  CV_Assert(normals.type() == CV_32FC3 && right.type() == CV_32FC3 && up.type() == CV_32FC3 &&
+            normal.type() == CV_32FC3 && right.size() == normals.size() &&
+            up.size() == normals.size() && normal.size() == normals.size());
+  cv::Mat out = cv::Mat::zeros(normals.size(), CV_32FC3);
+  for (int v = 0; v < normals.rows; ++v) {
+    const cv::Vec3f* n = normals.ptr<cv::Vec3f>(v);
+    const cv::Vec3f* r = right.ptr<cv::Vec3f>(v);
+    const cv::Vec3f* p = up.ptr<cv::Vec3f>(v);
+    const cv::Vec3f* z = normal.ptr<cv::Vec3f>(v);
+    cv::Vec3f* o = out.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < normals.cols; ++u) {
+      const float length = static_cast<float>(cv::norm(n[u]));
+      if (length < 0.5f || z[u].dot(z[u]) < 0.5f) continue;
+      const cv::Vec3f w = n[u] / length;
+      o[u] = cv::normalize(cv::Vec3f(w.dot(r[u]), w.dot(p[u]), w.dot(z[u])));
+    }
+  }
+  return out;
+}
+
+cv::Mat NormalMapImage(const cv::Mat& normals) {
+  CV_Assert(normals.type() == CV_32FC3);
+  cv::Mat out = cv::Mat::zeros(normals.size(), CV_16UC3);
+  for (int v = 0; v < normals.rows; ++v) {
+    const cv::Vec3f* n = normals.ptr<cv::Vec3f>(v);
+    cv::Vec3w* o = out.ptr<cv::Vec3w>(v);
+    for (int u = 0; u < normals.cols; ++u) {
+      if (n[u].dot(n[u]) < 0.25f) continue;
+      auto enc = [](float c) { return cv::saturate_cast<uint16_t>((c + 1.0f) * 0.5f * 65535.0f); };
+      o[u] = cv::Vec3w(enc(n[u][2]), enc(n[u][1]), enc(n[u][0]));  // B = z, G = y, R = x.
+    }
+  }
+  return out;
+}
+
+}  // namespace vellum
