@@ -122,8 +122,8 @@ Status WriteNormalMap(const std::string& dir, const cv::Mat& normal_map,
   with_encoding["encoding"] =
       "normal map: red, green, blue = x (right), y (up), z (out of the page), each (c + 1) / 2 "
       "of 65535; 0 = not measured";
-  return WriteTiffMaster((fs::path(dir) / "normals.tif").string(), normal_map,
-                         DpiParams(restored), identity, with_encoding, IccProfile(),
+  return WriteTiffMaster((fs::path(dir) / "normals.tif").string(), normal_map, DpiParams(restored),
+                         identity, with_encoding, IccProfile(),
                          /*profile=*/false);
 }
 

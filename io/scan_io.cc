@@ -179,8 +179,8 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
       for (const ScanLight& light : lights) {
         out << "{"
             << "name" << light.name;
-        if (light.directed()) out << "direction" << std::vector<double>(light.direction.val,
-                                                                        light.direction.val + 3);
+        if (light.directed())
+          out << "direction" << std::vector<double>(light.direction.val, light.direction.val + 3);
         out << "}";
       }
       out << "]";
@@ -385,8 +385,7 @@ Status MissingFrame(const std::string& path, int k, const Scan& scan) {
 }  // namespace
 
 Status ReadScanHeader(const std::string& dir, Scan* scan) {
-  Status s =
-      ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights);
+  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture, 16);

@@ -30,9 +30,9 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
                      const ScanIdentity& identity = ScanIdentity(),
                      const std::vector<ScanLight>& lights = {});
 
-// Reads scan.yaml, texture.png and the lights' images, and checks that every frame file is there, an image, of the
-// camera's size (from its PNG header, no pixel decoded); scan->frames is left empty. Errors
-// name the file and the problem.
+// Reads scan.yaml, texture.png and the lights' images, and checks that every frame file is there,
+// an image, of the camera's size (from its PNG header, no pixel decoded); scan->frames is left
+// empty. Errors name the file and the problem.
 Status ReadScanHeader(const std::string& dir, Scan* scan);
 // Hands on one frame as it is read: its index and its 8-bit one-channel image.
 using FrameSink = std::function<Status(int index, cv::Mat frame)>;

@@ -33,7 +33,7 @@ struct PageResult {
   FlattenResult flat;
   RestoreResult restored;
   RestoreResult albedo;  // With a flat field: the page's albedo, restored as `restored` is.
-  LightsResult lights;    // The scan's extra lights (and their normals), restored alike.
+  LightsResult lights;   // The scan's extra lights (and their normals), restored alike.
 };
 
 struct ProcessResult {

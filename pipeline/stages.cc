@@ -577,8 +577,8 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
     std::map<std::string, std::string> light_figures = figures;
     if (lights[k].directed()) {
       const cv::Vec3d& d = lights[k].direction;
-      light_figures["direction"] = JsonNumber(d[0]).dump() + " " + JsonNumber(d[1]).dump() + " " +
-                                   JsonNumber(d[2]).dump();
+      light_figures["direction"] =
+          JsonNumber(d[0]).dump() + " " + JsonNumber(d[1]).dump() + " " + JsonNumber(d[2]).dump();
     }
     images[k].setTo(0, through.mask == 0);
     s = stage.Output(PageFile(page, "lights/" + lights[k].name + ".tif"),
@@ -594,9 +594,9 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
     figures["model"] =
         "photometric stereo: Lambertian, distant lights of equal strength, a linear camera; "
         "normals in the flat page's frame";
-    s = stage.Output(PageFile(page, "normals.tif"),
-                     WriteNormalMap(dir, NormalMapImage(out->normals), restored, page_identity,
-                                    figures));
+    s = stage.Output(
+        PageFile(page, "normals.tif"),
+        WriteNormalMap(dir, NormalMapImage(out->normals), restored, page_identity, figures));
     if (s.ok()) s = stage.Picture(results, "relief", ReliefPicture(out->normals));
   }
   return stage.Finish(s);

@@ -268,7 +268,8 @@ cv::Mat ReliefPicture(const cv::Mat& normals) {
   CV_Assert(normals.type() == CV_32FC3);
   const double e = 30 * M_PI / 180;
   const cv::Vec3f light(static_cast<float>(-std::cos(e) * M_SQRT1_2),
-                        static_cast<float>(std::cos(e) * M_SQRT1_2), static_cast<float>(std::sin(e)));
+                        static_cast<float>(std::cos(e) * M_SQRT1_2),
+                        static_cast<float>(std::sin(e)));
   // A flat page shows mid-gray; a slope facing the light up to white.
   const float flat = light[2];
   cv::Mat out = cv::Mat::zeros(normals.size(), CV_8U);

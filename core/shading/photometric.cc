@@ -11,10 +11,11 @@ PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
                                      const PhotometricOptions& options) {
   PhotometricResult result;
   if (images.size() < 3 || images.size() != directions.size()) {
-    result.status = Status::Error("photometric normals need three or more lights, each with a "
-                                  "direction (got " + std::to_string(images.size()) +
-                                  " images and " + std::to_string(directions.size()) +
-                                  " directions)");
+    result.status = Status::Error(
+        "photometric normals need three or more lights, each with a "
+        "direction (got " +
+        std::to_string(images.size()) + " images and " + std::to_string(directions.size()) +
+        " directions)");
     return result;
   }
   const cv::Size size = images[0].size();
@@ -46,7 +47,8 @@ PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
   result.normals = cv::Mat::zeros(size, CV_32FC3);
   result.albedo = cv::Mat::zeros(size, CV_32F);
   result.valid = cv::Mat::zeros(size, CV_8U);
-  const float lo = static_cast<float>(options.min_level), hi = static_cast<float>(options.max_level);
+  const float lo = static_cast<float>(options.min_level),
+              hi = static_cast<float>(options.max_level);
   const int n = static_cast<int>(l.size());
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
     std::vector<const float*> rows(n);
