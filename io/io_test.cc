@@ -205,6 +205,65 @@ TEST_F(IoTest, ScanRoundTrip) {
   }
 }
 
+// Issue 17: a scan's extra lights (scan.yaml `lights`, light_<name>.png) round trip, a 16-bit
+// light stays 16-bit, and a bad entry or a missing file is an error naming the light.
+TEST_F(IoTest, ScanLightsRoundTripAndBadOnesAreNamed) {
+  Scan scan = SmallScan();
+  ScanLight raking;
+  raking.name = "raking-090";
+  raking.direction = cv::normalize(cv::Vec3d(0, 1, 1));
+  raking.image = cv::Mat(scan.texture.size(), CV_8U, cv::Scalar(90));
+  ScanLight uv;
+  uv.name = "uv";
+  uv.image = cv::Mat(scan.texture.size(), CV_16U, cv::Scalar(40000));
+  scan.lights = {raking, uv};
+  ASSERT_TRUE(WriteScan(Path("scan"), scan).ok());
+  ASSERT_TRUE(std::filesystem::exists(Path("scan") + "/light_uv.png"));
+  Scan r;
+  ASSERT_TRUE(ReadScan(Path("scan"), &r).ok());
+  ASSERT_EQ(r.lights.size(), 2u);
+  EXPECT_EQ(r.lights[0].name, "raking-090");
+  EXPECT_LT(cv::norm(r.lights[0].direction - raking.direction), 1e-12);
+  EXPECT_EQ(cv::norm(r.lights[0].image, raking.image, cv::NORM_INF), 0);
+  EXPECT_FALSE(r.lights[1].directed());
+  EXPECT_EQ(r.lights[1].image.type(), CV_16U);
+  EXPECT_EQ(cv::norm(r.lights[1].image, uv.image, cv::NORM_INF), 0);
+
+  std::string yaml;
+  {
+    std::ifstream in(Path("scan") + "/scan.yaml");
+    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const size_t at = yaml.find("lights:"), end = yaml.find("patterns:");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  const struct {
+    std::string lights, problem;
+  } cases[] = {
+      {"lights:\n  - { name: \"Raking/N\" }\n", "light 0: 'name'"},
+      {"lights:\n  - { name: uv }\n  - { name: uv }\n", "given twice"},
+      {"lights:\n  - { name: low, direction: [ 1, 0, -0.2 ] }\n", "point up"},
+      {"lights:\n  - { name: ir, direction: [ 1, 0 ] }\n", "[ x, y, z ]"},
+      {"lights: 3\n", "must be a sequence"},
+  };
+  for (const auto& c : cases) {
+    std::string bad = yaml;
+    bad.replace(at, end - at, c.lights);
+    std::ofstream(Path("scan") + "/scan.yaml") << bad;
+    Scan b;
+    const Status s = ReadScanHeader(Path("scan"), &b);
+    ASSERT_FALSE(s.ok()) << c.lights;
+    EXPECT_NE(s.message().find(c.problem), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find("scan.yaml"), std::string::npos) << s.message();
+  }
+  std::ofstream(Path("scan") + "/scan.yaml") << yaml;
+  std::filesystem::remove(Path("scan") + "/light_uv.png");
+  Scan b;
+  const Status s = ReadScanHeader(Path("scan"), &b);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("light_uv.png: file is missing (light 'uv'"), std::string::npos)
+      << s.message();
+}
+
 // Issue 15: the catalogue identity in scan.yaml (DESIGN.md, "Identity"), kept through a round
 // trip, read as hand-written (a folio as a number), and made safe: control characters removed,
 // a field cut to 200 bytes, an unknown side dropped.
