@@ -10,6 +10,7 @@
 #include "core/decode/decode.h"
 #include "core/geometry/triangulate.h"
 #include "core/shading/albedo.h"
+#include "flags/options.h"
 #include "io/calibration_io.h"
 #include "io/scan_io.h"
 
@@ -150,6 +151,53 @@ int RunCalibrateFlatField(const std::vector<std::string>& args) {
   return 0;
 }
 
+int RunCalibrateStudio(const std::vector<std::string>& args) {
+  Flags flags(
+      "vellum calibrate studio",
+      "Measures the studio lamps' light (and the camera's gain and vignetting under them) from\n"
+      "the texture of a white target lying flat on the table and covering the camera's view,\n"
+      "shot under the same lamps and exposure as the pages, for the texture's reflectance:\n"
+      "`vellum process --studio-field FILE` then writes restored_reflectance.tif. The lamps\n"
+      "are described by where they stand (world mm: the table's frame, z up); they are taken\n"
+      "as point sources of equal strength. Writes the studio field YAML to --out.",
+      {
+          {"scan", "DIR", "the white target's scan directory (its texture.png is used)", ""},
+          {"calibration", "FILE", "the station's calibration", ""},
+          {"lamps", "X,Y,Z;...", "each lamp's place, world mm, ';' between lamps", ""},
+          {"albedo", "A", "the target's reflectance, 0..1 (its maker's figure)", "0.9"},
+          {"out", "FILE", "the studio field YAML to write", ""},
+      });
+  if (!flags.Parse(args)) return 0;
+  const std::string dir = flags.Require("scan"), out = flags.Require("out");
+  const std::vector<cv::Vec3d> lamps = ParseLamps("lamps", flags.Require("lamps"));
+  if (lamps.empty()) throw UsageError("--lamps: give at least one lamp");
+  Calibration calibration;
+  cv::Mat texture;
+  Status s = ReadCalibration(flags.Require("calibration"), &calibration);
+  if (s.ok()) s = ReadTexture(dir, &texture);
+  StudioField field;
+  if (s.ok()) {
+    field = MeasureStudioField(texture, calibration.camera, lamps,
+                               flags.GetDouble("albedo", 0.01, 1), &s);
+    if (!s.ok()) s = Status::Error(dir + "/texture.png: " + s.message());
+  }
+  if (s.ok()) s = WriteStudioField(out, field);
+  if (!s.ok()) {
+    std::fprintf(stderr, "vellum calibrate studio: %s\n", s.message().c_str());
+    return 1;
+  }
+  cv::Mat first;
+  cv::extractChannel(field.gain, first, 0);
+  double low = 0, high = 0;
+  cv::minMaxIdx(first, &low, &high, nullptr, nullptr, first == first);
+  std::printf(
+      "studio field: %d of %d camera cells (%d px each) measured under %zu lamps; the camera's "
+      "gain there runs from %.0f%% to 100%% of its highest; written to %s\n",
+      cv::countNonZero(first == first), static_cast<int>(first.total()), field.cell_px,
+      lamps.size(), 100 * low / high, out.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int RunCalibrate(const std::vector<std::string>& args) {
@@ -157,7 +205,8 @@ int RunCalibrate(const std::vector<std::string>& args) {
       "usage: vellum calibrate capture --out DIR [--url URL]   record one board pose\n"
       "       vellum calibrate solve --board COLSxROWS --square MM --table DIR --out FILE DIR...\n"
       "       vellum calibrate flatfield --scan DIR --calibration FILE --albedo A --out FILE\n"
-      "Run 'vellum calibrate STEP --help' (capture, solve, flatfield) for details.\n";
+      "       vellum calibrate studio --scan DIR --calibration FILE --lamps X,Y,Z;... --out FILE\n"
+      "Run 'vellum calibrate STEP --help' (capture, solve, flatfield, studio) for details.\n";
   if (args.empty() || args[0] == "--help") {
     std::fputs(usage.c_str(), args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
@@ -166,6 +215,7 @@ int RunCalibrate(const std::vector<std::string>& args) {
   if (args[0] == "capture") return RunCalibrateCapture(rest);
   if (args[0] == "solve") return RunCalibrateSolve(rest);
   if (args[0] == "flatfield") return RunCalibrateFlatField(rest);
+  if (args[0] == "studio") return RunCalibrateStudio(rest);
   std::fprintf(stderr, "vellum calibrate: unknown step '%s'\n%s", args[0].c_str(), usage.c_str());
   return 2;
 }

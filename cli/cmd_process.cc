@@ -24,6 +24,10 @@ int RunProcess(const std::vector<std::string>& args) {
            "the projector's flat field (vellum calibrate flatfield): also writes each page's "
            "albedo, its reflectance without the shading, as restored_albedo.tif",
            ""},
+          {"studio-field", "FILE",
+           "the studio lamps' field (vellum calibrate studio): also writes each page's texture "
+           "without the lamps' shading, as restored_reflectance.tif",
+           ""},
       },
       PipelineFlagSpecs());
   Flags flags(
@@ -54,6 +58,10 @@ int RunProcess(const std::vector<std::string>& args) {
   if (!flags.Get("flatfield").empty()) {
     const Status read = ReadFlatField(flags.Get("flatfield"), &options.flat_field);
     if (!read.ok()) throw UsageError("--flatfield: " + read.message());
+  }
+  if (!flags.Get("studio-field").empty()) {
+    const Status read = ReadStudioField(flags.Get("studio-field"), &options.studio_field);
+    if (!read.ok()) throw UsageError("--studio-field: " + read.message());
   }
 
   Progress progress;

@@ -25,6 +25,9 @@ int RunRender(const std::vector<std::string>& args) {
        "bits per sample of the studio-light texture: 8, or 16 as a camera that gives more than 8 "
        "(the structured-light frames stay 8-bit)",
        "8"},
+      {"studio-lamps", "X,Y,Z;...",
+       "light the texture with these point lamps (world mm, ';' between lamps) instead of evenly",
+       ""},
       {"raking", "N",
        "also capture the page under N raking lights evenly around it (light_raking-000.png, ...; "
        "their directions in scan.yaml)",
@@ -65,6 +68,7 @@ int RunRender(const std::vector<std::string>& args) {
   light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
   light.texture_bits = flags.GetInt("texture-bits", 8, 16);
   light.projector_falloff = flags.GetBool("projector-falloff");
+  light.studio_lamps = ParseLamps("studio-lamps", flags.Get("studio-lamps"));
   if (light.texture_bits != 8 && light.texture_bits != 16) {
     throw UsageError("--texture-bits must be 8 or 16, got " + flags.Get("texture-bits"));
   }

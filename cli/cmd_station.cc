@@ -439,6 +439,13 @@ int RunImport(const std::vector<std::string>& args) {
                       "/texture.png: a 16-bit texture cannot go on the bus (its images are "
                       "8-bit); process the folder with vellum process instead");
   }
+  if (s.ok() && !scan.lights.empty()) {
+    // Said, not refused: the log still drives the station; the lights need vellum process.
+    std::fprintf(stderr,
+                 "vellum import: note: the scan's %zu extra lights (light_*.png) do not go on "
+                 "the bus; vellum process restores them\n",
+                 scan.lights.size());
+  }
   calibration_t calibration{};
   bool has_calibration = false;
   std::string calib_path = flags.Get("calibration");

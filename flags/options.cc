@@ -140,6 +140,25 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   return Status::Ok();
 }
 
+std::vector<cv::Vec3d> ParseLamps(const std::string& flag, const std::string& text) {
+  std::vector<cv::Vec3d> lamps;
+  size_t start = 0;
+  while (start <= text.size() && !text.empty()) {
+    const size_t end = std::min(text.find(';', start), text.size());
+    const std::string item = text.substr(start, end - start);
+    double x = 0, y = 0, z = 0;
+    char rest = 0;
+    if (std::sscanf(item.c_str(), "%lf,%lf,%lf%c", &x, &y, &z, &rest) != 3 ||
+        !std::isfinite(x + y + z) || z <= 0) {
+      throw UsageError("--" + flag + ": each lamp is X,Y,Z in mm above the table (z > 0), got '" +
+                       item + "'");
+    }
+    lamps.emplace_back(x, y, z);
+    start = end + 1;
+  }
+  return lamps;
+}
+
 std::vector<Flags::Spec> DecodeFlagSpecs() {
   return {
       {"decoder", "NAME", "phase (Gray code + phase shift) or gray (Gray code only)", "phase"},

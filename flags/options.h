@@ -54,6 +54,10 @@ std::vector<Flags::Spec> PipelineFlagSpecs();
 PipelineOptions PipelineOptionsFromFlags(const Flags& flags);
 
 // Appends b to a.
+// Lamps given as "X,Y,Z;X,Y,Z;..." (world mm, z > 0) for `flag`; a bad one is a UsageError
+// naming the flag.
+std::vector<cv::Vec3d> ParseLamps(const std::string& flag, const std::string& text);
+
 std::vector<Flags::Spec> Join(std::vector<Flags::Spec> a, const std::vector<Flags::Spec>& b);
 
 }  // namespace vellum

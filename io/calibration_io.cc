@@ -245,6 +245,71 @@ Status WriteFlatField(const std::string& path, const FlatField& field) {
   return Status::Ok();
 }
 
+Status ReadStudioField(const std::string& path, StudioField* field) {
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
+  *field = StudioField();
+  try {
+    cv::FileStorage fs;
+    if (!fs.open(path, cv::FileStorage::READ)) {
+      return Status::Error(path + ": cannot open the studio field");
+    }
+    if (!fs.root().isMap()) return Status::Error(path + ": not a studio field (expected keys)");
+    cv::Size size;
+    fs["camera_size"] >> size;
+    const cv::FileNode cell = fs["cell_px"];
+    cv::Mat gain, lamps;
+    fs["gain"] >> gain;
+    fs["lamps"] >> lamps;
+    if (size.area() <= 0) return Status::Error(path + ": camera_size missing or empty");
+    if (!cell.isInt() || static_cast<int>(cell) < 1) {
+      return Status::Error(path + ": cell_px must be an integer >= 1");
+    }
+    if (lamps.empty() || lamps.cols != 3 || lamps.channels() != 1) {
+      return Status::Error(path + ": lamps must be an N x 3 matrix (x, y, z mm of each lamp)");
+    }
+    const int c = static_cast<int>(cell);
+    const cv::Size cells((size.width + c - 1) / c, (size.height + c - 1) / c);
+    if (gain.empty() || gain.size() != cells || (gain.channels() != 1 && gain.channels() != 3)) {
+      return Status::Error(path + ": gain must be a " + std::to_string(cells.width) + "x" +
+                           std::to_string(cells.height) +
+                           " matrix of 1 or 3 channels (a value per " + std::to_string(c) +
+                           " px cell of the camera)");
+    }
+    gain.convertTo(field->gain, CV_32F);
+    lamps.convertTo(lamps, CV_64F);
+    for (int k = 0; k < lamps.rows; ++k) {
+      const cv::Vec3d lamp(lamps.at<double>(k, 0), lamps.at<double>(k, 1), lamps.at<double>(k, 2));
+      if (!std::isfinite(lamp.dot(lamp))) return Status::Error(path + ": a lamp is not finite");
+      field->lamps.push_back(lamp);
+    }
+    field->cell_px = c;
+    field->camera_size = size;
+  } catch (const std::exception& e) {
+    *field = StudioField();
+    return Status::Error(path + ": malformed studio field: " + e.what());
+  }
+  return Status::Ok();
+}
+
+Status WriteStudioField(const std::string& path, const StudioField& field) {
+  try {
+    cv::FileStorage fs(path, cv::FileStorage::WRITE);
+    if (!fs.isOpened()) return Status::Error(path + ": cannot write the studio field");
+    fs << "camera_size" << field.camera_size;
+    fs << "cell_px" << field.cell_px;
+    cv::Mat lamps(static_cast<int>(field.lamps.size()), 3, CV_64F);
+    for (int k = 0; k < lamps.rows; ++k) {
+      for (int c = 0; c < 3; ++c) lamps.at<double>(k, c) = field.lamps[k][c];
+    }
+    fs << "lamps" << lamps;
+    fs << "gain" << field.gain;
+  } catch (const cv::Exception& e) {
+    return Status::Error(path + ": cannot write the studio field: " + e.what());
+  }
+  return Status::Ok();
+}
+
 std::string CalibrationSha256(const Calibration& calibration) {
   std::string text;
   auto add = [&](double v) {

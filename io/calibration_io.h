@@ -25,5 +25,9 @@ std::string CalibrationSha256(const Calibration& calibration);
 // per cell, .nan where not measured). Errors name the file and the key.
 Status ReadFlatField(const std::string& path, FlatField* field);
 Status WriteFlatField(const std::string& path, const FlatField& field);
+// The studio lamps' field (core/shading/albedo.h) as OpenCV FileStorage YAML: camera_size,
+// cell_px, lamps (N x 3, world mm) and gain (a value per cell, one channel per texture channel).
+Status ReadStudioField(const std::string& path, StudioField* field);
+Status WriteStudioField(const std::string& path, const StudioField& field);
 
 }  // namespace vellum

@@ -94,11 +94,12 @@ Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::
 
 Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
                            const ScanIdentity& identity,
-                           const std::map<std::string, std::string>& figures) {
+                           const std::map<std::string, std::string>& figures,
+                           const std::string& file) {
   std::map<std::string, std::string> with_encoding = figures;
   with_encoding["encoding"] = "linear reflectance: 65535 = albedo 1; 0 = not measured";
-  return WriteTiffMaster((fs::path(dir) / "restored_albedo.tif").string(), albedo.image,
-                         DpiParams(albedo), identity, with_encoding, IccProfile(),
+  return WriteTiffMaster((fs::path(dir) / file).string(), albedo.image, DpiParams(albedo), identity,
+                         with_encoding, IccProfile(),
                          /*profile=*/false);
 }
 

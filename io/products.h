@@ -43,12 +43,14 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
                      const std::map<std::string, std::string>& provenance = {},
                      const IccProfile& icc = IccProfile());
 
-// restored_albedo.tif: the page's restored albedo (16-bit gray, linear reflectance, 65535 = 1,
-// 0 where not measured), with the dpi tags, the identity and `figures` in its XMP, and no
-// colour profile (its values are reflectances, not an encoded image).
+// restored_albedo.tif (or `file`): the page's restored albedo (16-bit, gray or one channel per
+// texture channel, linear reflectance, 65535 = 1, 0 where not measured), with the dpi tags, the
+// identity and `figures` in its XMP, and no colour profile (its values are reflectances, not an
+// encoded image).
 Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
                            const ScanIdentity& identity,
-                           const std::map<std::string, std::string>& figures);
+                           const std::map<std::string, std::string>& figures,
+                           const std::string& file = "restored_albedo.tif");
 
 // lights/<name>.tif in `dir`: one of the scan's extra lights restored with the page (as
 // captured: 8 or 16 bit, gray or colour), with the dpi tags of `restored`, the identity and

@@ -69,6 +69,17 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
                                SizeText(input.calibration.projector.size) + " one");
     return out;
   }
+  const StudioField& studio = options.studio_field;
+  if (!studio.empty() &&
+      (studio.camera_size != input.calibration.camera.size ||
+       (!input.scan.texture.empty() && studio.gain.channels() != input.scan.texture.channels()))) {
+    out.status =
+        Status::Error("the studio field is for a " + SizeText(studio.camera_size) + " camera of " +
+                      std::to_string(studio.gain.channels()) + " channel(s), but " +
+                      input.scan_dir + "/texture.png is " + SizeText(input.scan.texture.size()) +
+                      " with " + std::to_string(input.scan.texture.channels()));
+    return out;
+  }
   const CameraModel& camera = input.calibration.camera;
   next("decode", 0.35);
   DecodeResult decoded;
@@ -128,6 +139,16 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
                            page.mesh, page.flat.flat, options.restore, page.restored, report.stages,
                            results, page.name, &page.albedo),
                true)) {
+        return out;
+      }
+    }
+    if (!options.studio_field.empty()) {
+      next("reflectance", done + 0.93 * share);
+      if (!ran(
+              ReflectanceStage(input.scan.texture, out.map.points, mask, input.calibration,
+                               options.studio_field, page.mesh, page.flat.flat, options.restore,
+                               page.restored, report.stages, results, page.name, &page.reflectance),
+              true)) {
         return out;
       }
     }

@@ -32,8 +32,9 @@ struct PageResult {
   Mesh mesh;
   FlattenResult flat;
   RestoreResult restored;
-  RestoreResult albedo;  // With a flat field: the page's albedo, restored as `restored` is.
-  LightsResult lights;   // The scan's extra lights (and their normals), restored alike.
+  RestoreResult albedo;       // With a flat field: the page's albedo, restored as `restored` is.
+  RestoreResult reflectance;  // With a studio field: the texture's reflectance, restored alike.
+  LightsResult lights;        // The scan's extra lights (and their normals), restored alike.
 };
 
 struct ProcessResult {

@@ -472,59 +472,100 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   return stage.Finish(s);
 }
 
+namespace {
+
+// A page's reflectance per camera pixel (`a`, from the projector's light or the studio's)
+// restored through the page's sheet exactly as `restored` was (same options, at its dpi), with
+// its shares in the report under `stage`'s name, written as `file` (16-bit, linear).
+StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
+                               const cv::Mat& page_mask, const CameraModel& camera,
+                               const Mesh& mesh, const std::vector<cv::Point2d>& flat,
+                               const RestoreOptions& options, const RestoreResult& restored,
+                               const std::vector<StageReport>& earlier, const std::string& results,
+                               const std::string& page, const std::string& file,
+                               const std::string& model, const char* dim_key, RestoreResult* out) {
+  Stage stage(stage_name, page);
+  StageReport& r = stage.report();
+  if (!a.status.ok()) return stage.Finish(a.status);
+  const double page_px = std::max(1, cv::countNonZero(page_mask));
+  r.Number(stage_name, "estimated_share", a.estimated / page_px);
+  r.Number(stage_name, "marked_unmeasured_share", a.shadowed / page_px);
+  r.Number(stage_name, "marked_rim_share", a.rim / page_px);
+  r.Number(stage_name, dim_key, a.grazing / page_px);
+  r.Number(stage_name, "marked_outside_flat_field_share", a.outside_flat_field / page_px);
+  cv::Mat above = a.albedo > 1.0f;  // In any channel.
+  if (above.channels() == 3) {
+    std::vector<cv::Mat> channels;
+    cv::split(above, channels);
+    above = channels[0] | channels[1] | channels[2];
+  }
+  r.Number(stage_name, "above_one_share", cv::countNonZero(above & a.valid) / page_px);
+  RestoreOptions same = options;
+  if (restored.view == RestoreView::kOrthographic) same.dpi = restored.dpi;
+  cv::Mat linear16;
+  a.albedo.convertTo(linear16, CV_16U, 65535.0);  // Saturates above 1 (gloss, fluorescence).
+  // The reflectance and where it holds, through one warp.
+  *out = Restore(linear16, mesh, flat, camera, same, page_mask, {a.valid});
+  if (!out->status.ok()) return stage.Finish(out->status);
+  const cv::Mat valid = out->extras.at(0);
+  out->extras.clear();
+  if (out->image.size() != restored.image.size()) {
+    return stage.Finish(Status::Error(std::string("the restored ") + stage_name + " is " +
+                                      SizeText(out->image.size()) + ", the restored page " +
+                                      SizeText(restored.image.size())));
+  }
+  // A restored pixel that drew on any marked camera pixel is marked too.
+  out->image.setTo(0, valid < 255);
+  cv::Mat measured = valid == 255;
+  r.Number(stage_name, "mean", cv::mean(out->image, measured)[0] / 65535.0);
+  const std::string dir = PageDir(results, page);
+  Status s = MakeDirectories(dir);
+  if (s.ok()) {
+    const ScanIdentity identity = ReportedIdentity(earlier);
+    std::map<std::string, std::string> figures;
+    figures["view"] = ToString(out->view);
+    if (out->view == RestoreView::kOrthographic) figures["dpi"] = JsonNumber(out->dpi).dump();
+    figures["model"] = model;
+    s = stage.Output(
+        PageFile(page, file),
+        WriteRestoredAlbedo(dir, *out, page.empty() ? identity : PageIdentity(identity, page),
+                            figures, file));
+  }
+  return stage.Finish(s);
+}
+
+}  // namespace
+
 StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
                         const Calibration& calibration, const FlatField& flat_field,
                         const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                         const RestoreOptions& options, const RestoreResult& restored,
                         const std::vector<StageReport>& earlier, const std::string& results,
                         const std::string& page, RestoreResult* albedo) {
-  Stage stage("albedo", page);
-  StageReport& r = stage.report();
-  const AlbedoResult a = EstimateAlbedo(amplitude, points, page_mask, calibration, flat_field);
-  if (!a.status.ok()) return stage.Finish(a.status);
-  const double page_px = std::max(1, cv::countNonZero(page_mask));
-  r.Number("albedo", "estimated_share", a.estimated / page_px);
-  r.Number("albedo", "marked_unmeasured_share", a.shadowed / page_px);
-  r.Number("albedo", "marked_rim_share", a.rim / page_px);
-  r.Number("albedo", "marked_grazing_share", a.grazing / page_px);
-  r.Number("albedo", "marked_outside_flat_field_share", a.outside_flat_field / page_px);
-  const int above_one = cv::countNonZero((a.albedo > 1.0f) & a.valid);
-  r.Number("albedo", "above_one_share", above_one / page_px);
-  // Restored as the page was: the same sheet and options, at the dpi it was written at.
-  RestoreOptions same = options;
-  if (restored.view == RestoreView::kOrthographic) same.dpi = restored.dpi;
-  const CameraModel& camera = calibration.camera;
-  cv::Mat albedo16;
-  a.albedo.convertTo(albedo16, CV_16U, 65535.0);  // Saturates above 1 (gloss, fluorescence).
-  // The albedo and where it holds, through one warp.
-  *albedo = Restore(albedo16, mesh, flat, camera, same, page_mask, {a.valid});
-  if (!albedo->status.ok()) return stage.Finish(albedo->status);
-  const cv::Mat valid = albedo->extras.at(0);
-  albedo->extras.clear();
-  if (albedo->image.size() != restored.image.size()) {
-    return stage.Finish(Status::Error("the restored albedo is " + SizeText(albedo->image.size()) +
-                                      ", the restored page " + SizeText(restored.image.size())));
-  }
-  // A restored pixel that drew on any marked camera pixel is marked too.
-  albedo->image.setTo(0, valid < 255);
-  const cv::Mat measured = albedo->image > 0;
-  r.Number("albedo", "mean", cv::mean(albedo->image, measured)[0] / 65535.0);
-  const std::string dir = PageDir(results, page);
-  Status s = MakeDirectories(dir);
-  if (s.ok()) {
-    const ScanIdentity identity = ReportedIdentity(earlier);
-    std::map<std::string, std::string> figures;
-    figures["view"] = ToString(albedo->view);
-    if (albedo->view == RestoreView::kOrthographic) figures["dpi"] = JsonNumber(albedo->dpi).dump();
-    figures["model"] =
-        "Lambertian, lit by the projector alone (white less black), its flat field from a white "
-        "target on the table; interreflection and gloss not modelled";
-    s = stage.Output(
-        PageFile(page, "restored_albedo.tif"),
-        WriteRestoredAlbedo(dir, *albedo, page.empty() ? identity : PageIdentity(identity, page),
-                            figures));
-  }
-  return stage.Finish(s);
+  return RestoreReflectance(
+      "albedo", EstimateAlbedo(amplitude, points, page_mask, calibration, flat_field), page_mask,
+      calibration.camera, mesh, flat, options, restored, earlier, results, page,
+      "restored_albedo.tif",
+      "Lambertian, lit by the projector alone (white less black), its flat field from a white "
+      "target on the table; interreflection and gloss not modelled",
+      "marked_grazing_share", albedo);
+}
+
+StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
+                             const cv::Mat& page_mask, const Calibration& calibration,
+                             const StudioField& studio_field, const Mesh& mesh,
+                             const std::vector<cv::Point2d>& flat, const RestoreOptions& options,
+                             const RestoreResult& restored, const std::vector<StageReport>& earlier,
+                             const std::string& results, const std::string& page,
+                             RestoreResult* reflectance) {
+  return RestoreReflectance(
+      "reflectance", CorrectTexture(texture, points, page_mask, calibration, studio_field),
+      page_mask, calibration.camera, mesh, flat, options, restored, earlier, results, page,
+      "restored_reflectance.tif",
+      "Lambertian, lit by the described studio lamps (point sources of equal strength), their "
+      "field from a white target on the table; shadows the page casts on itself, "
+      "interreflection and gloss not modelled",
+      "marked_dim_share", reflectance);
 }
 
 StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,

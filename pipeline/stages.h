@@ -68,6 +68,9 @@ struct PipelineOptions {
   IccProfile camera_icc;
   // The projector's flat field (--flatfield); with it, each page's albedo (AlbedoStage).
   FlatField flat_field;
+  // The studio lamps' field (--studio-field); with it, each page's reflectance from the texture
+  // (ReflectanceStage).
+  StudioField studio_field;
 
   bool Check(std::string* why) const;
 };
@@ -144,6 +147,19 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
                         const RestoreOptions& options, const RestoreResult& restored,
                         const std::vector<StageReport>& earlier, const std::string& results,
                         const std::string& page, RestoreResult* albedo);
+
+// Reflectance from the studio light (issue 17): the texture's shading by the studio lamps taken
+// out by the page's measured shape (core/shading/albedo.h, CorrectTexture, with `studio_field`),
+// restored as AlbedoStage restores the albedo: restored_reflectance.tif in the page's folder,
+// 16-bit, one channel per texture channel, linear (65535 = reflectance 1), 0 where marked (not
+// measured, the page's rim, too little of the lamps' light, outside the studio field).
+StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
+                             const cv::Mat& page_mask, const Calibration& calibration,
+                             const StudioField& studio_field, const Mesh& mesh,
+                             const std::vector<cv::Point2d>& flat, const RestoreOptions& options,
+                             const RestoreResult& restored, const std::vector<StageReport>& earlier,
+                             const std::string& results, const std::string& page,
+                             RestoreResult* reflectance);
 
 // Lights (issue 17): the scan's extra images (`lights`, Scan::lights) restored through the page's
 // sheet exactly as `restored` was (same options, at its dpi), so they register to it and to

@@ -490,6 +490,46 @@ TEST_F(CliTest, AFlatFieldGivesEachPageItsAlbedo) {
       << r.output;
 }
 
+// Issue 17: a scan with raking lights and UV (vellum render --raking 3 --uv true) gives each light
+// restored beside the page, of its size, with its dpi (as exiftool reads it), and the normals;
+// vellum import says the lights stay off the bus.
+TEST_F(CliTest, ExtraLightsAreRestoredBesideThePage) {
+  const std::string scan = (root_ / "lit").string(), out = (root_ / "out_lit").string();
+  Result r = RunVellum("render --raking 3 --uv true --ridge 0.2,120 --truth false --calibration " +
+                       Rig() + " --out " + scan);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(fs::path(scan) / "light_raking-120.png"));
+  r = RunVellum("process --scan " + scan + " --calibration " + Rig() + " --out " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const cv::Mat restored = cv::imread(out + "/restored.tif", cv::IMREAD_UNCHANGED);
+  const nlohmann::json report = nlohmann::json::parse(FileBytes(fs::path(out) / "report.json"));
+  const std::string dpi = std::to_string(report.at("restored").at("dpi").get<int>());
+  for (const char* name : {"raking-000", "raking-120", "raking-240", "uv"}) {
+    const std::string file = out + "/lights/" + name + ".tif";
+    const cv::Mat light = cv::imread(file, cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(light.empty()) << file;
+    EXPECT_EQ(light.size(), restored.size()) << file;
+    const Result exif = Shell("exiftool -s3 -XResolution " + file);
+    EXPECT_EQ(exif.output, dpi + "\n") << file;
+  }
+  const cv::Mat normals = cv::imread(out + "/normals.tif", cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(normals.type(), CV_16UC3);
+  EXPECT_EQ(normals.size(), restored.size());
+  // Where solved (the checkerboard's ink is too dark under a raking light: marked, 0), nearly
+  // straight out of the page (z, blue, near full scale), in the page's own frame.
+  cv::Mat z;
+  cv::extractChannel(normals, z, 0);
+  ASSERT_GT(cv::countNonZero(z), restored.total() / 4);
+  EXPECT_GT(cv::mean(z, z > 0)[0], 0.98 * 65535);
+  EXPECT_GT(report.at("normals").at("solved_share").get<double>(), 0.5);
+  const std::string outputs = report.at("outputs").dump();
+  EXPECT_NE(outputs.find("lights/uv.tif"), std::string::npos) << outputs;
+  EXPECT_NE(outputs.find("report/relief.png"), std::string::npos) << outputs;
+  r = RunVellum("import " + scan + " " + (root_ / "lit.lcm").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("4 extra lights"), std::string::npos) << r.output;
+}
+
 TEST_F(CliTest, MissingFrame) {
   const std::string scan = CopyScan("missing");
   fs::remove(fs::path(scan) / FrameName(9));

@@ -187,21 +187,32 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
   }
   const CameraModel& projector = calibration.projector;
   const cv::Vec3d centre = projector.Center();
-  const cv::Mat normals =
-      Normals(points, page, options.normal_window_px, calibration.camera.Center());
   out.albedo = cv::Mat::zeros(points.size(), CV_32F);
   out.valid = cv::Mat::zeros(points.size(), CV_8U);
+  // The work is done over the page's bounding box alone, grown by the normals' window (which
+  // never reaches past the page): on a leaf filling a third of the view, a third of the work.
+  cv::Rect box(0, 0, points.cols, points.rows);
+  if (!page.empty()) {
+    const int w = options.normal_window_px + 1;
+    const cv::Rect r = cv::boundingRect(page);
+    box &= cv::Rect(r.x - w, r.y - w, r.width + 2 * w, r.height + 2 * w);
+  }
+  const cv::Mat points_in = points(box), amplitude_in = amplitude(box);
+  const cv::Mat page_in = page.empty() ? cv::Mat() : page(box);
+  cv::Mat albedo_in = out.albedo(box), valid_in = out.valid(box);
+  const cv::Mat normals =
+      Normals(points_in, page_in, options.normal_window_px, calibration.camera.Center());
   std::atomic<int> estimated{0}, shadowed{0}, rim{0}, grazing{0}, outside{0};
-  cv::parallel_for_(cv::Range(0, points.rows), [&](const cv::Range& range) {
+  cv::parallel_for_(cv::Range(0, points_in.rows), [&](const cv::Range& range) {
     int n_estimated = 0, n_shadowed = 0, n_rim = 0, n_grazing = 0, n_outside = 0;
     for (int v = range.start; v < range.end; ++v) {
-      const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+      const cv::Vec3f* p = points_in.ptr<cv::Vec3f>(v);
       const cv::Vec3f* nv = normals.ptr<cv::Vec3f>(v);
-      const float* amp = amplitude.ptr<float>(v);
-      const uint8_t* in = page.empty() ? nullptr : page.ptr<uint8_t>(v);
-      float* albedo = out.albedo.ptr<float>(v);
-      uint8_t* ok = out.valid.ptr<uint8_t>(v);
-      for (int u = 0; u < points.cols; ++u) {
+      const float* amp = amplitude_in.ptr<float>(v);
+      const uint8_t* in = page_in.empty() ? nullptr : page_in.ptr<uint8_t>(v);
+      float* albedo = albedo_in.ptr<float>(v);
+      uint8_t* ok = valid_in.ptr<uint8_t>(v);
+      for (int u = 0; u < points_in.cols; ++u) {
         if (in && !in[u]) continue;
         if (!std::isfinite(p[u][2])) {
           ++n_shadowed;  // Not measured: the projector's shadow, or a pixel it could not decode.
@@ -245,6 +256,222 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
                              : Status::Error(
                                    "albedo: no pixel where the model holds (lit, not "
                                    "grazing, inside the flat field)");
+  return out;
+}
+
+double LampLight(const std::vector<cv::Vec3d>& lamps, const cv::Vec3d& x, const cv::Vec3d& n) {
+  auto sum = [&](const cv::Vec3d& at, const cv::Vec3d& normal) {
+    double e = 0;
+    for (const cv::Vec3d& lamp : lamps) {
+      const cv::Vec3d to = lamp - at;
+      const double d2 = to.dot(to);
+      e += std::max(0.0, normal.dot(to)) / (d2 * std::sqrt(d2));
+    }
+    return e;
+  };
+  const double reference = sum(cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 1));
+  return reference > 0 ? sum(x, n) / reference : 0.0;
+}
+
+cv::Vec3d StudioField::At(const cv::Point2d& p) const {
+  const double nan = std::nan("");
+  if (gain.empty()) return {nan, nan, nan};
+  const double x = (p.x + 0.5) / cell_px - 0.5, y = (p.y + 0.5) / cell_px - 0.5;
+  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
+  const double fx = x - x0, fy = y - y0;
+  const int channels = gain.channels();
+  cv::Vec3d sum(0, 0, 0);
+  double weight = 0;
+  for (int j = 0; j < 2; ++j) {
+    for (int i = 0; i < 2; ++i) {
+      const int cx = std::clamp(x0 + i, 0, gain.cols - 1),
+                cy = std::clamp(y0 + j, 0, gain.rows - 1);
+      const float* g = gain.ptr<float>(cy) + cx * channels;
+      const double w = (i ? fx : 1 - fx) * (j ? fy : 1 - fy);
+      if (!std::isfinite(g[0])) {
+        if (w > 1e-9) return {nan, nan, nan};
+        continue;
+      }
+      for (int c = 0; c < channels; ++c) sum[c] += w * g[c];
+      weight += w;
+    }
+  }
+  if (!(weight > 0)) return {nan, nan, nan};
+  return sum / weight;
+}
+
+namespace {
+
+// A texture as shares of its full scale, float, its channels kept.
+cv::Mat Levels(const cv::Mat& texture) {
+  cv::Mat out;
+  texture.convertTo(out, CV_32F, texture.depth() == CV_16U ? 1.0 / 65535 : 1.0 / 255);
+  return out;
+}
+
+bool TextureKind(const cv::Mat& t) {
+  return !t.empty() && (t.depth() == CV_8U || t.depth() == CV_16U) &&
+         (t.channels() == 1 || t.channels() == 3);
+}
+
+}  // namespace
+
+StudioField MeasureStudioField(const cv::Mat& texture, const CameraModel& camera,
+                               const std::vector<cv::Vec3d>& lamps, double target_albedo,
+                               Status* status, int cell_px) {
+  StudioField out;
+  if (!TextureKind(texture) || texture.size() != camera.size) {
+    *status = Status::Error(
+        "studio field: the target's texture must be an 8 or 16 bit gray or "
+        "colour image of the camera's size (" +
+        SizeText(camera.size) + ")");
+    return out;
+  }
+  if (lamps.empty() || !(target_albedo > 0) || cell_px < 1) {
+    *status = Status::Error(
+        "studio field: needs the lamps' places, the target's albedo and a "
+        "cell size");
+    return out;
+  }
+  const int channels = texture.channels();
+  const cv::Mat level = Levels(texture);
+  const cv::Size cells((camera.size.width + cell_px - 1) / cell_px,
+                       (camera.size.height + cell_px - 1) / cell_px);
+  cv::Mat sum = cv::Mat::zeros(cells, CV_64FC(channels)), count = cv::Mat::zeros(cells, CV_32S);
+  const cv::Vec3d eye = camera.Center(), up(0, 0, 1);
+  const cv::Matx33d back = camera.rotation.t();
+  for (int v = 0; v < level.rows; ++v) {
+    const float* l = level.ptr<float>(v);
+    for (int u = 0; u < level.cols; ++u) {
+      // Where the pixel's ray meets the table.
+      const cv::Point2d m = camera.Normalize(cv::Point2d(u, v));
+      const cv::Vec3d ray = back * cv::Vec3d(m.x, m.y, 1.0);
+      if (!(ray[2] < 0)) continue;
+      const cv::Vec3d x = eye - (eye[2] / ray[2]) * ray;
+      const double e = LampLight(lamps, x, up);
+      if (!(e > 0.05)) continue;
+      const bool clipped = [&] {
+        for (int c = 0; c < channels; ++c)
+          if (l[u * channels + c] >= 0.995f) return true;
+        return false;
+      }();
+      if (clipped) continue;
+      double* s = sum.ptr<double>(v / cell_px) + (u / cell_px) * channels;
+      for (int c = 0; c < channels; ++c) s[c] += l[u * channels + c] / (target_albedo * e);
+      ++count.at<int>(v / cell_px, u / cell_px);
+    }
+  }
+  out.gain.create(cells, CV_32FC(channels));
+  const int least = std::max(1, cell_px * cell_px / 2);
+  int measured = 0;
+  for (int j = 0; j < cells.height; ++j) {
+    for (int i = 0; i < cells.width; ++i) {
+      const int n = count.at<int>(j, i);
+      float* g = out.gain.ptr<float>(j) + i * channels;
+      const double* s = sum.ptr<double>(j) + i * channels;
+      for (int c = 0; c < channels; ++c) g[c] = n >= least ? static_cast<float>(s[c] / n) : kNaN;
+      measured += n >= least;
+    }
+  }
+  if (measured == 0) {
+    out = StudioField();
+    *status = Status::Error(
+        "studio field: the target was not seen anywhere (too dark or "
+        "clipped under the lamps)");
+    return out;
+  }
+  out.cell_px = cell_px;
+  out.camera_size = camera.size;
+  out.lamps = lamps;
+  *status = Status::Ok();
+  return out;
+}
+
+AlbedoResult CorrectTexture(const cv::Mat& texture, const cv::Mat& points, const cv::Mat& page,
+                            const Calibration& calibration, const StudioField& field,
+                            const AlbedoOptions& options) {
+  AlbedoResult out;
+  if (!TextureKind(texture) || points.type() != CV_32FC3 || texture.size() != points.size()) {
+    out.status = Status::Error(
+        "reflectance: the texture (8 or 16 bit) and the point map must be "
+        "of one size");
+    return out;
+  }
+  if (!page.empty() && (page.type() != CV_8U || page.size() != points.size())) {
+    out.status = Status::Error("reflectance: the page mask must be CV_8U of the point map's size");
+    return out;
+  }
+  if (field.empty() || field.camera_size != calibration.camera.size ||
+      field.gain.channels() != texture.channels()) {
+    out.status = Status::Error(
+        "reflectance: the studio field is for a " + SizeText(field.camera_size) + " camera of " +
+        std::to_string(field.gain.channels()) + " channel(s); the texture is " +
+        SizeText(texture.size()) + " with " + std::to_string(texture.channels()));
+    return out;
+  }
+  const int channels = texture.channels();
+  const cv::Mat level = Levels(texture);
+  out.albedo = cv::Mat::zeros(points.size(), CV_32FC(channels));
+  out.valid = cv::Mat::zeros(points.size(), CV_8U);
+  cv::Rect box(0, 0, points.cols, points.rows);
+  if (!page.empty()) {
+    const int w = options.normal_window_px + 1;
+    const cv::Rect r = cv::boundingRect(page);
+    box &= cv::Rect(r.x - w, r.y - w, r.width + 2 * w, r.height + 2 * w);
+  }
+  const cv::Mat points_in = points(box), page_in = page.empty() ? cv::Mat() : page(box);
+  const cv::Mat normals =
+      Normals(points_in, page_in, options.normal_window_px, calibration.camera.Center());
+  std::atomic<int> estimated{0}, shadowed{0}, rim{0}, dim{0}, outside{0};
+  cv::parallel_for_(cv::Range(0, box.height), [&](const cv::Range& range) {
+    int n_estimated = 0, n_shadowed = 0, n_rim = 0, n_dim = 0, n_outside = 0;
+    for (int v = range.start; v < range.end; ++v) {
+      const cv::Vec3f* p = points_in.ptr<cv::Vec3f>(v);
+      const cv::Vec3f* nv = normals.ptr<cv::Vec3f>(v);
+      const uint8_t* in = page_in.empty() ? nullptr : page_in.ptr<uint8_t>(v);
+      const float* l = level.ptr<float>(v + box.y) + box.x * channels;
+      float* albedo = out.albedo.ptr<float>(v + box.y) + box.x * channels;
+      uint8_t* ok = out.valid.ptr<uint8_t>(v + box.y) + box.x;
+      for (int u = 0; u < box.width; ++u) {
+        if (in && !in[u]) continue;
+        if (!std::isfinite(p[u][2])) {
+          ++n_shadowed;
+          continue;
+        }
+        if (!std::isfinite(nv[u][0])) {
+          ++n_rim;
+          continue;
+        }
+        const double e = LampLight(field.lamps, cv::Vec3d(p[u]), cv::Vec3d(nv[u]));
+        if (!(e >= 0.2)) {
+          ++n_dim;
+          continue;
+        }
+        const cv::Vec3d k = field.At(cv::Point2d(u + box.x, v + box.y));
+        if (!(k[0] > 0)) {
+          ++n_outside;
+          continue;
+        }
+        for (int c = 0; c < channels; ++c) {
+          albedo[u * channels + c] = static_cast<float>(l[u * channels + c] / (k[c] * e));
+        }
+        ok[u] = 255;
+        ++n_estimated;
+      }
+    }
+    estimated += n_estimated;
+    shadowed += n_shadowed;
+    rim += n_rim;
+    dim += n_dim;
+    outside += n_outside;
+  });
+  out.estimated = estimated;
+  out.shadowed = shadowed;
+  out.rim = rim;
+  out.grazing = dim;
+  out.outside_flat_field = outside;
+  out.status =
+      estimated > 0 ? Status::Ok() : Status::Error("reflectance: no pixel where the model holds");
   return out;
 }
 

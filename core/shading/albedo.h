@@ -20,6 +20,7 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "core/common/status.h"
 #include "core/geometry/calibration.h"
@@ -74,6 +75,45 @@ struct AlbedoResult {
 // the window around each pixel; never across the page's rim).
 AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page,
                             const Calibration& calibration, const FlatField& flat_field,
+                            const AlbedoOptions& options = AlbedoOptions());
+
+// The studio lights' own flat field (issue 17): the texture is lit by the studio's lamps, not the
+// projector, so its shading is corrected from the same shape where the lamps are described.
+// The model: a Lambertian page lit by point lamps of equal strength at known places (world mm),
+// each giving cos(i) / d^2, summed as E(x, n) and taken relative to a surface at the world's
+// origin facing up; the camera sees level = reflectance * K(p) * E(x, n), where K is the lamps'
+// strength and the camera's gain and vignetting along pixel p's ray. K is measured once from the
+// texture of a white target of known albedo lying flat on the table under the same lamps and
+// exposure (each pixel sees the table point where its ray meets z = 0, facing up). Not
+// modelled: the shadow one part of the page casts on another, each lamp's own beam shape away
+// from the table, interreflection and gloss.
+struct StudioField {
+  cv::Mat gain;                  // K per cell, one channel per texture channel; NaN: not seen.
+  int cell_px = 8;               // Camera pixels per cell side (K is smooth; cells average
+                                 // the target's noise).
+  cv::Size camera_size;          // The camera it was measured for.
+  std::vector<cv::Vec3d> lamps;  // The lamps, world mm.
+
+  bool empty() const { return gain.empty(); }
+  // K at camera pixel p, per channel (bilinear between cell centres); NaN where not measured.
+  cv::Vec3d At(const cv::Point2d& p) const;
+};
+
+// The lamps' light on a point x with normal n, relative to a surface at the origin facing up.
+double LampLight(const std::vector<cv::Vec3d>& lamps, const cv::Vec3d& x, const cv::Vec3d& n);
+
+// The studio field from `texture` (8 or 16 bit, gray or colour) of a white target of
+// `target_albedo` lying flat on the table under `lamps`, seen by `camera`.
+StudioField MeasureStudioField(const cv::Mat& texture, const CameraModel& camera,
+                               const std::vector<cv::Vec3d>& lamps, double target_albedo,
+                               Status* status, int cell_px = 8);
+
+// The page's reflectance from its studio-lit texture (same type rules), its point map and
+// `page` mask as EstimateAlbedo takes them: AlbedoResult::albedo has one channel per texture
+// channel (CV_32F or CV_32FC3), 0 where marked (not measured, the rim, the lamps' light on it
+// under a fifth of the reference's, outside the studio field).
+AlbedoResult CorrectTexture(const cv::Mat& texture, const cv::Mat& points, const cv::Mat& page,
+                            const Calibration& calibration, const StudioField& field,
                             const AlbedoOptions& options = AlbedoOptions());
 
 }  // namespace vellum
