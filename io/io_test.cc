@@ -264,6 +264,34 @@ TEST_F(IoTest, ScanLightsRoundTripAndBadOnesAreNamed) {
       << s.message();
 }
 
+// Issue 17: the studio lamps' field round trips (gray and colour), and a file without lamps is
+// an error naming the file and the key.
+TEST_F(IoTest, StudioFieldRoundTripsAndABadOneIsNamed) {
+  for (int channels : {1, 3}) {
+    StudioField field;
+    field.camera_size = cv::Size(40, 30);
+    field.cell_px = 8;
+    field.gain = cv::Mat(4, 5, CV_32FC(channels), cv::Scalar(200, 210, 190));
+    field.gain.at<float>(0, 0) = std::nanf("");
+    field.lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
+    ASSERT_TRUE(WriteStudioField(Path("studio.yaml"), field).ok());
+    StudioField back;
+    const Status s = ReadStudioField(Path("studio.yaml"), &back);
+    ASSERT_TRUE(s.ok()) << s.message();
+    EXPECT_EQ(back.camera_size, field.camera_size);
+    EXPECT_EQ(back.gain.channels(), channels);
+    ASSERT_EQ(back.lamps.size(), 2u);
+    EXPECT_EQ(back.lamps[1], field.lamps[1]);
+    EXPECT_TRUE(std::isnan(back.gain.at<float>(0, 0)));
+    EXPECT_NEAR(back.At(cv::Point2d(20, 15))[0], 200, 1e-3);
+  }
+  std::ofstream(Path("no_lamps.yaml")) << "%YAML:1.0\n---\ncamera_size: [ 40, 30 ]\ncell_px: 8\n";
+  StudioField back;
+  const Status s = ReadStudioField(Path("no_lamps.yaml"), &back);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("no_lamps.yaml: lamps must be"), std::string::npos) << s.message();
+}
+
 // Issue 15: the catalogue identity in scan.yaml (DESIGN.md, "Identity"), kept through a round
 // trip, read as hand-written (a folio as a number), and made safe: control characters removed,
 // a field cut to 200 bytes, an unknown side dropped.
