@@ -136,27 +136,24 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     if (!options.flat_field.empty()) {
       next("albedo", done + 0.9 * share);
       if (!ran(AlbedoStage(amplitude, out.map.points, mask, input.calibration, options.flat_field,
-                           page.mesh, page.flat.flat, options.restore, page.restored, report.stages,
-                           results, page.name, &page.albedo),
+                           page.restored, report.stages, results, page.name, &page.albedo),
                true)) {
         return out;
       }
     }
     if (!options.studio_field.empty()) {
       next("reflectance", done + 0.93 * share);
-      if (!ran(
-              ReflectanceStage(input.scan.texture, out.map.points, mask, input.calibration,
-                               options.studio_field, page.mesh, page.flat.flat, options.restore,
-                               page.restored, report.stages, results, page.name, &page.reflectance),
-              true)) {
+      if (!ran(ReflectanceStage(input.scan.texture, out.map.points, mask, input.calibration,
+                                options.studio_field, page.restored, report.stages, results,
+                                page.name, &page.reflectance),
+               true)) {
         return out;
       }
     }
     if (!input.scan.lights.empty()) {
       next("lights", done + 0.95 * share);
-      if (!ran(LightsStage(input.scan.lights, mask, page.mesh, page.flat.flat, camera,
-                           options.restore, options.camera_icc, page.restored, report.stages,
-                           results, page.name, &page.lights),
+      if (!ran(LightsStage(input.scan.lights, mask, page.mesh, page.flat.flat, options.camera_icc,
+                           page.restored, report.stages, results, page.name, &page.lights),
                true)) {
         return out;
       }

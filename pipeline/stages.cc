@@ -478,9 +478,7 @@ namespace {
 // restored through the page's sheet exactly as `restored` was (same options, at its dpi), with
 // its shares in the report under `stage`'s name, written as `file` (16-bit, linear).
 StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
-                               const cv::Mat& page_mask, const CameraModel& camera,
-                               const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                               const RestoreOptions& options, const RestoreResult& restored,
+                               const cv::Mat& page_mask, const RestoreResult& restored,
                                const std::vector<StageReport>& earlier, const std::string& results,
                                const std::string& page, const std::string& file,
                                const std::string& model, const char* dim_key, RestoreResult* out) {
@@ -500,20 +498,16 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
     above = channels[0] | channels[1] | channels[2];
   }
   r.Number(stage_name, "above_one_share", cv::countNonZero(above & a.valid) / page_px);
-  RestoreOptions same = options;
-  if (restored.view == RestoreView::kOrthographic) same.dpi = restored.dpi;
   cv::Mat linear16;
   a.albedo.convertTo(linear16, CV_16U, 65535.0);  // Saturates above 1 (gloss, fluorescence).
-  // The reflectance and where it holds, through one warp.
-  *out = Restore(linear16, mesh, flat, camera, same, page_mask, {a.valid});
-  if (!out->status.ok()) return stage.Finish(out->status);
-  const cv::Mat valid = out->extras.at(0);
+  // The reflectance and where it holds, through the page's own warp.
+  std::vector<cv::Mat> through;
+  const Status warped = RestoreMore(restored, {linear16, a.valid}, &through);
+  if (!warped.ok()) return stage.Finish(warped);
+  *out = restored;  // Its view, dpi, map, mask and sampling.
   out->extras.clear();
-  if (out->image.size() != restored.image.size()) {
-    return stage.Finish(Status::Error(std::string("the restored ") + stage_name + " is " +
-                                      SizeText(out->image.size()) + ", the restored page " +
-                                      SizeText(restored.image.size())));
-  }
+  out->image = through[0];
+  const cv::Mat& valid = through[1];
   // A restored pixel that drew on any marked camera pixel is marked too.
   out->image.setTo(0, valid < 255);
   cv::Mat measured = valid == 255;
@@ -538,14 +532,12 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
 
 StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
                         const Calibration& calibration, const FlatField& flat_field,
-                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                        const RestoreOptions& options, const RestoreResult& restored,
-                        const std::vector<StageReport>& earlier, const std::string& results,
-                        const std::string& page, RestoreResult* albedo) {
+                        const RestoreResult& restored, const std::vector<StageReport>& earlier,
+                        const std::string& results, const std::string& page,
+                        RestoreResult* albedo) {
   return RestoreReflectance(
       "albedo", EstimateAlbedo(amplitude, points, page_mask, calibration, flat_field), page_mask,
-      calibration.camera, mesh, flat, options, restored, earlier, results, page,
-      "restored_albedo.tif",
+      restored, earlier, results, page, "restored_albedo.tif",
       "Lambertian, lit by the projector alone (white less black), its flat field from a white "
       "target on the table; interreflection and gloss not modelled",
       "marked_grazing_share", albedo);
@@ -553,15 +545,12 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
 
 StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
                              const cv::Mat& page_mask, const Calibration& calibration,
-                             const StudioField& studio_field, const Mesh& mesh,
-                             const std::vector<cv::Point2d>& flat, const RestoreOptions& options,
-                             const RestoreResult& restored, const std::vector<StageReport>& earlier,
-                             const std::string& results, const std::string& page,
-                             RestoreResult* reflectance) {
+                             const StudioField& studio_field, const RestoreResult& restored,
+                             const std::vector<StageReport>& earlier, const std::string& results,
+                             const std::string& page, RestoreResult* reflectance) {
   return RestoreReflectance(
       "reflectance", CorrectTexture(texture, points, page_mask, calibration, studio_field),
-      page_mask, calibration.camera, mesh, flat, options, restored, earlier, results, page,
-      "restored_reflectance.tif",
+      page_mask, restored, earlier, results, page, "restored_reflectance.tif",
       "Lambertian, lit by the described studio lamps (point sources of equal strength), their "
       "field from a white target on the table; shadows the page casts on itself, "
       "interreflection and gloss not modelled",
@@ -570,7 +559,6 @@ StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
 
 StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
                         const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                        const CameraModel& camera, const RestoreOptions& options,
                         const IccProfile& camera_icc, const RestoreResult& restored,
                         const std::vector<StageReport>& earlier, const std::string& results,
                         const std::string& page, LightsResult* out) {
@@ -594,19 +582,10 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
     r.Number("normals", "lights", static_cast<double>(directed.size()));
     extras.push_back(normals.normals);
   }
-  // Restored as the page was: the same sheet and options, at the dpi it was written at.
-  RestoreOptions same = options;
-  if (restored.view == RestoreView::kOrthographic) same.dpi = restored.dpi;
-  if (lights.empty()) return stage.Finish(Status::Error("the scan has no lights"));
-  RestoreResult through = Restore(lights.front().image, mesh, flat, camera, same, page_mask,
-                                  std::vector<cv::Mat>(extras.begin() + 1, extras.end()));
-  if (!through.status.ok()) return stage.Finish(through.status);
-  if (through.image.size() != restored.image.size()) {
-    return stage.Finish(Status::Error("the restored lights are " + SizeText(through.image.size()) +
-                                      ", the restored page " + SizeText(restored.image.size())));
-  }
-  std::vector<cv::Mat> images = {through.image};
-  images.insert(images.end(), through.extras.begin(), through.extras.end());
+  // Through the page's own warp.
+  std::vector<cv::Mat> images;
+  const Status warped = RestoreMore(restored, extras, &images);
+  if (!warped.ok()) return stage.Finish(warped);
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
   const ScanIdentity identity = ReportedIdentity(earlier);
@@ -621,7 +600,7 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
       light_figures["direction"] =
           JsonNumber(d[0]).dump() + " " + JsonNumber(d[1]).dump() + " " + JsonNumber(d[2]).dump();
     }
-    images[k].setTo(0, through.mask == 0);
+    if (!restored.mask.empty()) images[k].setTo(0, restored.mask == 0);
     s = stage.Output(PageFile(page, "lights/" + lights[k].name + ".tif"),
                      WriteRestoredLight(dir, lights[k].name, images[k], restored, page_identity,
                                         light_figures, camera_icc));

@@ -137,16 +137,14 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
                          RestoreResult* restored);
 
 // Albedo (issue 17): the page's reflectance from the projector's light (core/shading/albedo.h:
-// `amplitude` is the decoder's, `points` the point map), restored through the page's sheet
-// exactly as `restored` was (same options, at its dpi): restored_albedo.tif in the page's
-// folder, 16-bit gray, linear (65535 = albedo 1), 0 where the model does not hold (marked:
+// `amplitude` is the decoder's, `points` the point map), restored through the page's own warp
+// (RestoreMore of `restored`: the same triangles, samples and crop): restored_albedo.tif in the
+// page's folder, 16-bit gray, linear (65535 = albedo 1), 0 where the model does not hold (marked:
 // the projector's shadow, the page's rim, grazing light, outside the flat field).
 StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
                         const Calibration& calibration, const FlatField& flat_field,
-                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                        const RestoreOptions& options, const RestoreResult& restored,
-                        const std::vector<StageReport>& earlier, const std::string& results,
-                        const std::string& page, RestoreResult* albedo);
+                        const RestoreResult& restored, const std::vector<StageReport>& earlier,
+                        const std::string& results, const std::string& page, RestoreResult* albedo);
 
 // Reflectance from the studio light (issue 17): the texture's shading by the studio lamps taken
 // out by the page's measured shape (core/shading/albedo.h, CorrectTexture, with `studio_field`),
@@ -155,14 +153,12 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
 // measured, the page's rim, too little of the lamps' light, outside the studio field).
 StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
                              const cv::Mat& page_mask, const Calibration& calibration,
-                             const StudioField& studio_field, const Mesh& mesh,
-                             const std::vector<cv::Point2d>& flat, const RestoreOptions& options,
-                             const RestoreResult& restored, const std::vector<StageReport>& earlier,
-                             const std::string& results, const std::string& page,
-                             RestoreResult* reflectance);
+                             const StudioField& studio_field, const RestoreResult& restored,
+                             const std::vector<StageReport>& earlier, const std::string& results,
+                             const std::string& page, RestoreResult* reflectance);
 
 // Lights (issue 17): the scan's extra images (`lights`, Scan::lights) restored through the page's
-// sheet exactly as `restored` was (same options, at its dpi), so they register to it and to
+// own warp (RestoreMore of `restored`), so they register to it and to
 // each other pixel for pixel: lights/<name>.tif in the page's folder (as captured, with the
 // camera's ICC profile `camera_icc`). With three or more lights of known direction, the page's
 // photometric normals (core/shading/photometric.h) on the flat page in its own frame:
@@ -174,7 +170,6 @@ struct LightsResult {
 };
 StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
                         const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                        const CameraModel& camera, const RestoreOptions& options,
                         const IccProfile& camera_icc, const RestoreResult& restored,
                         const std::vector<StageReport>& earlier, const std::string& results,
                         const std::string& page, LightsResult* out);

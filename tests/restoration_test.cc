@@ -211,6 +211,21 @@ TEST(Restore, ExtrasGoThroughTheSameWarp) {
       Restore(p.texture, p.mesh, p.flat.flat, camera, options, leaf, {cv::Mat(10, 10, CV_8U)});
   EXPECT_FALSE(bad.status.ok());
   EXPECT_NE(bad.status.message().find("extra image 0"), std::string::npos) << bad.status.message();
+  // After the restoration, through its own warp (RestoreMore), exactly the same images; a float
+  // image (normals) too; an image of another size is refused.
+  std::vector<cv::Mat> more;
+  cv::Mat real;
+  flipped.convertTo(real, CV_32F, 0.5);
+  ASSERT_TRUE(RestoreMore(all, {flipped, wide, real}, &more).ok());
+  ASSERT_EQ(more.size(), 3u);
+  EXPECT_EQ(cv::norm(more[0], all.extras[0], cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(more[1], all.extras[1], cv::NORM_INF), 0.0);
+  ASSERT_EQ(more[2].type(), CV_32F);
+  cv::Mat half;
+  all.extras[0].convertTo(half, CV_32F, 0.5);
+  EXPECT_LE(cv::norm(more[2], half, cv::NORM_INF), 0.5);  // The 8-bit one's rounding.
+  EXPECT_FALSE(RestoreMore(all, {cv::Mat(10, 10, CV_8U)}, &more).ok());
+  EXPECT_FALSE(RestoreMore(RestoreResult(), {flipped}, &more).ok());
 }
 
 double Percentile(std::vector<double> v, double q) {

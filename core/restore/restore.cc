@@ -131,7 +131,46 @@ void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
       bands);
 }
 
+// Each image through the triangles into a `size` image, by its type.
+void RenderImage(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Size size,
+                 cv::Mat* dst) {
+  *dst = cv::Mat::zeros(size, src.type());
+  switch (src.type()) {
+    case CV_8UC1:
+      Render<uint8_t, 1>(src, tris, dst);
+      break;
+    case CV_8UC3:
+      Render<uint8_t, 3>(src, tris, dst);
+      break;
+    case CV_16UC1:
+      Render<uint16_t, 1>(src, tris, dst);
+      break;
+    case CV_16UC3:
+      Render<uint16_t, 3>(src, tris, dst);
+      break;
+    case CV_32FC1:
+      Render<float, 1>(src, tris, dst);
+      break;
+    case CV_32FC3:
+      Render<float, 3>(src, tris, dst);
+      break;
+  }
+}
+
+// What Restore takes as an extra image.
+bool ExtraKind(const cv::Mat& e) {
+  return !e.empty() && (e.depth() == CV_8U || e.depth() == CV_16U || e.depth() == CV_32F) &&
+         (e.channels() == 1 || e.channels() == 3);
+}
+
 }  // namespace
+
+struct RestorePlan {
+  std::vector<Triangle> tris;
+  cv::Size source;  // The texture's size.
+  cv::Size size;    // The whole sheet's image, before the crop.
+  cv::Rect crop;    // The part kept.
+};
 
 const char* ToString(RestoreView view) {
   return view == RestoreView::kOrthographic ? "orthographic" : "camera";
@@ -255,6 +294,28 @@ double UprightAngle(const cv::Mat& mask) {
   return angle;
 }
 
+Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& images,
+                   std::vector<cv::Mat>* out) {
+  if (!restored.status.ok() || !restored.plan) {
+    return Status::Error("RestoreMore needs a restoration that succeeded");
+  }
+  const RestorePlan& plan = *restored.plan;
+  out->assign(images.size(), cv::Mat());
+  for (size_t k = 0; k < images.size(); ++k) {
+    if (!ExtraKind(images[k]) || images[k].size() != plan.source) {
+      return Status::Error("image " + std::to_string(k) +
+                           " must be an 8, 16 or 32-bit float gray or three-channel image of the "
+                           "texture's size");
+    }
+  }
+  for (size_t k = 0; k < images.size(); ++k) {
+    cv::Mat whole;
+    RenderImage(images[k], plan.tris, plan.size, &whole);
+    (*out)[k] = plan.crop.size() == plan.size ? whole : whole(plan.crop).clone();
+  }
+  return Status::Ok();
+}
+
 RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
                       const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                       const RestoreOptions& options, const cv::Mat& leaf,
@@ -275,8 +336,7 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   }
   for (size_t k = 0; k < extras.size(); ++k) {
     const cv::Mat& e = extras[k];
-    const bool real = !e.empty() && e.depth() == CV_32F && (e.channels() == 1 || e.channels() == 3);
-    if (!(restorable(e) || real) || e.size() != texture.size()) {
+    if (!ExtraKind(e) || e.size() != texture.size()) {
       result.status = Status::Error("extra image " + std::to_string(k) +
                                     " must be an 8, 16 or 32-bit float gray or three-channel "
                                     "image of the texture's size");
@@ -400,33 +460,10 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     Render<uint8_t, 1>(leaf255, tris, &restored_leaf, 1);
     result.mask = restored_leaf >= 128;
   }
-  // Each image through the triangles, by its type.
-  auto render = [&](const cv::Mat& src, cv::Mat* dst) {
-    *dst = cv::Mat::zeros(size, src.type());
-    switch (src.type()) {
-      case CV_8UC1:
-        Render<uint8_t, 1>(src, tris, dst);
-        break;
-      case CV_8UC3:
-        Render<uint8_t, 3>(src, tris, dst);
-        break;
-      case CV_16UC1:
-        Render<uint16_t, 1>(src, tris, dst);
-        break;
-      case CV_16UC3:
-        Render<uint16_t, 3>(src, tris, dst);
-        break;
-      case CV_32FC1:
-        Render<float, 1>(src, tris, dst);
-        break;
-      case CV_32FC3:
-        Render<float, 3>(src, tris, dst);
-        break;
-    }
-  };
-  render(texture, &result.image);
+  RenderImage(texture, tris, size, &result.image);
   result.extras.resize(extras.size());
-  for (size_t k = 0; k < extras.size(); ++k) render(extras[k], &result.extras[k]);
+  for (size_t k = 0; k < extras.size(); ++k) RenderImage(extras[k], tris, size, &result.extras[k]);
+  cv::Rect crop(0, 0, size.width, size.height);
   if (options.view == RestoreView::kOrthographic) {
     // The sampling map: each triangle filled with its true sampling, in the renderer's order (the
     // last triangle covering a pixel gives it), subpixel corners (4 fractional bits).
@@ -446,6 +483,7 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     cv::Rect box = cv::boundingRect(result.mask);
     box = cv::Rect(box.x - m, box.y - m, box.width + 2 * m, box.height + 2 * m) &
           cv::Rect(0, 0, size.width, size.height);
+    crop = box;
     result.image = result.image(box).clone();
     for (cv::Mat& extra : result.extras) extra = extra(box).clone();
     result.mask = result.mask(box).clone();
@@ -453,6 +491,12 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     result.pixel_from_flat(0, 2) -= box.x;
     result.pixel_from_flat(1, 2) -= box.y;
   }
+  auto plan = std::make_shared<RestorePlan>();
+  plan->tris = std::move(tris);
+  plan->source = texture.size();
+  plan->size = size;
+  plan->crop = crop;
+  result.plan = std::move(plan);
   result.status = Status::Ok();
   return result;
 }

@@ -5,6 +5,7 @@
 // area-averaged (supersampled) where it shrinks, so stretched regions do not alias.
 #pragma once
 
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -38,6 +39,8 @@ struct RestoreOptions {
   bool Check(std::string* why) const;
 };
 
+struct RestorePlan;  // The warp of a restoration: its triangles, size and crop (restore.cc).
+
 struct RestoreResult {
   Status status = Status::Error("restoration not run");
   cv::Mat image;  // Same type as the texture (8 or 16 bit, gray or BGR); 0 outside.
@@ -58,6 +61,8 @@ struct RestoreResult {
   // Restore's `extras`, each through the same warp as `image` (the same triangles and samples,
   // the same crop), so they register to it pixel for pixel; each of its own type.
   std::vector<cv::Mat> extras;
+  // The warp itself, for RestoreMore.
+  std::shared_ptr<const RestorePlan> plan;
 };
 
 // How finely a restored page was truly sampled (from RestoreResult::sampling, over its nonzero
@@ -97,6 +102,12 @@ struct SheetFrame {
 };
 SheetFrame RestoredSheetFrame(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                               const RestoreResult& restored);
+
+// More images of the page from the same pose (as Restore's `extras`) through the warp of
+// `restored`, after it: the same triangles, samples and crop, so they register to it pixel for
+// pixel, without building the warp again. *out gets one image per input, each of its type.
+Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& images,
+                   std::vector<cv::Mat>* out);
 
 // The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the
 // direction of its straight edges when they make up most of its outline, else the sides of its

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/text.h"
@@ -20,17 +21,19 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 // (the page's rim, where a window would reach past it).
 cv::Mat Normals(const cv::Mat& points, const cv::Mat& page, int w, const cv::Vec3d& eye) {
   cv::Mat valid(points.size(), CV_32F), filled(points.size(), CV_32FC3);
-  for (int v = 0; v < points.rows; ++v) {
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    float* m = valid.ptr<float>(v);
-    cv::Vec3f* f = filled.ptr<cv::Vec3f>(v);
-    const uint8_t* in = page.empty() ? nullptr : page.ptr<uint8_t>(v);
-    for (int u = 0; u < points.cols; ++u) {
-      const bool ok = std::isfinite(p[u][2]) && (!in || in[u]);
-      m[u] = ok ? 1.0f : 0.0f;
-      f[u] = ok ? p[u] : cv::Vec3f(0, 0, 0);
+  cv::parallel_for_(cv::Range(0, points.rows), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+      float* m = valid.ptr<float>(v);
+      cv::Vec3f* f = filled.ptr<cv::Vec3f>(v);
+      const uint8_t* in = page.empty() ? nullptr : page.ptr<uint8_t>(v);
+      for (int u = 0; u < points.cols; ++u) {
+        const bool ok = std::isfinite(p[u][2]) && (!in || in[u]);
+        m[u] = ok ? 1.0f : 0.0f;
+        f[u] = ok ? p[u] : cv::Vec3f(0, 0, 0);
+      }
     }
-  }
+  });
   const cv::Size box(2 * w + 1, 2 * w + 1);
   cv::Mat sum, count;
   cv::boxFilter(filled, sum, CV_32F, box, cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
