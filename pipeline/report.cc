@@ -45,6 +45,10 @@ constexpr Picture kPictures[] = {
      "the page can hold, whatever dpi it is written at."},
     {"report/before_after",
      "The centre of the page before (left, camera) and after (right, restored)."},
+    {"report/relief",
+     "The flat page's relief from its photometric normals (three or more raking lights), lit "
+     "from the top left: ruling, prickings and embossed lines show; black where no normal was "
+     "found (too dark under the lights, the rim)."},
 };
 
 // report.json's sections in their order; a section no stage fills is left out.

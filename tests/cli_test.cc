@@ -526,6 +526,8 @@ TEST_F(CliTest, ExtraLightsAreRestoredBesideThePage) {
   const std::string outputs = report.at("outputs").dump();
   EXPECT_NE(outputs.find("lights/uv.tif"), std::string::npos) << outputs;
   EXPECT_NE(outputs.find("report/relief.png"), std::string::npos) << outputs;
+  EXPECT_NE(FileBytes(fs::path(out) / "report.html").find("<img src=\"report/relief.png\""),
+            std::string::npos);
   r = RunVellum("import " + scan + " " + (root_ / "lit.lcm").string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("4 extra lights"), std::string::npos) << r.output;
