@@ -76,6 +76,78 @@ double Geometry(const cv::Vec3d& x, const cv::Vec3d& n, const cv::Vec3d& project
   return std::max(0.0, n.dot(to) / d) * (d0 * d0) / (d * d);
 }
 
+// What an estimate made of a page pixel with a measured point and normal.
+enum class Mark { kEstimated, kDim, kOutside };
+
+// Calls `estimate(pixel, x, n, albedo)` for every pixel of `page` (CV_8U, nonzero on it; empty:
+// every pixel) with a measured point x and a normal n (Normals), in parallel, over the page's
+// bounding box alone (grown by the normals' window, which never reaches past the page: on a
+// leaf filling a third of the view, a third of the work); `albedo` points at the pixel's
+// `channels` values in out->albedo. Fills out->albedo (CV_32FC(channels), 0 where marked),
+// out->valid and the counts: not measured (shadowed), the rim, and what `estimate` marked (dim
+// or grazing light; outside what was calibrated).
+template <class Estimate>
+void ForEachPagePixel(const cv::Mat& points, const cv::Mat& page, int channels,
+                      const Calibration& calibration, const AlbedoOptions& options,
+                      AlbedoResult* out, Estimate estimate) {
+  out->albedo = cv::Mat::zeros(points.size(), CV_32FC(channels));
+  out->valid = cv::Mat::zeros(points.size(), CV_8U);
+  cv::Rect box(0, 0, points.cols, points.rows);
+  if (!page.empty()) {
+    const int w = options.normal_window_px + 1;
+    const cv::Rect r = cv::boundingRect(page);
+    box &= cv::Rect(r.x - w, r.y - w, r.width + 2 * w, r.height + 2 * w);
+  }
+  const cv::Mat points_in = points(box), page_in = page.empty() ? cv::Mat() : page(box);
+  const cv::Mat normals =
+      Normals(points_in, page_in, options.normal_window_px, calibration.camera.Center());
+  std::atomic<int> estimated{0}, shadowed{0}, rim{0}, dim{0}, outside{0};
+  cv::parallel_for_(cv::Range(0, box.height), [&](const cv::Range& range) {
+    int n_estimated = 0, n_shadowed = 0, n_rim = 0, n_dim = 0, n_outside = 0;
+    for (int v = range.start; v < range.end; ++v) {
+      const cv::Vec3f* p = points_in.ptr<cv::Vec3f>(v);
+      const cv::Vec3f* nv = normals.ptr<cv::Vec3f>(v);
+      const uint8_t* in = page_in.empty() ? nullptr : page_in.ptr<uint8_t>(v);
+      float* albedo = out->albedo.ptr<float>(v + box.y) + box.x * channels;
+      uint8_t* ok = out->valid.ptr<uint8_t>(v + box.y) + box.x;
+      for (int u = 0; u < box.width; ++u) {
+        if (in && !in[u]) continue;
+        if (!std::isfinite(p[u][2])) {
+          ++n_shadowed;  // Not measured: the projector's shadow, or a pixel it could not decode.
+          continue;
+        }
+        if (!std::isfinite(nv[u][0])) {
+          ++n_rim;
+          continue;
+        }
+        switch (estimate(cv::Point(u + box.x, v + box.y), cv::Vec3d(p[u]), cv::Vec3d(nv[u]),
+                         albedo + u * channels)) {
+          case Mark::kEstimated:
+            ok[u] = 255;
+            ++n_estimated;
+            break;
+          case Mark::kDim:
+            ++n_dim;
+            break;
+          case Mark::kOutside:
+            ++n_outside;
+            break;
+        }
+      }
+    }
+    estimated += n_estimated;
+    shadowed += n_shadowed;
+    rim += n_rim;
+    dim += n_dim;
+    outside += n_outside;
+  });
+  out->estimated = estimated;
+  out->shadowed = shadowed;
+  out->rim = rim;
+  out->grazing = dim;
+  out->outside_flat_field = outside;
+}
+
 }  // namespace
 
 double FlatField::At(const cv::Point2d& p) const {
@@ -190,75 +262,21 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
   }
   const CameraModel& projector = calibration.projector;
   const cv::Vec3d centre = projector.Center();
-  out.albedo = cv::Mat::zeros(points.size(), CV_32F);
-  out.valid = cv::Mat::zeros(points.size(), CV_8U);
-  // The work is done over the page's bounding box alone, grown by the normals' window (which
-  // never reaches past the page): on a leaf filling a third of the view, a third of the work.
-  cv::Rect box(0, 0, points.cols, points.rows);
-  if (!page.empty()) {
-    const int w = options.normal_window_px + 1;
-    const cv::Rect r = cv::boundingRect(page);
-    box &= cv::Rect(r.x - w, r.y - w, r.width + 2 * w, r.height + 2 * w);
-  }
-  const cv::Mat points_in = points(box), amplitude_in = amplitude(box);
-  const cv::Mat page_in = page.empty() ? cv::Mat() : page(box);
-  cv::Mat albedo_in = out.albedo(box), valid_in = out.valid(box);
-  const cv::Mat normals =
-      Normals(points_in, page_in, options.normal_window_px, calibration.camera.Center());
-  std::atomic<int> estimated{0}, shadowed{0}, rim{0}, grazing{0}, outside{0};
-  cv::parallel_for_(cv::Range(0, points_in.rows), [&](const cv::Range& range) {
-    int n_estimated = 0, n_shadowed = 0, n_rim = 0, n_grazing = 0, n_outside = 0;
-    for (int v = range.start; v < range.end; ++v) {
-      const cv::Vec3f* p = points_in.ptr<cv::Vec3f>(v);
-      const cv::Vec3f* nv = normals.ptr<cv::Vec3f>(v);
-      const float* amp = amplitude_in.ptr<float>(v);
-      const uint8_t* in = page_in.empty() ? nullptr : page_in.ptr<uint8_t>(v);
-      float* albedo = albedo_in.ptr<float>(v);
-      uint8_t* ok = valid_in.ptr<uint8_t>(v);
-      for (int u = 0; u < points_in.cols; ++u) {
-        if (in && !in[u]) continue;
-        if (!std::isfinite(p[u][2])) {
-          ++n_shadowed;  // Not measured: the projector's shadow, or a pixel it could not decode.
-          continue;
-        }
-        if (!std::isfinite(nv[u][0])) {
-          ++n_rim;
-          continue;
-        }
-        const cv::Vec3d x(p[u][0], p[u][1], p[u][2]), n(nv[u]);
-        const cv::Vec3d to = centre - x;
-        const double d = cv::norm(to);
-        const double cos_in = n.dot(to) / d;
-        if (!(cos_in >= options.min_cos)) {
-          ++n_grazing;
-          continue;
-        }
-        const double g = flat_field.At(projector.Project(x));
-        if (!(g > 0)) {
-          ++n_outside;
-          continue;
-        }
-        albedo[u] = static_cast<float>(2.0 * amp[u] /
-                                       (g * Geometry(x, n, centre, flat_field.reference_mm)));
-        ok[u] = 255;
-        ++n_estimated;
-      }
-    }
-    estimated += n_estimated;
-    shadowed += n_shadowed;
-    rim += n_rim;
-    grazing += n_grazing;
-    outside += n_outside;
-  });
-  out.estimated = estimated;
-  out.shadowed = shadowed;
-  out.rim = rim;
-  out.grazing = grazing;
-  out.outside_flat_field = outside;
-  out.status = estimated > 0 ? Status::Ok()
-                             : Status::Error(
-                                   "albedo: no pixel where the model holds (lit, not "
-                                   "grazing, inside the flat field)");
+  const double d0 = flat_field.reference_mm;
+  ForEachPagePixel(points, page, 1, calibration, options, &out,
+                   [&](cv::Point pixel, const cv::Vec3d& x, const cv::Vec3d& n, float* albedo) {
+                     const cv::Vec3d to = centre - x;
+                     if (!(n.dot(to) / cv::norm(to) >= options.min_cos)) return Mark::kDim;
+                     const double g = flat_field.At(projector.Project(x));
+                     if (!(g > 0)) return Mark::kOutside;
+                     *albedo = static_cast<float>(2.0 * amplitude.at<float>(pixel) /
+                                                  (g * Geometry(x, n, centre, d0)));
+                     return Mark::kEstimated;
+                   });
+  out.status = out.estimated > 0 ? Status::Ok()
+                                 : Status::Error(
+                                       "albedo: no pixel where the model holds (lit, not "
+                                       "grazing, inside the flat field)");
   return out;
 }
 
@@ -414,67 +432,19 @@ AlbedoResult CorrectTexture(const cv::Mat& texture, const cv::Mat& points, const
   }
   const int channels = texture.channels();
   const cv::Mat level = Levels(texture);
-  out.albedo = cv::Mat::zeros(points.size(), CV_32FC(channels));
-  out.valid = cv::Mat::zeros(points.size(), CV_8U);
-  cv::Rect box(0, 0, points.cols, points.rows);
-  if (!page.empty()) {
-    const int w = options.normal_window_px + 1;
-    const cv::Rect r = cv::boundingRect(page);
-    box &= cv::Rect(r.x - w, r.y - w, r.width + 2 * w, r.height + 2 * w);
-  }
-  const cv::Mat points_in = points(box), page_in = page.empty() ? cv::Mat() : page(box);
-  const cv::Mat normals =
-      Normals(points_in, page_in, options.normal_window_px, calibration.camera.Center());
-  std::atomic<int> estimated{0}, shadowed{0}, rim{0}, dim{0}, outside{0};
-  cv::parallel_for_(cv::Range(0, box.height), [&](const cv::Range& range) {
-    int n_estimated = 0, n_shadowed = 0, n_rim = 0, n_dim = 0, n_outside = 0;
-    for (int v = range.start; v < range.end; ++v) {
-      const cv::Vec3f* p = points_in.ptr<cv::Vec3f>(v);
-      const cv::Vec3f* nv = normals.ptr<cv::Vec3f>(v);
-      const uint8_t* in = page_in.empty() ? nullptr : page_in.ptr<uint8_t>(v);
-      const float* l = level.ptr<float>(v + box.y) + box.x * channels;
-      float* albedo = out.albedo.ptr<float>(v + box.y) + box.x * channels;
-      uint8_t* ok = out.valid.ptr<uint8_t>(v + box.y) + box.x;
-      for (int u = 0; u < box.width; ++u) {
-        if (in && !in[u]) continue;
-        if (!std::isfinite(p[u][2])) {
-          ++n_shadowed;
-          continue;
-        }
-        if (!std::isfinite(nv[u][0])) {
-          ++n_rim;
-          continue;
-        }
-        const double e = LampLight(field.lamps, cv::Vec3d(p[u]), cv::Vec3d(nv[u]));
-        if (!(e >= 0.2)) {
-          ++n_dim;
-          continue;
-        }
-        const cv::Vec3d k = field.At(cv::Point2d(u + box.x, v + box.y));
-        if (!(k[0] > 0)) {
-          ++n_outside;
-          continue;
-        }
-        for (int c = 0; c < channels; ++c) {
-          albedo[u * channels + c] = static_cast<float>(l[u * channels + c] / (k[c] * e));
-        }
-        ok[u] = 255;
-        ++n_estimated;
-      }
-    }
-    estimated += n_estimated;
-    shadowed += n_shadowed;
-    rim += n_rim;
-    dim += n_dim;
-    outside += n_outside;
-  });
-  out.estimated = estimated;
-  out.shadowed = shadowed;
-  out.rim = rim;
-  out.grazing = dim;
-  out.outside_flat_field = outside;
-  out.status =
-      estimated > 0 ? Status::Ok() : Status::Error("reflectance: no pixel where the model holds");
+  ForEachPagePixel(points, page, channels, calibration, options, &out,
+                   [&](cv::Point pixel, const cv::Vec3d& x, const cv::Vec3d& n, float* albedo) {
+                     const double e = LampLight(field.lamps, x, n);
+                     if (!(e >= 0.2)) return Mark::kDim;
+                     const cv::Vec3d k = field.At(pixel);
+                     if (!(k[0] > 0)) return Mark::kOutside;
+                     const float* l = level.ptr<float>(pixel.y) + pixel.x * channels;
+                     for (int c = 0; c < channels; ++c)
+                       albedo[c] = static_cast<float>(l[c] / (k[c] * e));
+                     return Mark::kEstimated;
+                   });
+  out.status = out.estimated > 0 ? Status::Ok()
+                                 : Status::Error("reflectance: no pixel where the model holds");
   return out;
 }
 

@@ -65,7 +65,8 @@ struct AlbedoResult {
   cv::Mat albedo;  // CV_32F per camera pixel; 0 where marked.
   cv::Mat valid;   // CV_8U, 255 where the model holds (lit, not grazing, in the flat field).
   // Pixels estimated, and marked: not measured (the projector's shadow, undecoded), within the
-  // normal's window of the page's rim, lit at a grazing angle, lit from outside the flat field.
+  // normal's window of the page's rim, lit at a grazing angle (CorrectTexture: too little of the
+  // lamps' light), lit from outside the flat field (CorrectTexture: outside the studio field).
   int estimated = 0, shadowed = 0, rim = 0, grazing = 0, outside_flat_field = 0;
 };
 
