@@ -1,7 +1,8 @@
 // Reassembly of a chunked product (CORRESPONDENCE, POINT_CLOUD, FLAT_MESH) on a daemon's
 // worker thread: every chunk is checked and copied in; a product is handed on when whole, and
-// given up with an error naming the missing chunks when the next scan's chunks begin or when
-// its chunks stop coming.
+// given up with an error naming the missing chunks when the next scan's chunks begin, when its
+// chunks stop coming, or when they start again (a re-send: the product is then built from the
+// new send alone, never from two).
 #pragma once
 
 #include <functional>
@@ -52,6 +53,13 @@ class Assembler {
   }
 
   void OnChunk(const Msg& msg) {
+    if (!chunks_.Complete() && chunks_.Has(msg.scan_id, msg.chunk_index)) {
+      // A chunk of the product being built comes again before it is whole: its sender started
+      // it over (a daemon restarted mid-send, a scan sent again). What came before is dropped,
+      // so a product is never made of two sends' chunks.
+      GiveUp("when it was sent again (chunk " + std::to_string(msg.chunk_index) +
+             " came twice); starting over with the new send");
+    }
     if (chunks_.Started() && (chunks_.scan_id() != msg.scan_id || chunks_.Complete())) {
       if (!chunks_.Complete()) GiveUp("when scan " + std::to_string(msg.scan_id) + " began");
       chunks_.Reset();

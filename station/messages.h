@@ -62,6 +62,10 @@ class ChunkSet {
   bool Stale(double seconds) const;
   bool Complete() const { return Started() && received_ == count_; }
   int64_t scan_id() const { return scan_id_; }
+  // Whether chunk `index` of this scan came already.
+  bool Has(int64_t scan_id, int index) const {
+    return Started() && scan_id == scan_id_ && index >= 0 && index < count_ && have_[index];
+  }
   // "chunks 3, 5 of 12 missing".
   std::string Missing() const;
   void Reset() { *this = ChunkSet(); }

@@ -21,6 +21,7 @@
 
 #include "core/mesh/mesh.h"
 #include "core/sim/gantry.h"
+#include "station/assembler.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_log.h"
@@ -29,6 +30,7 @@
 #include "vellum/point_cloud_t.hpp"
 #include "vellum/scan_request_t.hpp"
 #include "vellum/status_t.hpp"
+#include "vellum/texture_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -461,6 +463,47 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
   for (int k = 0; k < 5; ++k) node.Post([&order, k] { order.push_back(k); });
   while (node.Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   EXPECT_EQ(order, (std::vector<int>{0, 1, 2, 3, 4}));
+}
+
+// A product whose sender starts it over before it is whole (a daemon restarted mid-send, the scan
+// sent again) is built from the new send alone: the first send's chunks are dropped with an
+// error, never mixed in. Two textures of one scan that differ in every row show it.
+TEST(Assembler, AProductSentAgainMidwayIsBuiltFromTheNewSendAlone) {
+  Node node("vellum-unit", "memq://");
+  std::vector<status_t> statuses;
+  node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
+  std::mutex mutex;
+  std::vector<cv::Mat> products;
+  Assembler<texture_t, cv::Mat> assembler(
+      &node, "TEXTURE", [](const texture_t& m, cv::Mat* texture) { return AddChunk(m, texture); },
+      [&](int64_t, cv::Mat* texture, const texture_t&) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        products.push_back(texture->clone());
+      });
+  const cv::Mat first(1200, 1600, CV_8UC3, cv::Scalar::all(40)),
+      again(1200, 1600, CV_8UC3, cv::Scalar::all(200));
+  std::vector<texture_t> a = ToMessages(9, first), b = ToMessages(9, again);
+  ASSERT_GE(a.size(), 3u);
+  int64_t seq = 0;
+  auto send = [&](texture_t m) {
+    m.station = kDefaultStation;
+    m.seq = seq++;
+    node.lcm().publish("TEXTURE", &m);
+  };
+  send(a[0]);  // The first send stops after two chunks...
+  send(a[1]);
+  for (const texture_t& m : b) send(m);  // ...and the scan is sent again, whole.
+  for (int k = 0; k < 10; ++k) node.lcm().handleTimeout(10);
+  while (node.Pending() > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  for (int k = 0; k < 10; ++k) node.lcm().handleTimeout(10);
+  const std::lock_guard<std::mutex> lock(mutex);
+  ASSERT_EQ(products.size(), 1u);
+  EXPECT_EQ(cv::norm(products[0], again, cv::NORM_INF), 0.0) << "chunks of both sends mixed";
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_NE(statuses.back().last_error.find("scan 9: TEXTURE incomplete"), std::string::npos)
+      << statuses.back().last_error;
+  EXPECT_NE(statuses.back().last_error.find("sent again"), std::string::npos)
+      << statuses.back().last_error;
 }
 
 // Issue 14: a hung job on the worker (a stage that never returns) is reported as stuck and
