@@ -33,12 +33,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     case 0: {
       PatternSequence sequence;
       cv::Size camera;
-      (void)ReadScanYaml(dir.string(), &sequence, &camera);
+      ScanIdentity identity;
+      std::vector<ScanLight> lights;  // The extra lights' list (issue 17) too.
+      (void)ReadScanYaml(dir.string(), &sequence, &camera, &identity, &lights);
       break;
     }
     case 1: {
+      // The other YAML files a station reads beside its calibration: the flat fields.
       Calibration c;
       (void)ReadCalibration(path.string(), &c);
+      FlatField flat_field;
+      (void)ReadFlatField(path.string(), &flat_field);
+      StudioField studio_field;
+      (void)ReadStudioField(path.string(), &studio_field);
       break;
     }
     case 2: {
