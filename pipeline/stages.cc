@@ -475,8 +475,8 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
 namespace {
 
 // A page's reflectance per camera pixel (`a`, from the projector's light or the studio's)
-// restored through the page's sheet exactly as `restored` was (same options, at its dpi), with
-// its shares in the report under `stage`'s name, written as `file` (16-bit, linear).
+// restored through the page's own warp (RestoreMore of `restored`), with its shares in the
+// report under `stage`'s name, written as `file` (16-bit, linear).
 StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
                                const cv::Mat& page_mask, const RestoreResult& restored,
                                const std::vector<StageReport>& earlier, const std::string& results,
@@ -511,7 +511,10 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
   // A restored pixel that drew on any marked camera pixel is marked too.
   out->image.setTo(0, valid < 255);
   cv::Mat measured = valid == 255;
-  r.Number(stage_name, "mean", cv::mean(out->image, measured)[0] / 65535.0);
+  const cv::Scalar mean = cv::mean(out->image, measured);  // Over the channels, too.
+  const int channels = out->image.channels();
+  r.Number(stage_name, "mean",
+           (channels == 3 ? (mean[0] + mean[1] + mean[2]) / 3 : mean[0]) / 65535.0);
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
   if (s.ok()) {
@@ -601,9 +604,12 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
           JsonNumber(d[0]).dump() + " " + JsonNumber(d[1]).dump() + " " + JsonNumber(d[2]).dump();
     }
     if (!restored.mask.empty()) images[k].setTo(0, restored.mask == 0);
+    // The camera's profile where it fits the light's image (a colour UV shot of a gray
+    // camera's scan takes sRGB).
+    const bool fits = camera_icc.empty() || camera_icc.channels == images[k].channels();
     s = stage.Output(PageFile(page, "lights/" + lights[k].name + ".tif"),
                      WriteRestoredLight(dir, lights[k].name, images[k], restored, page_identity,
-                                        light_figures, camera_icc));
+                                        light_figures, fits ? camera_icc : IccProfile()));
     out->names.push_back(lights[k].name);
     out->images.push_back(images[k]);
   }
