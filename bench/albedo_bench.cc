@@ -12,6 +12,7 @@
 #include <benchmark/benchmark.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 
@@ -90,11 +91,10 @@ void BM_Vellum_RestoreTextureAndAlbedo(benchmark::State& state) {
     const RestoreResult r = Restore(f.texture, f.mesh, f.flat, camera, RestoreOptions(), f.leaf);
     const AlbedoResult a = EstimateAlbedo(f.amplitude, f.points, f.leaf, DefaultRig(), f.field);
     if (!r.status.ok() || !a.status.ok()) state.SkipWithError("restore or albedo failed");
-    cv::Mat albedo16;
-    a.albedo.convertTo(albedo16, CV_16U, 65535.0);
-    // Through the texture's own warp, as the pipeline's albedo stage does it.
+    // Through the texture's own warp, its marks with it, as the pipeline's albedo stage does it.
     std::vector<cv::Mat> out;
-    if (!RestoreMore(r, {albedo16, a.valid}, &out).ok()) state.SkipWithError("RestoreMore failed");
+    if (!RestoreMore(r, {MarkedAsNaN(a)}, &out, std::nan("")).ok())
+      state.SkipWithError("RestoreMore failed");
     benchmark::DoNotOptimize(out.back().data);
   }
 }
@@ -119,11 +119,8 @@ void BM_Vellum_RestoreTextureAlbedoAndTwoLights(benchmark::State& state) {
     const RestoreResult r = Restore(f.texture, f.mesh, f.flat, camera, RestoreOptions(), f.leaf);
     const AlbedoResult a = EstimateAlbedo(f.amplitude, f.points, f.leaf, DefaultRig(), f.field);
     if (!r.status.ok() || !a.status.ok()) state.SkipWithError("restore or albedo failed");
-    cv::Mat albedo16;
-    a.albedo.convertTo(albedo16, CV_16U, 65535.0);
     std::vector<cv::Mat> more = f.lights;
-    more.push_back(albedo16);
-    more.push_back(a.valid);
+    more.push_back(MarkedAsNaN(a));
     std::vector<cv::Mat> out;
     if (!RestoreMore(r, more, &out).ok()) state.SkipWithError("RestoreMore failed");
     benchmark::DoNotOptimize(out.back().data);

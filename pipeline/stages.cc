@@ -498,19 +498,23 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
     above = channels[0] | channels[1] | channels[2];
   }
   r.Number(stage_name, "above_one_share", cv::countNonZero(above & a.valid) / page_px);
-  cv::Mat linear16;
-  a.albedo.convertTo(linear16, CV_16U, 65535.0);  // Saturates above 1 (gloss, fluorescence).
-  // The reflectance and where it holds, through the page's own warp.
+  // The reflectance through the page's own warp, its marked pixels NaN: a restored pixel that
+  // drew on any marked camera pixel comes out NaN, marked too, as does one off the sheet (one
+  // pass, not a second one for where it holds).
   std::vector<cv::Mat> through;
-  const Status warped = RestoreMore(restored, {linear16, a.valid}, &through);
+  const Status warped = RestoreMore(restored, {MarkedAsNaN(a)}, &through, std::nan(""));
   if (!warped.ok()) return stage.Finish(warped);
   *out = restored;  // Its view, dpi, map, mask and sampling.
   out->extras.clear();
-  out->image = through[0];
-  const cv::Mat& valid = through[1];
-  // A restored pixel that drew on any marked camera pixel is marked too.
-  out->image.setTo(0, valid < 255);
-  cv::Mat measured = valid == 255;
+  cv::Mat measured = through[0] == through[0];  // Not NaN, in every channel.
+  if (measured.channels() == 3) {
+    std::vector<cv::Mat> channels;
+    cv::split(measured, channels);
+    measured = channels[0] & channels[1] & channels[2];
+  }
+  through[0].setTo(cv::Scalar::all(0), measured == 0);
+  // 16-bit, linear; saturates above 1 (gloss, fluorescence).
+  through[0].convertTo(out->image, CV_16U, 65535.0);
   const cv::Scalar mean = cv::mean(out->image, measured);  // Over the channels, too.
   const int channels = out->image.channels();
   r.Number(stage_name, "mean",

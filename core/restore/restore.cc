@@ -55,34 +55,44 @@ double TrianglePpi(const cv::Vec3i& t, const Mesh& mesh, const std::vector<cv::P
   return 25.4 * smallest;
 }
 
+constexpr int kMaxFused = 4;  // Images of one type rendered in one pass over the triangles.
+
+// Bilinear, clamped to the image; pixel centres at integers: the `count` images' values at
+// (x, y) (all of one size) added to out[k * C + c]. The weights are found once for all of them.
 template <typename T, int C>
-void Sample(const cv::Mat& src, double x, double y, double* out) {
-  // Bilinear, clamped to the image; pixel centres at integers.
-  x = std::clamp(x, 0.0, src.cols - 1.0);
-  y = std::clamp(y, 0.0, src.rows - 1.0);
-  const int x0 = std::min(static_cast<int>(x), src.cols - 2 < 0 ? 0 : src.cols - 2);
-  const int y0 = std::min(static_cast<int>(y), src.rows - 2 < 0 ? 0 : src.rows - 2);
-  const int x1 = std::min(x0 + 1, src.cols - 1), y1 = std::min(y0 + 1, src.rows - 1);
+void Sample(const cv::Mat* const* src, int count, double x, double y, double* out) {
+  const cv::Mat& first = *src[0];
+  x = std::clamp(x, 0.0, first.cols - 1.0);
+  y = std::clamp(y, 0.0, first.rows - 1.0);
+  const int x0 = std::min(static_cast<int>(x), first.cols - 2 < 0 ? 0 : first.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), first.rows - 2 < 0 ? 0 : first.rows - 2);
+  const int x1 = std::min(x0 + 1, first.cols - 1), y1 = std::min(y0 + 1, first.rows - 1);
   const double fx = x - x0, fy = y - y0;
-  const T* r0 = src.ptr<T>(y0);
-  const T* r1 = src.ptr<T>(y1);
-  for (int c = 0; c < C; ++c) {
-    out[c] += (1 - fy) * ((1 - fx) * r0[x0 * C + c] + fx * r0[x1 * C + c]) +
-              fy * ((1 - fx) * r1[x0 * C + c] + fx * r1[x1 * C + c]);
+  const double w00 = (1 - fy) * (1 - fx), w01 = (1 - fy) * fx, w10 = fy * (1 - fx), w11 = fy * fx;
+  for (int k = 0; k < count; ++k) {
+    const T* r0 = src[k]->ptr<T>(y0);
+    const T* r1 = src[k]->ptr<T>(y1);
+    double* o = out + k * C;
+    for (int c = 0; c < C; ++c) {
+      o[c] +=
+          w00 * r0[x0 * C + c] + w01 * r0[x1 * C + c] + w10 * r1[x0 * C + c] + w11 * r1[x1 * C + c];
+    }
   }
 }
 
-// Each pixel of `dst` inside a triangle from `src` through the triangle's map, with its own
-// supersampling but at most `max_samples` per pixel side.
+// Each pixel of `dst[k]` inside a triangle from `src[k]` (k < count <= kMaxFused, all of one
+// type and size) through the triangle's map, with its own supersampling but at most
+// `max_samples` per pixel side. The images share the pass: its geometry is found once.
 template <typename T, int C>
-void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
-            int max_samples = std::numeric_limits<int>::max()) {
-  const int bands = (dst->rows + kBandRows - 1) / kBandRows;
+void Render(const cv::Mat* const* src, cv::Mat* const* dst, int count,
+            const std::vector<Triangle>& tris, int max_samples = std::numeric_limits<int>::max()) {
+  const cv::Size size = dst[0]->size();
+  const int bands = (size.height + kBandRows - 1) / kBandRows;
   cv::parallel_for_(
       cv::Range(0, bands),
       [&](const cv::Range& range) {
         for (int band = range.start; band < range.end; ++band) {
-          const int y_lo = band * kBandRows, y_hi = std::min(dst->rows, y_lo + kBandRows);
+          const int y_lo = band * kBandRows, y_hi = std::min(size.height, y_lo + kBandRows);
           // Triangles in a fixed order, each pixel from the last triangle covering it: the result
           // does not depend on the threads.
           for (const Triangle& t : tris) {
@@ -94,7 +104,7 @@ void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
             const double min_x = std::min({t.d[0].x, t.d[1].x, t.d[2].x});
             const double max_x = std::max({t.d[0].x, t.d[1].x, t.d[2].x});
             const int xa = std::max(0, static_cast<int>(std::ceil(min_x)));
-            const int xb = std::min(dst->cols - 1, static_cast<int>(std::floor(max_x)));
+            const int xb = std::min(size.width - 1, static_cast<int>(std::floor(max_x)));
             const cv::Point2d &a = t.d[0], &b = t.d[1], &c = t.d[2];
             const double area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
             if (std::fabs(area) < 1e-12) continue;
@@ -103,7 +113,8 @@ void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
             const int n = std::min(t.samples, max_samples);
             const double inv_n2 = 1.0 / (n * n);
             for (int y = ya; y <= yb; ++y) {
-              T* row = dst->ptr<T>(y);
+              T* rows[kMaxFused];
+              for (int k = 0; k < count; ++k) rows[k] = dst[k]->ptr<T>(y);
               // The barycentric weights are affine in x along the row: w = w(xa) + k * dw.
               const double w0a = ((b.x - xa) * (c.y - y) - (b.y - y) * (c.x - xa)) * inv_area;
               const double w1a = ((c.x - xa) * (a.y - y) - (c.y - y) * (a.x - xa)) * inv_area;
@@ -112,17 +123,19 @@ void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
               for (int x = xa; x <= xb; ++x) {
                 const double w0 = w0a + (x - xa) * dw0, w1 = w1a + (x - xa) * dw1;
                 if (w0 < -1e-9 || w1 < -1e-9 || 1.0 - w0 - w1 < -1e-9) continue;
-                double acc[C] = {0};
+                double acc[kMaxFused * C] = {0};
                 for (int sy = 0; sy < n; ++sy) {
                   const double py = y + (sy + 0.5) / n - 0.5;
                   for (int sx = 0; sx < n; ++sx) {
                     const double px = x + (sx + 0.5) / n - 0.5;
-                    Sample<T, C>(src, m(0, 0) * px + m(0, 1) * py + m(0, 2),
+                    Sample<T, C>(src, count, m(0, 0) * px + m(0, 1) * py + m(0, 2),
                                  m(1, 0) * px + m(1, 1) * py + m(1, 2), acc);
                   }
                 }
-                for (int ch = 0; ch < C; ++ch)
-                  row[x * C + ch] = cv::saturate_cast<T>(acc[ch] * inv_n2);
+                for (int k = 0; k < count; ++k) {
+                  for (int ch = 0; ch < C; ++ch)
+                    rows[k][x * C + ch] = cv::saturate_cast<T>(acc[k * C + ch] * inv_n2);
+                }
               }
             }
           }
@@ -131,29 +144,44 @@ void Render(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Mat* dst,
       bands);
 }
 
-// Each image through the triangles into a `size` image, by its type.
-void RenderImage(const cv::Mat& src, const std::vector<Triangle>& tris, cv::Size size,
-                 cv::Mat* dst) {
-  *dst = cv::Mat::zeros(size, src.type());
-  switch (src.type()) {
-    case CV_8UC1:
-      Render<uint8_t, 1>(src, tris, dst);
-      break;
-    case CV_8UC3:
-      Render<uint8_t, 3>(src, tris, dst);
-      break;
-    case CV_16UC1:
-      Render<uint16_t, 1>(src, tris, dst);
-      break;
-    case CV_16UC3:
-      Render<uint16_t, 3>(src, tris, dst);
-      break;
-    case CV_32FC1:
-      Render<float, 1>(src, tris, dst);
-      break;
-    case CV_32FC3:
-      Render<float, 3>(src, tris, dst);
-      break;
+// Each image through the triangles into a `size` image of its own type, `outside` off them:
+// those of one type (and size) share a pass, kMaxFused at a time.
+void RenderImages(const std::vector<const cv::Mat*>& src, const std::vector<Triangle>& tris,
+                  cv::Size size, std::vector<cv::Mat>* dst, double outside = 0) {
+  dst->assign(src.size(), cv::Mat());
+  std::vector<bool> done(src.size(), false);
+  for (size_t k = 0; k < src.size(); ++k) {
+    if (done[k]) continue;
+    const cv::Mat* group[kMaxFused];
+    cv::Mat* out[kMaxFused];
+    int count = 0;
+    for (size_t j = k; j < src.size() && count < kMaxFused; ++j) {
+      if (done[j] || src[j]->type() != src[k]->type() || src[j]->size() != src[k]->size()) continue;
+      done[j] = true;
+      (*dst)[j] = cv::Mat(size, src[j]->type(), cv::Scalar::all(outside));
+      group[count] = src[j];
+      out[count++] = &(*dst)[j];
+    }
+    switch (src[k]->type()) {
+      case CV_8UC1:
+        Render<uint8_t, 1>(group, out, count, tris);
+        break;
+      case CV_8UC3:
+        Render<uint8_t, 3>(group, out, count, tris);
+        break;
+      case CV_16UC1:
+        Render<uint16_t, 1>(group, out, count, tris);
+        break;
+      case CV_16UC3:
+        Render<uint16_t, 3>(group, out, count, tris);
+        break;
+      case CV_32FC1:
+        Render<float, 1>(group, out, count, tris);
+        break;
+      case CV_32FC3:
+        Render<float, 3>(group, out, count, tris);
+        break;
+    }
   }
 }
 
@@ -295,7 +323,7 @@ double UprightAngle(const cv::Mat& mask) {
 }
 
 Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& images,
-                   std::vector<cv::Mat>* out) {
+                   std::vector<cv::Mat>* out, double outside) {
   if (!restored.status.ok() || !restored.plan) {
     return Status::Error("RestoreMore needs a restoration that succeeded");
   }
@@ -308,10 +336,12 @@ Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& im
                            "texture's size");
     }
   }
+  std::vector<const cv::Mat*> sources;
+  for (const cv::Mat& image : images) sources.push_back(&image);
+  std::vector<cv::Mat> whole;
+  RenderImages(sources, plan.tris, plan.size, &whole, outside);
   for (size_t k = 0; k < images.size(); ++k) {
-    cv::Mat whole;
-    RenderImage(images[k], plan.tris, plan.size, &whole);
-    (*out)[k] = plan.crop.size() == plan.size ? whole : whole(plan.crop).clone();
+    (*out)[k] = plan.crop.size() == plan.size ? whole[k] : whole[k](plan.crop).clone();
   }
   return Status::Ok();
 }
@@ -457,12 +487,16 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     // would only smooth what the threshold takes away).
     cv::Mat restored_leaf = cv::Mat::zeros(size, CV_8U);
     const cv::Mat leaf255 = leaf != 0;
-    Render<uint8_t, 1>(leaf255, tris, &restored_leaf, 1);
+    const cv::Mat* source = &leaf255;
+    cv::Mat* target = &restored_leaf;
+    Render<uint8_t, 1>(&source, &target, 1, tris, 1);
     result.mask = restored_leaf >= 128;
   }
-  RenderImage(texture, tris, size, &result.image);
-  result.extras.resize(extras.size());
-  for (size_t k = 0; k < extras.size(); ++k) RenderImage(extras[k], tris, size, &result.extras[k]);
+  std::vector<const cv::Mat*> sources = {&texture};
+  for (const cv::Mat& extra : extras) sources.push_back(&extra);
+  RenderImages(sources, tris, size, &result.extras);
+  result.image = result.extras.front();
+  result.extras.erase(result.extras.begin());
   cv::Rect crop(0, 0, size.width, size.height);
   if (options.view == RestoreView::kOrthographic) {
     // The sampling map: each triangle filled with its true sampling, in the renderer's order (the

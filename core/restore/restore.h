@@ -105,9 +105,11 @@ SheetFrame RestoredSheetFrame(const Mesh& mesh, const std::vector<cv::Point2d>& 
 
 // More images of the page from the same pose (as Restore's `extras`) through the warp of
 // `restored`, after it: the same triangles, samples and crop, so they register to it pixel for
-// pixel, without building the warp again. *out gets one image per input, each of its type.
+// pixel, without building the warp again. *out gets one image per input, each of its type, and
+// `outside` (saturated to its type; NaN for a float image whose unmeasured pixels are NaN) off
+// the sheet.
 Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& images,
-                   std::vector<cv::Mat>* out);
+                   std::vector<cv::Mat>* out, double outside = 0);
 
 // The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the
 // direction of its straight edges when they make up most of its outline, else the sides of its

@@ -280,6 +280,12 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
   return out;
 }
 
+cv::Mat MarkedAsNaN(const AlbedoResult& a) {
+  cv::Mat out = a.albedo.clone();
+  out.setTo(cv::Scalar::all(std::nan("")), a.valid == 0);
+  return out;
+}
+
 double LampLight(const std::vector<cv::Vec3d>& lamps, const cv::Vec3d& x, const cv::Vec3d& n) {
   auto sum = [&](const cv::Vec3d& at, const cv::Vec3d& normal) {
     double e = 0;

@@ -70,6 +70,10 @@ struct AlbedoResult {
   int estimated = 0, shadowed = 0, rim = 0, grazing = 0, outside_flat_field = 0;
 };
 
+// `a.albedo` with its marked pixels NaN: through a warp (RestoreMore), a restored pixel that
+// drew on any marked camera pixel comes out NaN, marked too, in the one pass.
+cv::Mat MarkedAsNaN(const AlbedoResult& a);
+
 // The albedo of every measured camera pixel of the page (`page`: CV_8U, nonzero on it, e.g. the
 // leaf's outline; empty: every pixel): `amplitude` and `points` as for MeasureFlatField, of the
 // scan whose page is wanted. The normals come from the page's own points (their plane within
