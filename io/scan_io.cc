@@ -205,6 +205,98 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
   return Status::Ok();
 }
 
+namespace {
+
+// The `lights` sequence of a scan.yaml or a station's lights file (at `path`, for messages): each
+// {name, direction} (direction optional), at most kMaxLights, and with `channels` its optional
+// `channel` (-1 when not given).
+Status ReadLightList(const cv::FileNode& list, const std::string& path,
+                     std::vector<ScanLight>* lights, std::vector<int>* channels) {
+  lights->clear();
+  if (channels) channels->clear();
+  if (!list.empty() && !list.isNone() && !list.isSeq()) {
+    return Status::Error(path + ": key 'lights' must be a sequence of {name, direction}");
+  }
+  if (list.isSeq() && static_cast<int>(list.size()) > kMaxLights) {
+    return Status::Error(path + ": " + std::to_string(list.size()) + " lights, at most " +
+                         std::to_string(kMaxLights));
+  }
+  for (const cv::FileNode& n : list) {
+    const std::string where = path + ": light " + std::to_string(lights->size());
+    ScanLight light;
+    if (!n.isMap() || !n["name"].isString() ||
+        !ValidLightName(light.name = static_cast<std::string>(n["name"]))) {
+      return Status::Error(where +
+                           ": 'name' must be 1 to 32 of a-z, 0-9, '-' and '_', starting with "
+                           "a letter or digit");
+    }
+    for (const ScanLight& earlier : *lights) {
+      if (earlier.name == light.name) {
+        return Status::Error(where + ": the name '" + light.name + "' is given twice");
+      }
+    }
+    const cv::FileNode d = n["direction"];
+    if (!d.empty() && !d.isNone()) {
+      auto number = [](const cv::FileNode& x) { return x.isReal() || x.isInt(); };
+      if (!d.isSeq() || d.size() != 3 || !number(d[0]) || !number(d[1]) || !number(d[2])) {
+        return Status::Error(where + " ('" + light.name +
+                             "'): 'direction' must be [ x, y, z ], towards the light");
+      }
+      const cv::Vec3d v(static_cast<double>(d[0]), static_cast<double>(d[1]),
+                        static_cast<double>(d[2]));
+      if (!UnitLightDirection(v, &light.direction)) {
+        return Status::Error(where + " ('" + light.name +
+                             "'): 'direction' must point up from the table (z > 0)");
+      }
+    }
+    if (channels) {
+      const cv::FileNode c = n["channel"];
+      int channel = -1;
+      if (!c.empty() && !c.isNone()) {
+        if (!c.isInt() || static_cast<int>(c) < 0 || static_cast<int>(c) > 255) {
+          return Status::Error(where + " ('" + light.name +
+                               "'): 'channel' must be a whole number from 0 to 255");
+        }
+        channel = static_cast<int>(c);
+      }
+      channels->push_back(channel);
+    }
+    lights->push_back(light);
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status ReadLightsFile(const std::string& path, StationLights* out) {
+  *out = StationLights();
+  if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  const std::string problem = YamlTextProblem(path);
+  if (!problem.empty()) return Status::Error(path + ": " + problem);
+  try {
+    cv::FileStorage in(path, cv::FileStorage::READ);
+    if (!in.isOpened()) return Status::Error(path + ": cannot read (not YAML?)");
+    const cv::FileNode list = in["lights"];
+    if (!list.isSeq() || list.size() == 0) {
+      return Status::Error(path +
+                           ": key 'lights' must be a non-empty sequence of {name, "
+                           "direction, channel}");
+    }
+    const Status s = ReadLightList(list, path, &out->lights, &out->channels);
+    if (!s.ok()) return s;
+    const cv::FileNode studio = in["studio_channel"];
+    if (!studio.empty() && !studio.isNone()) {
+      if (!studio.isInt() || static_cast<int>(studio) < 0 || static_cast<int>(studio) > 255) {
+        return Status::Error(path + ": 'studio_channel' must be a whole number from 0 to 255");
+      }
+      out->studio_channel = static_cast<int>(studio);
+    }
+  } catch (const cv::Exception& e) {
+    return Status::Error(path + ": cannot parse: " + e.what());
+  }
+  return Status::Ok();
+}
+
 Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
                     ScanIdentity* identity, std::vector<ScanLight>* lights) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
@@ -270,43 +362,8 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
       *identity = SanitizedIdentity(read);
     }
     if (lights) {
-      lights->clear();
-      const cv::FileNode list = in["lights"];
-      if (!list.empty() && !list.isNone() && !list.isSeq()) {
-        return Status::Error(path + ": key 'lights' must be a sequence of {name, direction}");
-      }
-      for (const cv::FileNode& n : list) {
-        const std::string where = path + ": light " + std::to_string(lights->size());
-        ScanLight light;
-        if (!n.isMap() || !n["name"].isString() ||
-            !ValidLightName(light.name = static_cast<std::string>(n["name"]))) {
-          return Status::Error(where +
-                               ": 'name' must be 1 to 32 of a-z, 0-9, '-' and '_', starting with "
-                               "a letter or digit");
-        }
-        for (const ScanLight& earlier : *lights) {
-          if (earlier.name == light.name) {
-            return Status::Error(where + ": the name '" + light.name + "' is given twice");
-          }
-        }
-        const cv::FileNode d = n["direction"];
-        if (!d.empty() && !d.isNone()) {
-          auto number = [](const cv::FileNode& x) { return x.isReal() || x.isInt(); };
-          if (!d.isSeq() || d.size() != 3 || !number(d[0]) || !number(d[1]) || !number(d[2])) {
-            return Status::Error(where + " ('" + light.name +
-                                 "'): 'direction' must be [ x, y, z ], towards the light");
-          }
-          const cv::Vec3d v(static_cast<double>(d[0]), static_cast<double>(d[1]),
-                            static_cast<double>(d[2]));
-          const double norm = cv::norm(v);
-          if (!std::isfinite(norm) || norm < 1e-9 || v[2] <= 0) {
-            return Status::Error(where + " ('" + light.name +
-                                 "'): 'direction' must point up from the table (z > 0)");
-          }
-          light.direction = v / norm;
-        }
-        lights->push_back(light);
-      }
+      const Status s = ReadLightList(in["lights"], path, lights, nullptr);
+      if (!s.ok()) return s;
     }
     const cv::FileNode list = in["patterns"];
     if (!list.isSeq() || list.size() == 0) {

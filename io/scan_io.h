@@ -30,6 +30,17 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
                      const ScanIdentity& identity = ScanIdentity(),
                      const std::vector<ScanLight>& lights = {});
 
+// A station's extra lights (issue 17), as vellum-projector and vellum-lights read them from one
+// YAML file: `lights`, a sequence of {name, direction: [x, y, z], channel} (direction optional, as
+// in scan.yaml; channel: the light's switch on a relay board, 0 to 255, optional), and
+// `studio_channel` (optional): the studio lamps' switch, off while an extra light is on.
+struct StationLights {
+  std::vector<ScanLight> lights;  // Names and directions; no images.
+  std::vector<int> channels;      // One per light, -1 when not given.
+  int studio_channel = -1;
+};
+Status ReadLightsFile(const std::string& path, StationLights* out);
+
 // Reads scan.yaml, texture.png and the lights' images, and checks that every frame file is there,
 // an image, of the camera's size (from its PNG header, no pixel decoded); scan->frames is left
 // empty. Errors name the file and the problem.

@@ -68,12 +68,6 @@ std::string PageFile(const std::string& page, const std::string& name) {
   return page.empty() ? name : "pages/" + page + "/" + name;
 }
 
-std::string Fixed(double value, int digits) {
-  char text[64];
-  std::snprintf(text, sizeof(text), "%.*f", digits, value);
-  return text;
-}
-
 }  // namespace
 
 bool PipelineOptions::Check(std::string* why) const {

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "core/common/text.h"
+
 namespace vellum::station {
 namespace {
 
@@ -139,6 +141,28 @@ pattern_spec_t ToMessage(const PatternSpec& spec) {
   m.steps = static_cast<int16_t>(spec.steps);
   m.period_px = static_cast<int16_t>(spec.period_px);
   return m;
+}
+
+light_spec_t ToMessage(const ScanLight& light) {
+  light_spec_t m{};
+  m.name = light.name;
+  m.directed = light.directed();
+  for (int i = 0; i < 3; ++i) m.direction[i] = light.direction[i];
+  return m;
+}
+
+Status FromMessage(const light_spec_t& m, ScanLight* light) {
+  *light = ScanLight();
+  if (!ValidLightName(m.name)) {
+    return Status::Error("light name '" + Printable(m.name, 40) +
+                         "' is not 1 to 32 of a-z, 0-9, '-' and '_'");
+  }
+  light->name = m.name;
+  if (m.directed && !UnitLightDirection(cv::Vec3d(m.direction[0], m.direction[1], m.direction[2]),
+                                        &light->direction)) {
+    return Status::Error("light '" + m.name + "': its direction must point up from the table");
+  }
+  return Status::Ok();
 }
 
 Status FromMessage(const pattern_spec_t& m, PatternSpec* spec) {

@@ -21,6 +21,7 @@
 #include "vellum/capture_t.hpp"
 #include "vellum/correspondence_t.hpp"
 #include "vellum/image_t.hpp"
+#include "vellum/light_spec_t.hpp"
 #include "vellum/mesh_t.hpp"
 #include "vellum/pattern_spec_t.hpp"
 #include "vellum/point_cloud_t.hpp"
@@ -43,6 +44,11 @@ pattern_spec_t ToMessage(const PatternSpec& spec);
 scan_identity_t ToMessage(const ScanIdentity& identity);
 ScanIdentity FromMessage(const scan_identity_t& msg);
 Status FromMessage(const pattern_spec_t& msg, PatternSpec* spec);
+
+// An extra light of a scan (its name and direction; its image travels as the capture's). The
+// reader checks the name (ValidLightName) and a direction (UnitLightDirection; made unit).
+light_spec_t ToMessage(const ScanLight& light);
+Status FromMessage(const light_spec_t& msg, ScanLight* light);
 
 void ToMessage(const Calibration& calibration, calibration_t* msg);
 Status FromMessage(const calibration_t& msg, Calibration* calibration);

@@ -34,6 +34,11 @@ inline constexpr char kScanStarted[] = "SCAN_STARTED";  // From the projector: a
 inline constexpr char kPatternShown[] = "PATTERN_SHOWN";
 inline constexpr char kCapture[] = "CAPTURE";
 inline constexpr char kCalibration[] = "CALIBRATION";
+// A scan's extra lights (light_t): the projector asks, vellum-lights switches (or prompts the
+// operator, who answers in the viewer), and the projector goes on when the light is on.
+inline constexpr char kLightRequest[] = "LIGHT_REQUEST";
+inline constexpr char kLightPrompt[] = "LIGHT_PROMPT";
+inline constexpr char kLightOn[] = "LIGHT_ON";
 inline constexpr char kTexture[] = "TEXTURE";  // From the decoder, as it sends a scan down.
 inline constexpr char kCorrespondence[] = "CORRESPONDENCE";
 inline constexpr char kPointCloud[] = "POINT_CLOUD";

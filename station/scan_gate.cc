@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <lcm/lcm-cpp.hpp>
 
+#include "core/common/text.h"
 #include "io/scan_io.h"
+#include "station/messages.h"
 #include "station/node.h"
 
 namespace vellum::station {
@@ -36,6 +38,31 @@ bool Contains(const std::deque<int64_t>& q, int64_t id) {
   return std::find(q.begin(), q.end(), id) != q.end();
 }
 
+// The extra lights' names a SCAN_STARTED announces; false (with *why) when there are more than
+// kMaxLights, one is not a valid light, or a name comes twice.
+bool LightNames(const scan_started_t& m, std::vector<std::string>* names, std::string* why) {
+  names->clear();
+  if (m.light_count < 0 || m.light_count > kMaxLights) {
+    *why = "light_count " + std::to_string(m.light_count) + " outside 0.." +
+           std::to_string(kMaxLights);
+    return false;
+  }
+  for (const light_spec_t& spec : m.lights) {
+    ScanLight light;
+    const Status s = FromMessage(spec, &light);
+    if (!s.ok()) {
+      *why = s.message();
+      return false;
+    }
+    if (std::find(names->begin(), names->end(), light.name) != names->end()) {
+      *why = "the light '" + light.name + "' comes twice";
+      return false;
+    }
+    names->push_back(light.name);
+  }
+  return true;
+}
+
 }  // namespace
 
 bool ScanGate::Holds(int64_t scan_id, int64_t session) const {
@@ -51,6 +78,11 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
   if (m.pattern_count <= 0 || m.pattern_count > kMaxPatterns) {
     return Refuse(what + ": SCAN_STARTED with pattern_count " + std::to_string(m.pattern_count),
                   "scans refused");
+  }
+  std::vector<std::string> names;
+  std::string bad;
+  if (!LightNames(m, &names, &bad)) {
+    return Refuse(what + ": SCAN_STARTED refused: " + bad, "scans refused");
   }
   std::lock_guard<std::mutex> lock(mutex_);
   if (m.scan_id == scan_id_ && m.session == session_) return Refuse("", "");  // Heard again.
@@ -71,7 +103,8 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
   scan_id_ = m.scan_id;
   session_ = m.session;
   count_ = m.pattern_count;
-  logged_.assign(count_ + 1, false);
+  lights_ = std::move(names);
+  logged_.assign(count_ + lights_.size() + 1, false);
   received_ = 0;
   calibration_ = false;
   return Record();
@@ -80,7 +113,9 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
 ScanGate::Decision ScanGate::Admit(const capture_t& c) {
   const std::string what =
       ScanText(c.scan_id) + ", " +
-      (c.pattern_index < 0 ? std::string("texture") : "pattern " + std::to_string(c.pattern_index));
+      (c.pattern_index < 0                  ? std::string("texture")
+       : c.pattern_index >= c.pattern_count ? "the light '" + Printable(c.light.name, 40) + "'"
+                                            : "pattern " + std::to_string(c.pattern_index));
   if (c.scan_id <= 0) {
     return Refuse(what + ": CAPTURE refused: no scan (scan_id must be > 0)",
                   "captures refused (unknown scan)");
@@ -111,6 +146,18 @@ ScanGate::Decision ScanGate::Admit(const capture_t& c) {
                       " patterns, the scan has " + std::to_string(count_),
                   "captures refused (mismatch)");
   }
+  const int lights = static_cast<int>(lights_.size());
+  if (c.light_count != lights) {
+    return Refuse(what + ": CAPTURE refused: " + std::to_string(c.light_count) +
+                      " extra lights, the scan has " + std::to_string(lights),
+                  "captures refused (mismatch)");
+  }
+  if (c.pattern_index >= count_ && c.light.name != lights_[c.pattern_index - count_]) {
+    return Refuse(what + ": CAPTURE refused: the scan's light " +
+                      std::to_string(c.pattern_index - count_) + " is '" +
+                      lights_[c.pattern_index - count_] + "'",
+                  "captures refused (mismatch)");
+  }
   char& seen = logged_[c.pattern_index + 1];  // CheckCapture bounded the index by its count.
   if (seen) {
     d.verdict = Verdict::kDuplicate;
@@ -121,7 +168,7 @@ ScanGate::Decision ScanGate::Admit(const capture_t& c) {
     return d;
   }
   seen = true;
-  if (++received_ == count_ + 1) {
+  if (++received_ == count_ + lights + 1) {
     Bounded(&closed_, scan_id_);  // Whole: nothing more of it.
     scan_id_ = 0;
     session_ = 0;
@@ -182,6 +229,12 @@ bool ScanGate::Resume(int64_t scan_id, int64_t session, std::string* why) {
     *why = folder.log() + " does not begin with the scan's SCAN_STARTED";
     return false;
   }
+  std::vector<std::string> names;
+  std::string bad;
+  if (!LightNames(started, &names, &bad)) {
+    *why = folder.log() + ": its SCAN_STARTED: " + bad;
+    return false;
+  }
   if (started.session != session) {
     *why = "its session is not the one " + folder.log() + " began with";
     return false;
@@ -193,14 +246,15 @@ bool ScanGate::Resume(int64_t scan_id, int64_t session, std::string* why) {
   scan_id_ = scan_id;
   session_ = session;
   count_ = started.pattern_count;
-  logged_.assign(count_ + 1, false);
+  lights_ = std::move(names);
+  logged_.assign(count_ + lights_.size() + 1, false);
   received_ = 0;
   calibration_ = true;  // Whatever it had, it keeps.
   for (e = log.readNextEvent(); e; e = log.readNextEvent()) {
     capture_t c;
     if (e->channel != channel::kCapture || !SafeDecode(e->data, e->datalen, &c) ||
         c.scan_id != scan_id || c.session != session || c.pattern_index < -1 ||
-        c.pattern_index >= count_ || logged_[c.pattern_index + 1]) {
+        c.pattern_index >= static_cast<int>(logged_.size()) - 1 || logged_[c.pattern_index + 1]) {
       continue;
     }
     logged_[c.pattern_index + 1] = true;

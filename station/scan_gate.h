@@ -66,7 +66,8 @@ class ScanGate {
   mutable std::mutex mutex_;  // The LCM thread decides, the worker closes.
   int64_t scan_id_ = 0, session_ = 0;
   int count_ = 0;
-  std::vector<char> logged_;  // [0] texture, [k + 1] pattern k.
+  std::vector<std::string> lights_;  // The extra lights' names (SCAN_STARTED), in order.
+  std::vector<char> logged_;         // [0] texture, [k + 1] pattern k, [count + k + 1] light k.
   int received_ = 0;
   bool calibration_ = false;
   std::deque<int64_t> closed_;         // The last scans closed, newest last.

@@ -17,6 +17,8 @@ scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t sessio
   m.projector_width = scan.sequence.projector_size.width;
   m.projector_height = scan.sequence.projector_size.height;
   m.identity = ToMessage(scan.identity);
+  m.light_count = static_cast<int32_t>(scan.lights.size());
+  for (const ScanLight& light : scan.lights) m.lights.push_back(ToMessage(light));
   return m;
 }
 
@@ -29,11 +31,21 @@ capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int6
   c.pattern_count = static_cast<int32_t>(scan.sequence.patterns.size());
   c.projector_width = scan.sequence.projector_size.width;
   c.projector_height = scan.sequence.projector_size.height;
+  c.light_count = static_cast<int32_t>(scan.lights.size());
   PatternSpec black;
   black.kind = PatternKind::kBlack;
-  c.pattern = ToMessage(pattern_index < 0 ? black : scan.sequence.patterns[pattern_index]);
+  const int patterns = c.pattern_count;
+  const bool pattern = pattern_index >= 0 && pattern_index < patterns;
+  c.pattern = ToMessage(pattern ? scan.sequence.patterns[pattern_index] : black);
   c.shown_utime = utime - 1000;
-  ToMessage(pattern_index < 0 ? scan.texture : scan.frames[pattern_index], &c.image);
+  const cv::Mat* image = &scan.texture;
+  if (pattern) image = &scan.frames[pattern_index];
+  if (pattern_index >= patterns) {
+    const ScanLight& light = scan.lights[pattern_index - patterns];
+    c.light = ToMessage(light);
+    image = &light.image;
+  }
+  ToMessage(*image, &c.image);
   c.image.utime = utime - 500;
   c.image.seq = 0;
   c.image.scan_id = scan_id;
@@ -74,7 +86,7 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
     c.session = session;
     if (!write(channel::kCalibration, Encode(c))) return Status::Error(log_path + ": write failed");
   }
-  for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
+  for (int k = -1; k < static_cast<int>(scan.frames.size() + scan.lights.size()); ++k) {
     utime += interval_us;
     capture_t c = MakeCapture(scan, scan_id, k, utime);
     c.seq = seq++;

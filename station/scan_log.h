@@ -1,7 +1,7 @@
 // Recorded scan logs <-> scan directories (`vellum export` / `vellum import`): a log as the
-// decoder records it (SCAN_STARTED, CALIBRATION, then the texture and every frame on CAPTURE)
-// read as a scan,
-// and a scan directory written as such a log that lcm-logplayer can play into the station.
+// decoder records it (SCAN_STARTED, CALIBRATION, then the texture, every frame and the image
+// under each extra light on CAPTURE) read as a scan, and a scan directory written as such a log
+// that lcm-logplayer can play into the station.
 #pragma once
 
 #include <cstdint>
@@ -29,8 +29,8 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
 // The SCAN_STARTED a projector publishes for `scan` (station and seq left to the publisher).
 scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t session);
 
-// The capture message of one image of a scan (pattern_index -1: the texture); its session is
-// left 0 (the caller's).
+// The capture message of one image of a scan (pattern_index -1: the texture; pattern count + k:
+// extra light k); its session is left 0 (the caller's).
 capture_t MakeCapture(const Scan& scan, int64_t scan_id, int pattern_index, int64_t utime);
 
 }  // namespace vellum::station

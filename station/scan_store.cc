@@ -106,8 +106,9 @@ Status MarkFailed(const ScanFolder& folder, const std::string& why) {
 }
 
 bool ClaimsAPattern(const capture_t& c) {
-  return c.pattern_count > 0 && c.pattern_count <= kMaxPatterns && c.pattern_index >= -1 &&
-         c.pattern_index < c.pattern_count;
+  return c.pattern_count > 0 && c.pattern_count <= kMaxPatterns && c.light_count >= 0 &&
+         c.light_count <= kMaxLights && c.pattern_index >= -1 &&
+         c.pattern_index < c.pattern_count + c.light_count;
 }
 
 Status CheckCapture(const capture_t& c) {
@@ -117,9 +118,20 @@ Status CheckCapture(const capture_t& c) {
     return Status::Error(where + ": pattern_count " + std::to_string(c.pattern_count) +
                          " is not valid");
   }
+  if (c.light_count < 0 || c.light_count > kMaxLights) {
+    return Status::Error(where + ": light_count " + std::to_string(c.light_count) + " is not 0.." +
+                         std::to_string(kMaxLights));
+  }
   if (!ClaimsAPattern(c)) {
     return Status::Error(where + ": pattern_index outside -1.." +
-                         std::to_string(c.pattern_count - 1));
+                         std::to_string(c.pattern_count + c.light_count - 1));
+  }
+  if (c.pattern_index >= c.pattern_count) {
+    ScanLight light;
+    const Status s = FromMessage(c.light, &light);
+    if (!s.ok()) return Status::Error(where + " (an extra light): " + s.message());
+  } else if (!c.light.name.empty()) {
+    return Status::Error(where + ": names a light, but is the texture or a pattern");
   }
   if (c.projector_width < 2 || c.projector_height < 2 || c.projector_width > kMaxProjectorExtent ||
       c.projector_height > kMaxProjectorExtent) {
@@ -147,21 +159,37 @@ Status CaptureSet::Add(const capture_t& c) {
     }
     scan_id_ = c.scan_id;
     count_ = c.pattern_count;
+    lights_ = c.light_count;
     projector_ = projector;
     camera_ = image.size();
     frames_.assign(count_, cv::Mat());
     specs_.assign(count_, PatternSpec());
-    have_.assign(count_ + 1, false);
-  } else if (c.scan_id != scan_id_ || c.pattern_count != count_ || projector != projector_) {
+    light_images_.assign(lights_, ScanLight());
+    have_.assign(count_ + lights_ + 1, false);
+  } else if (c.scan_id != scan_id_ || c.pattern_count != count_ || c.light_count != lights_ ||
+             projector != projector_) {
     return Status::Error(where + ": does not match the scan's " + std::to_string(count_) +
-                         " patterns for a " + SizeText(projector_) + " projector");
+                         " patterns and " + std::to_string(lights_) + " extra lights for a " +
+                         SizeText(projector_) + " projector");
   }
   if (image.size() != camera_) {
     return Status::Error(where + ": image is " + SizeText(image.size()) + ", the scan's are " +
                          SizeText(camera_));
   }
   if (have_[c.pattern_index + 1]) return Status::Error(where + ": captured twice");
-  if (c.pattern_index == -1) {
+  if (c.pattern_index >= count_) {
+    ScanLight light;
+    s = FromMessage(c.light, &light);  // Checked by CheckCapture.
+    if (!s.ok()) return Status::Error(where + ": " + s.message());
+    for (int k = 0; k < lights_; ++k) {
+      if (have_[count_ + k + 1] && light_images_[k].name == light.name) {
+        return Status::Error(where + ": the light '" + light.name + "' is the scan's light " +
+                             std::to_string(k) + " already");
+      }
+    }
+    light.image = image;
+    light_images_[c.pattern_index - count_] = light;
+  } else if (c.pattern_index == -1) {
     texture_ = image;
   } else {
     if (image.channels() != 1) {
@@ -175,18 +203,21 @@ Status CaptureSet::Add(const capture_t& c) {
   return Status::Ok();
 }
 
-bool CaptureSet::Complete() const { return Started() && received_ == count_ + 1; }
+bool CaptureSet::Complete() const { return Started() && received_ == Expected(); }
 
 std::string CaptureSet::Missing() const {
   std::string list;
   int n = 0;
-  for (int k = 0; k <= count_; ++k) {
+  for (int k = 0; k < Expected(); ++k) {
     if (have_[k]) continue;
-    if (n < 8) list += (n ? ", " : "") + (k == 0 ? std::string("texture") : std::to_string(k - 1));
+    const std::string what = k == 0        ? std::string("texture")
+                             : k <= count_ ? std::to_string(k - 1)
+                                           : "light " + std::to_string(k - 1 - count_);
+    if (n < 8) list += (n ? ", " : "") + what;
     ++n;
   }
   if (n > 8) list += ", ...";
-  return std::to_string(n) + " of " + std::to_string(count_ + 1) + " captures missing (" + list +
+  return std::to_string(n) + " of " + std::to_string(Expected()) + " captures missing (" + list +
          ")";
 }
 
@@ -197,6 +228,7 @@ Scan CaptureSet::ToScan() const {
   scan.camera_size = camera_;
   scan.texture = texture_;
   if (keep_frames_) scan.frames = frames_;
+  scan.lights = light_images_;
   return scan;
 }
 
@@ -305,8 +337,17 @@ void CaptureLog::Close() {
   scan_id_ = 0;
 }
 
-static std::string ImageName(int pattern_index) {
-  return pattern_index < 0 ? "texture.png" : FrameName(pattern_index);
+// The capture's file in the scan directory (DESIGN.md), and its writer: the texture and the
+// lights' images as they came, a pattern's frame within the camera's frame interval
+// (WriteFrameImage).
+static std::string ImageName(const capture_t& c) {
+  if (c.pattern_index >= c.pattern_count) return LightFileName(c.light.name);
+  return c.pattern_index < 0 ? "texture.png" : FrameName(c.pattern_index);
+}
+
+static Status WriteCaptureImage(const std::string& path, const capture_t& c, const cv::Mat& image) {
+  const bool frame = c.pattern_index >= 0 && c.pattern_index < c.pattern_count;
+  return frame ? WriteFrameImage(path, image) : WriteImage(path, image);
 }
 
 Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed,
@@ -339,11 +380,11 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
   // A complete scan in the log was processed before: this is the scan again (a replay).
   if (earlier.Complete()) return Status::Ok();
   for (const capture_t& c : taken) {
-    const std::string path = (fs::path(folder.raw()) / ImageName(c.pattern_index)).string();
+    const std::string path = (fs::path(folder.raw()) / ImageName(c)).string();
     if (PathExists(path)) continue;
     cv::Mat image;
     if (FromMessage(c.image, &image).ok()) {
-      s = c.pattern_index < 0 ? WriteImage(path, image) : WriteFrameImage(path, image);
+      s = WriteCaptureImage(path, c, image);
       if (!s.ok()) return s;
     }
   }
@@ -353,9 +394,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
 }
 
 Status ScanRecorder::Write(const capture_t& capture, const cv::Mat& image) {
-  const std::string path = (fs::path(folder_.raw()) / ImageName(capture.pattern_index)).string();
-  // A frame must be written within the camera's frame interval (WriteFrameImage).
-  return capture.pattern_index < 0 ? WriteImage(path, image) : WriteFrameImage(path, image);
+  return WriteCaptureImage((fs::path(folder_.raw()) / ImageName(capture)).string(), capture, image);
 }
 
 Status ScanRecorder::Write(const calibration_t& calibration) {
@@ -366,7 +405,7 @@ Status ScanRecorder::Write(const calibration_t& calibration) {
 }
 
 Status ScanRecorder::Finish(const Scan& scan) {
-  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity);
+  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity, scan.lights);
 }
 
 }  // namespace vellum::station

@@ -65,13 +65,14 @@ Status MarkFailed(const ScanFolder& folder, const std::string& why);
 inline constexpr int kMaxPatterns = 1000;
 
 // What a CAPTURE claims about itself, checked before anything is written: a pattern count of 1
-// to kMaxPatterns, its index -1 (the texture) or within the count, a projector of 2 to 65536 pixels
-// each way. A capture that fails is refused whole (never recorded: a scan's log holds only
-// captures that belong in it).
+// to kMaxPatterns, 0 to kMaxLights extra lights, its index -1 (the texture), a pattern's, or
+// pattern count + k for extra light k (which it names, ValidLightName; a pattern or the texture
+// names none), a projector of 2 to 65536 pixels each way. A capture that fails is refused whole
+// (never recorded: a scan's log holds only captures that belong in it).
 Status CheckCapture(const capture_t& c);
 // Whether a capture claims to be one of its scan's captures (a count of 1 to kMaxPatterns, its
-// index -1 or within it): one that does, and is bad, may stand in for the scan's real capture of
-// that pattern (its projector moves on); one that does not never does.
+// index -1 or within it and its lights): one that does, and is bad, may stand in for the scan's
+// real capture of that pattern (its projector moves on); one that does not never does.
 bool ClaimsAPattern(const capture_t& c);
 
 // The captures of one scan, as they arrive.
@@ -84,10 +85,11 @@ class CaptureSet {
   bool Complete() const;
   int64_t scan_id() const { return scan_id_; }
   int Received() const { return received_; }
-  int Expected() const { return count_ + 1; }  // Texture + patterns.
-  // Whether the capture of pattern_index (-1: texture) is in.
+  int Expected() const { return count_ + lights_ + 1; }  // Texture + patterns + lights.
+  // Whether the capture of pattern_index (-1: texture; count + k: light k) is in.
   bool Has(int pattern_index) const {
-    return Started() && pattern_index >= -1 && pattern_index < count_ && have_[pattern_index + 1];
+    return Started() && pattern_index >= -1 && pattern_index < count_ + lights_ &&
+           have_[pattern_index + 1];
   }
   // "texture, frames 3, 7 of 54 missing".
   std::string Missing() const;
@@ -100,12 +102,13 @@ class CaptureSet {
 
  private:
   int64_t scan_id_ = 0;
-  int count_ = -1, received_ = 0;
+  int count_ = -1, lights_ = 0, received_ = 0;
   cv::Size projector_, camera_;
   cv::Mat texture_;
   std::vector<cv::Mat> frames_;
   std::vector<PatternSpec> specs_;
-  std::vector<bool> have_;  // [0] texture, [k + 1] frame k.
+  std::vector<ScanLight> light_images_;  // Extra light k, with its image (always kept).
+  std::vector<bool> have_;               // [0] texture, [k + 1] frame k, [count + k + 1] light k.
   bool keep_frames_ = true;
 };
 
@@ -149,8 +152,9 @@ class CaptureLog {
   std::unique_ptr<lcm::LogFile> log_;
 };
 
-// The rest of a scan's folder, on the worker thread: each capture as raw/texture.png or
-// raw/frame_NNN.png, raw/calibration.yaml, and raw/scan.yaml once complete.
+// The rest of a scan's folder, on the worker thread: each capture as raw/texture.png,
+// raw/frame_NNN.png or raw/light_<name>.png, raw/calibration.yaml, and raw/scan.yaml once
+// complete.
 class ScanRecorder {
  public:
   // Opens the scan's folder. When its log already holds captures of this scan that were not

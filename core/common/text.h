@@ -1,12 +1,21 @@
 // Small text helpers shared by messages, logs and reports.
 #pragma once
 
+#include <iomanip>
 #include <opencv2/core.hpp>
+#include <sstream>
 #include <string>
 
 namespace vellum {
 
 // "1600x1200".
+// `value` with `digits` digits after the point ("0.2").
+inline std::string Fixed(double value, int digits) {
+  std::ostringstream out;
+  out << std::fixed << std::setprecision(digits) << value;
+  return out.str();
+}
+
 inline std::string SizeText(cv::Size size) {
   return std::to_string(size.width) + "x" + std::to_string(size.height);
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 
 namespace vellum {
 namespace {
@@ -179,6 +180,13 @@ std::string IdentitySlug(const ScanIdentity& identity) {
     }
   }
   return slug;
+}
+
+bool UnitLightDirection(const cv::Vec3d& v, cv::Vec3d* unit) {
+  const double norm = cv::norm(v);
+  if (!std::isfinite(norm) || norm < 1e-9 || !(v[2] > 0)) return false;
+  *unit = v / norm;
+  return true;
 }
 
 bool ValidLightName(const std::string& name) {

@@ -92,6 +92,10 @@ struct ScanLight {
 // A light's name: 1 to 32 of a-z, 0-9, '-' and '_', starting with a letter or digit (a file
 // name on any system, and a key in report.json).
 bool ValidLightName(const std::string& name);
+inline constexpr int kMaxLights = 32;  // Extra lights a scan may have.
+// A light's direction made a unit vector; false when it is not finite, is zero, or does not point
+// up from the table (z > 0).
+bool UnitLightDirection(const cv::Vec3d& v, cv::Vec3d* unit);
 
 struct Scan {
   PatternSequence sequence;

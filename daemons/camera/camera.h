@@ -9,6 +9,7 @@
 
 #include "core/common/status.h"
 #include "core/patterns/patterns.h"
+#include "core/patterns/scan.h"
 
 namespace vellum::station {
 
@@ -18,6 +19,9 @@ struct FrameRequest {
   int pattern_index = -1;   // -1: the texture (projector black, studio light).
   PatternSpec pattern;      // What the projector shows.
   cv::Size projector;       // The projector's image size.
+  // Under an extra light (issue 17; projector black, the studio light off): its name and
+  // direction (no image). Empty name: none.
+  ScanLight light;
 };
 
 class Camera {

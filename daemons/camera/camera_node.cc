@@ -61,22 +61,36 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   FrameRequest request;
   Status s = FromMessage(m.pattern, &request.pattern);
   if (!s.ok()) return node_->Error(where + ": PATTERN_SHOWN: " + s.message(), m.scan_id);
-  if (m.pattern_count <= 0 || m.pattern_index < -1 || m.pattern_index >= m.pattern_count) {
+  if (m.light_count < 0 || m.light_count > kMaxLights) {
+    return node_->Error(where + ": PATTERN_SHOWN: light_count " + std::to_string(m.light_count) +
+                            " outside 0.." + std::to_string(kMaxLights),
+                        m.scan_id);
+  }
+  const int last = m.pattern_count + m.light_count - 1;
+  if (m.pattern_count <= 0 || m.pattern_index < -1 || m.pattern_index > last) {
     return node_->Error(
-        where + ": PATTERN_SHOWN: pattern_index outside -1.." + std::to_string(m.pattern_count - 1),
-        m.scan_id);
+        where + ": PATTERN_SHOWN: pattern_index outside -1.." + std::to_string(last), m.scan_id);
+  }
+  const bool under_light = m.pattern_index >= m.pattern_count;
+  if (under_light) {
+    s = FromMessage(m.light, &request.light);
+    if (!s.ok()) return node_->Error(where + ": PATTERN_SHOWN: " + s.message(), m.scan_id);
+  } else if (!m.light.name.empty()) {
+    return node_->Error(where + ": PATTERN_SHOWN: a light named for a pattern or the texture",
+                        m.scan_id);
   }
   request.shown_utime = m.utime;
   request.pattern_index = m.pattern_index;
   request.projector = cv::Size(m.projector_width, m.projector_height);
-  node_->SetState(
-      "capturing", m.scan_id,
-      "pattern " + std::to_string(m.pattern_index) + " of " + std::to_string(m.pattern_count));
+  node_->SetState("capturing", m.scan_id,
+                  under_light ? "under the light '" + request.light.name + "'"
+                              : "pattern " + std::to_string(m.pattern_index) + " of " +
+                                    std::to_string(m.pattern_count));
   cv::Mat image;
   int64_t exposure = 0;
   s = camera_->Capture(request, &image, &exposure);
   if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
-  if (m.pattern_index >= 0 && image.channels() == 3) {
+  if (m.pattern_index >= 0 && !under_light && image.channels() == 3) {
     cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
   }
   capture_t c{};
@@ -88,6 +102,8 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   c.projector_height = m.projector_height;
   c.pattern = m.pattern;
   c.shown_utime = m.utime;
+  c.light_count = m.light_count;
+  c.light = m.light;
   ToMessage(image, &c.image);
   c.image.utime = exposure;
   c.image.scan_id = m.scan_id;
@@ -97,7 +113,7 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   node_->Publish(channel::kCapture, &c);
   node_->Count("frames captured");
   PublishPreview(image, exposure, m.scan_id, m.pattern_index, m.pattern_count);
-  if (m.pattern_index + 1 == m.pattern_count) node_->SetState("idle", m.scan_id, "scan captured");
+  if (m.pattern_index == last) node_->SetState("idle", m.scan_id, "scan captured");
 }
 
 }  // namespace vellum::station

@@ -28,6 +28,18 @@ Status SimCamera::Capture(const FrameRequest& request, cv::Mat* image, int64_t* 
   *exposure_utime = std::max(NowUtime(), request.shown_utime + 1);
   const uint64_t seed =
       options_.seed * 1000003ULL + static_cast<uint64_t>(request.pattern_index + 1);
+  if (!request.light.name.empty()) {
+    // A light of known direction is a distant lamp from there; one without, a flood lamp the
+    // page fluoresces under (UV).
+    SceneLight light = UvLight();
+    if (request.light.directed()) {
+      light = SceneLight();
+      light.direction = request.light.direction;
+    }
+    light.name = request.light.name;
+    *image = gantry_->RenderLight(light, seed);
+    return Status::Ok();
+  }
   *image = request.pattern_index < 0
                ? gantry_->RenderTexture(seed)
                : gantry_->RenderFrame(RenderPattern(request.pattern, request.projector), seed);

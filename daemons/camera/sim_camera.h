@@ -1,6 +1,8 @@
 // The virtual gantry as a camera: renders what the camera would see of a known warped page
-// under the pattern shown, with the light model's noise (core/sim). The station's tests, the
-// demo's recording and a station without hardware run on it.
+// under the pattern shown, with the light model's noise (core/sim), and under a scan's extra
+// lights (a light with a direction as a distant lamp from there, one without as the page's UV
+// fluorescence). The station's tests, the demo's recording and a station without hardware run
+// on it.
 #pragma once
 
 #include <memory>

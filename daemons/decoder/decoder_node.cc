@@ -191,10 +191,11 @@ bool DecoderNode::Begin(int64_t scan_id) {
   stream_begun_ = false;
   if (resumed > 0 && set_.Started()) {
     const Scan held = set_.ToScan();
-    for (int k = 0; k < static_cast<int>(held.frames.size()); ++k) {
+    const int patterns = static_cast<int>(held.sequence.patterns.size());
+    for (int k = 0; k < patterns; ++k) {
       if (set_.Has(k)) {
-        StreamFrame(scan_id, held.sequence.projector_size, set_.Expected() - 1, k,
-                    held.sequence.patterns[k], held.frames[k]);
+        StreamFrame(scan_id, held.sequence.projector_size, patterns, k, held.sequence.patterns[k],
+                    held.frames[k]);
       }
     }
   }
@@ -256,7 +257,7 @@ void DecoderNode::Complete() {
 
 void DecoderNode::Stream(const capture_t& msg, const cv::Mat& image) {
   PatternSpec spec;
-  if (msg.pattern_index < 0) return;
+  if (msg.pattern_index < 0 || msg.pattern_index >= msg.pattern_count) return;  // Not a pattern.
   if (!FromMessage(msg.pattern, &spec).ok()) {
     stream_id_ = 0;
     return;

@@ -8,6 +8,7 @@
 #include "daemons/projector/sdl_projector.h"
 #include "flags/options.h"
 #include "io/calibration_io.h"
+#include "io/scan_io.h"
 #include "station/daemon.h"
 
 int main(int argc, char** argv) {
@@ -23,13 +24,20 @@ int main(int argc, char** argv) {
       {"flip", "AXIS", "mirror flip: none, horizontal, vertical or both", "none"},
       {"settle-ms", "MS", "wait after vsync before PATTERN_SHOWN", "30"},
       {"capture-timeout", "S", "fail the scan when a CAPTURE takes longer", "5"},
+      {"lights", "FILE",
+       "the station's extra lights (the file vellum-lights reads): each scan takes a frame under "
+       "each, after its patterns; empty: none",
+       ""},
+      {"light-timeout", "S", "fail the scan when a light's LIGHT_ON takes longer", "120"},
   };
   specs = Join(Join(specs, own), PatternFlagSpecs());
   return DaemonMain(
       argc, argv, "vellum-projector",
       "Shows the structured-light patterns full screen, one per CAPTURE, for each SCAN_REQUEST;\n"
-      "publishes CALIBRATION at the start of a scan and PATTERN_SHOWN for each pattern. The\n"
-      "images are of the virtual (unmirrored) projector; --flip undoes the mirror.",
+      "publishes CALIBRATION at the start of a scan and PATTERN_SHOWN for each pattern; then,\n"
+      "with --lights, asks vellum-lights for each extra light (LIGHT_REQUEST) and has the\n"
+      "camera take a frame under it. The images are of the virtual (unmirrored) projector;\n"
+      "--flip undoes the mirror.",
       specs, [](const Flags& flags, Node& node) {
         ProjectorNodeOptions options;
         cv::Size size = flags.GetSize("projector");
@@ -50,6 +58,14 @@ int main(int argc, char** argv) {
         options.settle = std::chrono::milliseconds(flags.GetInt("settle-ms", 0, 10000));
         options.capture_timeout =
             std::chrono::duration<double>(flags.GetDouble("capture-timeout", 0.1, 600));
+        if (!flags.Get("lights").empty()) {
+          StationLights lights;
+          const Status s = ReadLightsFile(flags.Get("lights"), &lights);
+          if (!s.ok()) throw UsageError(s.message());
+          options.lights = lights.lights;
+        }
+        options.light_timeout =
+            std::chrono::duration<double>(flags.GetDouble("light-timeout", 0.1, 3600));
         SdlProjectorOptions screen;
         screen.size = size;
         screen.display = flags.GetInt("display", 0, 63);

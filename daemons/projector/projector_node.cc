@@ -23,13 +23,23 @@ ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
   node->Subscribe<capture_t>(channel::kCapture, [this](const capture_t& m) { OnCapture(m); });
   node->Subscribe<calibration_t>(channel::kCalibration,
                                  [this](const calibration_t& m) { OnCalibration(m); });
+  node->Subscribe<light_t>(channel::kLightOn, [this](const light_t& m) { OnLightOn(m); });
+  std::string lights;
+  for (const ScanLight& l : options_.lights) lights += (lights.empty() ? "" : ", ") + l.name;
   node->Log("projector " + SizeText(projector_->size()) + ", " +
-            std::to_string(sequence_.patterns.size()) + " patterns per scan");
+            std::to_string(sequence_.patterns.size()) + " patterns per scan" +
+            (lights.empty() ? "" : "; then the extra lights " + lights));
 }
 
 void ProjectorNode::Tick() {
   if (!projector_->Poll()) node_->Stop();
-  if (scan_id_ != 0 && std::chrono::steady_clock::now() - shown_at_ > options_.capture_timeout) {
+  if (scan_id_ == 0) return;
+  const auto waited = std::chrono::steady_clock::now() - shown_at_;
+  if (awaiting_light_ && waited > options_.light_timeout) {
+    Fail("no LIGHT_ON for " + What(index_) + " within " + Fixed(options_.light_timeout.count(), 1) +
+         " s (is vellum-lights running and on the same bus? with its manual backend the operator "
+         "answers in the viewer)");
+  } else if (!awaiting_light_ && waited > options_.capture_timeout) {
     Fail("no CAPTURE of " + What(index_) + " within " +
          std::to_string(static_cast<int>(options_.capture_timeout.count() * 1000)) +
          " ms (is vellum-camera running and on the same bus?)");
@@ -37,6 +47,7 @@ void ProjectorNode::Tick() {
 }
 
 std::string ProjectorNode::What(int index) const {
+  if (index >= Patterns()) return "the light '" + options_.lights[index - Patterns()].name + "'";
   return index < 0 ? std::string("the texture")
                    : "pattern " + std::to_string(index) + " of " +
                          std::to_string(sequence_.patterns.size());
@@ -67,6 +78,8 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
   started.projector_width = sequence_.projector_size.width;
   started.projector_height = sequence_.projector_size.height;
   started.identity = m.identity;
+  started.light_count = static_cast<int32_t>(options_.lights.size());
+  for (const ScanLight& l : options_.lights) started.lights.push_back(ToMessage(l));
   node_->Publish(channel::kScanStarted, &started);
   if (options_.calibration) {
     calibration_t c{};
@@ -98,30 +111,64 @@ void ProjectorNode::OnCalibration(const calibration_t& m) {
 
 void ProjectorNode::OnCapture(const capture_t& m) {
   if (scan_id_ == 0 || m.scan_id != scan_id_ || m.session != session_ ||
-      m.pattern_index != index_) {
+      m.pattern_index != index_ || awaiting_light_) {
     return;
   }
-  if (index_ + 1 < static_cast<int>(sequence_.patterns.size())) {
+  if (index_ + 1 < Patterns()) {
     ShowPattern(index_ + 1);
     return;
   }
+  const int lights = static_cast<int>(options_.lights.size());
+  if (index_ + 1 < Patterns() + lights) {
+    RequestLight(index_ + 1 - Patterns());
+    return;
+  }
+  if (lights > 0) RequestLight(-1);
   const double secs =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
-  node_->Log("scan " + std::to_string(scan_id_) + ": " +
-             std::to_string(sequence_.patterns.size() + 1) + " captures in " +
-             std::to_string(secs) + " s");
+  node_->Log("scan " + std::to_string(scan_id_) + ": " + std::to_string(Patterns() + 1 + lights) +
+             " captures in " + std::to_string(secs) + " s");
   node_->Count("scans captured");
   projector_->Show(black_);
   node_->SetState("idle", scan_id_, "scan captured");
   scan_id_ = 0;
 }
 
+void ProjectorNode::RequestLight(int k) {
+  light_t m{};
+  m.scan_id = scan_id_;
+  m.session = session_;
+  m.index = k;
+  m.light_count = static_cast<int32_t>(options_.lights.size());
+  if (k >= 0) {
+    index_ = Patterns() + k;
+    projector_->Show(black_);
+    m.light = ToMessage(options_.lights[k]);
+    awaiting_light_ = true;
+    shown_at_ = std::chrono::steady_clock::now();
+    node_->SetState("scanning", scan_id_, "waiting for " + What(index_));
+  }
+  node_->Publish(channel::kLightRequest, &m);
+}
+
+void ProjectorNode::OnLightOn(const light_t& m) {
+  if (scan_id_ == 0 || !awaiting_light_ || m.scan_id != scan_id_ || m.session != session_ ||
+      m.index != index_ - Patterns() || m.light.name != options_.lights[m.index].name) {
+    return;
+  }
+  awaiting_light_ = false;
+  node_->Log("scan " + std::to_string(scan_id_) + ": " + What(index_) + " is on (" +
+             Printable(m.source, 40) + ")");
+  ShowPattern(index_);
+}
+
 void ProjectorNode::ShowPattern(int index) {
   index_ = index;
   PatternSpec spec;
   spec.kind = PatternKind::kBlack;
-  if (index >= 0) spec = sequence_.patterns[index];
-  projector_->Show(index < 0 ? black_ : RenderPattern(spec, sequence_.projector_size));
+  const bool pattern = index >= 0 && index < Patterns();
+  if (pattern) spec = sequence_.patterns[index];
+  projector_->Show(pattern ? RenderPattern(spec, sequence_.projector_size) : black_);
   std::this_thread::sleep_for(options_.settle);
   pattern_shown_t m{};
   m.scan_id = scan_id_;
@@ -131,6 +178,8 @@ void ProjectorNode::ShowPattern(int index) {
   m.projector_width = sequence_.projector_size.width;
   m.projector_height = sequence_.projector_size.height;
   m.pattern = ToMessage(spec);
+  m.light_count = static_cast<int32_t>(options_.lights.size());
+  if (index >= Patterns()) m.light = ToMessage(options_.lights[index - Patterns()]);
   node_->Publish(channel::kPatternShown, &m);
   shown_at_ = std::chrono::steady_clock::now();
   node_->SetState("scanning", scan_id_, "showing " + What(index));
@@ -140,6 +189,8 @@ void ProjectorNode::Fail(const std::string& why) {
   node_->Count("scans failed");  // Before the error goes out with the count.
   node_->Error("scan " + std::to_string(scan_id_) + " failed: " + why, scan_id_);
   projector_->Show(black_);
+  if (!options_.lights.empty()) RequestLight(-1);
+  awaiting_light_ = false;
   node_->SetState("idle");
   scan_id_ = 0;
 }

@@ -2,8 +2,11 @@
 // and publishes SCAN_STARTED and the station's CALIBRATION, then for the texture and each pattern
 // k: shows it (projector black for the texture), waits the settle time, publishes PATTERN_SHOWN(k)
 // and waits for the camera's CAPTURE(k) (of this station and session) before the next. A capture
-// that does not come fails the scan with a clear status. A CALIBRATION with scan_id 0 replaces the
-// station's calibration from the next scan on.
+// that does not come fails the scan with a clear status. Then, for each extra light of the station
+// (issue 17), with the projector black: LIGHT_REQUEST(k) to vellum-lights, and on its LIGHT_ON(k)
+// (or the operator's, from the viewer) PATTERN_SHOWN(pattern_count + k) for the camera; after the
+// last, or when the scan fails, LIGHT_REQUEST(-1) turns them all off. A CALIBRATION with scan_id 0
+// replaces the station's calibration from the next scan on.
 #pragma once
 
 #include <chrono>
@@ -13,10 +16,12 @@
 
 #include "core/geometry/calibration.h"
 #include "core/patterns/patterns.h"
+#include "core/patterns/scan.h"
 #include "daemons/projector/projector.h"
 #include "station/node.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
+#include "vellum/light_t.hpp"
 #include "vellum/scan_request_t.hpp"
 
 namespace vellum::station {
@@ -27,6 +32,11 @@ struct ProjectorNodeOptions {
   std::string calibration_source;          // Where it came from (the message says).
   std::chrono::milliseconds settle{30};    // Wait after the image is on screen.
   std::chrono::duration<double> capture_timeout{5.0};  // Longest wait for each CAPTURE.
+  // The station's extra lights, taken after the patterns in this order (names and directions;
+  // no images). Empty: none.
+  std::vector<ScanLight> lights;
+  // Longest wait for a light's LIGHT_ON (an operator switching by hand needs time).
+  std::chrono::duration<double> light_timeout{120.0};
 };
 
 class ProjectorNode {
@@ -45,7 +55,10 @@ class ProjectorNode {
   void OnRequest(const scan_request_t& m);
   void OnCapture(const capture_t& m);
   void OnCalibration(const calibration_t& m);
+  void OnLightOn(const light_t& m);
   void ShowPattern(int index);
+  void RequestLight(int k);  // k -1: all off.
+  int Patterns() const { return static_cast<int>(sequence_.patterns.size()); }
   void Fail(const std::string& why);
 
   Node* node_;
@@ -56,7 +69,8 @@ class ProjectorNode {
   // LCM thread only (the projector runs its scans there, one message at a time):
   int64_t scan_id_ = 0;  // The scan in progress, 0 if none.
   int64_t session_ = 0;  // Its session (SCAN_STARTED): captures of other sessions are not its.
-  int index_ = -1;       // What is on screen: -1 the texture, k pattern k.
+  int index_ = -1;       // What is on screen: -1 the texture, k pattern k, Patterns() + k light k.
+  bool awaiting_light_ = false;  // LIGHT_REQUEST sent, LIGHT_ON not yet come.
   std::chrono::steady_clock::time_point shown_at_, started_;
 };
 

@@ -13,6 +13,7 @@
 #include "station/messages.h"
 #include "station/testing.h"
 #include "vellum/calibration_t.hpp"
+#include "vellum/light_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_started_t.hpp"
 
@@ -174,6 +175,75 @@ TEST_F(ProjectorNodeTest, OnlyItsSessionsCapturesAdvanceItAndANewCalibrationWait
     if (c.scan_id != 0) sources.push_back(c.source);
   }
   EXPECT_EQ(sources, (std::vector<std::string>{"small rig", "recalibrated"}));
+}
+
+// Issue 17: after its patterns the scan takes a frame under each extra light: LIGHT_REQUEST(k),
+// and on LIGHT_ON(k) (this scan's session, the light's name) PATTERN_SHOWN(pattern_count + k)
+// naming the light, the projector black; LIGHT_REQUEST(-1) at the end. A LIGHT_ON that does not
+// come fails the scan with a message naming the light, and turns the lights off.
+TEST_F(ProjectorNodeTest, EachExtraLightIsAskedForAndCapturedAfterThePatterns) {
+  for (const char* name : {"raking-000", "uv"}) {
+    ScanLight light;
+    light.name = name;
+    if (name[0] == 'r') light.direction = cv::Vec3d(0.8, 0, 0.6);
+    options_.lights.push_back(light);
+  }
+  options_.light_timeout = std::chrono::duration<double>(0.3);
+  Node node("vellum-projector", &bus_.lcm());
+  auto projector = std::make_unique<WatchedProjector>(screen_);
+  WatchedProjector* screen = projector.get();
+  ProjectorNode conductor(&node, std::move(projector), options_);
+  bus_.AddTick([&] { conductor.Tick(); });
+  bus_.Watch("vellum-projector");
+  auto started = bus_.Record<scan_started_t>(channel::kScanStarted);
+  auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
+  auto requests = bus_.Record<light_t>(channel::kLightRequest);
+  size_t answered = 0, lit = 0;
+  bool answer_lights = true;
+  bus_.AddTick([&] { AnswerEveryPattern(shown, &answered); });
+  bus_.AddTick([&] {
+    while (answer_lights && lit < requests->size()) {
+      light_t on = (*requests)[lit++];
+      if (on.index < 0) continue;
+      on.source = "test";
+      bus_.probe().Publish(channel::kLightOn, &on);
+    }
+  });
+  Request(90);
+  const int patterns = static_cast<int>(MakePatternSequence(options_.patterns).patterns.size());
+  const size_t total = patterns + 1 + 2;
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] { return shown->size() == total && conductor.scan_id() == 0 && requests->size() == 3; }));
+  ASSERT_EQ(started->size(), 1u);
+  ASSERT_EQ(started->front().light_count, 2);
+  EXPECT_EQ(started->front().lights[1].name, "uv");
+  EXPECT_TRUE(started->front().lights[0].directed);
+  for (int k = 0; k < 2; ++k) {
+    const pattern_shown_t& m = (*shown)[patterns + 1 + k];
+    EXPECT_EQ(m.pattern_index, patterns + k);
+    EXPECT_EQ(m.light_count, 2);
+    EXPECT_EQ(m.light.name, options_.lights[k].name);
+    EXPECT_EQ(m.pattern.kind, int8_t{pattern_spec_t::KIND_BLACK});
+  }
+  for (int k = 0; k <= patterns; ++k) EXPECT_EQ((*shown)[k].light.name, "") << k;
+  // Black on screen under the lights.
+  for (size_t k = screen->shown.size() - 3; k < screen->shown.size(); ++k) {
+    EXPECT_EQ(cv::countNonZero(screen->shown[k]), 0) << k;
+  }
+  ASSERT_EQ(requests->size(), 3u);
+  EXPECT_EQ((*requests)[0].index, 0);
+  EXPECT_EQ((*requests)[0].session, started->front().session);
+  EXPECT_EQ((*requests)[1].light.name, "uv");
+  EXPECT_EQ((*requests)[2].index, -1) << "the lights off at the end";
+  EXPECT_EQ(node.Counter("scans captured"), 1);
+  // No LIGHT_ON: the scan fails naming the light, and the lights are turned off.
+  answer_lights = false;
+  Request(91);
+  EXPECT_TRUE(bus_.WaitForError("vellum-projector",
+                                "scan 91 failed: no LIGHT_ON for the light 'raking-000' within"));
+  EXPECT_TRUE(bus_.RunUntil([&] { return requests->back().index == -1; }));
+  EXPECT_EQ(requests->back().scan_id, 91);
+  EXPECT_EQ(node.Counter("scans failed"), 1);
 }
 
 }  // namespace
