@@ -11,6 +11,7 @@
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_store.h"
+#include "vellum/light_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -28,7 +29,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vellum;
   using namespace vellum::station;
   if (size < 1) return 0;
-  const uint8_t kind = data[0] % 8;
+  const uint8_t kind = data[0] % 9;
   ++data;
   --size;
   switch (kind) {
@@ -92,6 +93,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       stage_report_t m;
       StageReport report;
       if (Decode(data, size, &m)) (void)FromMessage(m, &report);
+      break;
+    }
+    case 8: {
+      light_t m;
+      ScanLight light;
+      if (Decode(data, size, &m)) (void)FromMessage(m.light, &light);
       break;
     }
   }

@@ -75,15 +75,66 @@ Status CalibrationBook::Get(int64_t scan_id, Calibration* calibration) const {
   return Status::Error("no CALIBRATION message for it, and no --calibration file configured");
 }
 
-TextureBook::TextureBook(Node* node, const std::string& data_dir)
+TextureBook::TextureBook(Node* node, const std::string& data_dir, bool lights)
     : data_dir_(data_dir),
       assembler_(
           node, channel::kTexture,
           [](const texture_t& m, cv::Mat* texture) { return AddChunk(m, texture); },
-          [this](int64_t id, cv::Mat* texture, const texture_t&) {
+          [this](int64_t id, cv::Mat* texture, const texture_t& last) {
             by_scan_[id] = *texture;
             KeepRecent(&by_scan_);
-          }) {}
+            light_count_[id] = last.light_count;
+            KeepRecent(&light_count_);
+            lights_.erase(id);  // A scan sent again: its lights come again after it.
+          }) {
+  if (!lights) return;
+  light_assembler_ = std::make_unique<Assembler<texture_t, ScanLight>>(
+      node, channel::kLightTexture,
+      [](const texture_t& m, ScanLight* light) {
+        if (light->image.empty()) {
+          const Status s = FromMessage(m.light, light);
+          if (!s.ok()) return s;
+        } else if (m.light.name != light->name) {
+          return Status::Error("LIGHT_TEXTURE: chunk " + std::to_string(m.chunk_index) +
+                               " is of another light than the first");
+        }
+        return AddChunk(m, &light->image);
+      },
+      [this](int64_t id, ScanLight* light, const texture_t&) {
+        std::vector<ScanLight>& list = lights_[id];
+        KeepRecent(&lights_);
+        for (ScanLight& earlier : list) {
+          if (earlier.name == light->name) {
+            earlier = *light;
+            return;
+          }
+        }
+        list.push_back(*light);
+      });
+}
+
+Status TextureBook::GetLights(int64_t scan_id, std::vector<ScanLight>* lights) const {
+  lights->clear();
+  const auto count = light_count_.find(scan_id);
+  if (count != light_count_.end()) {
+    if (count->second == 0) return Status::Ok();
+    const auto got = lights_.find(scan_id);
+    if (got != lights_.end() && static_cast<int>(got->second.size()) == count->second) {
+      *lights = got->second;
+      return Status::Ok();
+    }
+  }
+  // Not heard whole (a restart): as the decoder recorded them.
+  const std::string raw = ScanFolder::For(data_dir_, scan_id).raw();
+  Scan scan;
+  const Status s = data_dir_.empty() ? Status::Error("no data folder") : ReadScanHeader(raw, &scan);
+  if (!s.ok()) {
+    return Status::Error("its extra lights (LIGHT_TEXTURE) never arrived whole, and " + raw +
+                         " cannot give them: " + s.message());
+  }
+  *lights = scan.lights;
+  return Status::Ok();
+}
 
 Status TextureBook::Get(int64_t scan_id, cv::Mat* texture) const {
   auto it = by_scan_.find(scan_id);

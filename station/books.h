@@ -7,12 +7,15 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "core/common/status.h"
 #include "core/geometry/calibration.h"
+#include "core/patterns/scan.h"
 #include "station/assembler.h"
 #include "station/node.h"
 
@@ -37,21 +40,29 @@ class CalibrationBook {
   std::map<int64_t, Calibration> by_scan_;
 };
 
-// The texture of each recent scan, reassembled from TEXTURE chunks; for a scan whose texture
-// this process has not seen (it restarted since), the one the decoder recorded under
-// `data_dir`. Worker thread only (the chunks are reassembled there, in order with the
-// products that need them).
+// The texture of each recent scan, reassembled from TEXTURE chunks, and with `lights` the images
+// under its extra lights (LIGHT_TEXTURE); for a scan whose texture or lights this process has not
+// seen whole (it restarted since), those the decoder recorded under `data_dir`. Worker thread
+// only (the chunks are reassembled there, in order with the products that need them).
 class TextureBook {
  public:
-  TextureBook(Node* node, const std::string& data_dir);
+  TextureBook(Node* node, const std::string& data_dir, bool lights = false);
   Status Get(int64_t scan_id, cv::Mat* texture) const;
+  // The scan's extra lights with their images, in the scan's order (none for a scan without).
+  Status GetLights(int64_t scan_id, std::vector<ScanLight>* lights) const;
   // About once a second: gives up a texture whose chunks stopped coming.
-  void Tick() { assembler_.Tick(); }
+  void Tick() {
+    assembler_.Tick();
+    if (light_assembler_) light_assembler_->Tick();
+  }
 
  private:
   std::string data_dir_;
   std::map<int64_t, cv::Mat> by_scan_;
+  std::map<int64_t, int> light_count_;  // What each TEXTURE announced.
+  std::map<int64_t, std::vector<ScanLight>> lights_;
   Assembler<texture_t, cv::Mat> assembler_;
+  std::unique_ptr<Assembler<texture_t, ScanLight>> light_assembler_;
 };
 
 }  // namespace vellum::station

@@ -345,7 +345,8 @@ Status FromMessages(const std::vector<stage_report_t>& msgs, std::vector<StageRe
   return Status::Ok();
 }
 
-std::vector<texture_t> ToMessages(int64_t scan_id, const cv::Mat& texture) {
+std::vector<texture_t> TextureMessages(int64_t scan_id, const cv::Mat& texture, int light_count,
+                                       const ScanLight* light) {
   CV_Assert(texture.depth() == CV_8U && (texture.channels() == 1 || texture.channels() == 3));
   const size_t row_bytes = texture.cols * texture.elemSize();
   const auto chunks = RowChunks(texture.rows, row_bytes);
@@ -361,6 +362,8 @@ std::vector<texture_t> ToMessages(int64_t scan_id, const cv::Mat& texture) {
     m.row_begin = chunks[c].first;
     m.row_count = chunks[c].second;
     m.channels = texture.channels();
+    m.light_count = light_count;
+    if (light) m.light = ToMessage(*light);
     m.size = static_cast<int32_t>(m.row_count * row_bytes);
     m.data.resize(m.size);
     for (int r = 0; r < m.row_count; ++r) {

@@ -90,8 +90,10 @@ Status FromMessage(const stage_report_t& msg, StageReport* report);
 // The reports a product carries (every chunk carries them all).
 Status FromMessages(const std::vector<stage_report_t>& msgs, std::vector<StageReport>* reports);
 
-// The texture in chunks of rows (TEXTURE), and its reassembly.
-std::vector<texture_t> ToMessages(int64_t scan_id, const cv::Mat& texture);
+// The texture in chunks of rows (TEXTURE; the scan has `light_count` extra lights), or with
+// `light` an extra light's image (LIGHT_TEXTURE), and its reassembly.
+std::vector<texture_t> TextureMessages(int64_t scan_id, const cv::Mat& texture, int light_count = 0,
+                                       const ScanLight* light = nullptr);
 Status AddChunk(const texture_t& msg, cv::Mat* texture);
 
 // Decoded correspondences: chunks of rows, and their reassembly. A reassembled map has an ok

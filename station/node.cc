@@ -15,6 +15,8 @@
 #include <stdexcept>
 
 #include "core/common/text.h"
+#include "vellum/capture_v1_t.hpp"
+#include "vellum/scan_started_v1_t.hpp"
 #include "vellum/status_t.hpp"
 
 namespace vellum::station {
@@ -25,6 +27,43 @@ std::atomic<bool> g_signalled{false};
 void OnSignal(int) { g_signalled = true; }
 
 }  // namespace
+
+bool SafeDecode(const void* data, int64_t size, capture_t* msg) {
+  if (SafeDecode<capture_t>(data, size, msg)) return true;
+  capture_v1_t old;
+  if (!SafeDecode<capture_v1_t>(data, size, &old)) return false;
+  *msg = capture_t{};
+  msg->utime = old.utime;
+  msg->seq = old.seq;
+  msg->scan_id = old.scan_id;
+  msg->station = old.station;
+  msg->session = old.session;
+  msg->pattern_index = old.pattern_index;
+  msg->pattern_count = old.pattern_count;
+  msg->projector_width = old.projector_width;
+  msg->projector_height = old.projector_height;
+  msg->pattern = old.pattern;
+  msg->shown_utime = old.shown_utime;
+  msg->image = std::move(old.image);
+  return true;  // No extra lights.
+}
+
+bool SafeDecode(const void* data, int64_t size, scan_started_t* msg) {
+  if (SafeDecode<scan_started_t>(data, size, msg)) return true;
+  scan_started_v1_t old;
+  if (!SafeDecode<scan_started_v1_t>(data, size, &old)) return false;
+  *msg = scan_started_t{};
+  msg->utime = old.utime;
+  msg->seq = old.seq;
+  msg->station = old.station;
+  msg->scan_id = old.scan_id;
+  msg->session = old.session;
+  msg->pattern_count = old.pattern_count;
+  msg->projector_width = old.projector_width;
+  msg->projector_height = old.projector_height;
+  msg->identity = old.identity;
+  return true;  // No extra lights.
+}
 
 int64_t NowUtime() {
   return std::chrono::duration_cast<std::chrono::microseconds>(

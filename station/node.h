@@ -22,6 +22,9 @@
 #include <utility>
 #include <vector>
 
+#include "vellum/capture_t.hpp"
+#include "vellum/scan_started_t.hpp"
+
 namespace vellum::station {
 
 // Microseconds since the epoch (the utime of every message).
@@ -40,6 +43,7 @@ inline constexpr char kLightRequest[] = "LIGHT_REQUEST";
 inline constexpr char kLightPrompt[] = "LIGHT_PROMPT";
 inline constexpr char kLightOn[] = "LIGHT_ON";
 inline constexpr char kTexture[] = "TEXTURE";  // From the decoder, as it sends a scan down.
+inline constexpr char kLightTexture[] = "LIGHT_TEXTURE";  // Its extra lights' images, after it.
 inline constexpr char kCorrespondence[] = "CORRESPONDENCE";
 inline constexpr char kPointCloud[] = "POINT_CLOUD";
 inline constexpr char kFlatMesh[] = "FLAT_MESH";
@@ -63,6 +67,11 @@ bool SafeDecode(const void* data, int64_t size, Msg* msg) {
     return false;
   }
 }
+// The recorded messages whose type grew (issue 17: extra lights): a CAPTURE or SCAN_STARTED of
+// a log recorded before decodes through its earlier type (capture_v1_t, scan_started_v1_t), as a
+// scan without extra lights, so every scan's log stays readable and playable.
+bool SafeDecode(const void* data, int64_t size, capture_t* msg);
+bool SafeDecode(const void* data, int64_t size, scan_started_t* msg);
 
 // The station id when none is configured. Stations that share a network (and a multicast
 // group) need ids of their own (README, "Several gantries in one room").

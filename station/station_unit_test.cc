@@ -482,7 +482,7 @@ TEST(Assembler, AProductSentAgainMidwayIsBuiltFromTheNewSendAlone) {
       });
   const cv::Mat first(1200, 1600, CV_8UC3, cv::Scalar::all(40)),
       again(1200, 1600, CV_8UC3, cv::Scalar::all(200));
-  std::vector<texture_t> a = ToMessages(9, first), b = ToMessages(9, again);
+  std::vector<texture_t> a = TextureMessages(9, first), b = TextureMessages(9, again);
   ASSERT_GE(a.size(), 3u);
   int64_t seq = 0;
   auto send = [&](texture_t m) {

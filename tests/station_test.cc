@@ -25,8 +25,10 @@
 #include <set>
 #include <tuple>
 
+#include "core/sim/gantry.h"
 #include "io/scan_io.h"
 #include "io/xmp.h"
+#include "station/node.h"
 #include "station/scan_log.h"
 #include "station/scan_store.h"
 #include "tests/report_keys.h"
@@ -336,7 +338,7 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
     // The handshake: each frame's exposure starts after its pattern was shown, and the
     // captures come in pattern order, texture first.
     capture_t c;
-    ASSERT_GE(c.decode(e->data, 0, e->datalen), 0);
+    ASSERT_TRUE(station::SafeDecode(e->data, e->datalen, &c));
     EXPECT_GT(c.image.utime, c.shown_utime) << "pattern " << c.pattern_index;
     EXPECT_EQ(c.pattern_index, captures - 2);
     EXPECT_EQ(c.image.pattern_index, c.pattern_index);
@@ -376,6 +378,71 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
 }
 
 TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) { RunFullScan(kRig, 54); }
+
+// Issue 17: a station with extra lights (three raking lamps and a UV lamp, switched by
+// vellum-lights' sim backend): after the patterns the projector asks for each light and the
+// camera takes its frame; the scan's folder holds them (light_<name>.png, named in scan.yaml
+// with their directions), and the restorer restores each through the page's own warp, with the
+// photometric normals of the three directed ones, file for file as `vellum process` of the
+// recorded scan does.
+TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes) {
+  const std::string lights_file = dir_ + "/lights.yaml";
+  {
+    std::ofstream out(lights_file);
+    out << "%YAML:1.0\n---\nstudio_channel: 0\nlights:\n";
+    int channel = 1;
+    for (const SceneLight& l : RakingLights(3)) {
+      out << "  - { name: " << l.name << ", direction: [ " << l.direction[0] << ", "
+          << l.direction[1] << ", " << l.direction[2] << " ], channel: " << channel++ << " }\n";
+    }
+    out << "  - { name: uv, channel: " << channel << " }\n";
+  }
+  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout,
+         "--lights", lights_file},
+        {"SDL_VIDEODRIVER=offscreen"});
+  Start(Daemon("vellum-lights"), {"--backend", "sim", "--lights", lights_file, "--settle-ms", "0"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  for (const char* s : {"STATUS_CAMERA", "STATUS_PROJECTOR", "STATUS_LIGHTS"}) all.push_back(s);
+  WaitForHeartbeats(all);
+  std::string out;
+  ASSERT_EQ(RunTool({"scan", "--url", url_, "--folio", "9", "--timeout", "300"}, &out), 0) << out;
+  const size_t arrow = out.find("-> ");
+  ASSERT_NE(arrow, std::string::npos) << out;
+  std::string results = out.substr(arrow + 3);
+  results = results.substr(0, results.find('\n'));
+  const std::string raw = fs::path(results).parent_path().string() + "/raw";
+  Scan recorded;
+  ASSERT_TRUE(ReadScan(raw, &recorded).ok());
+  ASSERT_EQ(recorded.lights.size(), 4u);
+  const std::vector<SceneLight> raking = RakingLights(3);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(recorded.lights[k].name, raking[k].name);
+    EXPECT_LT(cv::norm(recorded.lights[k].direction - raking[k].direction), 1e-6) << k;
+  }
+  EXPECT_EQ(recorded.lights[3].name, "uv");
+  EXPECT_FALSE(recorded.lights[3].directed());
+  // Each light's frame is its own: lit from its side, not the texture or another light's.
+  for (int k = 0; k < 4; ++k) {
+    const cv::Mat& image = recorded.lights[k].image;
+    ASSERT_EQ(image.size(), recorded.texture.size()) << k;
+    for (int j = 0; j < k; ++j) {
+      EXPECT_GT(cv::norm(image, recorded.lights[j].image, cv::NORM_L1) / image.total(), 1.0)
+          << recorded.lights[k].name << " is " << recorded.lights[j].name << "'s frame";
+    }
+  }
+  ExpectSameAsProcess(raw, results);
+  const std::string processed = dir_ + "/process";
+  for (const ScanLight& light : recorded.lights) {
+    const std::string file = "lights/" + light.name + ".tif";
+    ASSERT_TRUE(fs::exists(results + "/" + file)) << file;
+    EXPECT_EQ(ReadText(results + "/" + file), ReadText(processed + "/" + file)) << file;
+  }
+  EXPECT_EQ(ReadText(results + "/normals.tif"), ReadText(processed + "/normals.tif"));
+  EXPECT_TRUE(fs::exists(results + "/report/relief.png"));
+}
 
 // The default rig: 1600x1200 frames, a 17-chunk correspondence map and a 23-chunk point cloud
 // on the bus, paced so that no receiver's buffer overflows.
@@ -488,7 +555,7 @@ TEST_F(StationTest, TwoGantriesOnOneBusEachRestoreTheirOwnPage) {
     int captures = 0;
     for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
       capture_t c;
-      if (e->channel != "CAPTURE" || c.decode(e->data, 0, e->datalen) < 0) continue;
+      if (e->channel != "CAPTURE" || !station::SafeDecode(e->data, e->datalen, &c)) continue;
       ++captures;
       sessions.insert(c.session);
       EXPECT_EQ(c.station, stations[k].first);
@@ -532,7 +599,7 @@ TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
   {
     lcm::LogFile log(kLog, "r");
     for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
-      if (e->channel == "CAPTURE" && texture.decode(e->data, 0, e->datalen) >= 0) break;
+      if (e->channel == "CAPTURE" && station::SafeDecode(e->data, e->datalen, &texture)) break;
     }
   }
   texture.image.width = texture.image.height = texture.image.row_stride = 8;
@@ -631,9 +698,10 @@ TEST_F(StationTest, PoisonedAndMidScanMessagesFailClearlyOrAreRefusedAndNothingI
     bool have_start = false, have_capture = false;
     for (const lcm::LogEvent* e = log.readNextEvent(); e && !(have_start && have_capture);
          e = log.readNextEvent()) {
-      if (e->channel == "SCAN_STARTED") have_start = started.decode(e->data, 0, e->datalen) >= 0;
+      if (e->channel == "SCAN_STARTED")
+        have_start = station::SafeDecode(e->data, e->datalen, &started);
       if (e->channel == "CAPTURE" && !have_capture) {
-        have_capture = capture.decode(e->data, 0, e->datalen) >= 0;
+        have_capture = station::SafeDecode(e->data, e->datalen, &capture);
       }
     }
     ASSERT_TRUE(have_start && have_capture);
@@ -727,7 +795,7 @@ TEST_F(StationTest, PoisonedAndMidScanMessagesFailClearlyOrAreRefusedAndNothingI
                                    [&](const restored_t& m) { restored.push_back(m); });
   const std::string beyond_log = tampered(700, [&](const lcm::LogEvent& capture) {
     capture_t beyond;
-    EXPECT_GE(beyond.decode(capture.data, 0, capture.datalen), 0);
+    EXPECT_TRUE(station::SafeDecode(capture.data, capture.datalen, &beyond));
     beyond.pattern_index = beyond.pattern_count + 5;
     beyond.image.pattern_index = beyond.pattern_index;
     return Injected{"CAPTURE", station::Encode(beyond)};
@@ -1241,7 +1309,7 @@ TEST_F(StationTest, DecoderKilledMidScanKeepsEveryReceivedCaptureAndTheStationGo
   std::set<int> patterns;
   for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
     capture_t c;
-    if (e->channel == "CAPTURE" && c.decode(e->data, 0, e->datalen) >= 0) {
+    if (e->channel == "CAPTURE" && station::SafeDecode(e->data, e->datalen, &c)) {
       patterns.insert(c.pattern_index);
     }
   }

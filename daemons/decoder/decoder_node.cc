@@ -291,8 +291,16 @@ void DecoderNode::StreamFrame(int64_t scan_id, cv::Size projector, int count, in
 
 Status DecoderNode::Send(int64_t id, const Scan& scan) {
   node_->SetState("busy", id, "decoding");
-  std::vector<texture_t> texture = ToMessages(id, scan.texture);
+  std::vector<texture_t> texture =
+      TextureMessages(id, scan.texture, static_cast<int>(scan.lights.size()));
   node_->PublishChunks(channel::kTexture, &texture);
+  for (const ScanLight& light : scan.lights) {
+    cv::Mat image = light.image;  // The camera's 8 bits (a 16-bit one from a scan on disk, cut).
+    if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 257);
+    std::vector<texture_t> chunks =
+        TextureMessages(id, image, static_cast<int>(scan.lights.size()), &light);
+    node_->PublishChunks(channel::kLightTexture, &chunks);
+  }
   // Taken up as it came when the whole scan was; else read from its folder as it is decoded
   // (which ends any other scan's stream: that one is read from its folder in turn).
   const bool streamed = id == stream_id_ && stream_begun_ &&

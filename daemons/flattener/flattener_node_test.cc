@@ -34,7 +34,7 @@ class FlattenerNodeTest : public ::testing::Test {
     if (!HasFailure()) fs::remove_all(options_.data_dir);
   }
   void PublishTexture(int64_t id, const cv::Mat& texture) {
-    for (texture_t& m : ToMessages(id, texture)) bus_.probe().Publish(channel::kTexture, &m);
+    for (texture_t& m : TextureMessages(id, texture)) bus_.probe().Publish(channel::kTexture, &m);
   }
   void PublishPoints(int64_t id) {
     for (point_cloud_t& m : ToMessages(id, SmallScanProducts().map.points, FirstStages(2))) {

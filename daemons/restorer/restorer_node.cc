@@ -21,7 +21,7 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
       options_(options),
       calibrations_(node, options.fallback_calibration ? &*options.fallback_calibration : nullptr,
                     options.data_dir),
-      textures_(node, options.data_dir),
+      textures_(node, options.data_dir, /*lights=*/true),
       sheets_(
           node, channel::kFlatMesh,
           [](const mesh_t& m, Sheet* sheet) {
@@ -67,12 +67,30 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
     scans_.erase(id);
     return node_->FailScan(id, restore.status.message());
   }
+  // The scan's extra lights through the page's own warp, as `vellum process` does it.
+  std::vector<ScanLight> lights;
+  s = textures_.GetLights(id, &lights);
+  std::optional<StageReport> lit;
+  if (s.ok() && !lights.empty()) {
+    node_->SetState("busy", id, "restoring its " + std::to_string(lights.size()) + " extra lights");
+    std::vector<StageReport> earlier = stages;
+    earlier.push_back(restore);
+    LightsResult result;
+    lit = LightsStage(lights, sheet_page.mask, sheet_.mesh, sheet_.flat, o.camera_icc, restored,
+                      earlier, folder.results(), name, &result);
+    s = lit->status;
+  }
+  if (!s.ok()) {
+    scans_.erase(id);
+    return node_->FailScan(id, s.message());
+  }
   Pages& pages = scans_[id];
   pages.common.clear();
   std::vector<StageReport>& mine = pages.per_page[sheet_page.index];
   mine.clear();
   for (StageReport& stage : stages) (stage.page.empty() ? pages.common : mine).push_back(stage);
   mine.push_back(restore);
+  if (lit) mine.push_back(*lit);
   pages.restored[sheet_page.index] = std::move(restored);
   if (static_cast<int>(pages.names.size()) < sheet_page.count) pages.names.resize(sheet_page.count);
   pages.names[sheet_page.index] = name;

@@ -1,5 +1,6 @@
 // vellum-restorer's node: FLAT_MESH chunks + the scan's texture and calibration -> each page
-// restored (restored.tif, restored_mask.png, restored.json and the report's pictures), then,
+// restored (restored.tif, restored_mask.png, restored.json and the report's pictures; the images
+// under the scan's extra lights, LIGHT_TEXTURE, through the same warp: lights/, normals.tif), then,
 // once every page of the scan is in, the scan's report (report.html, report.json: every stage's
 // report, as `vellum process` writes them) -> RESTORED with a preview and the warnings.
 #pragma once

@@ -43,7 +43,7 @@ class RestorerNodeTest : public ::testing::Test {
     return ToMessages(id, p.mesh, MeshOptions().bend_springs, p.flat.flat, FirstStages(5), page);
   }
   void Publish(int64_t id, std::vector<mesh_t> sheet) {
-    for (texture_t& m : ToMessages(id, SmallScan().texture)) {
+    for (texture_t& m : TextureMessages(id, SmallScan().texture)) {
       bus_.probe().Publish(channel::kTexture, &m);
     }
     for (mesh_t& m : sheet) bus_.probe().Publish(channel::kFlatMesh, &m);
