@@ -207,6 +207,38 @@ TEST_F(IoTest, ScanRoundTrip) {
 
 // Issue 17: a scan's extra lights (scan.yaml `lights`, light_<name>.png) round trip, a 16-bit
 // light stays 16-bit, and a bad entry or a missing file is an error naming the light.
+// Issue 17: the station's lights file (what vellum-projector and vellum-lights read): the
+// shipped example reads, with its channels; a bad one is refused with the file and the problem.
+TEST_F(IoTest, TheStationsLightsFileReadsAndABadOneIsNamed) {
+  StationLights lights;
+  const std::string shipped = std::string(VELLUM_SOURCE_DIR) + "/config/lights.yaml";
+  ASSERT_TRUE(ReadLightsFile(shipped, &lights).ok()) << ReadLightsFile(shipped, &lights).message();
+  ASSERT_EQ(lights.lights.size(), 4u);
+  EXPECT_EQ(lights.channels, (std::vector<int>{1, 2, 3, 4}));
+  EXPECT_EQ(lights.studio_channel, 0);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_TRUE(lights.lights[k].directed()) << k;
+    EXPECT_NEAR(cv::norm(lights.lights[k].direction), 1.0, 1e-9);
+  }
+  EXPECT_EQ(lights.lights[3].name, "uv");
+  EXPECT_FALSE(lights.lights[3].directed());
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"lights: []", "key 'lights' must be a non-empty sequence"},
+      {"lights:\n  - { name: UV }", "light 0: 'name' must be 1 to 32"},
+      {"lights:\n  - { name: uv, channel: 300 }", "light 0 ('uv'): 'channel' must be"},
+      {"lights:\n  - { name: low, direction: [ 1, 0, -0.1 ] }", "must point up from the table"},
+      {"studio_channel: x\nlights:\n  - { name: uv }", "'studio_channel' must be"},
+  };
+  for (const auto& [text, message] : bad) {
+    const std::string path = Path("bad_lights.yaml");
+    std::ofstream(path) << "%YAML:1.0\n---\n" << text << "\n";
+    const Status s = ReadLightsFile(path, &lights);
+    EXPECT_FALSE(s.ok()) << text;
+    EXPECT_NE(s.message().find(path), std::string::npos) << s.message();
+    EXPECT_NE(s.message().find(message), std::string::npos) << text << ": " << s.message();
+  }
+}
+
 TEST_F(IoTest, ScanLightsRoundTripAndBadOnesAreNamed) {
   Scan scan = SmallScan();
   ScanLight raking;

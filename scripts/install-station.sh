@@ -6,6 +6,7 @@
 # vellum-bus-firewall.service with vellum.target). Then: edit /etc/vellum/*.yaml, put the calibration in
 # /etc/vellum/calibration.yaml and run
 #   systemctl enable --now vellum.target vellum-camera@video0 vellum-projector@0
+# (and vellum-lights, for a station with extra lights: /etc/vellum/lights.yaml)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 prefix=${PREFIX:-/usr/local}
@@ -13,7 +14,8 @@ bash scripts/install-deps.sh
 bash scripts/build.sh
 cmake --install build --prefix "$prefix"
 mkdir -p /etc/vellum /var/lib/vellum/scans
-for f in "$prefix"/share/vellum/config/vellum-*.yaml "$prefix"/share/vellum/config/vellum-bus.nft; do
+for f in "$prefix"/share/vellum/config/vellum-*.yaml "$prefix"/share/vellum/config/lights.yaml \
+         "$prefix"/share/vellum/config/vellum-bus.nft; do
   [ -e "/etc/vellum/$(basename "$f")" ] || cp "$f" /etc/vellum/
 done
 if [ -d /run/systemd/system ]; then

@@ -1599,8 +1599,8 @@ TEST_F(StationTest, ScansBackToBackKeepMemoryBounded) {
 TEST_F(StationTest, EveryDaemonHasHelpAndRejectsABadConfigFile) {
   std::ofstream(dir_ + "/bad.yaml") << "%YAML:1.0\n---\nno-such-flag: 3\n";
   for (const char* name :
-       {"vellum-camera", "vellum-projector", "vellum-decoder", "vellum-triangulator",
-        "vellum-flattener", "vellum-restorer", "vellum-viewer"}) {
+       {"vellum-camera", "vellum-projector", "vellum-lights", "vellum-decoder",
+        "vellum-triangulator", "vellum-flattener", "vellum-restorer", "vellum-viewer"}) {
     Process help({Daemon(name), "--help"}, dir_ + "/help.log");
     EXPECT_EQ(help.Wait(30), 0) << name;
     EXPECT_NE(help.Output().find("--url"), std::string::npos) << name;

@@ -10,6 +10,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/text.h"
 #include "core/outline/outline.h"
 #include "station/chain.h"
 #include "station/messages.h"
@@ -161,9 +162,21 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
     Started(m.scan_id);
     progress_ = "scan " + std::to_string(m.scan_id) + ": " +
                 (m.pattern_index < 0 ? std::string("texture")
-                                     : "pattern " + std::to_string(m.pattern_index + 1) + " of " +
-                                           std::to_string(m.pattern_count));
+                 : m.pattern_index >= m.pattern_count
+                     ? "under the light '" + Printable(m.light.name, 40) + "'"
+                     : "pattern " + std::to_string(m.pattern_index + 1) + " of " +
+                           std::to_string(m.pattern_count));
   });
+  node->Subscribe<light_t>(channel::kLightPrompt, [this](const light_t& m) {
+    prompt_ = m;
+    prompt_.text = Printable(m.text, 300);
+    if (prompt_.text.empty()) prompt_.text = "(vellum-lights asks, with no words)";
+  });
+  node->Subscribe<light_t>(channel::kLightOn, [this](const light_t& m) {
+    if (m.scan_id == prompt_.scan_id && m.index == prompt_.index) prompt_.text.clear();
+  });
+  node->Subscribe<status_t>(StatusChannel("vellum-lights"),
+                            [this](const status_t& m) { OnStatus(m); });
   auto on_status = [this](const status_t& m) { OnStatus(m); };
   for (const char* process : kGantry) node->Subscribe<status_t>(StatusChannel(process), on_status);
   for (const ChainLink& link : kChain) {
@@ -271,6 +284,20 @@ void ViewerNode::OnKey(SDL_Keycode key) {
     }
     case SDLK_c:
       sheet_ = !sheet_;
+      break;
+    case SDLK_l:  // The operator has switched the light asked for (or off, at the end).
+      if (!prompt_.text.empty()) {
+        if (prompt_.index >= 0) {
+          light_t on = prompt_;
+          on.utime = 0;
+          on.text.clear();
+          on.source = "operator";
+          node_->Publish(channel::kLightOn, &on);
+          progress_ = "scan " + std::to_string(on.scan_id) + ": the light '" + on.light.name +
+                      "' is on (the operator)";
+        }
+        prompt_.text.clear();
+      }
       break;
     case SDLK_z:
       zoom_ = !zoom_;
@@ -436,6 +463,7 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
   // The daemons.
   int y = strip.y + strip.height + 18;
   std::vector<const char*> processes(std::begin(kGantry), std::end(kGantry));
+  if (statuses_.count("vellum-lights")) processes.push_back("vellum-lights");  // Once heard.
   for (const ChainLink& link : kChain) processes.push_back(link.process);
   for (const char* process : processes) {
     auto it = statuses_.find(process);
@@ -579,6 +607,23 @@ cv::Mat ViewerNode::Draw() const {
                 cv::FONT_HERSHEY_SIMPLEX, 0.42, kAmber, 1, cv::LINE_AA);
   }
   if (sheet_) DrawSheet(canvas, cv::Rect(mid_x, top, w - mid_x - 8, h - top - 8));
+  // The operator's prompt to switch a light, over the middle and the right, in blue.
+  if (!prompt_.text.empty()) {
+    const std::vector<std::string> wrapped =
+        Wrap(prompt_.text, static_cast<size_t>(std::max(30, (w - mid_x - 40) / 11)));
+    const int n = std::min<int>(static_cast<int>(wrapped.size()), 6);
+    const cv::Rect box(mid_x, top + h / 4, w - mid_x - 8, 30 * n + 60);
+    cv::rectangle(canvas, box, cv::Scalar(90, 40, 10), cv::FILLED);
+    cv::rectangle(canvas, box, cv::Scalar(255, 160, 60), 3);
+    cv::putText(canvas,
+                prompt_.index >= 0 ? "LIGHTS: switch by hand, then press L" : "LIGHTS (L: done)",
+                box.tl() + cv::Point(12, 28), cv::FONT_HERSHEY_SIMPLEX, 0.7,
+                cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
+    for (int k = 0; k < n; ++k) {
+      cv::putText(canvas, wrapped[k], box.tl() + cv::Point(12, 58 + 30 * k),
+                  cv::FONT_HERSHEY_SIMPLEX, 0.65, cv::Scalar(255, 230, 200), 1, cv::LINE_AA);
+    }
+  }
   // The failure's whole message, over the middle and the right, in red.
   if (failed) {
     const std::vector<std::string> wrapped =

@@ -16,6 +16,11 @@
 // c = the session's contact sheet (every scan restored this session, its verdict in its
 // colour; on disk, <data>/index.html), left/right = step through the scans of this session,
 // q or Esc = quit.
+//
+// A station whose extra lights the operator switches by hand (vellum-lights --backend manual):
+// its LIGHT_PROMPT shows as a blue box over the results (which light to switch on, and that
+// nothing else may be on), and l answers LIGHT_ON for the scan, which then goes on; the box
+// goes when the light is on. vellum-lights' status is listed once it is heard.
 #pragma once
 
 #include <chrono>
@@ -28,6 +33,7 @@
 #include "core/patterns/scan.h"
 #include "display/window.h"
 #include "station/node.h"
+#include "vellum/light_t.hpp"
 #include "vellum/restored_t.hpp"
 #include "vellum/status_t.hpp"
 
@@ -57,6 +63,8 @@ class ViewerNode {
   const std::string& preview_leaf() const { return preview_leaf_; }
   // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
   const std::string& failure() const { return failure_; }
+  // The operator's prompt shown ("" when none): LIGHT_PROMPT's text.
+  const std::string& light_prompt() const { return prompt_.text; }
 
  private:
   struct Result {
@@ -100,6 +108,7 @@ class ViewerNode {
   int64_t failed_scan_ = 0;
   std::string failure_;
   std::map<std::string, int64_t> error_utime_;  // Each process's last error seen.
+  light_t prompt_{};                            // The operator's prompt (text "" when none).
 };
 
 }  // namespace vellum::station

@@ -12,6 +12,7 @@
 
 #include "station/messages.h"
 #include "station/testing.h"
+#include "vellum/light_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_request_t.hpp"
 #include "vellum/status_t.hpp"
@@ -386,6 +387,48 @@ TEST_F(ViewerNodeTest, AnUndecodablePreviewIsReportedAndTheViewerGoesOn) {
   restored_t good = Restored(14);
   bus_.probe().Publish(channel::kRestored, &good);
   EXPECT_TRUE(bus_.RunUntil([&] { return viewer.results() == 2; }));
+}
+
+// Issue 17: lights switched by hand. vellum-lights' LIGHT_PROMPT shows as a blue box with its
+// words; L answers LIGHT_ON for the scan (its session, the light, "operator"), and the box goes.
+TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
+  Node node("vellum-viewer", &bus_.lcm());
+  auto owned = Window();
+  display::Window* window = owned.get();
+  ViewerNode viewer(&node, std::move(owned));
+  bus_.AddTick([&] { viewer.Tick(); });
+  auto on = bus_.Record<light_t>(channel::kLightOn);
+  light_t prompt{};
+  prompt.scan_id = 31;
+  prompt.session = 77;
+  prompt.index = 1;
+  prompt.light_count = 3;
+  prompt.light.name = "raking-120";
+  prompt.text = "Switch on the light 'raking-120' and nothing else; then press L in the viewer.";
+  bus_.probe().Publish(channel::kLightPrompt, &prompt);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.light_prompt().empty(); }));
+  EXPECT_NE(viewer.light_prompt().find("'raking-120'"), std::string::npos);
+  // The box's fill (B 90, G 40, R 10) over the middle of the window.
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        if (screen.empty()) return false;
+        cv::Mat mask;
+        cv::inRange(screen, cv::Scalar(80, 30, 0), cv::Scalar(100, 50, 20), mask);
+        return cv::countNonZero(mask) > 5000;
+      },
+      10));
+  SDL_Event key{};
+  key.type = SDL_KEYDOWN;
+  key.key.keysym.sym = SDLK_l;
+  ASSERT_EQ(SDL_PushEvent(&key), 1) << SDL_GetError();
+  ASSERT_TRUE(bus_.RunUntil([&] { return !on->empty(); }, 10));
+  EXPECT_EQ(on->back().scan_id, 31);
+  EXPECT_EQ(on->back().session, 77);
+  EXPECT_EQ(on->back().index, 1);
+  EXPECT_EQ(on->back().light.name, "raking-120");
+  EXPECT_EQ(on->back().source, "operator");
+  EXPECT_TRUE(viewer.light_prompt().empty());
 }
 
 }  // namespace
