@@ -411,8 +411,11 @@ int RunExport(const std::vector<std::string>& args) {
     std::fprintf(stderr, "vellum export: %s\n", s.message().c_str());
     return 1;
   }
-  std::printf("scan %lld: %zu frames%s -> %s\n", static_cast<long long>(id), scan.frames.size(),
-              has_calibration ? " and calibration.yaml" : "", positional[1].c_str());
+  const std::string lights =
+      scan.lights.empty() ? "" : ", " + std::to_string(scan.lights.size()) + " extra lights";
+  std::printf("scan %lld: %zu frames%s%s -> %s\n", static_cast<long long>(id), scan.frames.size(),
+              lights.c_str(), has_calibration ? " and calibration.yaml" : "",
+              positional[1].c_str());
   return 0;
 }
 
@@ -423,7 +426,8 @@ int RunImport(const std::vector<std::string>& args) {
       {"calibration", "FILE", "calibration to include (default: DIR/calibration.yaml if any)", ""}};
   Flags flags("vellum import DIR LOG",
               "Writes a scan directory as an LCM log as station --station records it:\n"
-              "SCAN_STARTED, CALIBRATION, then the texture and every frame on CAPTURE.\n"
+              "SCAN_STARTED, CALIBRATION, then the texture, every frame and the image under\n"
+              "each extra light on CAPTURE.\n"
               "lcm-logplayer of it drives the station's decoder and processing daemons (a scan id\n"
               "the station has recorded before is refused: give each playback its own).",
               specs);
@@ -439,12 +443,12 @@ int RunImport(const std::vector<std::string>& args) {
                       "/texture.png: a 16-bit texture cannot go on the bus (its images are "
                       "8-bit); process the folder with vellum process instead");
   }
-  if (s.ok() && !scan.lights.empty()) {
-    // Said, not refused: the log still drives the station; the lights need vellum process.
-    std::fprintf(stderr,
-                 "vellum import: note: the scan's %zu extra lights (light_*.png) do not go on "
-                 "the bus; vellum process restores them\n",
-                 scan.lights.size());
+  for (const ScanLight& light : scan.lights) {
+    if (s.ok() && light.image.depth() != CV_8U) {
+      s = Status::Error(positional[0] + "/" + LightFileName(light.name) +
+                        ": a 16-bit light's image cannot go on the bus (its images are 8-bit); "
+                        "process the folder with vellum process instead");
+    }
   }
   calibration_t calibration{};
   bool has_calibration = false;

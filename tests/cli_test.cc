@@ -493,7 +493,8 @@ TEST_F(CliTest, AFlatFieldGivesEachPageItsAlbedo) {
 
 // Issue 17: a scan with raking lights and UV (vellum render --raking 3 --uv true) gives each light
 // restored beside the page, of its size, with its dpi (as exiftool reads it), and the normals;
-// vellum import says the lights stay off the bus.
+// vellum import puts the lights in the log (their captures after the patterns), and vellum
+// export gives them back as they were.
 TEST_F(CliTest, ExtraLightsAreRestoredBesideThePage) {
   const std::string scan = (root_ / "lit").string(), out = (root_ / "out_lit").string();
   Result r = RunVellum("render --raking 3 --uv true --ridge 0.2,120 --truth false --calibration " +
@@ -530,7 +531,19 @@ TEST_F(CliTest, ExtraLightsAreRestoredBesideThePage) {
             std::string::npos);
   r = RunVellum("import " + scan + " " + (root_ / "lit.lcm").string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string back = (root_ / "lit_back").string();
+  r = RunVellum("export " + (root_ / "lit.lcm").string() + " " + back);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("4 extra lights"), std::string::npos) << r.output;
+  Scan original, exported;
+  ASSERT_TRUE(ReadScan(scan, &original).ok());
+  ASSERT_TRUE(ReadScan(back, &exported).ok());
+  ASSERT_EQ(exported.lights.size(), original.lights.size());
+  for (size_t k = 0; k < original.lights.size(); ++k) {
+    EXPECT_EQ(exported.lights[k].name, original.lights[k].name);
+    EXPECT_EQ(exported.lights[k].direction, original.lights[k].direction) << k;
+    EXPECT_EQ(cv::norm(exported.lights[k].image, original.lights[k].image, cv::NORM_INF), 0) << k;
+  }
 }
 
 // Issue 17: the studio lamps' field from a white target's texture (vellum calibrate studio), then
