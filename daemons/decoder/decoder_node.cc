@@ -91,7 +91,13 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     if (!Log(channel::kCapture, msg.scan_id, msg.utime, Encode(msg))) return;
     auto copy = std::make_shared<capture_t>(msg);
     last_capture_ = std::chrono::steady_clock::now();
+    awaiting_light_ = false;
     node_->Post([this, copy] { OnCapture(*copy); }, "a CAPTURE");
+  });
+  node->Subscribe<light_t>(channel::kLightRequest, [this](const light_t& msg) {
+    if (!gate_.Holds(msg.scan_id, msg.session)) return;
+    awaiting_light_ = msg.index >= 0;
+    last_capture_ = std::chrono::steady_clock::now();
   });
   node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
     if (!Admitted(gate_.AdmitCalibration(msg), 0)) return;
@@ -116,8 +122,9 @@ bool DecoderNode::Admitted(const ScanGate::Decision& d, int64_t error_scan_id) {
 }
 
 void DecoderNode::Tick() {
-  if (!waiting_ || std::chrono::steady_clock::now() - last_capture_ <
-                       std::chrono::duration<double>(options_.scan_timeout_s)) {
+  if (!waiting_ || awaiting_light_ ||
+      std::chrono::steady_clock::now() - last_capture_ <
+          std::chrono::duration<double>(options_.scan_timeout_s)) {
     return;
   }
   waiting_ = false;

@@ -21,6 +21,7 @@
 #include "station/supervisor.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
+#include "vellum/light_t.hpp"
 
 namespace vellum::station {
 
@@ -82,6 +83,10 @@ class DecoderNode {
   CaptureLog log_;
   std::map<std::string, std::chrono::steady_clock::time_point> refusal_reported_;  // By reason.
   std::chrono::steady_clock::time_point last_capture_;
+  // The scan's projector waits for an extra light (LIGHT_REQUEST; an operator switching by hand
+  // may take minutes): no timeout until the light's capture, or the lights off (the projector's
+  // own light timeout fails the scan then, and this one runs again).
+  bool awaiting_light_ = false;
   std::atomic<bool> waiting_{false};  // A scan is being captured (set by the worker).
 };
 

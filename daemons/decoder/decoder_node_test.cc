@@ -20,6 +20,7 @@
 #include "station/messages.h"
 #include "station/scan_log.h"
 #include "station/testing.h"
+#include "vellum/light_t.hpp"
 #include "vellum/restored_t.hpp"
 #include "vellum/scan_progress_t.hpp"
 
@@ -185,6 +186,71 @@ TEST_F(DecoderNodeTest, AnIncompleteScanIsGivenUpNamingWhatIsMissingAndTheNextIs
   PublishScan(32);
   EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
   EXPECT_EQ(progress->back().scan_id, 32);
+}
+
+// Issue 17: a scan with extra lights. While its projector waits for a light (LIGHT_REQUEST: an
+// operator may take minutes) the scan is not given up for its silence; the lights' captures
+// complete it, recorded as light_<name>.png and named in scan.yaml. After the lights are turned
+// off (LIGHT_REQUEST -1) with a light's capture still missing, the timeout runs again.
+TEST_F(DecoderNodeTest, AScanWaitingForALightIsNotGivenUpAndItsLightsAreRecorded) {
+  Node node("vellum-decoder", &bus_.lcm());
+  DecoderNode decoder(&node, options_);
+  bus_.AddTick([&] { decoder.Tick(); });
+  bus_.Watch("vellum-decoder");
+  Scan scan = SmallScan();
+  for (const char* name : {"raking-000", "uv"}) {
+    ScanLight light;
+    light.name = name;
+    if (name[0] == 'r') light.direction = cv::Vec3d(0.8, 0, 0.6);
+    light.image = cv::Mat(scan.texture.size(), CV_8U, cv::Scalar(name[0] == 'r' ? 90 : 40));
+    scan.lights.push_back(light);
+  }
+  const int patterns = static_cast<int>(scan.frames.size());
+  auto publish_scan = [&](int64_t id, int64_t session, int lights) {
+    scan_started_t m = MakeScanStarted(scan, id, session);
+    bus_.probe().Publish(channel::kScanStarted, &m);
+    for (int k = -1; k < patterns + lights; ++k) {
+      capture_t c = MakeCapture(scan, id, k, NowUtime());
+      c.session = session;
+      bus_.probe().Publish(channel::kCapture, &c);
+    }
+  };
+  auto request = [&](int64_t id, int64_t session, int index) {
+    light_t r{};
+    r.scan_id = id;
+    r.session = session;
+    r.index = index;
+    r.light_count = 2;
+    if (index >= 0) r.light = ToMessage(scan.lights[index]);
+    bus_.probe().Publish(channel::kLightRequest, &r);
+  };
+  publish_scan(41, 4141, 0);
+  request(41, 4141, 0);
+  // Three times the decoder's timeout (1 s) in silence: the scan waits for its light.
+  const auto start = std::chrono::steady_clock::now();
+  bus_.RunUntil([&] { return std::chrono::steady_clock::now() - start > std::chrono::seconds(3); });
+  EXPECT_EQ(node.Counter("scans failed"), 0) << bus_.Status("vellum-decoder").last_error;
+  for (int k = 0; k < 2; ++k) {
+    capture_t c = MakeCapture(scan, 41, patterns + k, NowUtime());
+    c.session = 4141;
+    bus_.probe().Publish(channel::kCapture, &c);
+  }
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("scans recorded") == 1; }))
+      << bus_.Status("vellum-decoder").last_error;
+  Scan recorded;
+  ASSERT_TRUE(ReadScan(ScanFolder::For(data_, 41).raw(), &recorded).ok());
+  ASSERT_EQ(recorded.lights.size(), 2u);
+  EXPECT_EQ(recorded.lights[0].name, "raking-000");
+  EXPECT_TRUE(recorded.lights[0].directed());
+  EXPECT_EQ(cv::norm(recorded.lights[1].image, scan.lights[1].image, cv::NORM_INF), 0);
+  // The lights off with the second light's capture missing: given up once the timeout has run.
+  publish_scan(42, 4242, 1);
+  request(42, 4242, 1);
+  request(42, 4242, -1);
+  ASSERT_TRUE(bus_.WaitForError("vellum-decoder", "scan 42 failed: no capture for 1 s", 30))
+      << bus_.Status("vellum-decoder").last_error;
+  EXPECT_NE(bus_.Status("vellum-decoder").last_error.find("(light 1)"), std::string::npos)
+      << bus_.Status("vellum-decoder").last_error;
 }
 
 // The supervisor in the decoder: a restarted daemon (a new pid in its heartbeat) is sent again
