@@ -15,6 +15,7 @@
 #include "io/iiif.h"
 #include "io/json.h"
 #include "io/products.h"
+#include "io/ptm.h"
 #include "io/scan_io.h"
 
 namespace vellum {
@@ -611,8 +612,27 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
     out->names.push_back(lights[k].name);
     out->images.push_back(images[k]);
   }
+  const SheetFrame frame = photometric ? RestoredSheetFrame(mesh, flat, restored) : SheetFrame();
+  if (s.ok() && directed.size() >= 6 && photometric) {
+    // The page relit at will in an RTI viewer: a PTM of the flat page from the directed lights.
+    std::vector<cv::Mat> lit;
+    for (size_t k = 0; k < lights.size(); ++k) {
+      if (lights[k].directed()) lit.push_back(images[k]);
+    }
+    out->ptm = FitPtm(lit, directions, frame.right, frame.up);
+    if (out->ptm.status.ok()) {
+      if (!restored.mask.empty()) out->ptm.valid.setTo(0, restored.mask == 0);
+      const double leaf_px = restored.mask.empty() ? static_cast<double>(restored.image.total())
+                                                   : std::max(1, cv::countNonZero(restored.mask));
+      r.Number("ptm", "solved_share", cv::countNonZero(out->ptm.valid) / leaf_px);
+      r.Number("ptm", "lights", static_cast<double>(lit.size()));
+      s = stage.Output(PageFile(page, "lights.ptm"),
+                       WritePtm((fs::path(dir) / "lights.ptm").string(), out->ptm));
+    } else {
+      r.Text("ptm", "not_written", out->ptm.status.message());
+    }
+  }
   if (s.ok() && photometric) {
-    const SheetFrame frame = RestoredSheetFrame(mesh, flat, restored);
     out->normals = NormalsOnPage(images.back(), frame.right, frame.up, frame.normal);
     out->normals.setTo(0, restored.mask.empty() ? cv::Mat() : restored.mask == 0);
     figures["model"] =

@@ -162,11 +162,14 @@ StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
 // each other pixel for pixel: lights/<name>.tif in the page's folder (as captured, with the
 // camera's ICC profile `camera_icc`). With three or more lights of known direction, the page's
 // photometric normals (core/shading/photometric.h) on the flat page in its own frame:
-// normals.tif (WriteNormalMap) and a picture of the relief lit from the top left.
+// normals.tif (WriteNormalMap) and a picture of the relief lit from the top left. With six or
+// more, at two or more elevations, a polynomial texture map of the flat page for RTI viewers:
+// lights.ptm (FitPtm, WritePtm).
 struct LightsResult {
   std::vector<std::string> names;  // The lights restored, in the scan's order.
   std::vector<cv::Mat> images;     // Each restored, registered to the restored page.
   cv::Mat normals;  // CV_32FC3 on the restored page (x right, y up, z out); empty without.
+  PtmResult ptm;    // With six or more directed lights at two elevations: lights.ptm.
 };
 StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
                         const Mesh& mesh, const std::vector<cv::Point2d>& flat,

@@ -1,5 +1,8 @@
 #include "core/shading/photometric.h"
 
+#include <algorithm>
+#include <atomic>
+#include <cmath>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
@@ -89,6 +92,99 @@ PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
   const int wanted = mask.empty() ? size.area() : cv::countNonZero(mask);
   result.marked = wanted - result.solved;
   result.status = Status::Ok();
+  return result;
+}
+
+PtmResult FitPtm(const std::vector<cv::Mat>& images, const std::vector<cv::Vec3d>& directions,
+                 const cv::Mat& right, const cv::Mat& up, const PhotometricOptions& options) {
+  PtmResult result;
+  if (images.size() < 6 || images.size() != directions.size() || right.type() != CV_32FC3 ||
+      up.type() != CV_32FC3 || right.size() != images[0].size() || up.size() != right.size()) {
+    result.status = Status::Error(
+        "a PTM needs six or more lights, each with a direction, and the page's frame (got " +
+        std::to_string(images.size()) + " images and " + std::to_string(directions.size()) +
+        " directions)");
+    return result;
+  }
+  double low = 1, high = -1;
+  for (const cv::Vec3d& d : directions) {
+    const double z = d[2] / std::max(1e-12, cv::norm(d));
+    low = std::min(low, z), high = std::max(high, z);
+  }
+  if (!(high - low > 0.05)) {
+    result.status = Status::Error(
+        "a PTM needs lights at two or more elevations (these are all within 3 degrees of one: "
+        "the fit cannot tell lu^2 + lv^2 from a constant)");
+    return result;
+  }
+  const cv::Size size = images[0].size();
+  const int n = static_cast<int>(images.size());
+  std::vector<cv::Mat> levels(n), colours(n);
+  for (int k = 0; k < n; ++k) {
+    const cv::Mat& im = images[k];
+    if (im.empty() || im.size() != size || (im.depth() != CV_8U && im.depth() != CV_16U) ||
+        (im.channels() != 1 && im.channels() != 3)) {
+      result.status = Status::Error("light image " + std::to_string(k) +
+                                    " must be 8 or 16 bit, gray or colour, of the first's size");
+      return result;
+    }
+    const double full = im.depth() == CV_8U ? 255.0 : 65535.0;
+    cv::Mat gray = im;
+    if (im.channels() == 3) cv::cvtColor(im, gray, cv::COLOR_BGR2GRAY);
+    gray.convertTo(levels[k], CV_32F, 1.0 / full);
+    cv::Mat bgr = im;
+    if (im.channels() == 1) cv::cvtColor(im, bgr, cv::COLOR_GRAY2BGR);
+    bgr.convertTo(colours[k], CV_32FC3, 1.0 / full);
+  }
+  result.coefficients = cv::Mat::zeros(size, CV_32FC(6));
+  result.rgb = cv::Mat::zeros(size, CV_32FC3);
+  result.valid = cv::Mat::zeros(size, CV_8U);
+  std::atomic<int> solved{0};
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    int mine = 0;
+    for (int v = rows.start; v < rows.end; ++v) {
+      const cv::Vec3f* r = right.ptr<cv::Vec3f>(v);
+      const cv::Vec3f* p = up.ptr<cv::Vec3f>(v);
+      auto* out = result.coefficients.ptr<cv::Vec<float, 6>>(v);
+      cv::Vec3f* rgb = result.rgb.ptr<cv::Vec3f>(v);
+      uint8_t* ok = result.valid.ptr<uint8_t>(v);
+      for (int u = 0; u < size.width; ++u) {
+        if (r[u].dot(r[u]) < 0.25f || p[u].dot(p[u]) < 0.25f) continue;  // Off the sheet.
+        cv::Matx<double, 6, 6> ata = cv::Matx<double, 6, 6>::zeros();
+        cv::Vec<double, 6> atb(0, 0, 0, 0, 0, 0);
+        cv::Vec3d colour(0, 0, 0);
+        double luminance = 0;
+        int used = 0;
+        for (int k = 0; k < n; ++k) {
+          const float level = levels[k].at<float>(v, u);
+          // Clipped, or turned away from the light (the polynomial cannot bend to a clamp at 0).
+          if (!(level <= options.max_level) || !(level >= options.min_level)) continue;
+          const cv::Vec3d d = directions[k];
+          const double lu = d.dot(cv::Vec3d(r[u])), lv = d.dot(cv::Vec3d(p[u]));
+          const cv::Vec<double, 6> row(lu * lu, lv * lv, lu * lv, lu, lv, 1.0);
+          ata += row * row.t();
+          atb += row * static_cast<double>(level);
+          colour += cv::Vec3d(colours[k].at<cv::Vec3f>(v, u));
+          luminance += level;
+          ++used;
+        }
+        if (used < 6) continue;
+        cv::Vec<double, 6> a;
+        if (!cv::solve(ata, atb, a, cv::DECOMP_CHOLESKY)) continue;
+        out[u] = cv::Vec<float, 6>(a);
+        for (int c = 0; c < 3; ++c) {
+          rgb[u][c] = luminance > 0 ? static_cast<float>(std::min(1.0, colour[c] / luminance)) : 0;
+        }
+        ok[u] = 255;
+        ++mine;
+      }
+    }
+    solved += mine;
+  });
+  result.solved = solved;
+  result.status = result.solved > 0
+                      ? Status::Ok()
+                      : Status::Error("PTM: no pixel with six or more unclipped lights");
   return result;
 }
 

@@ -47,6 +47,32 @@ PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
 cv::Mat NormalsOnPage(const cv::Mat& normals, const cv::Mat& right, const cv::Mat& up,
                       const cv::Mat& normal);
 
+// A polynomial texture map of the flat page (Malzbender, Gelb and Wolters 2001; the PTM of
+// cultural-heritage RTI): at each restored pixel, the luminance under a distant light as a
+// biquadratic in the light's direction projected on the page there (lu, lv: its components along
+// the page's own right and up, RestoredSheetFrame), L = a0 lu^2 + a1 lv^2 + a2 lu lv + a3 lu +
+// a4 lv + a5, fitted by least squares to the restored images of six or more lights of known
+// direction (at two or more elevations: lights all at one elevation leave lu^2 + lv^2 constant,
+// and the fit singular). A light is left out at a pixel where it is clipped; a pixel with fewer
+// than six left is marked. The colour is the pixel's mean over the lights, as a share of its
+// luminance (a gray page: white), so that colour = L * rgb.
+struct PtmResult {
+  Status status = Status::Error("PTM not fitted");
+  cv::Mat coefficients;  // CV_32FC(6): a0 .. a5, L in shares of full scale; 0 where marked.
+  cv::Mat rgb;           // CV_32FC3 (B, G, R), each a share of the luminance, at most 1.
+  cv::Mat valid;         // CV_8U 255 where fitted.
+  int solved = 0;
+};
+// `images`: the restored lights (8 or 16 bit, gray or colour, one size); `directions`: unit,
+// world, towards each light; `right`, `up`: RestoredSheetFrame's (zero off the sheet).
+PtmResult FitPtm(const std::vector<cv::Mat>& images, const std::vector<cv::Vec3d>& directions,
+                 const cv::Mat& right, const cv::Mat& up,
+                 const PhotometricOptions& options = PhotometricOptions());
+// The fitted luminance at one pixel for a light at (lu, lv).
+inline double PtmLuminance(const cv::Vec<float, 6>& a, double lu, double lv) {
+  return a[0] * lu * lu + a[1] * lv * lv + a[2] * lu * lv + a[3] * lu + a[4] * lv + a[5];
+}
+
 // A normal map as an image (the usual tangent-space encoding: each component c as (c + 1) / 2 of
 // full scale): CV_16UC3 in OpenCV's BGR order, so a file reader sees R = x, G = y, B = z; 0 (not
 // a unit normal) where `normals` is 0.

@@ -95,6 +95,37 @@ TEST(Photometric, RefusesTooFewLightsOrNoDirection) {
   EXPECT_NE(r.status.message().find("light 2"), std::string::npos) << r.status.message();
 }
 
+// A PTM: six lights at least, at two elevations or more (at one, lu^2 + lv^2 is a constant).
+// Of synthetic levels that are a biquadratic in (lu, lv), it gives that biquadratic back.
+TEST(Photometric, APtmNeedsSixLightsAtTwoElevationsAndFitsABiquadratic) {
+  const cv::Mat right(2, 2, CV_32FC3, cv::Scalar(1, 0, 0)), up(2, 2, CV_32FC3, cv::Scalar(0, 1, 0));
+  std::vector<cv::Vec3d> ring, rings;
+  for (int k = 0; k < 6; ++k) {
+    const double a = k * M_PI / 3;
+    ring.push_back(cv::Vec3d(0.8 * std::cos(a), 0.8 * std::sin(a), 0.6));
+    const double e = k % 2 ? 0.6 : 0.9;  // Two elevations.
+    rings.push_back(cv::normalize(
+        cv::Vec3d(std::sqrt(1 - e * e) * std::cos(a), std::sqrt(1 - e * e) * std::sin(a), e)));
+  }
+  rings.push_back(cv::Vec3d(0, 0, 1));
+  const cv::Vec<float, 6> truth(0.1f, -0.05f, 0.02f, 0.2f, -0.1f, 0.5f);
+  std::vector<cv::Mat> images;
+  for (const cv::Vec3d& d : rings) {
+    images.push_back(cv::Mat(2, 2, CV_16U, cv::Scalar(65535 * PtmLuminance(truth, d[0], d[1]))));
+  }
+  const PtmResult one =
+      FitPtm(std::vector<cv::Mat>(images.begin(), images.begin() + 6), ring, right, up);
+  ASSERT_FALSE(one.status.ok());
+  EXPECT_NE(one.status.message().find("two or more elevations"), std::string::npos);
+  EXPECT_FALSE(FitPtm({images[0], images[1]}, {rings[0], rings[1]}, right, up).status.ok());
+  const PtmResult fit = FitPtm(images, rings, right, up);
+  ASSERT_TRUE(fit.status.ok()) << fit.status.message();
+  EXPECT_EQ(fit.solved, 4);
+  const cv::Vec<float, 6> a = fit.coefficients.at<cv::Vec<float, 6>>(1, 1);
+  for (int k = 0; k < 6; ++k) EXPECT_NEAR(a[k], truth[k], 1e-4) << k;
+  EXPECT_NEAR(fit.rgb.at<cv::Vec3f>(0, 0)[1], 1.0f, 1e-6);  // Gray: white.
+}
+
 TEST(Photometric, NormalMapEncodesRightUpOut) {
   cv::Mat n = cv::Mat::zeros(1, 3, CV_32FC3);
   n.at<cv::Vec3f>(0, 0) = cv::Vec3f(0, 0, 1);
