@@ -8,6 +8,37 @@
 #include <string>
 
 namespace vellum {
+namespace {
+
+// Each light's image as a share of its full scale, gray (CV_32F), and with `colours` in colour
+// too (CV_32FC3, BGR; a gray image as gray). An error names the image that is not 8 or 16 bit,
+// gray or colour, of the first's size.
+Status LightLevels(const std::vector<cv::Mat>& images, std::vector<cv::Mat>* levels,
+                   std::vector<cv::Mat>* colours = nullptr) {
+  levels->assign(images.size(), cv::Mat());
+  if (colours) colours->assign(images.size(), cv::Mat());
+  for (size_t k = 0; k < images.size(); ++k) {
+    const cv::Mat& im = images[k];
+    if (im.empty() || im.size() != images[0].size() ||
+        (im.depth() != CV_8U && im.depth() != CV_16U) ||
+        (im.channels() != 1 && im.channels() != 3)) {
+      return Status::Error("light image " + std::to_string(k) +
+                           " must be 8 or 16 bit, gray or colour, of the first's size");
+    }
+    const double full = im.depth() == CV_8U ? 255.0 : 65535.0;
+    cv::Mat gray = im;
+    if (im.channels() == 3) cv::cvtColor(im, gray, cv::COLOR_BGR2GRAY);
+    gray.convertTo((*levels)[k], CV_32F, 1.0 / full);
+    if (colours) {
+      cv::Mat bgr = im;
+      if (im.channels() == 1) cv::cvtColor(im, bgr, cv::COLOR_GRAY2BGR);
+      bgr.convertTo((*colours)[k], CV_32FC3, 1.0 / full);
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace
 
 PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
                                      const std::vector<cv::Vec3d>& directions, const cv::Mat& mask,
@@ -22,19 +53,12 @@ PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
     return result;
   }
   const cv::Size size = images[0].size();
-  // Each image as a share of its full scale, gray.
-  std::vector<cv::Mat> levels(images.size());
+  std::vector<cv::Mat> levels;
+  if (const Status s = LightLevels(images, &levels); !s.ok()) {
+    result.status = s;
+    return result;
+  }
   for (size_t k = 0; k < images.size(); ++k) {
-    const cv::Mat& im = images[k];
-    if (im.empty() || im.size() != size || (im.depth() != CV_8U && im.depth() != CV_16U) ||
-        (im.channels() != 1 && im.channels() != 3)) {
-      result.status = Status::Error("light image " + std::to_string(k) +
-                                    " must be 8 or 16 bit, gray or colour, of the first's size");
-      return result;
-    }
-    cv::Mat gray = im;
-    if (im.channels() == 3) cv::cvtColor(im, gray, cv::COLOR_BGR2GRAY);
-    gray.convertTo(levels[k], CV_32F, im.depth() == CV_8U ? 1.0 / 255 : 1.0 / 65535);
     const double norm = cv::norm(directions[k]);
     if (!(norm > 1e-9)) {
       result.status = Status::Error("light " + std::to_string(k) + " has no direction");
@@ -119,22 +143,10 @@ PtmResult FitPtm(const std::vector<cv::Mat>& images, const std::vector<cv::Vec3d
   }
   const cv::Size size = images[0].size();
   const int n = static_cast<int>(images.size());
-  std::vector<cv::Mat> levels(n), colours(n);
-  for (int k = 0; k < n; ++k) {
-    const cv::Mat& im = images[k];
-    if (im.empty() || im.size() != size || (im.depth() != CV_8U && im.depth() != CV_16U) ||
-        (im.channels() != 1 && im.channels() != 3)) {
-      result.status = Status::Error("light image " + std::to_string(k) +
-                                    " must be 8 or 16 bit, gray or colour, of the first's size");
-      return result;
-    }
-    const double full = im.depth() == CV_8U ? 255.0 : 65535.0;
-    cv::Mat gray = im;
-    if (im.channels() == 3) cv::cvtColor(im, gray, cv::COLOR_BGR2GRAY);
-    gray.convertTo(levels[k], CV_32F, 1.0 / full);
-    cv::Mat bgr = im;
-    if (im.channels() == 1) cv::cvtColor(im, bgr, cv::COLOR_GRAY2BGR);
-    bgr.convertTo(colours[k], CV_32FC3, 1.0 / full);
+  std::vector<cv::Mat> levels, colours;
+  if (const Status s = LightLevels(images, &levels, &colours); !s.ok()) {
+    result.status = s;
+    return result;
   }
   result.coefficients = cv::Mat::zeros(size, CV_32FC(6));
   result.rgb = cv::Mat::zeros(size, CV_32FC3);
