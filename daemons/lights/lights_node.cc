@@ -7,6 +7,10 @@
 
 namespace vellum::station {
 
+namespace {
+constexpr char kScanOver[] = "the scan is over";
+}  // namespace
+
 LightsNode::LightsNode(Node* node, std::unique_ptr<Lights> lights, const LightsNodeOptions& options)
     : node_(node), lights_(std::move(lights)), options_(options) {
   node->Subscribe<light_t>(channel::kLightRequest, [this](const light_t& m) { OnRequest(m); });
@@ -36,7 +40,10 @@ void LightsNode::AllOff(const std::string& why) {
   if (on_ >= 0 && !why.empty()) {
     node_->Log("the light '" + options_.lights.lights[on_].name + "' off: " + why);
   }
-  if (on_ >= 0 && lights_->Source().empty()) {
+  // By hand: the operator is asked once the scan is over (between lights, the next light's prompt
+  // says that nothing else may be on).
+  if (by_hand_ && why == kScanOver) {
+    by_hand_ = false;
     light_t prompt{};
     prompt.scan_id = scan_id_;
     prompt.session = session_;
@@ -56,7 +63,7 @@ void LightsNode::OnRequest(const light_t& m) {
     return node_->Error(where + "without a scan and its session; ignored");
   }
   if (m.index == -1) {
-    if (m.scan_id == scan_id_ && m.session == session_) AllOff("the scan is over");
+    if (m.scan_id == scan_id_ && m.session == session_) AllOff(kScanOver);
     return;
   }
   if (m.light_count != count || m.index < 0 || m.index >= count ||
@@ -88,6 +95,7 @@ void LightsNode::OnRequest(const light_t& m) {
     reply.text = "Switch on the light '" + light.name + "' and nothing else (studio lamps off" +
                  (light.directed() ? ", the lamp where the lights file says" : "") +
                  "); then press L in the viewer.";
+    by_hand_ = true;
     node_->SetState("waiting", m.scan_id, "for the operator to switch on '" + light.name + "'");
     node_->Publish(channel::kLightPrompt, &reply);
     return;

@@ -40,6 +40,7 @@ class LightsNode {
   LightsNodeOptions options_;
   // LCM thread only: the light that is on (-1 none), for which scan and session.
   int on_ = -1;
+  bool by_hand_ = false;  // The operator switched a light of this scan (asked to end it).
   int64_t scan_id_ = 0, session_ = 0;
   std::chrono::steady_clock::time_point on_since_;
 };

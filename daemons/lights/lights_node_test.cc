@@ -160,11 +160,20 @@ TEST(LightsNodeTest, TheManualBackendPromptsTheOperator) {
   EXPECT_NE(prompts->front().text.find("'raking-000'"), std::string::npos) << prompts->front().text;
   EXPECT_NE(prompts->front().text.find("press L in the viewer"), std::string::npos);
   EXPECT_TRUE(on->empty()) << "the operator answers, not the node";
-  // The scan's end asks for the lights off.
+  // Its capture asks nothing (the next light's prompt would say "nothing else"); the scan's end
+  // asks for the lights off.
+  capture_t c{};
+  c.scan_id = 40;
+  c.session = 7;
+  c.pattern_count = 10;
+  c.pattern_index = 10;
+  bus.probe().Publish(channel::kCapture, &c);
   light_t off = Request(options, -1);
   bus.probe().Publish(channel::kLightRequest, &off);
-  ASSERT_TRUE(bus.RunUntil([&] { return prompts->size() == 2; }));
+  ASSERT_TRUE(bus.RunUntil([&] { return prompts->size() >= 2; }));
+  EXPECT_EQ(prompts->size(), 2u);
   EXPECT_EQ(prompts->back().index, -1);
+  EXPECT_NE(prompts->back().text.find("studio lamps on"), std::string::npos);
 }
 
 }  // namespace
