@@ -15,6 +15,7 @@
 
 #include "cli/commands.h"
 #include "cli/progress.h"
+#include "core/common/text.h"
 #include "io/calibration_io.h"
 #include "station/chain.h"
 #include "station/contact_sheet.h"
@@ -42,11 +43,13 @@ class Follower {
     node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
       if (scan_id_ && m.scan_id != scan_id_) return;
       // Capturing is about 70% of a scan's time on the default rig.
-      progress_.Update(m.pattern_index < 0
-                           ? std::string("capturing the texture")
+      const int captures = m.pattern_count + m.light_count + 1;
+      progress_.Update(m.pattern_index < 0 ? std::string("capturing the texture")
+                       : m.pattern_index >= m.pattern_count
+                           ? "capturing under the light '" + Printable(m.light.name, 40) + "'"
                            : "capturing pattern " + std::to_string(m.pattern_index + 1) + " of " +
                                  std::to_string(m.pattern_count),
-                       0.7 * (m.pattern_index + 1) / std::max(1, m.pattern_count + 1));
+                       0.7 * (m.pattern_index + 1) / std::max(1, captures));
     });
     auto on_status = [this](const status_t& m) { OnStatus(m); };
     for (const char* process : station::kGantry) {
