@@ -218,6 +218,9 @@ ScanIdentity FromMessage(const scan_identity_t& m) {
 void ToMessage(const Calibration& calibration, calibration_t* msg) {
   ToModel(calibration.camera, &msg->camera);
   ToModel(calibration.projector, &msg->projector);
+  msg->min_z_mm = calibration.min_z_mm;
+  msg->max_z_mm = calibration.max_z_mm;
+  msg->scale_error_percent = calibration.scale_error_percent;
 }
 
 Status FromMessage(const calibration_t& msg, Calibration* calibration) {
@@ -226,6 +229,17 @@ Status FromMessage(const calibration_t& msg, Calibration* calibration) {
   if (!s.ok()) return s;
   s = FromModel(msg.projector, "calibration projector", &c.projector);
   if (!s.ok()) return s;
+  if (!std::isfinite(msg.min_z_mm) || !std::isfinite(msg.max_z_mm) ||
+      !(msg.min_z_mm < msg.max_z_mm)) {
+    return Status::Error("calibration: the working volume must be finite heights, low < high");
+  }
+  if (!std::isnan(msg.scale_error_percent) &&
+      !(msg.scale_error_percent >= 0 && std::isfinite(msg.scale_error_percent))) {
+    return Status::Error("calibration: scale_error_percent must be >= 0 or NaN (not measured)");
+  }
+  c.min_z_mm = msg.min_z_mm;
+  c.max_z_mm = msg.max_z_mm;
+  c.scale_error_percent = msg.scale_error_percent;
   *calibration = c;
   return Status::Ok();
 }

@@ -15,6 +15,8 @@
 #include <stdexcept>
 
 #include "core/common/text.h"
+#include "core/geometry/calibration.h"
+#include "vellum/calibration_v1_t.hpp"
 #include "vellum/capture_v1_t.hpp"
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/status_t.hpp"
@@ -63,6 +65,26 @@ bool SafeDecode(const void* data, int64_t size, scan_started_t* msg) {
   msg->projector_height = old.projector_height;
   msg->identity = old.identity;
   return true;  // No extra lights.
+}
+
+bool SafeDecode(const void* data, int64_t size, calibration_t* msg) {
+  if (SafeDecode<calibration_t>(data, size, msg)) return true;
+  calibration_v1_t old;
+  if (!SafeDecode<calibration_v1_t>(data, size, &old)) return false;
+  *msg = calibration_t{};
+  msg->utime = old.utime;
+  msg->seq = old.seq;
+  msg->scan_id = old.scan_id;
+  msg->station = old.station;
+  msg->session = old.session;
+  msg->source = old.source;
+  msg->camera = old.camera;
+  msg->projector = old.projector;
+  const Calibration defaults;
+  msg->min_z_mm = defaults.min_z_mm;
+  msg->max_z_mm = defaults.max_z_mm;
+  msg->scale_error_percent = defaults.scale_error_percent;
+  return true;
 }
 
 int64_t NowUtime() {

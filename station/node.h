@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 #include "vellum/scan_started_t.hpp"
 
@@ -72,6 +73,9 @@ bool SafeDecode(const void* data, int64_t size, Msg* msg) {
 // scan without extra lights, so every scan's log stays readable and playable.
 bool SafeDecode(const void* data, int64_t size, capture_t* msg);
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg);
+// Likewise a CALIBRATION recorded before it carried the working volume and the scale error
+// (calibration_v1_t): the default working volume, the scale error not measured.
+bool SafeDecode(const void* data, int64_t size, calibration_t* msg);
 
 // The station id when none is configured. Stations that share a network (and a multicast
 // group) need ids of their own (README, "Several gantries in one room").

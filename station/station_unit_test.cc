@@ -27,6 +27,7 @@
 #include "station/scan_log.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
+#include "vellum/calibration_v1_t.hpp"
 #include "vellum/point_cloud_t.hpp"
 #include "vellum/scan_request_t.hpp"
 #include "vellum/status_t.hpp"
@@ -220,6 +221,44 @@ TEST(Messages, CalibrationRoundTripsAndNaNIsRejected) {
   msg.projector.rotation[4] = std::numeric_limits<double>::quiet_NaN();
   EXPECT_NE(FromMessage(msg, &back).message().find("not all numbers are finite"),
             std::string::npos);
+}
+
+// The working volume and the measured scale error travel with the calibration (a station's scan
+// triangulates and reports as `vellum process` with the calibration file does); a CALIBRATION
+// recorded before they did decodes with the default volume and no measured error.
+TEST(Messages, TheWorkingVolumeAndScaleErrorTravelAndAnOldCalibrationStillDecodes) {
+  Calibration rig = DefaultRig();
+  rig.min_z_mm = -5;
+  rig.max_z_mm = 80;
+  rig.scale_error_percent = 0.07;
+  calibration_t msg{};
+  ToMessage(rig, &msg);
+  Calibration back;
+  ASSERT_TRUE(FromMessage(msg, &back).ok());
+  EXPECT_EQ(back.min_z_mm, -5);
+  EXPECT_EQ(back.max_z_mm, 80);
+  EXPECT_EQ(back.scale_error_percent, 0.07);
+  msg.max_z_mm = -10;
+  EXPECT_NE(FromMessage(msg, &back).message().find("working volume"), std::string::npos);
+  msg.max_z_mm = 80;
+  msg.scale_error_percent = -1;
+  EXPECT_NE(FromMessage(msg, &back).message().find("scale_error_percent"), std::string::npos);
+  // As recorded before: the same fields up to the projector.
+  calibration_v1_t old{};
+  old.scan_id = 5;
+  old.source = "old rig";
+  ToMessage(rig, &msg);
+  old.camera = msg.camera;
+  old.projector = msg.projector;
+  const std::vector<uint8_t> bytes = Encode(old);
+  calibration_t decoded;
+  ASSERT_TRUE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &decoded));
+  EXPECT_EQ(decoded.source, "old rig");
+  ASSERT_TRUE(FromMessage(decoded, &back).ok());
+  EXPECT_EQ(back.min_z_mm, Calibration().min_z_mm);
+  EXPECT_EQ(back.max_z_mm, Calibration().max_z_mm);
+  EXPECT_TRUE(std::isnan(back.scale_error_percent));
+  EXPECT_EQ(back.camera.matrix, rig.camera.matrix);
 }
 
 Scan SmallScan() {

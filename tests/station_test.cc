@@ -819,7 +819,7 @@ TEST_F(StationTest, PoisonedAndMidScanMessagesFailClearlyOrAreRefusedAndNothingI
     lcm::LogFile again(dir_ + "/scan701.lcmlog", "r");
     for (const lcm::LogEvent* c = again.readNextEvent(); c; c = again.readNextEvent()) {
       if (c->channel == "CALIBRATION") {
-        EXPECT_GE(other.decode(c->data, 0, c->datalen), 0);
+        EXPECT_TRUE(station::SafeDecode(c->data, c->datalen, &other));
       }
     }
     other.camera.matrix[0] *= 1.1;  // Another camera's focal length.
