@@ -106,8 +106,7 @@ class StationTest : public ::testing::Test {
     if (pace && binary.find("vellum-") != std::string::npos &&
         binary.find("camera") == std::string::npos &&
         binary.find("projector") == std::string::npos &&
-        binary.find("lights") == std::string::npos &&
-        binary.find("viewer") == std::string::npos) {
+        binary.find("lights") == std::string::npos && binary.find("viewer") == std::string::npos) {
       args.push_back("--pace");
       args.push_back(pace);
     }
