@@ -89,6 +89,16 @@ light_t Request(const LightsNodeOptions& options, int index, int64_t scan_id = 4
   return m;
 }
 
+// The camera's capture under light `index` of scan 40 (session 7, ten patterns before it).
+capture_t CaptureUnder(int index) {
+  capture_t c{};
+  c.scan_id = 40;
+  c.session = 7;
+  c.pattern_count = 10;
+  c.pattern_index = 10 + index;
+  return c;
+}
+
 TEST(LightsNodeTest, ARelaySwitchesEachLightOnAloneAndOffWhenItsCaptureComes) {
   MemqBus bus;
   Board board;
@@ -110,13 +120,9 @@ TEST(LightsNodeTest, ARelaySwitchesEachLightOnAloneAndOffWhenItsCaptureComes) {
   EXPECT_EQ(on->front().session, 7);
   EXPECT_EQ(board.On(), (std::set<int>{2})) << "light 1 alone, the studio lamps off";
   // A capture of another index leaves it on; its own turns it off, the studio lamps on again.
-  capture_t c{};
-  c.scan_id = 40;
-  c.session = 7;
-  c.pattern_count = 10;
-  c.pattern_index = 10;
+  capture_t c = CaptureUnder(0);
   bus.probe().Publish(channel::kCapture, &c);
-  c.pattern_index = 11;
+  c = CaptureUnder(1);
   bus.probe().Publish(channel::kCapture, &c);
   ASSERT_TRUE(bus.RunUntil([&] { return board.On() == std::set<int>{0}; }));
   EXPECT_EQ(node.Counter("lights switched"), 1);
@@ -162,11 +168,7 @@ TEST(LightsNodeTest, TheManualBackendPromptsTheOperator) {
   EXPECT_TRUE(on->empty()) << "the operator answers, not the node";
   // Its capture asks nothing (the next light's prompt would say "nothing else"); the scan's end
   // asks for the lights off.
-  capture_t c{};
-  c.scan_id = 40;
-  c.session = 7;
-  c.pattern_count = 10;
-  c.pattern_index = 10;
+  capture_t c = CaptureUnder(0);
   bus.probe().Publish(channel::kCapture, &c);
   light_t off = Request(options, -1);
   bus.probe().Publish(channel::kLightRequest, &off);
