@@ -11,39 +11,60 @@ namespace {
 
 enum class Fit { kOk, kHole, kEdge };
 
+// A point in a node's window: its monomials in the pixel offset from the node (in window
+// half-sizes: 1, du, dv, du^2, du dv, dv^2) and the measured point, mm.
 struct Sample {
-  double du, dv;  // Pixel offset from the node, in window half-sizes.
-  cv::Vec3d x;    // The measured point, mm.
+  double m[6];
+  double x[3];
 };
 
-// Least squares of x, y, z as polynomials in (du, dv) with `terms` coefficients (6: quadratic,
-// 3: linear) over the samples with keep[i]; the value at the node, or false if ill-posed.
-bool Polyfit(const std::vector<Sample>& samples, const std::vector<uint8_t>& keep, int terms,
-             Eigen::Matrix<double, 6, 3>* coef) {
-  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
-  Eigen::Matrix<double, 6, 3> atb = Eigen::Matrix<double, 6, 3>::Zero();
-  for (size_t i = 0; i < samples.size(); ++i) {
-    if (!keep[i]) continue;
-    const Sample& s = samples[i];
-    Eigen::Matrix<double, 6, 1> b;
-    b << 1, s.du, s.dv, s.du * s.du, s.du * s.dv, s.dv * s.dv;
-    ata.selfadjointView<Eigen::Lower>().rankUpdate(b);
-    atb += b * Eigen::RowVector3d(s.x[0], s.x[1], s.x[2]);
+// The normal equations of the least-squares fit of x, y, z as polynomials in (du, dv): sums of
+// monomial products (the upper triangle) and of monomials times the coordinates. Kept as plain
+// sums (not Eigen's rank updates): a node's window holds a few hundred points, two fits each.
+struct NormalSums {
+  double ata[6][6] = {};
+  double atb[6][3] = {};
+
+  void Add(const Sample& s, double sign) {
+    for (int i = 0; i < 6; ++i) {
+      const double mi = sign * s.m[i];
+      for (int j = i; j < 6; ++j) ata[i][j] += mi * s.m[j];
+      for (int c = 0; c < 3; ++c) atb[i][c] += mi * s.x[c];
+    }
   }
-  ata.triangularView<Eigen::Upper>() = ata.transpose();
-  const Eigen::MatrixXd a = ata.topLeftCorner(terms, terms);
-  const Eigen::LDLT<Eigen::MatrixXd> ldlt(a);
+};
+
+// Solves the first `N` terms' normal equations; false if ill-posed.
+template <int N>
+bool Solve(const NormalSums& sums, Eigen::Matrix<double, 6, 3>* coef) {
+  Eigen::Matrix<double, N, N> a;
+  Eigen::Matrix<double, N, 3> b;
+  for (int i = 0; i < N; ++i) {
+    for (int j = i; j < N; ++j) a(i, j) = a(j, i) = sums.ata[i][j];
+    for (int c = 0; c < 3; ++c) b(i, c) = sums.atb[i][c];
+  }
+  const Eigen::LDLT<Eigen::Matrix<double, N, N>> ldlt(a);
   if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-9)) return false;
   coef->setZero();
-  coef->topRows(terms) = ldlt.solve(atb.topRows(terms));
+  coef->template topRows<N>() = ldlt.solve(b);
   return coef->allFinite();
 }
 
-cv::Vec3d Evaluate(const Eigen::Matrix<double, 6, 3>& c, double du, double dv) {
-  Eigen::Matrix<double, 6, 1> b;
-  b << 1, du, dv, du * du, du * dv, dv * dv;
-  const Eigen::RowVector3d r = b.transpose() * c;
-  return {r[0], r[1], r[2]};
+// Least squares of x, y, z as polynomials in (du, dv) with `terms` coefficients (6: quadratic,
+// 3: linear); false if ill-posed.
+bool Polyfit(const NormalSums& sums, int terms, Eigen::Matrix<double, 6, 3>* coef) {
+  return terms == 6 ? Solve<6>(sums, coef) : Solve<3>(sums, coef);
+}
+
+// The squared distance of a sample from the fitted polynomials, mm^2.
+double Residual2(const Eigen::Matrix<double, 6, 3>& c, const Sample& s) {
+  double d2 = 0;
+  for (int k = 0; k < 3; ++k) {
+    double f = -s.x[k];
+    for (int i = 0; i < 6; ++i) f += s.m[i] * c(i, k);
+    d2 += f * f;
+  }
+  return d2;
 }
 
 // Fits x, y, z of the points around a node as functions of the pixel offset (quadratic where
@@ -58,17 +79,21 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
   const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
   const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
   const int v1 = std::min(points.rows - 1, static_cast<int>(std::ceil(at.y)) + hv);
-  std::vector<Sample> samples;
+  thread_local std::vector<Sample> samples;
+  samples.clear();
   double su = 0, sv = 0;
   bool own = false;
   for (int v = v0; v <= v1; ++v) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
     const uint8_t* m = mask.ptr<uint8_t>(v);
+    const double dv = (v - at.y) / hv;
     for (int u = u0; u <= u1; ++u) {
       if (!m[u] || !std::isfinite(row[u][2])) continue;
-      samples.push_back({(u - at.x) / hu, (v - at.y) / hv, cv::Vec3d(row[u])});
-      su += samples.back().du;
-      sv += samples.back().dv;
+      const double du = (u - at.x) / hu;
+      samples.push_back(
+          {{1, du, dv, du * du, du * dv, dv * dv}, {row[u][0], row[u][1], row[u][2]}});
+      su += du;
+      sv += dv;
       own = own || (std::fabs(u - at.x) <= 1.5 && std::fabs(v - at.y) <= 1.5);
     }
   }
@@ -79,20 +104,37 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
   const bool one_sided = std::hypot(su, sv) / count > 0.25;
   if (one_sided && !own) return Fit::kEdge;
   const int terms = (count >= 2 * min_points && !one_sided) ? 6 : 3;
-  std::vector<uint8_t> keep(samples.size(), 1);
+  NormalSums sums;
+  for (const Sample& sample : samples) sums.Add(sample, 1);
   Eigen::Matrix<double, 6, 3> c;
-  if (!Polyfit(samples, keep, terms, &c)) return Fit::kHole;
-  std::vector<double> residual(samples.size());
+  if (!Polyfit(sums, terms, &c)) return Fit::kHole;
+  // Points further than four times the median residual go, but never closer than 0.2 mm
+  // (compared squared). The median is sought only when it is over 0.05 mm (more than half the
+  // residuals are): below that the cut is 0.2 mm whatever it is.
+  constexpr double kFloor = 0.2;  // mm
+  thread_local std::vector<double> residual, sorted;
+  residual.resize(samples.size());
+  int small = 0;
   for (size_t i = 0; i < samples.size(); ++i) {
-    residual[i] = cv::norm(Evaluate(c, samples[i].du, samples[i].dv) - samples[i].x);
+    residual[i] = Residual2(c, samples[i]);
+    small += residual[i] <= kFloor * kFloor / 16;
   }
-  std::vector<double> sorted = residual;
-  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
-  const double cut = std::max(0.2, 4.0 * sorted[sorted.size() / 2]);  // mm
-  int kept = 0;
-  for (size_t i = 0; i < samples.size(); ++i) kept += keep[i] = residual[i] <= cut;
-  if (kept < min_points || !Polyfit(samples, keep, terms, &c)) return Fit::kHole;
-  *out = Evaluate(c, 0, 0);
+  double cut = kFloor * kFloor;
+  if (small < count / 2 + 1) {
+    sorted = residual;
+    std::nth_element(sorted.begin(), sorted.begin() + count / 2, sorted.end());
+    cut = std::max(cut, 16.0 * sorted[count / 2]);
+  }
+  // The second fit: the first's sums less the points dropped (few: the sums stay well scaled).
+  int kept = count;
+  for (size_t i = 0; i < samples.size(); ++i) {
+    if (residual[i] > cut) {
+      sums.Add(samples[i], -1);
+      --kept;
+    }
+  }
+  if (kept < min_points || !Polyfit(sums, terms, &c)) return Fit::kHole;
+  *out = cv::Vec3d(c(0, 0), c(0, 1), c(0, 2));  // The polynomials at the node (du = dv = 0).
   return Fit::kOk;
 }
 

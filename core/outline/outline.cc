@@ -1,5 +1,6 @@
 #include "core/outline/outline.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -21,15 +22,18 @@ bool Valid(float z) { return z > -1e3f; }
 // outlier is dropped, a step stays sharp, and a steep slope with missing points is not biased (a
 // plain 3 x 3 median over the points present picks a lower or higher neighbour where points are
 // missing on one side: on a 50 degree ripple, a third of a millimetre, a false rim). kNoData
-// where the pixel has no point and fewer than two pairs do.
-cv::Mat SmoothHeights(const cv::Mat& points) {
+// where the pixel has no point and fewer than two pairs do; `nan` (if given) gets the same
+// heights with NaN there instead.
+cv::Mat SmoothHeights(const cv::Mat& points, cv::Mat* nan = nullptr) {
   const int w = points.cols, h = points.rows;
   cv::Mat raw(points.size(), CV_32F);
-  for (int v = 0; v < h; ++v) {
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    float* out = raw.ptr<float>(v);
-    for (int u = 0; u < w; ++u) out[u] = std::isfinite(p[u][2]) ? p[u][2] : kNoData;
-  }
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+      float* out = raw.ptr<float>(v);
+      for (int u = 0; u < w; ++u) out[u] = std::isfinite(p[u][2]) ? p[u][2] : kNoData;
+    }
+  });
   cv::Mat smooth(points.size(), CV_32F, cv::Scalar(kNoData));
   cv::parallel_for_(cv::Range(1, h - 1), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
@@ -37,6 +41,20 @@ cv::Mat SmoothHeights(const cv::Mat& points) {
                   *down = raw.ptr<float>(v + 1);
       float* out = smooth.ptr<float>(v);
       for (int u = 1; u < w - 1; ++u) {
+        const float l = row[u - 1], r = row[u + 1], t = up[u], b = down[u], tl = up[u - 1],
+                    br = down[u + 1], tr = up[u + 1], bl = down[u - 1], c = row[u];
+        if (Valid(l) && Valid(r) && Valid(t) && Valid(b) && Valid(tl) && Valid(br) && Valid(tr) &&
+            Valid(bl) && Valid(c)) {
+          // Every pair and the pixel: the median of five without sorting. Of the four means, the
+          // larger of the two pairwise minima and the smaller of the two pairwise maxima are the
+          // middle two; the median of five is the median of those and the pixel.
+          const float m0 = 0.5f * (l + r), m1 = 0.5f * (t + b), m2 = 0.5f * (tl + br),
+                      m3 = 0.5f * (tr + bl);
+          const float f = std::max(std::min(m0, m1), std::min(m2, m3));
+          const float g = std::min(std::max(m0, m1), std::max(m2, m3));
+          out[u] = std::max(std::min(f, g), std::min(std::max(f, g), c));
+          continue;
+        }
         float values[5];
         int n = 0;
         auto pair = [&](float a, float b) {
@@ -61,6 +79,18 @@ cv::Mat SmoothHeights(const cv::Mat& points) {
       }
     }
   });
+  if (nan) {
+    *nan = cv::Mat(points.size(), CV_32F);
+    cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& range) {
+      for (int v = range.start; v < range.end; ++v) {
+        const float* in = smooth.ptr<float>(v);
+        float* out = nan->ptr<float>(v);
+        for (int u = 0; u < w; ++u) {
+          out[u] = Valid(in[u]) ? in[u] : std::numeric_limits<float>::quiet_NaN();
+        }
+      }
+    });
+  }
   return smooth;
 }
 
@@ -71,14 +101,14 @@ cv::Mat SmoothHeights(const cv::Mat& points) {
 // pixel, must agree (a plane or a symmetric curve agrees exactly; a step of height S disagrees
 // by S over a band about as wide as the fit's window, centred on the edge). Along rows, columns
 // and both diagonals; the strongest disagreement is kept.
-cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& z, int scale, double max_slope_deg) {
+// `zn`: the heights with NaN where there is none (the comparisons below then drop out by
+// themselves).
+cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& zn, int scale, double max_slope_deg) {
+  const cv::Mat& z = zn;
   cv::Mat strength = cv::Mat::zeros(z.size(), CV_32F);
   const int a = scale, b = 2 * scale, w = z.cols;
   const float tan_max = static_cast<float>(std::tan(max_slope_deg * M_PI / 180.0));
   const float tan2 = tan_max * tan_max;
-  // Heights with NaN where there is none: the comparisons below then drop out by themselves.
-  cv::Mat zn = z.clone();
-  zn.setTo(std::numeric_limits<float>::quiet_NaN(), z < -1e3f);
   cv::parallel_for_(cv::Range(0, z.rows), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
       const float* row = zn.ptr<float>(v);
@@ -89,7 +119,7 @@ cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& z, int scale, double m
       auto disagree = [a](float fb, float nb, float na, float fa) {
         const float d =
             std::fabs((na - (fa - na)) - (nb + (nb - fb))) - 0.5f * std::fabs(na - nb) / (2 * a);
-        return d == d ? std::max(d, 0.0f) : 0.0f;  // NaN (a missing height): no evidence.
+        return std::max(0.0f, d);  // NaN (a missing height) gives 0: no evidence.
       };
       if (v >= b && v + b < z.rows) {
         const float *rb = zn.ptr<float>(v - b), *ra = zn.ptr<float>(v - a);
@@ -103,21 +133,20 @@ cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& z, int scale, double m
         }
       }
       // Silhouettes: the height changes faster than a surface at max_slope_deg would between a
-      // point and its right or lower neighbour.
+      // point and its right or lower neighbour. Written without branches (a missing height or
+      // point is NaN, and a comparison with NaN is false), so the compiler vectorizes it.
       const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-      const cv::Vec3f* q = v + 1 < z.rows ? points.ptr<cv::Vec3f>(v + 1) : nullptr;
-      const float* below = v + 1 < z.rows ? zn.ptr<float>(v + 1) : nullptr;
-      for (int u = 0; u < w; ++u) {
-        if (!(row[u] == row[u])) continue;
-        if (u + 1 < w && row[u + 1] == row[u + 1]) {
-          const float rise = row[u + 1] - row[u];
-          const float dx = p[u + 1][0] - p[u][0], dy = p[u + 1][1] - p[u][1];
-          if (rise * rise > tan2 * (dx * dx + dy * dy)) out[u] = std::max(out[u], std::fabs(rise));
-        }
-        if (below && below[u] == below[u]) {
-          const float rise = below[u] - row[u];
-          const float dx = q[u][0] - p[u][0], dy = q[u][1] - p[u][1];
-          if (rise * rise > tan2 * (dx * dx + dy * dy)) out[u] = std::max(out[u], std::fabs(rise));
+      auto steeper = [tan2](float rise, float dx, float dy, float was) {
+        return rise * rise > tan2 * (dx * dx + dy * dy) ? std::max(was, std::fabs(rise)) : was;
+      };
+      for (int u = 0; u + 1 < w; ++u) {
+        out[u] = steeper(row[u + 1] - row[u], p[u + 1][0] - p[u][0], p[u + 1][1] - p[u][1], out[u]);
+      }
+      if (v + 1 < z.rows) {
+        const cv::Vec3f* q = points.ptr<cv::Vec3f>(v + 1);
+        const float* below = zn.ptr<float>(v + 1);
+        for (int u = 0; u < w; ++u) {
+          out[u] = steeper(below[u] - row[u], q[u][0] - p[u][0], q[u][1] - p[u][1], out[u]);
         }
       }
     }
@@ -155,11 +184,18 @@ cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale
   } else {
     cv::blur(gray, around, {2 * reach + 1, 2 * reach + 1});
   }
-  cv::Mat threshold;
-  around.convertTo(threshold, CV_32F, 1.0 / bright);
-  threshold = cv::max(threshold, 0.05);
-  threshold = static_cast<float>(0.5 * step) / threshold;
-  threshold = cv::max(threshold, step);
+  cv::Mat threshold(gray.size(), CV_32F);
+  const float to_paper = static_cast<float>(1.0 / bright), half = static_cast<float>(0.5 * step),
+              least = static_cast<float>(step);
+  cv::parallel_for_(cv::Range(0, gray.rows), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      const uint8_t* in = around.ptr<uint8_t>(v);
+      float* out = threshold.ptr<float>(v);
+      for (int u = 0; u < gray.cols; ++u) {
+        out[u] = std::max(least, half / std::max(in[u] * to_paper, 0.05f));
+      }
+    }
+  });
   return threshold;
 }
 
@@ -168,48 +204,59 @@ cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale
 // where the rim is faint). `labels` holds the seeds on input; pixels without a height stay 0.
 void Flood(const cv::Mat& strength, const cv::Mat& z, cv::Mat* labels) {
   constexpr int kLevels = 256;
-  auto level = [&](int v, int u) {
-    return std::min(kLevels - 1, static_cast<int>(strength.at<float>(v, u) * 32));
-  };
-  std::vector<std::vector<int>> buckets(kLevels);
   const int w = z.cols, h = z.rows;
-  auto push_neighbours = [&](int v, int u, int floor) {
-    const int du[4] = {1, -1, 0, 0}, dv[4] = {0, 0, 1, -1};
-    for (int d = 0; d < 4; ++d) {
-      const int uu = u + du[d], vv = v + dv[d];
-      if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
-      if (labels->at<uint8_t>(vv, uu) != 0 || !Valid(z.at<float>(vv, uu))) continue;
-      buckets[std::max(floor, level(vv, uu))].push_back(vv * w + uu);
-    }
-  };
-  // The floods start from the seeds' edges: unlabelled pixels with a height beside a seed.
+  // Each pixel's level (rim strength in 1/32 of the threshold, capped), or -1 without a height,
+  // and its label: flat, row-major and framed by a pixel without a height, so a neighbour is an
+  // offset and never out of bounds.
+  const int stride = w + 2;
+  std::vector<int16_t> level(static_cast<size_t>(stride) * (h + 2), -1);
+  std::vector<uint8_t> label(level.size(), 0);
   for (int v = 0; v < h; ++v) {
-    const uint8_t* row = labels->ptr<uint8_t>(v);
+    const float* s = strength.ptr<float>(v);
     const float* zr = z.ptr<float>(v);
+    const uint8_t* in = labels->ptr<uint8_t>(v);
+    const size_t row = static_cast<size_t>(v + 1) * stride + 1;
     for (int u = 0; u < w; ++u) {
-      if (row[u] != 0 || !Valid(zr[u])) continue;
-      const bool beside = (u > 0 && row[u - 1]) || (u + 1 < w && row[u + 1]) ||
-                          (v > 0 && labels->at<uint8_t>(v - 1, u)) ||
-                          (v + 1 < h && labels->at<uint8_t>(v + 1, u));
-      if (beside) buckets[level(v, u)].push_back(v * w + u);
+      const float x = s[u] * 32;
+      level[row + u] = !Valid(zr[u])      ? -1
+                       : x >= kLevels - 1 ? kLevels - 1
+                                          : static_cast<int16_t>(x);
+      label[row + u] = in[u];
+    }
+  }
+  const int around[4] = {1, -1, stride, -stride};
+  // A pixel is queued once: it is taken at the level of its first queueing (later ones come
+  // from higher levels), so a pixel queued is marked as if it had no height.
+  constexpr int16_t kQueued = -2;
+  std::vector<std::vector<int>> buckets(kLevels);
+  // The floods start from the seeds' edges: unlabelled pixels with a height beside a seed.
+  for (int at = stride; at < stride * (h + 1); ++at) {
+    if (label[at] != 0 || level[at] < 0) continue;
+    if (label[at + 1] | label[at - 1] | label[at + stride] | label[at - stride]) {
+      buckets[level[at]].push_back(at);
+      level[at] = kQueued;
     }
   }
   for (int l = 0; l < kLevels; ++l) {
     for (size_t k = 0; k < buckets[l].size(); ++k) {
-      const int at = buckets[l][k], v = at / w, u = at % w;
-      if (labels->at<uint8_t>(v, u) != 0) continue;
+      const int at = buckets[l][k];
+      if (label[at] != 0) continue;
       // The label of the flood that reached it: a labelled 4-neighbour.
-      const int du[4] = {1, -1, 0, 0}, dv[4] = {0, 0, 1, -1};
       uint8_t from = 0;
-      for (int d = 0; d < 4 && !from; ++d) {
-        const int uu = u + du[d], vv = v + dv[d];
-        if (uu >= 0 && vv >= 0 && uu < w && vv < h) from = labels->at<uint8_t>(vv, uu);
-      }
+      for (int d = 0; d < 4 && !from; ++d) from = label[at + around[d]];
       if (!from) continue;
-      labels->at<uint8_t>(v, u) = from;
-      push_neighbours(v, u, l);
+      label[at] = from;
+      for (int d = 0; d < 4; ++d) {
+        const int next = at + around[d];
+        if (label[next] != 0 || level[next] < 0) continue;
+        buckets[std::max<int>(l, level[next])].push_back(next);
+        level[next] = kQueued;
+      }
     }
     std::vector<int>().swap(buckets[l]);
+  }
+  for (int v = 0; v < h; ++v) {
+    std::copy_n(label.data() + static_cast<size_t>(v + 1) * stride + 1, w, labels->ptr<uint8_t>(v));
   }
 }
 
@@ -237,19 +284,36 @@ bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Poi
     const double x = (p.x - centre.x) / scale, y = (p.y - centre.y) / scale;
     row[0] = 1, row[1] = x, row[2] = y, row[3] = x * x, row[4] = x * y, row[5] = y * y;
   };
-  cv::Mat a(static_cast<int>(around.size()), 6, CV_64F), b(a.rows, 1, CV_64F);
-  for (int k = 0; k < a.rows; ++k) {
-    terms(around[k], a.ptr<double>(k));
-    b.at<double>(k) = around[k].z;
-  }
-  cv::Mat quadric;
-  if (!cv::solve(a, b, quadric, cv::DECOMP_SVD)) return false;
-  std::vector<float> off;
+  // Least squares by the normal equations (the terms are scaled to [-1, 1]: well conditioned);
+  // an SVD of the whole system only where they are not (points on a line).
+  Eigen::Matrix<double, 6, 6> ata = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> atb = Eigen::Matrix<double, 6, 1>::Zero(), quadric;
   double row[6];
+  for (const cv::Point3f& p : around) {
+    terms(p, row);
+    for (int i = 0; i < 6; ++i) {
+      for (int j = i; j < 6; ++j) ata(i, j) += row[i] * row[j];
+      atb(i) += row[i] * p.z;
+    }
+  }
+  ata.triangularView<Eigen::StrictlyLower>() = ata.transpose();
+  const Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(ata);
+  if (ldlt.info() == Eigen::Success && ldlt.rcond() > 1e-9) {
+    quadric = ldlt.solve(atb);
+  } else {
+    cv::Mat a(static_cast<int>(around.size()), 6, CV_64F), b(a.rows, 1, CV_64F), x;
+    for (int k = 0; k < a.rows; ++k) {
+      terms(around[k], a.ptr<double>(k));
+      b.at<double>(k) = around[k].z;
+    }
+    if (!cv::solve(a, b, x, cv::DECOMP_SVD)) return false;
+    for (int t = 0; t < 6; ++t) quadric(t) = x.at<double>(t);
+  }
+  std::vector<float> off;
   for (const cv::Point3f& p : inside) {
     terms(p, row);
     double fit = 0;
-    for (int t = 0; t < 6; ++t) fit += row[t] * quadric.at<double>(t);
+    for (int t = 0; t < 6; ++t) fit += row[t] * quadric(t);
     off.push_back(static_cast<float>(std::fabs(p.z - fit)));
   }
   return Median(&off) < step;
@@ -272,76 +336,78 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
   constexpr int kRing = 12, kTile = 32, kNear = 3, kFar = 10;
   const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * kRing + 1, 2 * kRing + 1});
   std::vector<uint8_t> fill(n, 0), kept_label(n, 0);
-  int kept = 0;
-  for (int l = 1; l < n; ++l) {
-    const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
-                       stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
-    const int area = stats.at<int>(l, cv::CC_STAT_AREA);
-    if (box.x == 0 || box.y == 0 || box.br().x == z.cols || box.br().y == z.rows) continue;
-    if (area < 9) {
-      fill[l] = 1;
-      continue;
-    }
-    const cv::Rect near = (box + cv::Size(2 * kRing, 2 * kRing) - cv::Point(kRing, kRing)) & all;
-    const cv::Mat hole = labels(near) == l;
-    cv::Mat ring, depth;
-    cv::dilate(hole, ring, disc);
-    ring &= (*leaf)(near);
-    cv::distanceTransform(hole, depth, cv::DIST_L2, 3);
-    double deepest = 0;
-    cv::minMaxLoc(depth, nullptr, &deepest);
-    // A hole too narrow for the band: all of it.
-    const float lo = deepest >= kFar ? kNear : 0, hi = deepest >= kFar ? kFar : 1e9f;
-    const int tiles_x = (near.width + kTile - 1) / kTile,
-              tiles_y = (near.height + kTile - 1) / kTile;
-    std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
-    std::vector<std::vector<float>> steps(tiles_x * tiles_y);
-    std::vector<float> look_in, look_around;
-    int valid = 0;
-    for (int v = 0; v < near.height; ++v) {
-      const uint8_t* in_hole = hole.ptr<uint8_t>(v);
-      const uint8_t* in_ring = ring.ptr<uint8_t>(v);
-      const float* d = depth.ptr<float>(v);
-      for (int u = 0; u < near.width; ++u) {
-        if (!in_hole[u] && !in_ring[u]) continue;
-        const int uu = u + near.x, vv = v + near.y;
-        const float h = z.at<float>(vv, uu);
-        (in_hole[u] ? look_in : look_around).push_back(gray.at<uint8_t>(vv, uu));
-        if (!Valid(h)) continue;
-        if (in_hole[u]) {
-          ++valid;
-          if (d[u] < lo || d[u] > hi) continue;
-          const int t = (v / kTile) * tiles_x + u / kTile;
-          inside[t].emplace_back(uu, vv, h);
-          steps[t].push_back(threshold.at<float>(vv, uu));
-          continue;
-        }
-        // A ring pixel serves its own tile and those within a quarter tile of it.
-        for (int ty = std::max(0, (v - kTile / 4) / kTile);
-             ty <= std::min(tiles_y - 1, (v + kTile / 4) / kTile); ++ty) {
-          for (int tx = std::max(0, (u - kTile / 4) / kTile);
-               tx <= std::min(tiles_x - 1, (u + kTile / 4) / kTile); ++tx) {
-            around[ty * tiles_x + tx].emplace_back(uu, vv, h);
+  // Each hole judged on its own, the holes shared among the threads.
+  cv::parallel_for_(cv::Range(1, std::max(n, 1)), [&](const cv::Range& range) {
+    for (int l = range.start; l < range.end; ++l) {
+      const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
+                         stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
+      const int area = stats.at<int>(l, cv::CC_STAT_AREA);
+      if (box.x == 0 || box.y == 0 || box.br().x == z.cols || box.br().y == z.rows) continue;
+      if (area < 9) {
+        fill[l] = 1;
+        continue;
+      }
+      const cv::Rect near = (box + cv::Size(2 * kRing, 2 * kRing) - cv::Point(kRing, kRing)) & all;
+      const cv::Mat hole = labels(near) == l;
+      cv::Mat ring, depth;
+      cv::dilate(hole, ring, disc);
+      ring &= (*leaf)(near);
+      cv::distanceTransform(hole, depth, cv::DIST_L2, 3);
+      double deepest = 0;
+      cv::minMaxLoc(depth, nullptr, &deepest);
+      // A hole too narrow for the band: all of it.
+      const float lo = deepest >= kFar ? kNear : 0, hi = deepest >= kFar ? kFar : 1e9f;
+      const int tiles_x = (near.width + kTile - 1) / kTile,
+                tiles_y = (near.height + kTile - 1) / kTile;
+      std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
+      std::vector<std::vector<float>> steps(tiles_x * tiles_y);
+      std::vector<float> look_in, look_around;
+      int valid = 0;
+      for (int v = 0; v < near.height; ++v) {
+        const uint8_t* in_hole = hole.ptr<uint8_t>(v);
+        const uint8_t* in_ring = ring.ptr<uint8_t>(v);
+        const float* d = depth.ptr<float>(v);
+        for (int u = 0; u < near.width; ++u) {
+          if (!in_hole[u] && !in_ring[u]) continue;
+          const int uu = u + near.x, vv = v + near.y;
+          const float h = z.at<float>(vv, uu);
+          (in_hole[u] ? look_in : look_around).push_back(gray.at<uint8_t>(vv, uu));
+          if (!Valid(h)) continue;
+          if (in_hole[u]) {
+            ++valid;
+            if (d[u] < lo || d[u] > hi) continue;
+            const int t = (v / kTile) * tiles_x + u / kTile;
+            inside[t].emplace_back(uu, vv, h);
+            steps[t].push_back(threshold.at<float>(vv, uu));
+            continue;
+          }
+          // A ring pixel serves its own tile and those within a quarter tile of it.
+          for (int ty = std::max(0, (v - kTile / 4) / kTile);
+               ty <= std::min(tiles_y - 1, (v + kTile / 4) / kTile); ++ty) {
+            for (int tx = std::max(0, (u - kTile / 4) / kTile);
+                 tx <= std::min(tiles_x - 1, (u + kTile / 4) / kTile); ++tx) {
+              around[ty * tiles_x + tx].emplace_back(uu, vv, h);
+            }
           }
         }
       }
-    }
-    bool island;
-    if (valid >= area / 2) {
-      int judged = 0, off = 0;
-      for (size_t t = 0; t < inside.size(); ++t) {
-        if (inside[t].size() < 8 || around[t].size() < 24) continue;
-        ++judged;
-        off += !OnSurface(around[t], inside[t], Median(&steps[t]));
+      bool island;
+      if (valid >= area / 2) {
+        int judged = 0, off = 0;
+        for (size_t t = 0; t < inside.size(); ++t) {
+          if (inside[t].size() < 8 || around[t].size() < 24) continue;
+          ++judged;
+          off += !OnSurface(around[t], inside[t], Median(&steps[t]));
+        }
+        island = 2 * off <= judged;
+      } else {
+        island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;
       }
-      island = 2 * off <= judged;
-    } else {
-      island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;
+      fill[l] = island;
+      kept_label[l] = !island;
     }
-    fill[l] = island;
-    kept_label[l] = !island;
-    kept += !island;
-  }
+  });
+  const int kept = static_cast<int>(std::count(kept_label.begin(), kept_label.end(), 1));
   // The holes kept, closed over leaf bridges narrower than the rim's blur (4 px: two pieces of
   // one hole the flood split are one hole), and counted.
   cv::Mat holes = cv::Mat::zeros(z.size(), CV_8U);
@@ -487,13 +553,14 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat gray = texture;
   if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
   if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 1.0 / 257);
-  const cv::Mat z = SmoothHeights(points);
+  cv::Mat zn;
+  const cv::Mat z = SmoothHeights(points, &zn);
   // Rim strength in units of the step that counts as a rim there: `step` where the surface is
   // bright (paper), more over dark ink, whose heights are as noisy as its signal is weak.
-  cv::Mat strength = RimStrength(points, z, options.scale_px, options.max_slope_deg);
+  cv::Mat strength = RimStrength(points, zn, options.scale_px, options.max_slope_deg);
   const double bright = BrightLevel(gray);
-  cv::Mat threshold = StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false);
-  strength /= threshold;
+  cv::divide(strength, StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false),
+             strength);
   // Surfaces: pixels with a height, away from every rim (gaps in a rim closed), as components.
   cv::Mat rims;
   cv::dilate(strength > 1, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),
