@@ -24,6 +24,16 @@ class RatioReporter : public benchmark::ConsoleReporter {
     }
     return 0.0;
   }
+  // The median of a benchmark's repetitions (its "_median" aggregate), else its one run's time.
+  double Median(const std::string& prefix) const {
+    for (const auto& [name, t] : times_) {
+      if (name.rfind(prefix, 0) == 0 && name.size() > 7 &&
+          name.compare(name.size() - 7, 7, "_median") == 0) {
+        return t;
+      }
+    }
+    return Time(prefix);
+  }
   // After the table: "<ours_label> T ms vs <peer_label> T ms: peer / ours = Rx", when both
   // ran (a --benchmark_filter may leave either out). Times in ms (the benchmarks' unit).
   void PrintRatio(const std::string& ours, const std::string& ours_label, const std::string& peer,

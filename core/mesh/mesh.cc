@@ -11,25 +11,24 @@ namespace {
 
 enum class Fit { kOk, kHole, kEdge };
 
-// A point in a node's window: its monomials in the pixel offset from the node (in window
-// half-sizes: 1, du, dv, du^2, du dv, dv^2) and the measured point, mm.
-struct Sample {
-  double m[6];
-  double x[3];
-};
+// The fit's six monomials du^a dv^b: 1, du, dv, du^2, du dv, dv^2 (du, dv: the pixel offset from
+// the node in window half-sizes).
+constexpr int kPowerU[6] = {0, 1, 0, 2, 1, 0};
+constexpr int kPowerV[6] = {0, 0, 1, 0, 1, 2};
 
 // The normal equations of the least-squares fit of x, y, z as polynomials in (du, dv): sums of
-// monomial products (the upper triangle) and of monomials times the coordinates. Kept as plain
-// sums (not Eigen's rank updates): a node's window holds a few hundred points, two fits each.
+// monomial products (the upper triangle) and of monomials times the coordinates.
 struct NormalSums {
   double ata[6][6] = {};
   double atb[6][3] = {};
 
-  void Add(const Sample& s, double sign) {
+  // Adds (sign 1) or removes (-1) one point.
+  void Add(double du, double dv, const cv::Vec3f& x, double sign) {
+    const double m[6] = {1, du, dv, du * du, du * dv, dv * dv};
     for (int i = 0; i < 6; ++i) {
-      const double mi = sign * s.m[i];
-      for (int j = i; j < 6; ++j) ata[i][j] += mi * s.m[j];
-      for (int c = 0; c < 3; ++c) atb[i][c] += mi * s.x[c];
+      const double mi = sign * m[i];
+      for (int j = i; j < 6; ++j) ata[i][j] += mi * m[j];
+      for (int c = 0; c < 3; ++c) atb[i][c] += mi * x[c];
     }
   }
 };
@@ -56,56 +55,75 @@ bool Polyfit(const NormalSums& sums, int terms, Eigen::Matrix<double, 6, 3>* coe
   return terms == 6 ? Solve<6>(sums, coef) : Solve<3>(sums, coef);
 }
 
-// The squared distance of a sample from the fitted polynomials, mm^2.
-double Residual2(const Eigen::Matrix<double, 6, 3>& c, const Sample& s) {
-  double d2 = 0;
-  for (int k = 0; k < 3; ++k) {
-    double f = -s.x[k];
-    for (int i = 0; i < 6; ++i) f += s.m[i] * c(i, k);
-    d2 += f * f;
-  }
-  return d2;
-}
-
 // Fits x, y, z of the points around a node as functions of the pixel offset (quadratic where
 // there are enough points around it, else linear) and returns their value at the node. The
 // fit removes noise and, being of second order, does not flatten the page's curvature. It is
 // robust: points far from a first fit (mixed pixels at the page's edge, stray decodes) are
 // dropped before the second. A node with data on one side only and none at its own pixel lies
 // beyond the data's edge (kEdge): a fit there would extrapolate, so it is left to the skirt.
+//
+// The sums are separable: along a window row dv is fixed, so each row sums du^0..4 and x du^0..2
+// of its points, and the row's sums enter the normal equations with its powers of dv (14
+// products a point instead of 39; a window holds a few hundred points).
 Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
             int min_points, cv::Vec3d* out) {
   const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
   const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
   const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
   const int v1 = std::min(points.rows - 1, static_cast<int>(std::ceil(at.y)) + hv);
-  thread_local std::vector<Sample> samples;
-  samples.clear();
+  auto offset_u = [&](int u) { return (u - at.x) / hu; };
+  auto offset_v = [&](int v) { return (v - at.y) / hv; };
+  auto usable = [&](const cv::Vec3f& x, uint8_t m) { return m && std::isfinite(x[2]); };
+  NormalSums sums;
+  int count = 0;
   double su = 0, sv = 0;
-  bool own = false;
   for (int v = v0; v <= v1; ++v) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
     const uint8_t* m = mask.ptr<uint8_t>(v);
-    const double dv = (v - at.y) / hv;
+    double pu[5] = {}, xu[3][3] = {};  // Sums of du^a; of x_k du^a.
+    int n = 0;
     for (int u = u0; u <= u1; ++u) {
-      if (!m[u] || !std::isfinite(row[u][2])) continue;
-      const double du = (u - at.x) / hu;
-      samples.push_back(
-          {{1, du, dv, du * du, du * dv, dv * dv}, {row[u][0], row[u][1], row[u][2]}});
-      su += du;
-      sv += dv;
-      own = own || (std::fabs(u - at.x) <= 1.5 && std::fabs(v - at.y) <= 1.5);
+      if (!usable(row[u], m[u])) continue;
+      const double du = offset_u(u), du2 = du * du;
+      ++n;
+      pu[1] += du;
+      pu[2] += du2;
+      pu[3] += du2 * du;
+      pu[4] += du2 * du2;
+      for (int k = 0; k < 3; ++k) {
+        xu[k][0] += row[u][k];
+        xu[k][1] += row[u][k] * du;
+        xu[k][2] += row[u][k] * du2;
+      }
     }
+    if (n == 0) continue;
+    pu[0] = n;
+    const double dv = offset_v(v);
+    const double pv[5] = {1, dv, dv * dv, dv * dv * dv, dv * dv * dv * dv};
+    for (int i = 0; i < 6; ++i) {
+      for (int j = i; j < 6; ++j) {
+        sums.ata[i][j] += pv[kPowerV[i] + kPowerV[j]] * pu[kPowerU[i] + kPowerU[j]];
+      }
+      for (int k = 0; k < 3; ++k) sums.atb[i][k] += pv[kPowerV[i]] * xu[k][kPowerU[i]];
+    }
+    count += n;
+    su += pu[1];
+    sv += n * dv;
   }
-  const int count = static_cast<int>(samples.size());
   if (count < min_points) return Fit::kHole;
   // Points on one side only (a node at the page's edge): a quadratic would extrapolate
-  // wildly, a plane does not.
+  // wildly, a plane does not. `own`: a point at the node's own pixel.
+  bool own = false;
+  for (int v = std::max(v0, static_cast<int>(std::ceil(at.y - 1.5)));
+       v <= std::min(v1, static_cast<int>(std::floor(at.y + 1.5))) && !own; ++v) {
+    for (int u = std::max(u0, static_cast<int>(std::ceil(at.x - 1.5)));
+         u <= std::min(u1, static_cast<int>(std::floor(at.x + 1.5))); ++u) {
+      own = own || usable(points.at<cv::Vec3f>(v, u), mask.at<uint8_t>(v, u));
+    }
+  }
   const bool one_sided = std::hypot(su, sv) / count > 0.25;
   if (one_sided && !own) return Fit::kEdge;
   const int terms = (count >= 2 * min_points && !one_sided) ? 6 : 3;
-  NormalSums sums;
-  for (const Sample& sample : samples) sums.Add(sample, 1);
   Eigen::Matrix<double, 6, 3> c;
   if (!Polyfit(sums, terms, &c)) return Fit::kHole;
   // Points further than four times the median residual go, but never closer than 0.2 mm
@@ -113,11 +131,30 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
   // residuals are): below that the cut is 0.2 mm whatever it is.
   constexpr double kFloor = 0.2;  // mm
   thread_local std::vector<double> residual, sorted;
-  residual.resize(samples.size());
+  residual.clear();
   int small = 0;
-  for (size_t i = 0; i < samples.size(); ++i) {
-    residual[i] = Residual2(c, samples[i]);
-    small += residual[i] <= kFloor * kFloor / 16;
+  for (int v = v0; v <= v1; ++v) {
+    const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+    const uint8_t* m = mask.ptr<uint8_t>(v);
+    // Along the row each coordinate's polynomial is a + b du + g du^2.
+    const double dv = offset_v(v);
+    double a[3], b[3], g[3];
+    for (int k = 0; k < 3; ++k) {
+      a[k] = c(0, k) + dv * (c(2, k) + dv * c(5, k));
+      b[k] = c(1, k) + dv * c(4, k);
+      g[k] = c(3, k);
+    }
+    for (int u = u0; u <= u1; ++u) {
+      if (!usable(row[u], m[u])) continue;
+      const double du = offset_u(u);
+      double r2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        const double f = a[k] + du * (b[k] + du * g[k]) - row[u][k];
+        r2 += f * f;
+      }
+      residual.push_back(r2);
+      small += r2 <= kFloor * kFloor / 16;
+    }
   }
   double cut = kFloor * kFloor;
   if (small < count / 2 + 1) {
@@ -125,15 +162,22 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
     std::nth_element(sorted.begin(), sorted.begin() + count / 2, sorted.end());
     cut = std::max(cut, 16.0 * sorted[count / 2]);
   }
-  // The second fit: the first's sums less the points dropped (few: the sums stay well scaled).
+  // The second fit: the first's sums less the points dropped (few: the sums stay well scaled);
+  // none dropped, the first fit stands.
   int kept = count;
-  for (size_t i = 0; i < samples.size(); ++i) {
-    if (residual[i] > cut) {
-      sums.Add(samples[i], -1);
-      --kept;
+  size_t i = 0;
+  for (int v = v0; v <= v1; ++v) {
+    const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+    const uint8_t* m = mask.ptr<uint8_t>(v);
+    for (int u = u0; u <= u1; ++u) {
+      if (!usable(row[u], m[u])) continue;
+      if (residual[i++] > cut) {
+        sums.Add(offset_u(u), offset_v(v), row[u], -1);
+        --kept;
+      }
     }
   }
-  if (kept < min_points || !Polyfit(sums, terms, &c)) return Fit::kHole;
+  if (kept < min_points || (kept < count && !Polyfit(sums, terms, &c))) return Fit::kHole;
   *out = cv::Vec3d(c(0, 0), c(0, 1), c(0, 2));  // The polynomials at the node (du = dv = 0).
   return Fit::kOk;
 }

@@ -176,7 +176,9 @@ double BrightLevel(const cv::Mat& gray) {
 // darkest brightness the decoder's fit reaches (a cautious threshold, for deciding whether a hole
 // is real); otherwise the mean brightness there (a sensitive one, for finding rims across lines
 // of text). Brightness is relative to the texture's bright level.
-cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale, bool darkest) {
+// If `in_steps` is given, it is divided by the threshold in the same pass.
+cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale, bool darkest,
+                      cv::Mat* in_steps = nullptr) {
   cv::Mat around;
   const int reach = 2 * scale + 1;
   if (darkest) {
@@ -193,6 +195,10 @@ cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale
       float* out = threshold.ptr<float>(v);
       for (int u = 0; u < gray.cols; ++u) {
         out[u] = std::max(least, half / std::max(in[u] * to_paper, 0.05f));
+      }
+      if (in_steps) {
+        float* x = in_steps->ptr<float>(v);
+        for (int u = 0; u < gray.cols; ++u) x[u] /= out[u];
       }
     }
   });
@@ -559,8 +565,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // bright (paper), more over dark ink, whose heights are as noisy as its signal is weak.
   cv::Mat strength = RimStrength(points, zn, options.scale_px, options.max_slope_deg);
   const double bright = BrightLevel(gray);
-  cv::divide(strength, StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false),
-             strength);
+  StepThreshold(gray, bright, step, options.scale_px, /*darkest=*/false, &strength);
   // Surfaces: pixels with a height, away from every rim (gaps in a rim closed), as components.
   cv::Mat rims;
   cv::dilate(strength > 1, rims, cv::getStructuringElement(cv::MORPH_CROSS, {3, 3}),
@@ -573,13 +578,11 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::resize(blocks, blocks, cv::Size(size.width / 2, size.height / 2), 0, 0, cv::INTER_NEAREST);
   const int count =
       cv::connectedComponentsWithStats(blocks, half_components, stats, centroids, 4, CV_32S);
-  cv::Mat components;
-  cv::resize(half_components, components, cv::Size(size.width / 2 * 2, size.height / 2 * 2), 0, 0,
-             cv::INTER_NEAREST);
-  if (components.size() != size) {
-    cv::copyMakeBorder(components, components, 0, size.height - components.rows, 0,
-                       size.width - components.cols, cv::BORDER_CONSTANT, 0);
-  }
+  // A pixel's component: its block's (none in an odd last row or column).
+  const cv::Size half = half_components.size();
+  auto component = [&](int v, int u) {
+    return v / 2 < half.height && u / 2 < half.width ? half_components.at<int>(v / 2, u / 2) : 0;
+  };
   // The leaf: the surfaces that cover much of the seed region (the hint, or the centre of the
   // view; an open book's two pages share it).
   cv::Rect seed = options.hint & cv::Rect(0, 0, size.width, size.height);
@@ -588,8 +591,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   std::vector<int> votes(count, 0);
   for (int v = seed.y; v < seed.y + seed.height; ++v) {
-    const int* row = components.ptr<int>(v);
-    for (int u = seed.x; u < seed.x + seed.width; ++u) ++votes[row[u]];
+    for (int u = seed.x; u < seed.x + seed.width; ++u) ++votes[component(v, u)];
   }
   votes[0] = 0;
   const int most = *std::max_element(votes.begin(), votes.end());
@@ -606,12 +608,20 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     }
   }
   cv::Mat labels(size, CV_8U);
-  for (int v = 0; v < size.height; ++v) {
-    const int* c = components.ptr<int>(v);
-    uint8_t* out = labels.ptr<uint8_t>(v);
-    const uint8_t* in = surface.ptr<uint8_t>(v);
-    for (int u = 0; u < size.width; ++u) out[u] = in[u] ? kind[c[u]] : 0;
-  }
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+    for (int v = range.start; v < range.end; ++v) {
+      uint8_t* out = labels.ptr<uint8_t>(v);
+      const uint8_t* in = surface.ptr<uint8_t>(v);
+      if (v / 2 >= half.height) {
+        std::fill_n(out, size.width, 0);
+        continue;
+      }
+      const int* c = half_components.ptr<int>(v / 2);
+      for (int u = 0; u < size.width; ++u) {
+        out[u] = in[u] && u / 2 < half.width ? kind[c[u / 2]] : 0;
+      }
+    }
+  });
   const double area_min = options.min_area * size.area();
   cv::Mat leaf;
   if (leaf_area >= area_min) {
