@@ -110,7 +110,8 @@ int main(int argc, char** argv) {
   const double ours = reporter.Median("BM_Vellum_FindLeaf_SheetAuto");
   if (base > 0 && ours > 0) {
     std::printf(
-        "finding the leaf by its shape and its sheet (medians): %.1f ms against %.1f ms for the brightness "
+        "finding the leaf by its shape and its sheet (medians): %.1f ms against %.1f ms for the "
+        "brightness "
         "rule and a 45x45 sheet: %.1f ms added (bar: 50 ms), ratio %.2fx\n",
         ours, base, ours - base, ours / base);
   }
