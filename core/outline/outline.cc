@@ -17,6 +17,28 @@ constexpr float kNoData = -1e4f;  // Heights below -1e3 mean "no point".
 
 bool Valid(float z) { return z > -1e3f; }
 
+// SmoothHeights' common case, for the pixels 1 to w - 2 of a row (`up`, `row` and `down` the
+// raw heights of three rows): where the pixel and its eight neighbours all have a height, the
+// median of the pixel and the means of its four opposite pairs, found without sorting (of the
+// four means, the larger of the two pairwise minima and the smaller of the two pairwise maxima
+// are the middle two; the median of five is the median of those and the pixel); NaN elsewhere.
+// Without branches, so the compiler vectorizes it.
+void MedianOfFive(const float* up, const float* row, const float* down, int w,
+                  float* __restrict out) {
+  for (int u = 1; u < w - 1; ++u) {
+    const float l = row[u - 1], r = row[u + 1], t = up[u], b = down[u], tl = up[u - 1],
+                br = down[u + 1], tr = up[u + 1], bl = down[u - 1], c = row[u];
+    auto lo = [](float x, float y) { return x < y ? x : y; };
+    auto hi = [](float x, float y) { return x > y ? x : y; };
+    const float least = lo(lo(lo(l, r), lo(t, b)), lo(lo(tl, br), lo(lo(tr, bl), c)));
+    const float m0 = 0.5f * (l + r), m1 = 0.5f * (t + b), m2 = 0.5f * (tl + br),
+                m3 = 0.5f * (tr + bl);
+    const float f = hi(lo(m0, m1), lo(m2, m3)), g = lo(hi(m0, m1), hi(m2, m3));
+    const float median = hi(lo(f, g), lo(hi(f, g), c));
+    out[u] = Valid(least) ? median : std::numeric_limits<float>::quiet_NaN();
+  }
+}
+
 // Heights of the point map, each the median of its own and the means of its opposite
 // neighbours (left-right, up-down and both diagonals) where both have a point: an isolated
 // outlier is dropped, a step stays sharp, and a steep slope with missing points is not biased (a
@@ -34,27 +56,25 @@ cv::Mat SmoothHeights(const cv::Mat& points, cv::Mat* nan = nullptr) {
       for (int u = 0; u < w; ++u) out[u] = std::isfinite(p[u][2]) ? p[u][2] : kNoData;
     }
   });
-  cv::Mat smooth(points.size(), CV_32F, cv::Scalar(kNoData));
-  cv::parallel_for_(cv::Range(1, h - 1), [&](const cv::Range& range) {
+  cv::Mat smooth(points.size(), CV_32F);
+  if (nan) *nan = cv::Mat(points.size(), CV_32F);
+  constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
+      float* out = smooth.ptr<float>(v);
+      if (v == 0 || v == h - 1) {
+        std::fill_n(out, w, kNoData);
+        if (nan) std::fill_n(nan->ptr<float>(v), w, kNaN);
+        continue;
+      }
       const float *up = raw.ptr<float>(v - 1), *row = raw.ptr<float>(v),
                   *down = raw.ptr<float>(v + 1);
-      float* out = smooth.ptr<float>(v);
+      out[0] = out[w - 1] = kNoData;
+      MedianOfFive(up, row, down, w, out);
       for (int u = 1; u < w - 1; ++u) {
-        const float l = row[u - 1], r = row[u + 1], t = up[u], b = down[u], tl = up[u - 1],
-                    br = down[u + 1], tr = up[u + 1], bl = down[u - 1], c = row[u];
-        if (Valid(l) && Valid(r) && Valid(t) && Valid(b) && Valid(tl) && Valid(br) && Valid(tr) &&
-            Valid(bl) && Valid(c)) {
-          // Every pair and the pixel: the median of five without sorting. Of the four means, the
-          // larger of the two pairwise minima and the smaller of the two pairwise maxima are the
-          // middle two; the median of five is the median of those and the pixel.
-          const float m0 = 0.5f * (l + r), m1 = 0.5f * (t + b), m2 = 0.5f * (tl + br),
-                      m3 = 0.5f * (tr + bl);
-          const float f = std::max(std::min(m0, m1), std::min(m2, m3));
-          const float g = std::min(std::max(m0, m1), std::max(m2, m3));
-          out[u] = std::max(std::min(f, g), std::min(std::max(f, g), c));
-          continue;
-        }
+        if (out[u] == out[u]) continue;
+        // A pixel or a neighbour without a height (NaN from MedianOfFive): the pairs present.
+        out[u] = kNoData;
         float values[5];
         int n = 0;
         auto pair = [&](float a, float b) {
@@ -77,21 +97,38 @@ cv::Mat SmoothHeights(const cv::Mat& points, cv::Mat* nan = nullptr) {
         }
         out[u] = n % 2 ? values[n / 2] : 0.5f * (values[n / 2 - 1] + values[n / 2]);
       }
+      if (nan) {
+        float* with_nan = nan->ptr<float>(v);
+        for (int u = 0; u < w; ++u) with_nan[u] = Valid(out[u]) ? out[u] : kNaN;
+      }
     }
   });
-  if (nan) {
-    *nan = cv::Mat(points.size(), CV_32F);
-    cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& range) {
-      for (int v = range.start; v < range.end; ++v) {
-        const float* in = smooth.ptr<float>(v);
-        float* out = nan->ptr<float>(v);
-        for (int u = 0; u < w; ++u) {
-          out[u] = Valid(in[u]) ? in[u] : std::numeric_limits<float>::quiet_NaN();
-        }
-      }
-    });
-  }
   return smooth;
+}
+
+// One row of RimStrength's step test: for each pixel, the strongest disagreement of the surface
+// `a` and `b` = 2a pixels before and after it, extrapolated to it, along the row (`row`), the
+// column and both diagonals (the rows b and a above, a and b below). A plain function over
+// pointers, so the compiler vectorizes it.
+void StepDisagreement(const float* row, const float* rb, const float* ra, const float* sa,
+                      const float* sb, int a, int b, int w, float* __restrict out) {
+  const float slope = 2.0f * a;
+  // |after - before|, less what a steep, curved surface gives without any step (its samples
+  // thin out as it turns from the camera: half the height it changes per pixel there).
+  auto disagree = [slope](float fb, float nb, float na, float fa) {
+    const float d =
+        std::fabs((na - (fa - na)) - (nb + (nb - fb))) - 0.5f * std::fabs(na - nb) / slope;
+    return d > 0.0f ? d : 0.0f;  // NaN (a missing height) gives 0: no evidence.
+  };
+  for (int u = b; u < w - b; ++u) {
+    // By value (std::max returns a reference, which can keep a loop from vectorizing).
+    const float d0 = disagree(row[u - b], row[u - a], row[u + a], row[u + b]);
+    const float d1 = disagree(rb[u], ra[u], sa[u], sb[u]);
+    const float d2 = disagree(rb[u - b], ra[u - a], sa[u + a], sb[u + b]);
+    const float d3 = disagree(rb[u + b], ra[u + a], sa[u - a], sb[u - b]);
+    const float e0 = d0 > d1 ? d0 : d1, e1 = d2 > d3 ? d2 : d3;
+    out[u] = e0 > e1 ? e0 : e1;
+  }
 }
 
 // How strongly each pixel lies on a rim, mm: where the height steps, or where the surface
@@ -113,24 +150,9 @@ cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& zn, int scale, double 
     for (int v = range.start; v < range.end; ++v) {
       const float* row = zn.ptr<float>(v);
       float* out = strength.ptr<float>(v);
-      // The surface a and b pixels before and after, extrapolated to the pixel: |after - before|,
-      // less what a steep, curved surface gives without any step (its samples thin out as it
-      // turns from the camera: half the height it changes per pixel there).
-      auto disagree = [a](float fb, float nb, float na, float fa) {
-        const float d =
-            std::fabs((na - (fa - na)) - (nb + (nb - fb))) - 0.5f * std::fabs(na - nb) / (2 * a);
-        return std::max(0.0f, d);  // NaN (a missing height) gives 0: no evidence.
-      };
       if (v >= b && v + b < z.rows) {
-        const float *rb = zn.ptr<float>(v - b), *ra = zn.ptr<float>(v - a);
-        const float *sa = zn.ptr<float>(v + a), *sb = zn.ptr<float>(v + b);
-        for (int u = b; u < w - b; ++u) {
-          float worst = disagree(row[u - b], row[u - a], row[u + a], row[u + b]);
-          worst = std::max(worst, disagree(rb[u], ra[u], sa[u], sb[u]));
-          worst = std::max(worst, disagree(rb[u - b], ra[u - a], sa[u + a], sb[u + b]));
-          worst = std::max(worst, disagree(rb[u + b], ra[u + a], sa[u - a], sb[u - b]));
-          out[u] = worst;
-        }
+        StepDisagreement(row, zn.ptr<float>(v - b), zn.ptr<float>(v - a), zn.ptr<float>(v + a),
+                         zn.ptr<float>(v + b), a, b, w, out);
       }
       // Silhouettes: the height changes faster than a surface at max_slope_deg would between a
       // point and its right or lower neighbour. Written without branches (a missing height or
