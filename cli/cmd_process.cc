@@ -42,8 +42,9 @@ int RunProcess(const std::vector<std::string>& args) {
       "open book) each page's files go to pages/left/ and pages/right/.\n"
       "Exit status: 0 restored; 1 an error (one line names the file and the problem); 2 bad\n"
       "flags; 3 restored with warnings that make the result doubtful (the leaf runs off the\n"
-      "view, an uncertain outline, high strain or fold-over, an unexpected leaf size): check\n"
-      "report.html before delivering it.",
+      "view, an uncertain outline, high strain or fold-over, an unexpected leaf size, a\n"
+      "spread's pages missing over 5 mm at the gutter): check report.html before delivering\n"
+      "it.",
       specs);
   if (!flags.Parse(args)) return 0;
   const std::string scan_dir = flags.Require("scan");

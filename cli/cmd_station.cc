@@ -163,7 +163,8 @@ int RunScan(const std::vector<std::string>& args) {
               "restored. Exit status 1 when the projector is not heard within --wait, a daemon\n"
               "reports the scan failed, or nothing happens before the timeout; 3 when the page\n"
               "was restored with warnings that make it doubtful (printed; the leaf runs off the\n"
-              "view, an uncertain outline, high strain): check its report.html.",
+              "view, an uncertain outline, high strain, pages missing at a gutter): check its\n"
+              "report.html.",
               specs);
   if (!flags.Parse(args)) return 0;
   const double timeout = flags.GetDouble("timeout", 1, 86400);

@@ -234,6 +234,21 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
            "the leaf runs off the camera's view: what lies outside it is missing from the "
            "restored page; move the leaf into the view and scan again");
   }
+  if (outline->pages.size() == 2) {
+    const GutterGap gap = UnseenAtGutter(points, *outline);
+    if (gap.rows > 0) {
+      r.Number("outline", "gutter_unseen_mm", gap.median_mm);
+      r.Number("outline", "gutter_unseen_p95_mm", gap.p95_mm);
+      if (gap.median_mm > limits.max_gutter_unseen_mm) {
+        r.Warn("gutter_hidden",
+               "the restored pages leave out at least " + Fixed(gap.median_mm, 1) +
+                   " mm of page at the gutter (" + Fixed(gap.p95_mm, 1) +
+                   " mm in places): the camera or the projector did not reach it, or it was not "
+                   "measured or not taken as the page (see the outline in the report); open "
+                   "the book wider, or turn the cradle towards the projector");
+      }
+    }
+  }
   if (outline->confidence < limits.min_outline_confidence) {
     r.Warn("outline_uncertain",
            "only " + Fixed(100 * outline->confidence, 0) +

@@ -43,6 +43,9 @@ struct WarningLimits {
   // An output dpi asked above the page's finest true sampling by more than this share is
   // upsampling: the restored page holds no detail finer than the camera saw.
   double max_upsampling = 0.05;
+  // On a spread, the least page surface the gutter keeps from view (UnseenAtGutter's median),
+  // mm: above it, the pages' inner margins are not all in the restored pages.
+  double max_gutter_unseen_mm = 5.0;
 };
 
 // Every stage's options: what `vellum process` takes, and each daemon its own part of.

@@ -341,6 +341,123 @@ TEST(Doubtful, ALeafRunningOffTheViewIsFlagged) {
   EXPECT_EQ(qc.checks[0].verdict, QcVerdict::kFail);
 }
 
+// A spread's gutter: what the restored pages leave out of the pages there is reported (at
+// least the straight line between the last points of either page), flagged past 5 mm, and
+// never invented: each restored page ends where its page was last seen. Truth from the gantry:
+// in each row across the middle of the spread, the innermost pixel of each page that the camera
+// sees and the projector lights; and, per millimetre of the page's height, how far from its
+// outer edge the page was seen.
+struct GutterTruth {
+  double chord_mm = 0;  // Median straight line between those pixels' points.
+  // Per page and per millimetre of t: the seen s nearest the gutter (the left page's gutter is
+  // its s = w edge, the right page's its s = 0 edge); NaN where none.
+  std::vector<double> innermost[2];
+};
+
+GutterTruth TrueGutter(const VirtualGantry& gantry) {
+  const GroundTruth& truth = gantry.truth();
+  const cv::Size2d size = gantry.pages().at(0).options().size_mm;
+  GutterTruth t;
+  for (auto& bins : t.innermost) bins.assign(static_cast<size_t>(size.height) + 1, std::nan(""));
+  const cv::Rect box = cv::boundingRect(truth.page_index);
+  std::vector<double> chords;
+  for (int v = 0; v < truth.page_index.rows; ++v) {
+    int last_left = -1, first_right = -1;
+    for (int u = 0; u < truth.page_index.cols; ++u) {
+      const int page = truth.page_index.at<uint8_t>(v, u);
+      if (!truth.lit.at<uint8_t>(v, u) || page == 0) continue;
+      if (page == 1) last_left = u;
+      if (page == 2 && first_right < 0) first_right = u;
+      const cv::Vec2f st = truth.page.at<cv::Vec2f>(v, u);
+      double& bin = t.innermost[page - 1].at(
+          std::clamp(static_cast<int>(st[1]), 0, static_cast<int>(size.height)));
+      bin = std::isnan(bin) ? st[0]
+            : page == 1     ? std::max<double>(bin, st[0])
+                            : std::min<double>(bin, st[0]);
+    }
+    if (v < box.y + box.height / 10 || v >= box.y + box.height * 9 / 10) continue;
+    if (last_left < 0 || first_right < 0) continue;
+    chords.push_back(cv::norm(truth.points.at<cv::Vec3f>(v, first_right) -
+                              truth.points.at<cv::Vec3f>(v, last_left)));
+  }
+  std::nth_element(chords.begin(), chords.begin() + chords.size() / 2, chords.end());
+  t.chord_mm = chords.at(chords.size() / 2);
+  return t;
+}
+
+// Restored leaf pixels of page k (0 left, 1 right) whose true point lies more than `slack_mm`
+// past where the page was seen, towards the gutter, and the leaf pixels looked at.
+std::pair<int, int> Invented(const Scanned& run, const GutterTruth& truth, size_t k,
+                             double slack_mm) {
+  const PageResult& page = run.result.pages.at(k);
+  const Rigid2D to_true = FlatToTrue(run.scan.gantry->truth(), page);
+  const RestoreResult& r = page.restored;
+  const cv::Matx22d inv = cv::Matx22d(r.pixel_from_flat(0, 0), r.pixel_from_flat(0, 1),
+                                      r.pixel_from_flat(1, 0), r.pixel_from_flat(1, 1))
+                              .inv();
+  const std::vector<double>& bins = truth.innermost[k];
+  int invented = 0, looked = 0;
+  for (int v = 0; v < r.mask.rows; v += 2) {
+    for (int u = 0; u < r.mask.cols; u += 2) {
+      if (!r.mask.at<uint8_t>(v, u)) continue;
+      const cv::Vec2d f = inv * cv::Vec2d(u - r.pixel_from_flat(0, 2), v - r.pixel_from_flat(1, 2));
+      const cv::Point2d st = to_true.Apply({f[0], f[1]});
+      const int bin = static_cast<int>(std::floor(st.y));
+      if (bin < 0 || bin >= static_cast<int>(bins.size()) || std::isnan(bins[bin])) continue;
+      ++looked;
+      invented += k == 0 ? st.x > bins[bin] + slack_mm : st.x < bins[bin] - slack_mm;
+    }
+  }
+  return {invented, looked};
+}
+
+TEST(Doubtful, WhatTheGutterHidesIsReportedFlaggedAndNotInvented) {
+  // A book opened wide (the pages turn 55 degrees down into the gutter) and one barely open
+  // (88 degrees, a tighter bend): the camera and the projector reach all of the first, not the
+  // depth of the second.
+  for (const double angle : {55.0, 88.0}) {
+    const bool deep = angle > 80;
+    SCOPED_TRACE(deep ? "deep gutter" : "open wide");
+    PageOptions page;
+    page.size_mm = {170.0, 230.0};
+    page.gutter_angle_deg = angle;
+    if (deep) page.gutter_radius_mm = 25;
+    SceneOptions scene;
+    scene.spread = true;
+    const Scanned run = ProcessOn(DefaultRig(), page, TextureOptions(), scene, 41,
+                                  PipelineOptions(), deep ? "deep_gutter" : "open_wide");
+    ASSERT_TRUE(run.result.status.ok()) << run.result.status.message();
+    ASSERT_EQ(run.result.pages.size(), 2u) << "found as a spread";
+    const GutterTruth truth = TrueGutter(*run.scan.gantry);
+    const ProcessReport& report = run.result.report;
+    const double unseen = report.Number("outline", "gutter_unseen_mm");
+    std::printf(
+        "[gutter] %-11s left out %.2f mm (p95 %.2f) reported; the true line between "
+        "the last pages' points seen %.2f mm\n",
+        deep ? "deep" : "open wide", unseen, report.Number("outline", "gutter_unseen_p95_mm"),
+        truth.chord_mm);
+    ASSERT_NE(report.Find("outline", "gutter_unseen_mm"), nullptr);
+    // What the camera and the projector did not reach is left out: the line reported is at
+    // least the true one, less the pages' 2 mm gap, whose floor (level with the pages' gutter
+    // edges) may be taken as page.
+    EXPECT_GE(unseen, truth.chord_mm - scene.spread_gap_mm);
+    EXPECT_EQ(Has(WarningCodes(run), "gutter_hidden"), deep) << unseen << " mm";
+    if (!deep) {
+      EXPECT_LE(unseen, truth.chord_mm + 1.0) << "the open book's pages come out whole";
+    }
+    // Never invented: no restored leaf pixel lies past where its page was seen, by more than
+    // the rim's mixed pixels (5 px at 0.25 mm, 1.25 mm on flat paper) and the gap's floor
+    // taken as page (2 mm).
+    for (size_t k = 0; k < 2; ++k) {
+      const auto [invented, looked] = Invented(run, truth, k, 1.25 + scene.spread_gap_mm);
+      std::printf("[gutter] %-11s %-5s %d of %d restored leaf pixels past what was seen\n",
+                  deep ? "deep" : "open wide", run.result.pages[k].name.c_str(), invented, looked);
+      EXPECT_GT(looked, 10000);
+      EXPECT_EQ(invented, 0) << run.result.pages[k].name;
+    }
+  }
+}
+
 // An over-exposed texture (the studio light's frame twice as bright: the paper clips at the
 // camera's maximum) is flagged, and fails quality control on exposure; the same scene at its
 // exposure passes it.

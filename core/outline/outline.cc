@@ -696,6 +696,33 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   return out;
 }
 
+GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline) {
+  GutterGap gap;
+  if (outline.pages.size() != 2 || points.type() != CV_32FC3) return gap;
+  const cv::Mat &left = outline.pages[0], &right = outline.pages[1];
+  if (left.size() != points.size() || right.size() != points.size()) return gap;
+  const cv::Rect box = cv::boundingRect(outline.mask);
+  std::vector<float> lengths;
+  for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    const uint8_t *in_left = left.ptr<uint8_t>(v), *in_right = right.ptr<uint8_t>(v);
+    auto measured = [&](int u) { return std::isfinite(p[u][2]); };
+    int last_left = -1, first_right = -1;
+    for (int u = box.x; u < box.x + box.width; ++u) {
+      if (in_left[u] && measured(u)) last_left = u;
+      if (first_right < 0 && in_right[u] && measured(u)) first_right = u;
+    }
+    if (last_left < 0 || first_right < 0 || first_right <= last_left) continue;
+    lengths.push_back(static_cast<float>(cv::norm(p[first_right] - p[last_left])));
+  }
+  gap.rows = static_cast<int>(lengths.size());
+  if (lengths.empty()) return gap;
+  std::sort(lengths.begin(), lengths.end());
+  gap.median_mm = lengths[lengths.size() / 2];
+  gap.p95_mm = lengths[std::min(lengths.size() - 1, lengths.size() * 95 / 100)];
+  return gap;
+}
+
 Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
   Outline out;
   out.method = "brightness";

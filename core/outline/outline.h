@@ -55,6 +55,20 @@ struct Outline {
 Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
                  const OutlineOptions& options = OutlineOptions());
 
+// What a spread's gutter keeps from view: in each image row across the middle 80% of the
+// spread, the straight line between the last points measured on either side of the gutter (the
+// innermost point of the left page and of the right page). Deep in a gutter the camera or the
+// projector does not reach the pages, and that part of them is not measured: the restored pages
+// end there, and the line is the least page surface missing between them (the surface runs
+// down into the gutter and back up; the pages' own gap is part of it).
+struct GutterGap {
+  int rows = 0;          // Rows with a measured point on both sides.
+  double median_mm = 0;  // The line's median length over those rows, mm.
+  double p95_mm = 0;     // Its 95th percentile, mm.
+};
+// Rows 0 when the outline is not a spread.
+GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline);
+
 // The leaf as a live preview shows it, before any scan, for placing it: by brightness alone
 // (a leaf brighter than its surround; the scan itself finds the leaf by its shape). Sets
 // `touches_border` when it runs off the view. An error, in a few words for the viewer, when
