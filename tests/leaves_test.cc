@@ -134,6 +134,24 @@ cv::Point2d Apply(const cv::Matx23d& a, const cv::Point2d& p) {
   return {a(0, 0) * p.x + a(0, 1) * p.y + a(0, 2), a(1, 0) * p.x + a(1, 1) * p.y + a(1, 2)};
 }
 
+// Calls visit(u, v, st) for every other restored leaf pixel (u, v) of `page` (rows and columns
+// in steps of 2), with st its true page point (s, t), mm: the restored map back to the flat
+// frame, then `to_true`.
+template <typename Visit>
+void ForLeafPixels(const PageResult& page, const Rigid2D& to_true, Visit&& visit) {
+  const RestoreResult& r = page.restored;
+  const cv::Matx22d inv = cv::Matx22d(r.pixel_from_flat(0, 0), r.pixel_from_flat(0, 1),
+                                      r.pixel_from_flat(1, 0), r.pixel_from_flat(1, 1))
+                              .inv();
+  for (int v = 0; v < r.mask.rows; v += 2) {
+    for (int u = 0; u < r.mask.cols; u += 2) {
+      if (!r.mask.at<uint8_t>(v, u)) continue;
+      const cv::Vec2d f = inv * cv::Vec2d(u - r.pixel_from_flat(0, 2), v - r.pixel_from_flat(1, 2));
+      visit(u, v, to_true.Apply({f[0], f[1]}));
+    }
+  }
+}
+
 // The restored page's checkerboard corners, each refined to sub-pixel from where the page's true
 // layout puts it (NaN where its neighbourhood is not all leaf: a hole, the edge). In `image` (an
 // image registered to the restored page: another light's) when given.
@@ -254,27 +272,18 @@ TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
     // checked on a 0.5 mm grid within 1.5 mm).
     int outside = 0, leaf = 0;
     const RestoreResult& r = page.restored;
-    const cv::Matx22d lin(r.pixel_from_flat(0, 0), r.pixel_from_flat(0, 1), r.pixel_from_flat(1, 0),
-                          r.pixel_from_flat(1, 1));
-    const cv::Matx22d inv = lin.inv();
     cv::Mat off_leaf = cv::Mat::zeros(r.mask.size(), CV_8U);
-    for (int v = 0; v < r.mask.rows; v += 2) {
-      for (int u = 0; u < r.mask.cols; u += 2) {
-        if (!r.mask.at<uint8_t>(v, u)) continue;
-        ++leaf;
-        const cv::Vec2d f =
-            inv * cv::Vec2d(u - r.pixel_from_flat(0, 2), v - r.pixel_from_flat(1, 2));
-        const cv::Point2d st = to_true.Apply({f[0], f[1]});
-        bool near = pages[k].Contains(st.x, st.y);
-        for (double ds = -1.5; ds <= 1.5 && !near; ds += 0.5) {
-          for (double dt = -1.5; dt <= 1.5 && !near; dt += 0.5) {
-            near = ds * ds + dt * dt <= 1.5 * 1.5 && pages[k].Contains(st.x + ds, st.y + dt);
-          }
+    ForLeafPixels(page, to_true, [&](int u, int v, const cv::Point2d& st) {
+      ++leaf;
+      bool near = pages[k].Contains(st.x, st.y);
+      for (double ds = -1.5; ds <= 1.5 && !near; ds += 0.5) {
+        for (double dt = -1.5; dt <= 1.5 && !near; dt += 0.5) {
+          near = ds * ds + dt * dt <= 1.5 * 1.5 && pages[k].Contains(st.x + ds, st.y + dt);
         }
-        outside += !near;
-        if (!near) off_leaf.at<uint8_t>(v, u) = 255;
       }
-    }
+      outside += !near;
+      if (!near) off_leaf.at<uint8_t>(v, u) = 255;
+    });
     if (getenv("LEAVES_DUMP")) {
       cv::Mat show = r.image.clone();
       if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
@@ -390,24 +399,16 @@ GutterTruth TrueGutter(const VirtualGantry& gantry) {
 std::pair<int, int> Invented(const Scanned& run, const GutterTruth& truth, size_t k,
                              double slack_mm) {
   const PageResult& page = run.result.pages.at(k);
-  const Rigid2D to_true = FlatToTrue(run.scan.gantry->truth(), page);
-  const RestoreResult& r = page.restored;
-  const cv::Matx22d inv = cv::Matx22d(r.pixel_from_flat(0, 0), r.pixel_from_flat(0, 1),
-                                      r.pixel_from_flat(1, 0), r.pixel_from_flat(1, 1))
-                              .inv();
   const std::vector<double>& bins = truth.innermost[k];
   int invented = 0, looked = 0;
-  for (int v = 0; v < r.mask.rows; v += 2) {
-    for (int u = 0; u < r.mask.cols; u += 2) {
-      if (!r.mask.at<uint8_t>(v, u)) continue;
-      const cv::Vec2d f = inv * cv::Vec2d(u - r.pixel_from_flat(0, 2), v - r.pixel_from_flat(1, 2));
-      const cv::Point2d st = to_true.Apply({f[0], f[1]});
-      const int bin = static_cast<int>(std::floor(st.y));
-      if (bin < 0 || bin >= static_cast<int>(bins.size()) || std::isnan(bins[bin])) continue;
-      ++looked;
-      invented += k == 0 ? st.x > bins[bin] + slack_mm : st.x < bins[bin] - slack_mm;
-    }
-  }
+  ForLeafPixels(page, FlatToTrue(run.scan.gantry->truth(), page),
+                [&](int, int, const cv::Point2d& st) {
+                  const int bin = static_cast<int>(std::floor(st.y));
+                  if (bin < 0 || bin >= static_cast<int>(bins.size()) || std::isnan(bins[bin]))
+                    return;
+                  ++looked;
+                  invented += k == 0 ? st.x > bins[bin] + slack_mm : st.x < bins[bin] - slack_mm;
+                });
   return {invented, looked};
 }
 
