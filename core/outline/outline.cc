@@ -141,16 +141,15 @@ void StepDisagreement(const float* row, const float* rb, const float* ra, const 
 // `zn`: the heights with NaN where there is none (the comparisons below then drop out by
 // themselves).
 cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& zn, int scale, double max_slope_deg) {
-  const cv::Mat& z = zn;
-  cv::Mat strength = cv::Mat::zeros(z.size(), CV_32F);
-  const int a = scale, b = 2 * scale, w = z.cols;
+  cv::Mat strength = cv::Mat::zeros(zn.size(), CV_32F);
+  const int a = scale, b = 2 * scale, w = zn.cols;
   const float tan_max = static_cast<float>(std::tan(max_slope_deg * M_PI / 180.0));
   const float tan2 = tan_max * tan_max;
-  cv::parallel_for_(cv::Range(0, z.rows), [&](const cv::Range& range) {
+  cv::parallel_for_(cv::Range(0, zn.rows), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
       const float* row = zn.ptr<float>(v);
       float* out = strength.ptr<float>(v);
-      if (v >= b && v + b < z.rows) {
+      if (v >= b && v + b < zn.rows) {
         StepDisagreement(row, zn.ptr<float>(v - b), zn.ptr<float>(v - a), zn.ptr<float>(v + a),
                          zn.ptr<float>(v + b), a, b, w, out);
       }
@@ -164,7 +163,7 @@ cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& zn, int scale, double 
       for (int u = 0; u + 1 < w; ++u) {
         out[u] = steeper(row[u + 1] - row[u], p[u + 1][0] - p[u][0], p[u + 1][1] - p[u][1], out[u]);
       }
-      if (v + 1 < z.rows) {
+      if (v + 1 < zn.rows) {
         const cv::Vec3f* q = points.ptr<cv::Vec3f>(v + 1);
         const float* below = zn.ptr<float>(v + 1);
         for (int u = 0; u < w; ++u) {
