@@ -295,9 +295,11 @@ double Median(std::vector<float>* values) {
 
 // Whether the heights `inside` a hole lie on the surface the leaf makes `around` it (a quadric
 // fitted to the leaf around it, so a curled leaf's bend does not pass for a step): their median
-// distance from it is under `step`.
+// distance from it is under `step`. `slack_px` forgives each point what the surface's slope there
+// gives over that many pixels (on a wall turned nearly edge-on to the camera a height changes by
+// half a millimetre per pixel, and a fit extrapolated across a gap is not better than a pixel).
 bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Point3f>& inside,
-               double step) {
+               double step, double slack_px = 0) {
   if (around.size() < 12 || inside.empty()) return false;
   // Centred and scaled, for a well-conditioned fit.
   cv::Point2f centre(0, 0);
@@ -341,7 +343,11 @@ bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Poi
     terms(p, row);
     double fit = 0;
     for (int t = 0; t < 6; ++t) fit += row[t] * quadric(t);
-    off.push_back(static_cast<float>(std::fabs(p.z - fit)));
+    // The quadric's slope there, mm per pixel (row[1] and row[2] are the scaled x and y).
+    const double gx = (quadric(1) + 2 * quadric(3) * row[1] + quadric(4) * row[2]) / scale,
+                 gy = (quadric(2) + quadric(4) * row[1] + 2 * quadric(5) * row[2]) / scale;
+    const double slack = slack_px * std::hypot(gx, gy);
+    off.push_back(static_cast<float>(std::max(0.0, std::fabs(p.z - fit) - slack)));
   }
   return Median(&off) < step;
 }
@@ -455,6 +461,139 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
   return cv::connectedComponents(holes, pieces, 8, CV_32S) - 1;
 }
 
+// The blocks of the half-resolution grid `half` that lie outside the leaf and its holes
+// (reached from the grid's border without crossing the leaf) but within its convex hull: the
+// bays of its outline, and between the two pages of a spread.
+cv::Mat BaysOfLeaf(const cv::Mat& leaf, cv::Size half) {
+  cv::Mat blocks(half.height + 2, half.width + 2, CV_8U, cv::Scalar(0));
+  cv::resize(leaf(cv::Rect(0, 0, 2 * half.width, 2 * half.height)),
+             blocks(cv::Rect(1, 1, half.width, half.height)), half, 0, 0, cv::INTER_NEAREST);
+  std::vector<cv::Point> points, hull;
+  cv::findNonZero(blocks, points);
+  cv::Mat bays = cv::Mat::zeros(blocks.size(), CV_8U);
+  if (points.size() < 3) return bays(cv::Rect(1, 1, half.width, half.height));
+  cv::convexHull(points, hull);
+  cv::fillConvexPoly(bays, hull, cv::Scalar(255));
+  cv::floodFill(blocks, cv::Point(0, 0), cv::Scalar(128), nullptr, 0, 0, 4);
+  bays &= blocks == 128;
+  return bays(cv::Rect(1, 1, half.width, half.height));
+}
+
+// Surfaces outside the leaf whose heights continue it join it (`kind` 2 -> 1), and how many:
+// on a page's wall turned from the projector, ink the decoder cannot read and the noise of
+// grazing light around it cut the strip beyond from the page, which the rim test then took for
+// another surface. Each surface mostly in the leaf's bays (`bays`, from BaysOfLeaf: not under
+// it, nor beyond its outline), near the leaf's surfaces (within the rims' reach), small beside
+// them (a twentieth of their area at most: a support, a frame or the table is not a piece cut
+// off the leaf) and not touching the view's border is judged as FillHoles judges a hole, piece by
+// piece (32 px tiles) where the two come near: a quadric fitted to the leaf there, against the
+// surface's heights, within the cautious step threshold, less what the slope gives over a pixel (a
+// fit extrapolated across the rims is not better than that, and on a wall nearly edge-on to the
+// camera a pixel is half a millimetre of height). It joins when most pieces lie on the leaf's
+// surface. Works on the half-resolution surface labels (`half`, their `stats`).
+int JoinContinuations(const cv::Mat& z, const cv::Mat& gray, double bright, double step,
+                      const OutlineOptions& options, const cv::Mat& half, const cv::Mat& stats,
+                      const cv::Mat& bays, std::vector<uint8_t>* kind) {
+  const int count = static_cast<int>(kind->size());
+  // Near: within the rims' reach (a square of that many blocks either way).
+  const int reach = options.scale_px + options.gap_px + 4;
+  const cv::Mat square = cv::Mat::ones(2 * reach + 1, 2 * reach + 1, CV_8U);
+  cv::Mat near_leaf(half.size(), CV_8U);
+  for (int v = 0; v < half.rows; ++v) {
+    const int* c = half.ptr<int>(v);
+    uint8_t* out = near_leaf.ptr<uint8_t>(v);
+    for (int u = 0; u < half.cols; ++u) out[u] = (*kind)[c[u]] == 1 ? 255 : 0;
+  }
+  const int leaf_blocks = cv::countNonZero(near_leaf);
+  cv::dilate(near_leaf, near_leaf, square);
+  std::vector<uint8_t> near(count, 0);
+  std::vector<int> in_bays(count, 0);
+  for (int v = 0; v < half.rows; ++v) {
+    const int* c = half.ptr<int>(v);
+    const uint8_t* by = near_leaf.ptr<uint8_t>(v);
+    const uint8_t* bay = bays.ptr<uint8_t>(v);
+    for (int u = 0; u < half.cols; ++u) {
+      near[c[u]] |= by[u];
+      in_bays[c[u]] += bay[u] != 0;
+    }
+  }
+  const cv::Rect all(0, 0, half.cols, half.rows);
+  constexpr int kTile = 16, kMinBlocks = 16;  // Blocks: 32 px tiles; 64 px surfaces.
+  std::vector<int> candidates;
+  for (int l = 1; l < count; ++l) {
+    const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
+                       stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
+    const int area = stats.at<int>(l, cv::CC_STAT_AREA);
+    if ((*kind)[l] == 2 && near[l] && 2 * in_bays[l] >= area && area >= kMinBlocks &&
+        area * 20 <= leaf_blocks && box.x > 0 && box.y > 0 && box.br().x < half.cols &&
+        box.br().y < half.rows) {
+      candidates.push_back(l);
+    }
+  }
+  std::vector<uint8_t> joins(count, 0);
+  cv::parallel_for_(cv::Range(0, static_cast<int>(candidates.size())), [&](const cv::Range& r) {
+    for (int i = r.start; i < r.end; ++i) {
+      const int l = candidates[i];
+      const cv::Rect box =
+          (cv::Rect(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
+                    stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT)) +
+           cv::Size(2 * reach, 2 * reach) - cv::Point(reach, reach)) &
+          all;
+      const cv::Rect pixels(2 * box.x, 2 * box.y, 2 * box.width, 2 * box.height);
+      const cv::Mat cautious = StepThreshold(gray(pixels), bright, step, options.scale_px,
+                                             /*darkest=*/true);
+      cv::Mat near_it;
+      cv::dilate(half(box) == l, near_it, square);
+      const int tiles_x = (box.width + kTile - 1) / kTile,
+                tiles_y = (box.height + kTile - 1) / kTile;
+      std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
+      std::vector<std::vector<float>> steps(tiles_x * tiles_y);
+      for (int v = 0; v < box.height; ++v) {
+        const int* c = half.ptr<int>(v + box.y);
+        const uint8_t* by_leaf = near_leaf.ptr<uint8_t>(v + box.y);
+        const uint8_t* by_it = near_it.ptr<uint8_t>(v);
+        for (int u = 0; u < box.width; ++u) {
+          const int lab = c[u + box.x];
+          const bool in = lab == l && by_leaf[u + box.x];
+          const bool by = lab > 0 && (*kind)[lab] == 1 && by_it[u];
+          if (!in && !by) continue;
+          const int uu = 2 * (u + box.x), vv = 2 * (v + box.y);
+          const float h = z.at<float>(vv, uu);
+          if (!Valid(h)) continue;
+          if (in) {
+            const int t = (v / kTile) * tiles_x + u / kTile;
+            inside[t].emplace_back(uu, vv, h);
+            steps[t].push_back(cautious.at<float>(vv - pixels.y, uu - pixels.x));
+            continue;
+          }
+          for (int ty = std::max(0, (v - kTile / 4) / kTile);
+               ty <= std::min(tiles_y - 1, (v + kTile / 4) / kTile); ++ty) {
+            for (int tx = std::max(0, (u - kTile / 4) / kTile);
+                 tx <= std::min(tiles_x - 1, (u + kTile / 4) / kTile); ++tx) {
+              around[ty * tiles_x + tx].emplace_back(uu, vv, h);
+            }
+          }
+        }
+      }
+      int judged = 0, off = 0;
+      for (size_t t = 0; t < inside.size(); ++t) {
+        if (inside[t].size() < 8 || around[t].size() < 24) continue;
+        ++judged;
+        off += !OnSurface(around[t], inside[t], Median(&steps[t]), /*slack_px=*/1);
+      }
+      joins[l] = judged > 0 && 2 * off < judged;
+    }
+  });
+  int joined = 0;
+  for (int l = 1; l < count; ++l) {
+    if (joins[l]) {
+      (*kind)[l] = 1;
+      ++joined;
+    }
+  }
+  return joined;
+}
+
 // Share of the leaf's rim pixels that are set apart from what is beside them: on a rim (a
 // step or a silhouette), beside pixels without a height (shadow, or the leaf seen edge-on), or
 // at the image border.
@@ -533,10 +672,28 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
   if (off > static_cast<int>(valley.size()) / 4) return false;
   *left = cv::Mat::zeros(leaf.size(), CV_8U);
   *right = cv::Mat::zeros(leaf.size(), CV_8U);
+  // Where the line falls within a couple of pixels of the end of a run of leaf pixels that is a
+  // page's body (the line runs through each row's lowest point, which can be the first pixel of
+  // the far page's wall, beyond the gap between the pages), the whole run is that page's.
+  constexpr int kEdge = 2, kBody = 20, kGap = 8;
   for (int v = 0; v < leaf.rows; ++v) {
     // The line's column at this row (the gutter runs down the image).
-    const float at = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
+    float at = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
     const uint8_t* in = leaf.ptr<uint8_t>(v);
+    const int c = static_cast<int>(std::floor(at));
+    if (c >= 0 && c < leaf.cols && in[c]) {
+      int a = c, b = c;
+      while (a > 0 && in[a - 1]) --a;
+      while (b + 1 < leaf.cols && in[b + 1]) ++b;
+      // The gap beyond the run's end, up to kGap pixels.
+      auto gap = [&](int u, int step) {
+        int n = 0;
+        while (n < kGap && u >= 0 && u < leaf.cols && !in[u]) ++n, u += step;
+        return n;
+      };
+      if (b - a + 1 >= kBody && c - a <= kEdge && gap(a - 1, -1) >= kGap) at = a;
+      if (b - a + 1 >= kBody && b - c <= kEdge && gap(b + 1, 1) >= kGap) at = b + 1.0f;
+    }
     for (int u = 0; u < leaf.cols; ++u) {
       if (!in[u]) continue;
       (u < at ? left : right)->at<uint8_t>(v, u) = 255;
@@ -618,45 +775,59 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   const int most = *std::max_element(votes.begin(), votes.end());
   // Seeds for the flood: 1 the leaf's surfaces, 2 every other surface.
   std::vector<uint8_t> kind(count, 0);
+  for (int l = 1; l < count; ++l) {
+    const bool leafy =
+        most > 0 && votes[l] >= std::max(1, most / 4) && votes[l] >= seed.area() / 10;
+    kind[l] = leafy ? 1 : 2;  // 2: every other surface, however small (what shows through a hole).
+  }
   int leaf_area = 0;
   for (int l = 1; l < count; ++l) {
-    const int area = 4 * stats.at<int>(l, cv::CC_STAT_AREA);
-    if (most > 0 && votes[l] >= std::max(1, most / 4) && votes[l] >= seed.area() / 10) {
-      kind[l] = 1;
-      leaf_area += area;
-    } else {
-      kind[l] = 2;  // Every other surface, however small (what shows through a hole).
-    }
+    if (kind[l] == 1) leaf_area += 4 * stats.at<int>(l, cv::CC_STAT_AREA);
   }
+  // Each pixel of a surface labelled with its kind.
   cv::Mat labels(size, CV_8U);
-  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
-    for (int v = range.start; v < range.end; ++v) {
-      uint8_t* out = labels.ptr<uint8_t>(v);
-      const uint8_t* in = surface.ptr<uint8_t>(v);
-      if (v / 2 >= half.height) {
-        std::fill_n(out, size.width, 0);
-        continue;
+  auto label_surfaces = [&] {
+    cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+      for (int v = range.start; v < range.end; ++v) {
+        uint8_t* out = labels.ptr<uint8_t>(v);
+        const uint8_t* in = surface.ptr<uint8_t>(v);
+        if (v / 2 >= half.height) {
+          std::fill_n(out, size.width, 0);
+          continue;
+        }
+        const int* c = half_components.ptr<int>(v / 2);
+        for (int u = 0; u < size.width; ++u) {
+          out[u] = in[u] && u / 2 < half.width ? kind[c[u / 2]] : 0;
+        }
       }
-      const int* c = half_components.ptr<int>(v / 2);
-      for (int u = 0; u < size.width; ++u) {
-        out[u] = in[u] && u / 2 < half.width ? kind[c[u / 2]] : 0;
-      }
-    }
-  });
+    });
+  };
   const double area_min = options.min_area * size.area();
   cv::Mat leaf;
   if (leaf_area >= area_min) {
     // The leaf grows from its seed by no more than a rim's width: the floods and the holes are
     // worked out in the seed's box with a margin.
     const int margin = 4 * (options.scale_px + options.gap_px) + 4;
-    cv::Rect box = cv::boundingRect(labels == 1);
-    box =
-        cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin, box.height + 2 * margin) &
-        cv::Rect(0, 0, size.width, size.height);
-    cv::Mat box_labels = labels(box).clone();
-    Flood(strength(box), z(box), &box_labels);
-    leaf = cv::Mat::zeros(size, CV_8U);
-    leaf(box).setTo(255, box_labels == 1);
+    cv::Mat bays;  // The bays of the leaf as first found: where surfaces may join it.
+    for (int pass = 0;; ++pass) {
+      label_surfaces();
+      cv::Rect box = cv::boundingRect(labels == 1);
+      box = cv::Rect(box.x - margin, box.y - margin, box.width + 2 * margin,
+                     box.height + 2 * margin) &
+            cv::Rect(0, 0, size.width, size.height);
+      cv::Mat box_labels = labels(box).clone();
+      Flood(strength(box), z(box), &box_labels);
+      leaf = cv::Mat::zeros(size, CV_8U);
+      leaf(box).setTo(255, box_labels == 1);
+      if (pass == 3) break;
+      // Surfaces outside the leaf whose heights continue it join it, and the leaf is flooded
+      // again (a few times: a surface joined can bring the next within reach).
+      if (pass == 0) bays = BaysOfLeaf(leaf, half);
+      if (JoinContinuations(z, gray, bright, step, options, half_components, stats, bays, &kind) ==
+          0) {
+        break;
+      }
+    }
     const cv::Rect holes_box = (cv::boundingRect(leaf) + cv::Size(4, 4) - cv::Point(2, 2)) &
                                cv::Rect(0, 0, size.width, size.height);
     cv::Mat box_leaf = leaf(holes_box);

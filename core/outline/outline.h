@@ -6,8 +6,9 @@
 // ends the measured surface steps down (by at least its thickness, 0.1-0.3 mm, far above the
 // scanner's noise), or it curls away. The leaf is found as the surface that such steps enclose
 // (slope-compensated height differences between neighbouring pixels, after a robust smoothing),
-// around the centre of the view or an operator's hint; holes that show another surface stay
-// holes, holes without data (shadows, ink) are filled. The brightness rule of the paper is the
+// around the centre of the view or an operator's hint; a strip that noise or unreadable ink cut
+// off it, whose heights continue it, joins it; holes that show another surface stay holes, holes
+// without data (shadows, ink) are filled. The brightness rule of the paper is the
 // fallback, and a cross-check, when the shape finds nothing plausible. An open book is found as
 // two pages meeting at a gutter: a valley from which the surface rises steeply on both sides.
 #pragma once
