@@ -468,8 +468,10 @@ cv::Mat BaysOfLeaf(const cv::Mat& leaf, cv::Size half) {
   cv::Mat blocks(half.height + 2, half.width + 2, CV_8U, cv::Scalar(0));
   cv::resize(leaf(cv::Rect(0, 0, 2 * half.width, 2 * half.height)),
              blocks(cv::Rect(1, 1, half.width, half.height)), half, 0, 0, cv::INTER_NEAREST);
+  std::vector<std::vector<cv::Point>> outlines;
+  cv::findContours(blocks, outlines, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
   std::vector<cv::Point> points, hull;
-  cv::findNonZero(blocks, points);
+  for (const auto& outline : outlines) points.insert(points.end(), outline.begin(), outline.end());
   cv::Mat bays = cv::Mat::zeros(blocks.size(), CV_8U);
   if (points.size() < 3) return bays(cv::Rect(1, 1, half.width, half.height));
   cv::convexHull(points, hull);
