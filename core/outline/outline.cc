@@ -352,6 +352,54 @@ bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Poi
   return Median(&off) < step;
 }
 
+// Heights beside the leaf (a hole's, or a surface's that may join the leaf) against the leaf's
+// around them, compared square tile by square tile of a grid of `size` cells: each tile's
+// points `inside` against a quadric of the leaf's points `around` them in that tile or within a
+// quarter tile of it (OnSurface).
+class TileComparison {
+ public:
+  TileComparison(cv::Size size, int tile)
+      : tile_(tile),
+        tiles_x_((size.width + tile - 1) / tile),
+        tiles_y_((size.height + tile - 1) / tile),
+        inside_(tiles_x_ * tiles_y_),
+        around_(tiles_x_ * tiles_y_),
+        steps_(tiles_x_ * tiles_y_) {}
+
+  // A point at cell (u, v) of the grid, with the step threshold there.
+  void Inside(int u, int v, const cv::Point3f& p, float step) {
+    const int t = (v / tile_) * tiles_x_ + u / tile_;
+    inside_[t].push_back(p);
+    steps_[t].push_back(step);
+  }
+  void Around(int u, int v, const cv::Point3f& p) {
+    for (int ty = std::max(0, (v - tile_ / 4) / tile_);
+         ty <= std::min(tiles_y_ - 1, (v + tile_ / 4) / tile_); ++ty) {
+      for (int tx = std::max(0, (u - tile_ / 4) / tile_);
+           tx <= std::min(tiles_x_ - 1, (u + tile_ / 4) / tile_); ++tx) {
+        around_[ty * tiles_x_ + tx].push_back(p);
+      }
+    }
+  }
+  // The tiles with points enough to judge (8 inside, 24 around), and how many of them stand off
+  // the leaf's surface (by more than the median step threshold of their points inside; OnSurface
+  // with `slack_px`).
+  std::pair<int, int> Judge(double slack_px) {
+    int judged = 0, off = 0;
+    for (size_t t = 0; t < inside_.size(); ++t) {
+      if (inside_[t].size() < 8 || around_[t].size() < 24) continue;
+      ++judged;
+      off += !OnSurface(around_[t], inside_[t], Median(&steps_[t]), slack_px);
+    }
+    return {judged, off};
+  }
+
+ private:
+  int tile_, tiles_x_, tiles_y_;
+  std::vector<std::vector<cv::Point3f>> inside_, around_;
+  std::vector<std::vector<float>> steps_;
+};
+
 // Fills the holes of `leaf` that show no other surface, and returns how many it keeps. A hole
 // with heights is kept when they differ from the leaf's around it (another surface shows
 // through), filled when they do not (an island the rim test cut out). The two are compared
@@ -390,10 +438,7 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
       cv::minMaxLoc(depth, nullptr, &deepest);
       // A hole too narrow for the band: all of it.
       const float lo = deepest >= kFar ? kNear : 0, hi = deepest >= kFar ? kFar : 1e9f;
-      const int tiles_x = (near.width + kTile - 1) / kTile,
-                tiles_y = (near.height + kTile - 1) / kTile;
-      std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
-      std::vector<std::vector<float>> steps(tiles_x * tiles_y);
+      TileComparison tiles(near.size(), kTile);
       std::vector<float> look_in, look_around;
       int valid = 0;
       for (int v = 0; v < near.height; ++v) {
@@ -408,30 +453,17 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
           if (!Valid(h)) continue;
           if (in_hole[u]) {
             ++valid;
-            if (d[u] < lo || d[u] > hi) continue;
-            const int t = (v / kTile) * tiles_x + u / kTile;
-            inside[t].emplace_back(uu, vv, h);
-            steps[t].push_back(threshold.at<float>(vv, uu));
-            continue;
-          }
-          // A ring pixel serves its own tile and those within a quarter tile of it.
-          for (int ty = std::max(0, (v - kTile / 4) / kTile);
-               ty <= std::min(tiles_y - 1, (v + kTile / 4) / kTile); ++ty) {
-            for (int tx = std::max(0, (u - kTile / 4) / kTile);
-                 tx <= std::min(tiles_x - 1, (u + kTile / 4) / kTile); ++tx) {
-              around[ty * tiles_x + tx].emplace_back(uu, vv, h);
+            if (d[u] >= lo && d[u] <= hi) {
+              tiles.Inside(u, v, cv::Point3f(uu, vv, h), threshold.at<float>(vv, uu));
             }
+          } else {
+            tiles.Around(u, v, cv::Point3f(uu, vv, h));
           }
         }
       }
       bool island;
       if (valid >= area / 2) {
-        int judged = 0, off = 0;
-        for (size_t t = 0; t < inside.size(); ++t) {
-          if (inside[t].size() < 8 || around[t].size() < 24) continue;
-          ++judged;
-          off += !OnSurface(around[t], inside[t], Median(&steps[t]));
-        }
+        const auto [judged, off] = tiles.Judge(/*slack_px=*/0);
         island = 2 * off <= judged;
       } else {
         island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;
@@ -546,10 +578,7 @@ int JoinContinuations(const cv::Mat& z, const cv::Mat& gray, double bright, doub
                                              /*darkest=*/true);
       cv::Mat near_it;
       cv::dilate(half(box) == l, near_it, square);
-      const int tiles_x = (box.width + kTile - 1) / kTile,
-                tiles_y = (box.height + kTile - 1) / kTile;
-      std::vector<std::vector<cv::Point3f>> inside(tiles_x * tiles_y), around(tiles_x * tiles_y);
-      std::vector<std::vector<float>> steps(tiles_x * tiles_y);
+      TileComparison tiles(box.size(), kTile);
       for (int v = 0; v < box.height; ++v) {
         const int* c = half.ptr<int>(v + box.y);
         const uint8_t* by_leaf = near_leaf.ptr<uint8_t>(v + box.y);
@@ -563,26 +592,14 @@ int JoinContinuations(const cv::Mat& z, const cv::Mat& gray, double bright, doub
           const float h = z.at<float>(vv, uu);
           if (!Valid(h)) continue;
           if (in) {
-            const int t = (v / kTile) * tiles_x + u / kTile;
-            inside[t].emplace_back(uu, vv, h);
-            steps[t].push_back(cautious.at<float>(vv - pixels.y, uu - pixels.x));
-            continue;
-          }
-          for (int ty = std::max(0, (v - kTile / 4) / kTile);
-               ty <= std::min(tiles_y - 1, (v + kTile / 4) / kTile); ++ty) {
-            for (int tx = std::max(0, (u - kTile / 4) / kTile);
-                 tx <= std::min(tiles_x - 1, (u + kTile / 4) / kTile); ++tx) {
-              around[ty * tiles_x + tx].emplace_back(uu, vv, h);
-            }
+            tiles.Inside(u, v, cv::Point3f(uu, vv, h),
+                         cautious.at<float>(vv - pixels.y, uu - pixels.x));
+          } else {
+            tiles.Around(u, v, cv::Point3f(uu, vv, h));
           }
         }
       }
-      int judged = 0, off = 0;
-      for (size_t t = 0; t < inside.size(); ++t) {
-        if (inside[t].size() < 8 || around[t].size() < 24) continue;
-        ++judged;
-        off += !OnSurface(around[t], inside[t], Median(&steps[t]), /*slack_px=*/1);
-      }
+      const auto [judged, off] = tiles.Judge(/*slack_px=*/1);
       joins[l] = judged > 0 && 2 * off < judged;
     }
   });
