@@ -96,6 +96,16 @@ bool Window::Poll(std::vector<Input>* input) {
     if (!input) continue;
     if (e.type == SDL_KEYDOWN) input->push_back({e.key.keysym.sym, ""});
     if (e.type == SDL_TEXTINPUT) input->push_back({0, e.text.text});
+    // SDL gives the mouse in the logical size's pixels (SDL_RenderSetLogicalSize).
+    using Mouse = Input::Mouse;
+    if ((e.type == SDL_MOUSEBUTTONDOWN || e.type == SDL_MOUSEBUTTONUP) &&
+        e.button.button == SDL_BUTTON_LEFT) {
+      input->push_back({0, "", e.type == SDL_MOUSEBUTTONDOWN ? Mouse::kDown : Mouse::kUp,
+                        cv::Point(e.button.x, e.button.y)});
+    }
+    if (e.type == SDL_MOUSEMOTION && (e.motion.state & SDL_BUTTON_LMASK)) {
+      input->push_back({0, "", Mouse::kDrag, cv::Point(e.motion.x, e.motion.y)});
+    }
   }
   return open;
 }

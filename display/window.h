@@ -38,12 +38,15 @@ class Window {
   void Show(const cv::Mat& image, Flip flip = Flip::kNone);
   // What is on screen now, as BGR (read back from the renderer).
   cv::Mat Screen() const;
-  // Handles the window's events: what the keyboard gave, in order, is appended to `input` (if
-  // given): each key pressed, and the text typed (UTF-8, while text input is on); false once
-  // the window was closed.
+  // Handles the window's events: what the keyboard and the mouse gave, in order, is appended
+  // to `input` (if given): each key pressed, the text typed (UTF-8, while text input is on),
+  // and the left mouse button's presses, drags and releases; false once the window was closed.
   struct Input {
-    SDL_Keycode key = 0;  // 0 for text.
+    enum class Mouse { kNone, kDown, kDrag, kUp };
+    SDL_Keycode key = 0;  // 0 for text and the mouse.
     std::string text;
+    Mouse mouse = Mouse::kNone;
+    cv::Point at;  // The mouse, in pixels of the image shown (the logical size).
   };
   bool Poll(std::vector<Input>* input = nullptr);
   // Text input (an on-screen or input-method keyboard, and SDL_TEXTINPUT events) on or off.

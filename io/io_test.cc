@@ -324,6 +324,42 @@ TEST_F(IoTest, StudioFieldRoundTripsAndABadOneIsNamed) {
   EXPECT_NE(s.message().find("no_lamps.yaml: lamps must be"), std::string::npos) << s.message();
 }
 
+// The operator's leaf hint in scan.yaml: kept through a round trip in camera pixels, absent when
+// not given, and a hint that is not a region of the camera's view refused naming the file and
+// the key.
+TEST_F(IoTest, ScanLeafHintRoundTripsAndABadOneIsRefused) {
+  Scan scan = SmallScan();
+  const cv::Size camera = scan.camera_size;
+  scan.leaf_hint =
+      cv::Rect(camera.width / 4, camera.height / 5, camera.width / 3, camera.height / 2);
+  ASSERT_TRUE(WriteScan(Path("hinted"), scan).ok());
+  Scan r;
+  const Status read = ReadScan(Path("hinted"), &r);
+  ASSERT_TRUE(read.ok()) << read.message();
+  EXPECT_EQ(r.leaf_hint, scan.leaf_hint);
+  ASSERT_TRUE(WriteScan(Path("plain"), SmallScan()).ok());
+  ASSERT_TRUE(ReadScan(Path("plain"), &r).ok());
+  EXPECT_TRUE(r.leaf_hint.empty());
+  std::string yaml;
+  {
+    std::ifstream in(Path("hinted") + "/scan.yaml");
+    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const size_t at = yaml.find("leaf_hint:");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  const size_t end = yaml.find('\n', at);
+  for (const std::string& bad : {std::string("[ 10, 7, 31 ]"), std::string("[ 10, 7, -1, 19 ]"),
+                                 std::string("[ a, 7, 31, 19 ]"),
+                                 "[ " + std::to_string(camera.width - 5) + ", 7, 31, 19 ]"}) {
+    std::string edited = yaml;
+    edited.replace(at, end - at, "leaf_hint: " + bad);
+    std::ofstream(Path("hinted") + "/scan.yaml") << edited;
+    const Status s = ReadScanHeader(Path("hinted"), &r);
+    ASSERT_FALSE(s.ok()) << bad;
+    EXPECT_NE(s.message().find("scan.yaml: key 'leaf_hint'"), std::string::npos) << s.message();
+  }
+}
+
 // Issue 15: the catalogue identity in scan.yaml (DESIGN.md, "Identity"), kept through a round
 // trip, read as hand-written (a folio as a number), and made safe: control characters removed,
 // a field cut to 200 bytes, an unknown side dropped.

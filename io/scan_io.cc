@@ -160,7 +160,8 @@ Status WriteFrameImage(const std::string& path, const cv::Mat& frame) {
 std::string LightFileName(const std::string& name) { return "light_" + name + ".png"; }
 
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
-                     const ScanIdentity& identity, const std::vector<ScanLight>& lights) {
+                     const ScanIdentity& identity, const std::vector<ScanLight>& lights,
+                     const cv::Rect& leaf_hint) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   try {
     cv::FileStorage out(path, cv::FileStorage::WRITE);
@@ -172,6 +173,10 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
     ForEachIdentityField(identity, [&](const char* key, const std::string& value) {
       if (!value.empty()) out << key << value;
     });
+    if (!leaf_hint.empty()) {
+      out << "leaf_hint"
+          << std::vector<int>{leaf_hint.x, leaf_hint.y, leaf_hint.width, leaf_hint.height};
+    }
     out << "texture" << kTexture;
     if (!lights.empty()) {
       out << "lights"
@@ -298,7 +303,7 @@ Status ReadLightsFile(const std::string& path, StationLights* out) {
 }
 
 Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity, std::vector<ScanLight>* lights) {
+                    ScanIdentity* identity, std::vector<ScanLight>* lights, cv::Rect* leaf_hint) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
@@ -364,6 +369,27 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
     if (lights) {
       const Status s = ReadLightList(in["lights"], path, lights, nullptr);
       if (!s.ok()) return s;
+    }
+    if (leaf_hint) {
+      *leaf_hint = cv::Rect();
+      const cv::FileNode n = in["leaf_hint"];
+      if (!n.empty() && !n.isNone()) {
+        const Status bad = Status::Error(
+            path + ": key 'leaf_hint' must be [ x, y, width, height ] in camera pixels, a region " +
+            (camera_size->area() > 0 ? "of the " + std::to_string(camera_size->width) + "x" +
+                                           std::to_string(camera_size->height) + " camera's view"
+                                     : "of the camera's view"));
+        if (!n.isSeq() || n.size() != 4) return bad;
+        int v[4];
+        for (int k = 0; k < 4; ++k) {
+          if (!n[k].isInt()) return bad;
+          v[k] = static_cast<int>(n[k]);
+        }
+        const cv::Rect r(v[0], v[1], v[2], v[3]);
+        if (r.x < 0 || r.y < 0 || r.width <= 0 || r.height <= 0) return bad;
+        if (camera_size->area() > 0 && (r & cv::Rect(cv::Point(), *camera_size)) != r) return bad;
+        *leaf_hint = r;
+      }
     }
     const cv::FileNode list = in["patterns"];
     if (!list.isSeq() || list.size() == 0) {
@@ -442,13 +468,19 @@ Status MissingFrame(const std::string& path, int k, const Scan& scan) {
 }  // namespace
 
 Status ReadScanHeader(const std::string& dir, Scan* scan) {
-  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights);
+  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights,
+                          &scan->leaf_hint);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture, 16);
   if (!s.ok()) return s;
   s = CheckSize((root / kTexture).string(), scan->texture.size(), *scan);
   if (!s.ok()) return s;
+  if ((scan->leaf_hint & cv::Rect(cv::Point(), scan->texture.size())) != scan->leaf_hint) {
+    return Status::Error((root / kScanYaml).string() + ": key 'leaf_hint' runs off the " +
+                         std::to_string(scan->texture.cols) + "x" +
+                         std::to_string(scan->texture.rows) + " camera's view");
+  }
   for (ScanLight& light : scan->lights) {
     const std::string path = (root / LightFileName(light.name)).string();
     if (!PathExists(path)) {
@@ -537,7 +569,8 @@ Status WriteScan(const std::string& dir, const Scan& scan) {
       return Status::Error(dir + ": light name '" + light.name + "' is not a valid name");
     }
   }
-  s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity, scan.lights);
+  s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity, scan.lights,
+                    scan.leaf_hint);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = WriteImage((root / kTexture).string(), scan.texture);

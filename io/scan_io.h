@@ -21,14 +21,18 @@ std::string LightFileName(const std::string& name);  // "light_raking-090.png"
 // Reads scan.yaml only; its identity keys (shelfmark, folio, side, operator, note, label; any may
 // be absent) into *identity when given, sanitised (SanitizedIdentity); its extra lights (key
 // `lights`: a sequence of {name, direction: [x, y, z]}, direction optional) into *lights when
-// given, names and directions only (the images are light_<name>.png).
+// given, names and directions only (the images are light_<name>.png); the operator's
+// `leaf_hint: [x, y, width, height]` (camera pixels, within camera_size when that is given) into
+// *leaf_hint when given, empty when absent.
 Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity = nullptr, std::vector<ScanLight>* lights = nullptr);
+                    ScanIdentity* identity = nullptr, std::vector<ScanLight>* lights = nullptr,
+                    cv::Rect* leaf_hint = nullptr);
 // Writes scan.yaml; camera_size may be empty; identity keys only when set; `lights` by name and
-// direction.
+// direction; leaf_hint when not empty.
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
                      const ScanIdentity& identity = ScanIdentity(),
-                     const std::vector<ScanLight>& lights = {});
+                     const std::vector<ScanLight>& lights = {},
+                     const cv::Rect& leaf_hint = cv::Rect());
 
 // A station's extra lights (issue 17), as vellum-projector and vellum-lights read them from one
 // YAML file: `lights`, a sequence of {name, direction: [x, y, z], channel} (direction optional, as

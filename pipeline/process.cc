@@ -106,7 +106,7 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
   }
   next("outline", 0.65);
   if (!ran(OutlineStage(out.map.points, input.scan.texture, options.outline, options.limits,
-                        results, &out.outline),
+                        report.stages, results, &out.outline),
            true)) {
     return out;
   }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
 #include <filesystem>
 #include <sstream>
@@ -345,6 +346,23 @@ ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages) {
     }
   }
   return identity;
+}
+
+std::string LeafHintText(const cv::Rect& hint) {
+  return std::to_string(hint.x) + "," + std::to_string(hint.y) + "," + std::to_string(hint.width) +
+         "," + std::to_string(hint.height);
+}
+
+cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages) {
+  const ReportValue* v = FindValue(stages, "operator", "leaf_hint");
+  int x = 0, y = 0, w = 0, h = 0;
+  char end = 0;
+  if (!v || !v->is_text ||
+      std::sscanf(v->text.c_str(), "%d,%d,%d,%d%c", &x, &y, &w, &h, &end) != 4 || x < 0 || y < 0 ||
+      w <= 0 || h <= 0) {
+    return cv::Rect();
+  }
+  return cv::Rect(x, y, w, h);
 }
 
 void StageReport::Text(const std::string& section, const std::string& key,

@@ -73,6 +73,10 @@ const ReportValue* FindValue(const std::vector<StageReport>& stages, const std::
 
 // The scan's catalogue identity as its decode stage reported it (the `identity` section).
 ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages);
+// The operator's leaf hint for the scan as its decode stage reported it (operator/leaf_hint:
+// "x,y,width,height", camera pixels); empty when none.
+cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages);
+std::string LeafHintText(const cv::Rect& hint);
 
 // Writes report.html (the warnings, the key figures, the pictures the stages wrote to report/,
 // the options) and then report.json (every section; on a spread, `pages` holds each page's

@@ -103,6 +103,8 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   ForEachIdentityField(scan.identity, [&](const char* key, const std::string& value) {
     if (!value.empty()) r.Text("identity", key, value);
   });
+  // Where the operator said the leaf is (scan.yaml, or SCAN_STARTED at the station).
+  if (!scan.leaf_hint.empty()) r.Text("operator", "leaf_hint", LeafHintText(scan.leaf_hint));
   r.Text("sizes", "camera", SizeText(scan.camera_size));
   r.Text("sizes", "projector", SizeText(scan.sequence.projector_size));
   r.Number("sizes", "patterns", static_cast<double>(scan.sequence.patterns.size()));
@@ -176,11 +178,20 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
 
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
                          const OutlineOptions& options, const WarningLimits& limits,
-                         const std::string& results, Outline* outline) {
+                         const std::vector<StageReport>& earlier, const std::string& results,
+                         Outline* outline) {
   Stage stage("outline");
   StageReport& r = stage.report();
   r.Number("options", "outline_step_mm", options.step_mm);
-  *outline = FindLeaf(points, texture, options);
+  // The scan's own hint (drawn for it) outranks the options' (the station's configuration).
+  OutlineOptions o = options;
+  const cv::Rect scan_hint = ReportedLeafHint(earlier);
+  if (!scan_hint.empty()) o.hint = scan_hint;
+  if (!o.hint.empty()) {
+    r.Text("outline", "hint", LeafHintText(o.hint));
+    r.Text("outline", "hint_from", scan_hint.empty() ? "options" : "scan");
+  }
+  *outline = FindLeaf(points, texture, o);
   if (!outline->status.ok()) return stage.Finish(outline->status);
   r.Text("outline", "method", outline->method);
   r.Number("outline", "confidence", outline->confidence);
@@ -248,6 +259,23 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
                    "the book wider, or turn the cradle towards the projector");
       }
     }
+  }
+  // A surface standing above the leaf inside it: the leaf itself, more likely, on a support.
+  const RaisedHole raised = HighestRaisedHole(points, outline->mask, options.step_mm);
+  if (raised.area_px > 0) {
+    r.Number("outline", "raised_hole_pixels", raised.area_px);
+    r.Number("outline", "raised_hole_rise_mm", raised.rise_mm);
+  }
+  if (leaf > 0 && raised.area_px >= limits.min_raised_hole * leaf) {
+    const cv::Rect& b = raised.box;
+    r.Warn("leaf_ambiguous",
+           "a surface " + Fixed(raised.rise_mm, 2) +
+               " mm above the leaf found lies inside it, in " + "a hole of " +
+               Fixed(100.0 * raised.area_px / leaf, 0) + "% of its area (camera pixels " +
+               LeafHintText(b) +
+               "); through a hole one sees what is under the leaf, so that surface is likely "
+               "the leaf itself, on a support taken for the leaf: draw a leaf hint over it in "
+               "the viewer (or give --leaf-hint) and scan again");
   }
   if (outline->confidence < limits.min_outline_confidence) {
     r.Warn("outline_uncertain",

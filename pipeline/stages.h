@@ -30,10 +30,13 @@ namespace vellum {
 // and `vellum process` exits with status 3).
 struct WarningLimits {
   double min_outline_confidence = 0.9;  // Share of the leaf's rim set apart from its surround.
-  double max_mean_strain = 0.002;       // Mean relative spring-length error after flattening.
-  double max_strain = 0.05;             // Largest relative spring-length error.
-  cv::Size2d expected_leaf_mm{0, 0};    // The leaf's size as the operator expects it (0: none).
-  double size_tolerance = 0.1;          // Relative difference from it that is doubtful.
+  // A hole of the leaf whose surface stands above it, of this share of the leaf's area or
+  // more: the leaf itself, likely, on a support taken for it (HighestRaisedHole).
+  double min_raised_hole = 0.02;
+  double max_mean_strain = 0.002;     // Mean relative spring-length error after flattening.
+  double max_strain = 0.05;           // Largest relative spring-length error.
+  cv::Size2d expected_leaf_mm{0, 0};  // The leaf's size as the operator expects it (0: none).
+  double size_tolerance = 0.1;        // Relative difference from it that is doubtful.
   // Share of the leaf's pixels that may be clipped (at the camera's maximum, or 0): above it,
   // the texture has lost detail there (glare, or an exposure too long or too short).
   double max_clipped = 0.005;
@@ -99,11 +102,14 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
                              PointMap* map);
 
 // Outline: the leaf (or a spread's two pages) in the point map and the texture
-// (core/outline). Writes report/texture.png and report/outline.png. Warns of a leaf that runs off
-// the view and of an outline of low confidence.
+// (core/outline), seeded at the operator's hint for the scan when the decode stage among
+// `earlier` reported one, else at options.hint. Writes report/texture.png and
+// report/outline.png. Warns of a leaf that runs off the view and of an outline of low
+// confidence.
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
                          const OutlineOptions& options, const WarningLimits& limits,
-                         const std::string& results, Outline* outline);
+                         const std::vector<StageReport>& earlier, const std::string& results,
+                         Outline* outline);
 
 // Mesh (3.5-3.6): the sheet over one page (`page_mask`, camera pixels) of the point map, its
 // grid chosen from the page's shape when `options.auto_grid`. Writes nothing (the sheet is

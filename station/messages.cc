@@ -215,6 +215,32 @@ ScanIdentity FromMessage(const scan_identity_t& m) {
   return SanitizedIdentity(id);
 }
 
+cv::Rect LeafHintPixels(const float hint[4], cv::Size camera) {
+  const float x = hint[0], y = hint[1], w = hint[2], h = hint[3];
+  // Written as they are so that NaN fails each test.
+  if (!(x >= 0 && y >= 0 && w > 0 && h > 0 && x + w <= 1.0001f && y + h <= 1.0001f)) {
+    return cv::Rect();
+  }
+  // A whole pixel's region goes there and back exactly (float's rounding forgiven).
+  constexpr double kSlack = 1e-3;
+  const cv::Rect r(
+      cv::Point(cvFloor(x * camera.width + kSlack), cvFloor(y * camera.height + kSlack)),
+      cv::Point(cvCeil((x + w) * camera.width - kSlack), cvCeil((y + h) * camera.height - kSlack)));
+  return r & cv::Rect(cv::Point(0, 0), camera);
+}
+
+void FromStarted(const scan_started_t& m, Scan* scan) {
+  scan->identity = FromMessage(m.identity);
+  scan->leaf_hint = LeafHintPixels(m.leaf_hint, scan->camera_size);
+}
+
+void ToLeafHint(const cv::Rect2d& fraction, float hint[4]) {
+  hint[0] = static_cast<float>(fraction.x);
+  hint[1] = static_cast<float>(fraction.y);
+  hint[2] = static_cast<float>(fraction.width);
+  hint[3] = static_cast<float>(fraction.height);
+}
+
 void ToMessage(const Calibration& calibration, calibration_t* msg) {
   ToModel(calibration.camera, &msg->camera);
   ToModel(calibration.projector, &msg->projector);

@@ -26,6 +26,7 @@
 #include "vellum/pattern_spec_t.hpp"
 #include "vellum/point_cloud_t.hpp"
 #include "vellum/scan_identity_t.hpp"
+#include "vellum/scan_started_t.hpp"
 #include "vellum/stage_report_t.hpp"
 #include "vellum/texture_t.hpp"
 
@@ -43,6 +44,14 @@ pattern_spec_t ToMessage(const PatternSpec& spec);
 // A scan's identity on the bus and back (FromMessage sanitises: SanitizedIdentity).
 scan_identity_t ToMessage(const ScanIdentity& identity);
 ScanIdentity FromMessage(const scan_identity_t& msg);
+// The leaf hint of SCAN_REQUEST and SCAN_STARTED (x, y, width, height as fractions of the
+// camera's view) and back. In camera pixels of a view of `camera` pixels, within it; empty when
+// the message has none (width 0) or it is not a region of the view (NaN, outside 0 .. 1).
+cv::Rect LeafHintPixels(const float hint[4], cv::Size camera);
+void ToLeafHint(const cv::Rect2d& fraction, float hint[4]);
+// What SCAN_STARTED says of a scan beyond its patterns: its identity and the leaf hint (in
+// pixels of scan->camera_size, which must be known).
+void FromStarted(const scan_started_t& msg, Scan* scan);
 Status FromMessage(const pattern_spec_t& msg, PatternSpec* spec);
 
 // An extra light of a scan (its name and direction; its image travels as the capture's). The

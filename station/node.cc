@@ -19,6 +19,7 @@
 #include "vellum/calibration_v1_t.hpp"
 #include "vellum/capture_v1_t.hpp"
 #include "vellum/scan_started_v1_t.hpp"
+#include "vellum/scan_started_v2_t.hpp"
 #include "vellum/status_t.hpp"
 
 namespace vellum::station {
@@ -52,6 +53,22 @@ bool SafeDecode(const void* data, int64_t size, capture_t* msg) {
 
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg) {
   if (SafeDecode<scan_started_t>(data, size, msg)) return true;
+  scan_started_v2_t v2;
+  if (SafeDecode<scan_started_v2_t>(data, size, &v2)) {
+    *msg = scan_started_t{};
+    msg->utime = v2.utime;
+    msg->seq = v2.seq;
+    msg->station = v2.station;
+    msg->scan_id = v2.scan_id;
+    msg->session = v2.session;
+    msg->pattern_count = v2.pattern_count;
+    msg->projector_width = v2.projector_width;
+    msg->projector_height = v2.projector_height;
+    msg->identity = v2.identity;
+    msg->light_count = v2.light_count;
+    msg->lights = std::move(v2.lights);
+    return true;  // No leaf hint.
+  }
   scan_started_v1_t old;
   if (!SafeDecode<scan_started_v1_t>(data, size, &old)) return false;
   *msg = scan_started_t{};

@@ -17,6 +17,11 @@ scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t sessio
   m.projector_width = scan.sequence.projector_size.width;
   m.projector_height = scan.sequence.projector_size.height;
   m.identity = ToMessage(scan.identity);
+  if (!scan.leaf_hint.empty() && scan.camera_size.area() > 0) {
+    const cv::Rect& h = scan.leaf_hint;
+    const double w = scan.camera_size.width, ht = scan.camera_size.height;
+    ToLeafHint(cv::Rect2d(h.x / w, h.y / ht, h.width / w, h.height / ht), m.leaf_hint);
+  }
   m.light_count = static_cast<int32_t>(scan.lights.size());
   for (const ScanLight& light : scan.lights) m.lights.push_back(ToMessage(light));
   return m;
@@ -103,7 +108,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
   lcm::LogFile log(log_path, "r");
   if (!log.good()) return Status::Error(log_path + ": cannot open as an LCM log");
   CaptureSet set;
-  ScanIdentity identity;
+  scan_started_t started{};
   *has_calibration = false;
   int64_t other = 0;
   int events = 0;
@@ -124,7 +129,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
     } else if (e->channel == channel::kScanStarted) {
       scan_started_t m;
       if (SafeDecode(e->data, e->datalen, &m) && (scan_id == 0 || m.scan_id == scan_id)) {
-        identity = FromMessage(m.identity);
+        started = m;
       }
     } else if (e->channel == channel::kCalibration) {
       calibration_t c;
@@ -151,7 +156,7 @@ Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, boo
                          " is incomplete: " + set.Missing());
   }
   *scan = set.ToScan();
-  scan->identity = identity;
+  FromStarted(started, scan);
   *found_scan_id = set.scan_id();
   return Status::Ok();
 }

@@ -351,7 +351,7 @@ static Status WriteCaptureImage(const std::string& path, const capture_t& c, con
 }
 
 Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed,
-                          int* count, ScanIdentity* identity) {
+                          int* count, scan_started_t* started_out) {
   folder_ = folder;
   *count = 0;
   Status s = MakeDirectories(folder.raw());
@@ -366,7 +366,7 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
       scan_started_t started;
       if (e->channel == channel::kScanStarted && SafeDecode(e->data, e->datalen, &started) &&
           started.scan_id == scan_id) {
-        *identity = FromMessage(started.identity);
+        *started_out = started;
         continue;
       }
       capture_t c;
@@ -405,7 +405,8 @@ Status ScanRecorder::Write(const calibration_t& calibration) {
 }
 
 Status ScanRecorder::Finish(const Scan& scan) {
-  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity, scan.lights);
+  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity, scan.lights,
+                       scan.leaf_hint);
 }
 
 }  // namespace vellum::station

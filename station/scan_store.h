@@ -14,6 +14,7 @@
 #include "io/scan_io.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 
@@ -159,10 +160,10 @@ class ScanRecorder {
  public:
   // Opens the scan's folder. When its log already holds captures of this scan that were not
   // processed (the decoder restarted in the middle of the scan), they are taken up: added to
-  // *resumed (*count of them), their images written if missing; and the identity its
-  // SCAN_STARTED carried, into *identity.
+  // *resumed (*count of them), their images written if missing; and its SCAN_STARTED (the
+  // identity and leaf hint it carried), into *started.
   Status Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed, int* count,
-              ScanIdentity* identity);
+              scan_started_t* started);
   Status Write(const capture_t& capture, const cv::Mat& image);
   Status Write(const calibration_t& calibration);
   Status Finish(const Scan& scan);

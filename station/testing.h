@@ -154,7 +154,7 @@ inline const SmallProducts& SmallScanProducts() {
     p.stages.push_back(
         TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, p.results, &p.map));
     p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, o.outline, o.limits,
-                                    p.results, &p.outline));
+                                    p.stages, p.results, &p.outline));
     p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));
     p.stages.push_back(FlattenStage(p.mesh, o.flatten, o.limits, p.results, "", &p.flat));
     p.stages.push_back(RestoreStage(SmallScan().texture, p.outline.pages[0], p.mesh, p.flat.flat,

@@ -950,4 +950,47 @@ cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline) {
   return out;
 }
 
+RaisedHole HighestRaisedHole(const cv::Mat& points, const cv::Mat& leaf_mask, double min_rise_mm) {
+  RaisedHole best;
+  std::vector<std::vector<cv::Point>> contours;
+  std::vector<cv::Vec4i> hierarchy;
+  cv::findContours(leaf_mask.clone(), contours, hierarchy, cv::RETR_CCOMP, cv::CHAIN_APPROX_SIMPLE);
+  const cv::Rect view(cv::Point(0, 0), leaf_mask.size());
+  // The median height of the measured points of `where` (a mask of `box`); NaN when none.
+  std::vector<float> z;
+  auto median_height = [&](const cv::Mat& where, cv::Rect box) {
+    z.clear();
+    for (int v = 0; v < box.height; ++v) {
+      const uint8_t* in = where.ptr<uint8_t>(v);
+      const cv::Vec3f* p = points.ptr<cv::Vec3f>(box.y + v) + box.x;
+      for (int u = 0; u < box.width; ++u) {
+        if (in[u] && !std::isnan(p[u][2])) z.push_back(p[u][2]);
+      }
+    }
+    if (z.empty()) return std::numeric_limits<double>::quiet_NaN();
+    std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
+    return static_cast<double>(z[z.size() / 2]);
+  };
+  for (size_t k = 0; k < contours.size(); ++k) {
+    if (hierarchy[k][3] < 0) continue;  // An outer contour, not a hole.
+    const int area = static_cast<int>(cv::contourArea(contours[k]));
+    if (area <= best.area_px || area < 16) continue;
+    // The hole and a ring of the leaf around it, a few pixels wide.
+    const int ring = 6;
+    const cv::Rect box =
+        (cv::boundingRect(contours[k]) + cv::Size(2 * ring, 2 * ring) - cv::Point(ring, ring)) &
+        view;
+    cv::Mat hole = cv::Mat::zeros(box.size(), CV_8U);
+    cv::drawContours(hole, contours, static_cast<int>(k), cv::Scalar(255), cv::FILLED, cv::LINE_8,
+                     cv::noArray(), 0, -box.tl());
+    hole &= ~leaf_mask(box);  // Islands of leaf inside the hole are not the hole.
+    cv::Mat around;
+    cv::dilate(hole, around, cv::Mat::ones(2 * ring + 1, 2 * ring + 1, CV_8U));
+    around &= leaf_mask(box);
+    const double rise = median_height(hole, box) - median_height(around, box);
+    if (rise >= min_rise_mm) best = {area, rise, box};
+  }
+  return best;
+}
+
 }  // namespace vellum

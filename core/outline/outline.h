@@ -70,6 +70,17 @@ struct GutterGap {
 // Rows 0 when the outline is not a spread.
 GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline);
 
+// The largest hole of the leaf whose surface stands above the leaf around it. Through a hole
+// one sees what the leaf lies on, lower than the leaf; a surface higher than the leaf around it
+// (by at least `min_rise_mm`, a rim's step) is more likely the leaf itself, lying on a support
+// that was taken for the leaf (the view's centre fell on the support). Area 0 when none.
+struct RaisedHole {
+  int area_px = 0;     // Its pixels.
+  double rise_mm = 0;  // Its median height above the median of the leaf's ring around it.
+  cv::Rect box;        // Where it is, camera pixels.
+};
+RaisedHole HighestRaisedHole(const cv::Mat& points, const cv::Mat& leaf_mask, double min_rise_mm);
+
 // The leaf as a live preview shows it, before any scan, for placing it: by brightness alone
 // (a leaf brighter than its surround; the scan itself finds the leaf by its shape). Sets
 // `touches_border` when it runs off the view. An error, in a few words for the viewer, when

@@ -104,6 +104,9 @@ struct Scan {
   std::vector<cv::Mat> frames;  // 8-bit gray, one per pattern.
   ScanIdentity identity;
   std::vector<ScanLight> lights;  // Extra images under other lights, each named once.
+  // The operator's hint where the scene is ambiguous: camera pixels inside the leaf (scan.yaml's
+  // leaf_hint; drawn in vellum-viewer); empty when none. It outranks the options' hint.
+  cv::Rect leaf_hint;
 };
 
 }  // namespace vellum

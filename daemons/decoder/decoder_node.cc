@@ -185,9 +185,9 @@ bool DecoderNode::Begin(int64_t scan_id) {
   supervisor_.Recording(scan_id);
   waiting_ = true;
   int resumed = 0;
-  identity_ = ScanIdentity();
+  started_ = scan_started_t{};
   const ScanFolder folder = ScanFolder::For(options_.data_dir, scan_id);
-  const Status s = recorder_.Open(folder, scan_id, &set_, &resumed, &identity_);
+  const Status s = recorder_.Open(folder, scan_id, &set_, &resumed, &started_);
   if (!s.ok()) {
     Fail(scan_id, "cannot record: " + s.message());
     return false;
@@ -251,7 +251,7 @@ void DecoderNode::Complete() {
   supervisor_.Recording(0);
   const int64_t id = set_.scan_id();
   Scan scan = set_.ToScan();
-  scan.identity = identity_;
+  FromStarted(started_, &scan);
   const Status s = recorder_.Finish(scan);
   if (!s.ok()) {
     Fail(id, s.message());

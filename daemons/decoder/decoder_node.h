@@ -22,6 +22,7 @@
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 #include "vellum/light_t.hpp"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 
@@ -74,8 +75,8 @@ class DecoderNode {
   bool stream_begun_ = false;
   PatternSequence stream_sequence_;  // Its sequence, as the station's projector shows it.
   CaptureSet set_;
-  int64_t recording_ = 0;  // The scan whose folder is open.
-  ScanIdentity identity_;  // Its identity (SCAN_STARTED), for its scan.yaml and report.
+  int64_t recording_ = 0;   // The scan whose folder is open.
+  scan_started_t started_;  // Its SCAN_STARTED (identity, leaf hint), for scan.yaml and report.
   ScanRecorder recorder_;
   Supervisor supervisor_;
   ScanGate gate_;  // Decides on the LCM thread; the worker closes scans it gives up.

@@ -1,5 +1,6 @@
 #include "daemons/projector/projector_node.h"
 
+#include <algorithm>
 #include <thread>
 
 #include "core/common/text.h"
@@ -80,6 +81,7 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
   started.identity = m.identity;
   started.light_count = static_cast<int32_t>(options_.lights.size());
   for (const ScanLight& l : options_.lights) started.lights.push_back(ToMessage(l));
+  std::copy(m.leaf_hint, m.leaf_hint + 4, started.leaf_hint);
   node_->Publish(channel::kScanStarted, &started);
   if (options_.calibration) {
     calibration_t c{};

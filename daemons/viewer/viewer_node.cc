@@ -23,7 +23,8 @@ namespace {
 namespace fs = std::filesystem;
 
 // Draws `image` scaled to fit `box` of `canvas` (centred), with a caption above.
-void Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::string& caption) {
+// Returns where the image went on the canvas (empty when there is none).
+cv::Rect Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::string& caption) {
   cv::rectangle(canvas, box, cv::Scalar(70, 70, 70), 1);
   cv::putText(canvas, caption, box.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.5,
               cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
@@ -31,7 +32,7 @@ void Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::strin
   if (image.empty()) {
     cv::putText(canvas, "(none yet)", inner.tl() + cv::Point(8, 24), cv::FONT_HERSHEY_SIMPLEX, 0.5,
                 cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
-    return;
+    return cv::Rect();
   }
   cv::Mat bgr = image;
   if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
@@ -41,7 +42,9 @@ void Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::strin
   cv::resize(bgr, scaled, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
   const cv::Rect at(inner.x + (inner.width - scaled.cols) / 2,
                     inner.y + (inner.height - scaled.rows) / 2, scaled.cols, scaled.rows);
-  scaled.copyTo(canvas(at & cv::Rect(0, 0, canvas.cols, canvas.rows)));
+  const cv::Rect shown = at & cv::Rect(0, 0, canvas.cols, canvas.rows);
+  scaled(shown - at.tl()).copyTo(canvas(shown));
+  return shown;
 }
 
 // The identity form's fields, in order.
@@ -80,7 +83,7 @@ std::vector<std::string> Wrap(const std::string& text, size_t chars) {
   return lines;
 }
 
-const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60);
+const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60), kCyan(255, 220, 0);
 
 // The preview as the viewer shows it (8-bit BGR, the pixels at the camera's maximum in any
 // channel painted red) and its histogram (64 bins of gray); returns the share clipped. Worked
@@ -213,7 +216,9 @@ void ViewerNode::Tick() {
   std::vector<display::Window::Input> input;
   if (!window_->Poll(&input)) node_->Stop();
   for (const display::Window::Input& in : input) {
-    if (in.key != 0) {
+    if (in.mouse != display::Window::Input::Mouse::kNone) {
+      OnMouse(in);
+    } else if (in.key != 0) {
       OnKey(in.key);
     } else if (editing_ >= 0) {
       OnText(in.text);
@@ -222,6 +227,32 @@ void ViewerNode::Tick() {
   if (Clock::now() < next_draw_) return;
   next_draw_ = Clock::now() + std::chrono::milliseconds(100);
   window_->Show(Draw());
+}
+
+void ViewerNode::OnMouse(const display::Window::Input& in) {
+  using Mouse = display::Window::Input::Mouse;
+  const cv::Rect at = preview_at_;
+  if (editing_ >= 0 || zoom_ || at.empty()) return;
+  const cv::Point p(std::clamp(in.at.x, at.x, at.br().x), std::clamp(in.at.y, at.y, at.br().y));
+  if (in.mouse == Mouse::kDown) {
+    if (!at.contains(in.at)) return;  // Only a drag begun on the preview draws.
+    drag_from_ = drag_to_ = p;
+    return;
+  }
+  if (drag_from_.x < 0) return;
+  drag_to_ = p;
+  if (in.mouse != Mouse::kUp) return;
+  const cv::Rect box(drag_from_, drag_to_);
+  drag_from_ = cv::Point(-1, -1);
+  if (box.width < 4 || box.height < 4) {  // A click: no hint.
+    if (hint_.area() > 0) progress_ = "leaf hint cleared";
+    hint_ = cv::Rect2d();
+    return;
+  }
+  hint_ = cv::Rect2d(
+      static_cast<double>(box.x - at.x) / at.width, static_cast<double>(box.y - at.y) / at.height,
+      static_cast<double>(box.width) / at.width, static_cast<double>(box.height) / at.height);
+  progress_ = "leaf hint drawn: every scan from now on looks for the leaf there (h clears it)";
 }
 
 void ViewerNode::OnText(const std::string& text) {
@@ -274,6 +305,7 @@ void ViewerNode::OnKey(SDL_Keycode key) {
       r.scan_id = NowUtime();
       r.identity = ToMessage(next_);
       if (next_ == ScanIdentity()) r.identity.label = "from vellum-viewer";
+      ToLeafHint(hint_, r.leaf_hint);
       node_->Publish(channel::kScanRequest, &r);
       progress_ = "scan " + std::to_string(r.scan_id) + " requested: " + Describe(next_);
       Started(r.scan_id);
@@ -284,6 +316,10 @@ void ViewerNode::OnKey(SDL_Keycode key) {
     }
     case SDLK_c:
       sheet_ = !sheet_;
+      break;
+    case SDLK_h:
+      if (hint_.area() > 0) progress_ = "leaf hint cleared";
+      hint_ = cv::Rect2d();
       break;
     case SDLK_l:  // The operator has switched the light asked for (or off, at the end).
       if (!prompt_.text.empty()) {
@@ -413,7 +449,17 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
                   cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
     }
   } else {
-    Panel(canvas, box, preview_shown_, "camera preview (clipped in red)");
+    preview_at_ = Panel(canvas, box, preview_shown_, "camera preview (clipped in red)");
+    // The leaf hint in cyan, and the box being dragged.
+    const cv::Rect at = preview_at_;
+    if (!at.empty() && hint_.area() > 0) {
+      const cv::Rect hint(at.x + cvRound(hint_.x * at.width), at.y + cvRound(hint_.y * at.height),
+                          cvRound(hint_.width * at.width), cvRound(hint_.height * at.height));
+      cv::rectangle(canvas, hint, kCyan, 2);
+      cv::putText(canvas, "leaf hint (h: clear)", hint.tl() + cv::Point(4, 14),
+                  cv::FONT_HERSHEY_SIMPLEX, 0.4, kCyan, 1, cv::LINE_AA);
+    }
+    if (drag_from_.x >= 0) cv::rectangle(canvas, cv::Rect(drag_from_, drag_to_), kCyan, 1);
     if (!preview_leaf_.empty()) {
       const bool off = preview_leaf_ == "off the view", in = preview_leaf_ == "in view";
       const std::string line = off  ? "LEAF RUNS OFF THE VIEW"
@@ -560,8 +606,8 @@ cv::Mat ViewerNode::Draw() const {
               : doubtful ? kAmber
                          : cv::Scalar(120, 220, 255),
               failed ? 2 : 1, cv::LINE_AA);
-  cv::putText(canvas, "s: scan  e: identity  c: sheet  q: quit", cv::Point(help_x, 28),
-              cv::FONT_HERSHEY_SIMPLEX, 0.45,
+  cv::putText(canvas, "s: scan  e: identity  c: sheet  drag: leaf hint  q: quit",
+              cv::Point(help_x, 28), cv::FONT_HERSHEY_SIMPLEX, 0.45,
               failed ? cv::Scalar(255, 255, 255) : cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
   // Left: live preview, histogram, the daemons, the next scan's identity.
   const int left_w = w / 3;

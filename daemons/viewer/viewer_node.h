@@ -17,6 +17,11 @@
 // colour; on disk, <data>/index.html), left/right = step through the scans of this session,
 // q or Esc = quit.
 //
+// Where the scene is ambiguous (a leaf on a support as bright as it, in a frame), the operator
+// drags a box over the leaf in the camera preview: the leaf hint, drawn in cyan, which every
+// scan asked for from here on carries (SCAN_REQUEST's leaf_hint) until h clears it (or a click
+// without a drag).
+//
 // A station whose extra lights the operator switches by hand (vellum-lights --backend manual):
 // its LIGHT_PROMPT shows as a blue box over the results (which light to switch on, and that
 // nothing else may be on), and l answers LIGHT_ON for the scan, which then goes on; the box
@@ -65,6 +70,10 @@ class ViewerNode {
   const std::string& failure() const { return failure_; }
   // The operator's prompt shown ("" when none): LIGHT_PROMPT's text.
   const std::string& light_prompt() const { return prompt_.text; }
+  // The leaf hint the next scan carries, as fractions of the camera's view; empty when none.
+  const cv::Rect2d& leaf_hint() const { return hint_; }
+  // Where the preview was last drawn on the window (its pixels); empty before any.
+  cv::Rect preview_area() const { return preview_at_; }
 
  private:
   struct Result {
@@ -76,6 +85,7 @@ class ViewerNode {
   };
   void OnKey(SDL_Keycode key);
   void OnText(const std::string& text);
+  void OnMouse(const display::Window::Input& in);
   void OnStatus(const status_t& m);
   void OnRestored(const restored_t& m);
   void Started(int64_t scan_id);  // A scan began: a failure shown before is over.
@@ -109,6 +119,11 @@ class ViewerNode {
   std::string failure_;
   std::map<std::string, int64_t> error_utime_;  // Each process's last error seen.
   light_t prompt_{};                            // The operator's prompt (text "" when none).
+  cv::Rect2d hint_;                             // See leaf_hint().
+  cv::Point drag_from_{-1, -1};                 // Where a drag on the preview began (window).
+  cv::Point drag_to_;
+  // Set by each draw (Draw is const: the layout is its own), read by the mouse.
+  mutable cv::Rect preview_at_;
 };
 
 }  // namespace vellum::station

@@ -431,5 +431,80 @@ TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
   EXPECT_TRUE(viewer.light_prompt().empty());
 }
 
+// The operator drags a box over the leaf in the preview: it is drawn in cyan, and the next scan
+// asks for the leaf there, as fractions of the camera's view (not of the window); h clears it.
+// The preview is not square and not placed at the window's corner, so a mapping that forgets
+// the panel's offset or its scale fails.
+TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
+  Node node("vellum-viewer", &bus_.lcm());
+  auto owned = Window();
+  display::Window* window = owned.get();
+  ViewerNode viewer(&node, std::move(owned));
+  bus_.AddTick([&] { viewer.Tick(); });
+  auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  image_t preview{};
+  ToMessage(cv::Mat(240, 320, CV_8UC1, cv::Scalar(60)), &preview);
+  bus_.probe().Publish(channel::kPreview, &preview);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.preview_area().empty(); }, 10));
+  const cv::Rect at = viewer.preview_area();
+  EXPECT_NEAR(static_cast<double>(at.width) / at.height, 320.0 / 240.0, 0.02);
+  // From a fifth across and a quarter down to 70% across and 90% down of the camera's view.
+  auto point = [&](double fx, double fy) {
+    return cv::Point(at.x + cvRound(fx * at.width), at.y + cvRound(fy * at.height));
+  };
+  auto mouse = [](Uint32 type, cv::Point p) {
+    SDL_Event e{};
+    e.type = type;
+    if (type == SDL_MOUSEMOTION) {
+      e.motion.x = p.x;
+      e.motion.y = p.y;
+      e.motion.state = SDL_BUTTON_LMASK;
+    } else {
+      e.button.button = SDL_BUTTON_LEFT;
+      e.button.x = p.x;
+      e.button.y = p.y;
+    }
+    ASSERT_EQ(SDL_PushEvent(&e), 1) << SDL_GetError();
+  };
+  mouse(SDL_MOUSEBUTTONDOWN, point(0.2, 0.25));
+  mouse(SDL_MOUSEMOTION, point(0.5, 0.5));
+  mouse(SDL_MOUSEBUTTONUP, point(0.7, 0.9));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.leaf_hint().area() > 0; }, 10));
+  // Within a screen pixel of the preview (the panel shows 320 px in about 200).
+  const double px = 1.0 / at.width, py = 1.0 / at.height;
+  EXPECT_NEAR(viewer.leaf_hint().x, 0.2, px);
+  EXPECT_NEAR(viewer.leaf_hint().y, 0.25, py);
+  EXPECT_NEAR(viewer.leaf_hint().width, 0.5, 2 * px);
+  EXPECT_NEAR(viewer.leaf_hint().height, 0.65, 2 * py);
+  // Drawn in cyan over the preview.
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] {
+        const cv::Mat screen = window->Screen();
+        if (screen.empty()) return false;
+        cv::Mat mask;
+        cv::inRange(screen(at), cv::Scalar(230, 200, 0), cv::Scalar(255, 240, 30), mask);
+        return cv::countNonZero(mask) > at.width / 2;
+      },
+      10));
+  PushKey(SDLK_s);
+  ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 1; }, 10));
+  const scan_request_t& r = requests->back();
+  EXPECT_NEAR(r.leaf_hint[0], 0.2, px);
+  EXPECT_NEAR(r.leaf_hint[1], 0.25, py);
+  EXPECT_NEAR(r.leaf_hint[2], 0.5, 2 * px);
+  EXPECT_NEAR(r.leaf_hint[3], 0.65, 2 * py);
+  // In the camera's pixels of a 1600 x 1200 view, as the decoder turns it into scan.yaml's.
+  const cv::Rect pixels = LeafHintPixels(r.leaf_hint, cv::Size(1600, 1200));
+  EXPECT_NEAR(pixels.x, 320, 1600 * px);
+  EXPECT_NEAR(pixels.br().y, 1080, 1200 * py + 1);
+  // The hint stays for the scans after (a book stays where it lies), until h clears it.
+  PushKey(SDLK_h);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.leaf_hint().area() == 0; }, 10));
+  PushKey(SDLK_s);
+  ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 2; }, 10));
+  EXPECT_EQ(requests->back().leaf_hint[2], 0.0f);
+  EXPECT_TRUE(LeafHintPixels(requests->back().leaf_hint, cv::Size(1600, 1200)).empty());
+}
+
 }  // namespace
 }  // namespace vellum::station
