@@ -19,6 +19,8 @@ int main(int argc, char** argv) {
                     "Keys: e = the next scan's identity (a form: Tab moves, Return closes),\n"
                     "s = start a scan (the folio then advances), u = undo the last advance,\n"
                     "z = 100% zoom with a focus figure, c = the session's contact sheet,\n"
+                    "drag a box over the leaf in the preview = the leaf hint every scan\n"
+                    "carries (where the leaf is not at the view's centre), h = clear it,\n"
                     "left/right = step through results, q = quit.",
                     Join(DaemonFlagSpecs(false), own), [](const Flags& flags, Node& node) {
                       display::WindowOptions window;
