@@ -148,6 +148,11 @@ int RunScan(const std::vector<std::string>& args) {
   specs.push_back({"side", "SIDE", "recto, verso, left or right", ""});
   specs.push_back({"operator", "NAME", "who scans", ""});
   specs.push_back({"note", "TEXT", "anything else about the scan", ""});
+  specs.push_back({"leaf-hint", "X,Y,W,H",
+                   "where the leaf lies when it is not at the view's centre: a box inside it, as "
+                   "fractions of the camera's view (0..1, x right, y down; as the viewer's drawn "
+                   "hint)",
+                   ""});
   specs.push_back({"timeout", "S", "give up after this long", "600"});
   specs.push_back({"wait", "S",
                    "wait this long for every daemon's heartbeat before asking (no projector: "
@@ -187,6 +192,19 @@ int RunScan(const std::vector<std::string>& args) {
   }
   if (!changed.empty()) std::fprintf(stderr, "vellum scan: %s\n", changed.c_str());
   request.identity = station::ToMessage(identity);
+  const std::string hint = flags.Get("leaf-hint");
+  if (!hint.empty()) {
+    double x = 0, y = 0, w = 0, h = 0;
+    char end = 0;
+    if (std::sscanf(hint.c_str(), "%lf,%lf,%lf,%lf%c", &x, &y, &w, &h, &end) != 4 ||
+        !(x >= 0 && y >= 0 && w > 0 && h > 0 && x + w <= 1 && y + h <= 1)) {
+      throw UsageError(
+          "--leaf-hint must be X,Y,W,H as fractions of the camera's view (a box "
+          "inside 0..1), got '" +
+          hint + "'");
+    }
+    station::ToLeafHint(cv::Rect2d(x, y, w, h), request.leaf_hint);
+  }
   Follower follower(&node, request.scan_id);
   // The request goes out once every daemon of the station is heard (a heartbeat a second), or
   // --wait has passed: one sent before the projector listens would be lost. Without the

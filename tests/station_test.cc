@@ -1268,6 +1268,61 @@ TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFail
   EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
 }
 
+// A small leaf off the view's centre on a support as bright as it (the default rig): asked for
+// with no hint, the support is taken for the leaf and the scan says so (leaf_ambiguous, exit 3);
+// with the operator's hint (`vellum scan --leaf-hint`, as the viewer's drawn box: fractions of
+// the view) it travels SCAN_REQUEST -> SCAN_STARTED -> raw/scan.yaml (camera pixels), the leaf
+// is restored clean at its own size, and `vellum process` on the raw folder gives the same.
+TEST_F(StationTest, TheOperatorsLeafHintFindsALeafOffTheCentreOfASupport) {
+  const std::string rig = kSource + "/config/default_calibration.yaml";
+  Start(Daemon("vellum-camera"),
+        {"--backend", "sim", "--rig", rig, "--page", "curl", "--scene", "support", "--page-size",
+         "100x130", "--centre", "100,60", "--texture", "text"});
+  Start(Daemon("vellum-projector"),
+        {"--calibration", rig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  for (const char* s : {"STATUS_CAMERA", "STATUS_PROJECTOR"}) all.push_back(s);
+  WaitForHeartbeats(all);
+  auto results_of = [](const std::string& out) {
+    const size_t arrow = out.find("-> ");
+    if (arrow == std::string::npos) return std::string();
+    const std::string rest = out.substr(arrow + 3);
+    return rest.substr(0, rest.find('\n'));
+  };
+  std::string out;
+  EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 3) << out;
+  EXPECT_NE(out.find("leaf_ambiguous"), std::string::npos) << out;
+  // The leaf lies 100 mm right and 60 mm up of the view's centre on the default rig (0.25 mm
+  // pixels, y down): camera pixels about 1000..1400 across and 100..620 down. A box in its
+  // middle, as fractions of the 1600 x 1200 view.
+  ASSERT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300", "--leaf-hint",
+                     "0.6875,0.1666667,0.125,0.25"},
+                    &out),
+            0)
+      << out;
+  EXPECT_NE(out.find("quality: pass"), std::string::npos) << out;
+  const std::string results = results_of(out);
+  ASSERT_FALSE(results.empty()) << out;
+  const std::string raw = fs::path(results).parent_path().string() + "/raw";
+  Scan recorded;
+  ASSERT_TRUE(ReadScanHeader(raw, &recorded).ok());
+  EXPECT_EQ(recorded.leaf_hint, cv::Rect(1100, 200, 200, 300));
+  const nlohmann::json report = nlohmann::json::parse(ReadText(results + "/report.json"));
+  EXPECT_EQ(report["outline"]["hint_from"], "scan") << report["outline"].dump();
+  EXPECT_EQ(report["outline"]["hint"], "1100,200,200,300") << report["outline"].dump();
+  EXPECT_TRUE(report["warnings"].empty()) << report["warnings"].dump();
+  // The restored leaf at its own size: 100 x 130 mm plus the 3 mm margin each side.
+  const nlohmann::json restored = nlohmann::json::parse(ReadText(results + "/restored.json"));
+  const double mm = 25.4 / restored["dpi"].get<double>();
+  cv::Mat page = cv::imread(results + "/restored.tif", cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(page.empty());
+  EXPECT_NEAR(page.cols * mm, 106, 4) << page.cols << " px at " << mm << " mm";
+  EXPECT_NEAR(page.rows * mm, 136, 4) << page.rows << " px at " << mm << " mm";
+  ExpectSameAsProcess(raw, results);
+}
+
 // The recorder crashes in the middle of a scan and systemd starts it again. What the decoder
 // had received is on disk (each capture is appended to the scan's log the moment it arrives;
 // the new decoder continues that log, never truncates it, and takes its captures up). A
