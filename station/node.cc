@@ -51,37 +51,39 @@ bool SafeDecode(const void* data, int64_t size, capture_t* msg) {
   return true;  // No extra lights.
 }
 
+namespace {
+
+// The fields every recorded layout of SCAN_STARTED has, from an earlier one; the rest empty.
+template <class Earlier>
+scan_started_t StartedFrom(const Earlier& old) {
+  scan_started_t msg{};
+  msg.utime = old.utime;
+  msg.seq = old.seq;
+  msg.station = old.station;
+  msg.scan_id = old.scan_id;
+  msg.session = old.session;
+  msg.pattern_count = old.pattern_count;
+  msg.projector_width = old.projector_width;
+  msg.projector_height = old.projector_height;
+  msg.identity = old.identity;
+  return msg;
+}
+
+}  // namespace
+
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg) {
   if (SafeDecode<scan_started_t>(data, size, msg)) return true;
   scan_started_v2_t v2;
   if (SafeDecode<scan_started_v2_t>(data, size, &v2)) {
-    *msg = scan_started_t{};
-    msg->utime = v2.utime;
-    msg->seq = v2.seq;
-    msg->station = v2.station;
-    msg->scan_id = v2.scan_id;
-    msg->session = v2.session;
-    msg->pattern_count = v2.pattern_count;
-    msg->projector_width = v2.projector_width;
-    msg->projector_height = v2.projector_height;
-    msg->identity = v2.identity;
+    *msg = StartedFrom(v2);
     msg->light_count = v2.light_count;
     msg->lights = std::move(v2.lights);
     return true;  // No leaf hint.
   }
-  scan_started_v1_t old;
-  if (!SafeDecode<scan_started_v1_t>(data, size, &old)) return false;
-  *msg = scan_started_t{};
-  msg->utime = old.utime;
-  msg->seq = old.seq;
-  msg->station = old.station;
-  msg->scan_id = old.scan_id;
-  msg->session = old.session;
-  msg->pattern_count = old.pattern_count;
-  msg->projector_width = old.projector_width;
-  msg->projector_height = old.projector_height;
-  msg->identity = old.identity;
-  return true;  // No extra lights.
+  scan_started_v1_t v1;
+  if (!SafeDecode<scan_started_v1_t>(data, size, &v1)) return false;
+  *msg = StartedFrom(v1);
+  return true;  // No extra lights, no leaf hint.
 }
 
 bool SafeDecode(const void* data, int64_t size, calibration_t* msg) {

@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -30,6 +31,8 @@
 #include "vellum/calibration_v1_t.hpp"
 #include "vellum/point_cloud_t.hpp"
 #include "vellum/scan_request_t.hpp"
+#include "vellum/scan_started_v1_t.hpp"
+#include "vellum/scan_started_v2_t.hpp"
 #include "vellum/status_t.hpp"
 #include "vellum/texture_t.hpp"
 
@@ -259,6 +262,51 @@ TEST(Messages, TheWorkingVolumeAndScaleErrorTravelAndAnOldCalibrationStillDecode
   EXPECT_EQ(back.max_z_mm, Calibration().max_z_mm);
   EXPECT_TRUE(std::isnan(back.scale_error_percent));
   EXPECT_EQ(back.camera.matrix, rig.camera.matrix);
+}
+
+// A SCAN_STARTED as logs recorded it before the leaf hint (v2) and before the extra lights (v1)
+// still reads: the same scan, no hint (and no lights); and the hint as the viewer sends it turns
+// into camera pixels, while one that is not a region of the view is none.
+TEST(Messages, EarlierScanStartedLayoutsReadAndTheLeafHintIsARegionOfTheView) {
+  scan_started_v2_t v2{};
+  v2.scan_id = 41;
+  v2.session = 7;
+  v2.pattern_count = 58;
+  v2.identity.shelfmark = "MS 12";
+  v2.light_count = 1;
+  v2.lights.resize(1);
+  v2.lights[0].name = "uv";
+  std::vector<uint8_t> bytes = Encode(v2);
+  scan_started_t m;
+  ASSERT_TRUE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &m));
+  EXPECT_EQ(m.scan_id, 41);
+  EXPECT_EQ(m.session, 7);
+  EXPECT_EQ(m.pattern_count, 58);
+  EXPECT_EQ(m.identity.shelfmark, "MS 12");
+  ASSERT_EQ(m.light_count, 1);
+  EXPECT_EQ(m.lights[0].name, "uv");
+  EXPECT_EQ(m.leaf_hint[2], 0.0f);
+  scan_started_v1_t v1{};
+  v1.scan_id = 42;
+  v1.identity.folio = "3";
+  bytes = Encode(v1);
+  ASSERT_TRUE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &m));
+  EXPECT_EQ(m.scan_id, 42);
+  EXPECT_EQ(m.identity.folio, "3");
+  EXPECT_EQ(m.light_count, 0);
+  EXPECT_EQ(m.leaf_hint[2], 0.0f);
+
+  const cv::Size camera(1600, 1200);
+  const float hint[4] = {0.6875f, 0.25f, 0.125f, 0.5f};
+  EXPECT_EQ(LeafHintPixels(hint, camera), cv::Rect(1100, 300, 200, 600));
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (const std::array<float, 4>& bad :
+       {std::array<float, 4>{0, 0, 0, 0}, std::array<float, 4>{nan, 0.1f, 0.2f, 0.2f},
+        std::array<float, 4>{0.9f, 0.1f, 0.2f, 0.2f}, std::array<float, 4>{-0.1f, 0.1f, 0.2f, 0.2f},
+        std::array<float, 4>{0.1f, 0.1f, 0.2f, -0.2f}}) {
+    EXPECT_TRUE(LeafHintPixels(bad.data(), camera).empty())
+        << bad[0] << "," << bad[1] << "," << bad[2] << "," << bad[3];
+  }
 }
 
 Scan SmallScan() {
