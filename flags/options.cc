@@ -253,14 +253,8 @@ void FlattenGroupFromFlags(const Flags& flags, PipelineOptions* options) {
   options->max_warp_error_px = flags.GetDouble("max-warp-error", 0.001, 10);
   options->flatten = FlattenOptionsFromFlags(flags);
   const std::string hint = flags.Get("leaf-hint");
-  if (!hint.empty()) {
-    int x = 0, y = 0, w = 0, h = 0;
-    char end = 0;
-    if (std::sscanf(hint.c_str(), "%d,%d,%d,%d%c", &x, &y, &w, &h, &end) != 4 || x < 0 || y < 0 ||
-        w <= 0 || h <= 0) {
-      throw UsageError("--leaf-hint must be X,Y,W,H in camera pixels, got '" + hint + "'");
-    }
-    options->outline.hint = cv::Rect(x, y, w, h);
+  if (!hint.empty() && !ParseLeafHint(hint, &options->outline.hint)) {
+    throw UsageError("--leaf-hint must be X,Y,W,H in camera pixels, got '" + hint + "'");
   }
 }
 

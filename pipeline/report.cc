@@ -353,16 +353,22 @@ std::string LeafHintText(const cv::Rect& hint) {
          "," + std::to_string(hint.height);
 }
 
-cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages) {
-  const ReportValue* v = FindValue(stages, "operator", "leaf_hint");
+bool ParseLeafHint(const std::string& text, cv::Rect* hint) {
   int x = 0, y = 0, w = 0, h = 0;
   char end = 0;
-  if (!v || !v->is_text ||
-      std::sscanf(v->text.c_str(), "%d,%d,%d,%d%c", &x, &y, &w, &h, &end) != 4 || x < 0 || y < 0 ||
+  if (std::sscanf(text.c_str(), "%d,%d,%d,%d%c", &x, &y, &w, &h, &end) != 4 || x < 0 || y < 0 ||
       w <= 0 || h <= 0) {
-    return cv::Rect();
+    return false;
   }
-  return cv::Rect(x, y, w, h);
+  *hint = cv::Rect(x, y, w, h);
+  return true;
+}
+
+cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages) {
+  const ReportValue* v = FindValue(stages, "operator", "leaf_hint");
+  cv::Rect hint;
+  if (!v || !v->is_text || !ParseLeafHint(v->text, &hint)) return cv::Rect();
+  return hint;
 }
 
 void StageReport::Text(const std::string& section, const std::string& key,

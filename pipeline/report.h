@@ -76,7 +76,10 @@ ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages);
 // The operator's leaf hint for the scan as its decode stage reported it (operator/leaf_hint:
 // "x,y,width,height", camera pixels); empty when none.
 cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages);
+// A leaf hint as text, "x,y,width,height" (camera pixels), and back: false unless the text is
+// exactly that, x, y >= 0 and width, height > 0.
 std::string LeafHintText(const cv::Rect& hint);
+bool ParseLeafHint(const std::string& text, cv::Rect* hint);
 
 // Writes report.html (the warnings, the key figures, the pictures the stages wrote to report/,
 // the options) and then report.json (every section; on a spread, `pages` holds each page's

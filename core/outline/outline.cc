@@ -967,9 +967,7 @@ RaisedHole HighestRaisedHole(const cv::Mat& points, const cv::Mat& leaf_mask, do
         if (in[u] && !std::isnan(p[u][2])) z.push_back(p[u][2]);
       }
     }
-    if (z.empty()) return std::numeric_limits<double>::quiet_NaN();
-    std::nth_element(z.begin(), z.begin() + z.size() / 2, z.end());
-    return static_cast<double>(z[z.size() / 2]);
+    return z.empty() ? std::numeric_limits<double>::quiet_NaN() : Median(&z);
   };
   for (size_t k = 0; k < contours.size(); ++k) {
     if (hierarchy[k][3] < 0) continue;  // An outer contour, not a hole.

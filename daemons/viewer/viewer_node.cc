@@ -245,14 +245,18 @@ void ViewerNode::OnMouse(const display::Window::Input& in) {
   const cv::Rect box(drag_from_, drag_to_);
   drag_from_ = cv::Point(-1, -1);
   if (box.width < 4 || box.height < 4) {  // A click: no hint.
-    if (hint_.area() > 0) progress_ = "leaf hint cleared";
-    hint_ = cv::Rect2d();
+    ClearHint();
     return;
   }
   hint_ = cv::Rect2d(
       static_cast<double>(box.x - at.x) / at.width, static_cast<double>(box.y - at.y) / at.height,
       static_cast<double>(box.width) / at.width, static_cast<double>(box.height) / at.height);
   progress_ = "leaf hint drawn: every scan from now on looks for the leaf there (h clears it)";
+}
+
+void ViewerNode::ClearHint() {
+  if (hint_.area() > 0) progress_ = "leaf hint cleared";
+  hint_ = cv::Rect2d();
 }
 
 void ViewerNode::OnText(const std::string& text) {
@@ -318,8 +322,7 @@ void ViewerNode::OnKey(SDL_Keycode key) {
       sheet_ = !sheet_;
       break;
     case SDLK_h:
-      if (hint_.area() > 0) progress_ = "leaf hint cleared";
-      hint_ = cv::Rect2d();
+      ClearHint();
       break;
     case SDLK_l:  // The operator has switched the light asked for (or off, at the end).
       if (!prompt_.text.empty()) {

@@ -86,6 +86,7 @@ class ViewerNode {
   void OnKey(SDL_Keycode key);
   void OnText(const std::string& text);
   void OnMouse(const display::Window::Input& in);
+  void ClearHint();  // h, or a click without a drag.
   void OnStatus(const status_t& m);
   void OnRestored(const restored_t& m);
   void Started(int64_t scan_id);  // A scan began: a failure shown before is over.
