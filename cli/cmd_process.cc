@@ -7,6 +7,7 @@
 #include "core/common/text.h"
 #include "flags/options.h"
 #include "io/calibration_io.h"
+#include "io/memory.h"
 #include "pipeline/process.h"
 #include "pipeline/qc.h"
 
@@ -56,6 +57,7 @@ int RunProcess(const std::vector<std::string>& args) {
   // large scan's peak stays about as it was.
   mallopt(M_MMAP_THRESHOLD, 32 << 20);
   mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  UseHugePagesForLargeImages();
   const std::string scan_dir = flags.Require("scan");
   const std::string calibration = flags.Require("calibration");
   const std::string out = flags.Require("out");

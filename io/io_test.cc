@@ -13,6 +13,7 @@
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"
 #include "io/manifest.h"
+#include "io/memory.h"
 #include "io/ply.h"
 #include "io/products.h"
 #include "io/scan_io.h"
@@ -499,11 +500,56 @@ TEST_F(IoTest, PlyRoundTrip) {
   EXPECT_EQ(r[0].u, 2.0f);
   EXPECT_EQ(r[0].v, 1.0f);
   EXPECT_EQ(r[1].z, 6.0f);
+  // Larger than the writer's buffer (32 rows): every third point, in order, across its flushes.
+  cv::Mat many(200, 40, CV_32FC3, cv::Scalar::all(NAN));
+  for (int v = 0; v < many.rows; ++v) {
+    for (int u = 0; u < many.cols; ++u) {
+      if ((v * many.cols + u) % 3 == 0) many.at<cv::Vec3f>(v, u) = cv::Vec3f(u, v, u + v);
+    }
+  }
+  ASSERT_TRUE(WritePointsPly(Path("many.ply"), many).ok());
+  ASSERT_TRUE(ReadPointsPly(Path("many.ply"), &r).ok());
+  ASSERT_EQ(r.size(), 200u * 40u / 3 + 1);
+  for (size_t i = 0; i < r.size(); ++i) {
+    const int at = static_cast<int>(3 * i);
+    ASSERT_EQ(r[i].u, at % 40) << i;
+    ASSERT_EQ(r[i].v, at / 40) << i;
+    ASSERT_EQ(r[i].z, r[i].x + r[i].y) << i;
+  }
 }
 
 // A scan's manifest lists every file of its raw/ and results/ (not what lies beside them), in
 // the format sha256sum reads (checked by sha256sum itself), and names each file missing,
 // changed or added since.
+// The huge-page allocator (set for every later Mat of this test program, which changes no
+// other test's result): a large Mat's block is 2 MB aligned, a freed one serves the next Mat of
+// its size, small Mats and Mats over memory they do not own are as before.
+TEST(HugePages, LargeImagesAreAlignedAndTheirBlocksReused) {
+  UseHugePagesForLargeImages();
+  constexpr uintptr_t kTwoMb = uintptr_t{2} << 20;
+  const uchar* first = nullptr;
+  {
+    cv::Mat big(1200, 1600, CV_32F, cv::Scalar(7));  // 7.3 MB.
+    EXPECT_EQ(reinterpret_cast<uintptr_t>(big.data) % kTwoMb, 0u);
+    EXPECT_EQ(big.at<float>(1199, 1599), 7.0f);
+    first = big.data;
+  }
+  cv::Mat again(1200, 1600, CV_32F);
+  EXPECT_EQ(again.data, first) << "a freed block serves the next image of its size";
+  cv::Mat other(1200, 1600, CV_32FC3);  // 22 MB: a block of its own.
+  EXPECT_NE(other.data, first);
+  EXPECT_EQ(reinterpret_cast<uintptr_t>(other.data) % kTwoMb, 0u);
+  other.setTo(cv::Scalar(1, 2, 3));
+  EXPECT_EQ(other.at<cv::Vec3f>(1199, 1599), cv::Vec3f(1, 2, 3));
+  cv::Mat roi = other(cv::Rect(10, 10, 100, 100)).clone();  // Small: OpenCV's own.
+  EXPECT_EQ(roi.at<cv::Vec3f>(0, 0), cv::Vec3f(1, 2, 3));
+  std::vector<float> owned(1600 * 1200, 5.0f);
+  cv::Mat wrapped(1200, 1600, CV_32F, owned.data());
+  EXPECT_EQ(wrapped.data, reinterpret_cast<uchar*>(owned.data()));
+  cv::Mat copy = wrapped.clone();
+  EXPECT_EQ(copy.at<float>(600, 800), 5.0f);
+}
+
 TEST_F(IoTest, TheManifestProvesAScanWholeAndNamesWhatChanged) {
   fs::create_directories(dir_ / "raw");
   fs::create_directories(dir_ / "results" / "report");

@@ -21,27 +21,41 @@ uint64_t BytesLeft(std::ifstream& f) {
 
 Status WritePointsPly(const std::string& path, const cv::Mat& points) {
   if (points.type() != CV_32FC3) return Status::Error(path + ": point map must be CV_32FC3");
-  std::vector<PlyPoint> out;
-  out.reserve(points.total() / 2);
+  auto finite = [](const cv::Vec3f& p) {
+    return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
+  };
+  size_t count = 0;
   for (int v = 0; v < points.rows; ++v) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
-    for (int u = 0; u < points.cols; ++u) {
-      if (std::isfinite(row[u][0]) && std::isfinite(row[u][1]) && std::isfinite(row[u][2])) {
-        out.push_back(
-            {row[u][0], row[u][1], row[u][2], static_cast<float>(u), static_cast<float>(v)});
-      }
-    }
+    for (int u = 0; u < points.cols; ++u) count += finite(row[u]);
   }
   std::ofstream f(path, std::ios::binary);
   if (!f) return Status::Error(path + ": cannot open for writing");
   f << "ply\nformat binary_little_endian 1.0\n"
     << "comment vellum points: x y z world frame mm (z = 0 on the table), u v camera pixel\n"
-    << "element vertex " << out.size() << "\n"
+    << "element vertex " << count << "\n"
     << "property float x\nproperty float y\nproperty float z\n"
     << "property float u\nproperty float v\nend_header\n";
   static_assert(sizeof(PlyPoint) == 20, "PlyPoint must be packed");
-  f.write(reinterpret_cast<const char*>(out.data()),
-          static_cast<std::streamsize>(out.size() * sizeof(PlyPoint)));
+  // Written a few rows at a time through one small buffer: a 24 MP scan's cloud is some 500 MB.
+  std::vector<PlyPoint> out;
+  out.reserve(static_cast<size_t>(points.cols) * 32);
+  auto flush = [&] {
+    f.write(reinterpret_cast<const char*>(out.data()),
+            static_cast<std::streamsize>(out.size() * sizeof(PlyPoint)));
+    out.clear();
+  };
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < points.cols; ++u) {
+      if (finite(row[u])) {
+        out.push_back(
+            {row[u][0], row[u][1], row[u][2], static_cast<float>(u), static_cast<float>(v)});
+      }
+    }
+    if (out.size() + static_cast<size_t>(points.cols) > out.capacity()) flush();
+  }
+  flush();
   if (!f) return Status::Error(path + ": write failed (disk full?)");
   return Status::Ok();
 }

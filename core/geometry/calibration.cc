@@ -101,14 +101,30 @@ cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel) const {
   const double yd = (pixel.y - matrix(1, 2)) / matrix(1, 1);
   const double xd = (pixel.x - matrix(0, 2) - matrix(0, 1) * yd) / matrix(0, 0);
   if (!HasDistortion()) return {xd, yd};
-  // Fixed-point inversion of the distortion, refined until it reproduces the pixel.
+  // Newton's inversion of the distortion, refined until it reproduces the pixel: three or four
+  // rounds where the fixed-point iteration x -= D(x) - xd took ten or more at a wide lens's
+  // corners (the ray table of every camera pixel is made this way for each triangulation).
+  const cv::Vec<double, 5>& k = distortion;
   double x = xd, y = yd;
   for (int i = 0; i < 20; ++i) {
-    const cv::Point2d d = Distort(distortion, x, y);
-    const double ex = d.x - xd, ey = d.y - yd;
-    x -= ex;
-    y -= ey;
+    const double r2 = x * x + y * y;
+    const double radial = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]));
+    const double dradial = k[0] + r2 * (2 * k[1] + 3 * r2 * k[4]);  // d radial / d r2.
+    const double ex = x * radial + 2 * k[2] * x * y + k[3] * (r2 + 2 * x * x) - xd;
+    const double ey = y * radial + k[2] * (r2 + 2 * y * y) + 2 * k[3] * x * y - yd;
     if (ex * ex + ey * ey < 1e-24) break;
+    // The Jacobian of Distort (symmetric: both off-diagonal terms are the same).
+    const double jxx = radial + 2 * x * x * dradial + 2 * k[2] * y + 6 * k[3] * x;
+    const double jyy = radial + 2 * y * y * dradial + 6 * k[2] * y + 2 * k[3] * x;
+    const double jxy = 2 * x * y * dradial + 2 * k[2] * x + 2 * k[3] * y;
+    const double det = jxx * jyy - jxy * jxy;
+    if (!(std::fabs(det) > 1e-12)) {  // Past the model's fold: the plain step.
+      x -= ex;
+      y -= ey;
+      continue;
+    }
+    x -= (jyy * ex - jxy * ey) / det;
+    y -= (jxx * ey - jxy * ex) / det;
   }
   return {x, y};
 }
