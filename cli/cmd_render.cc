@@ -7,6 +7,7 @@
 #include "core/sim/gantry.h"
 #include "flags/options.h"
 #include "io/calibration_io.h"
+#include "io/image_file.h"
 #include "io/scan_io.h"
 
 namespace vellum {

@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <cstdio>
-#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "io/image_file.h"
 
 namespace vellum {
 
@@ -132,10 +134,12 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   const std::string tex = flags.Get("texture");
   if (!ParseTextureKind(tex, &texture->kind) || texture->kind == TextureKind::kImage) {
     texture->kind = TextureKind::kImage;
-    texture->image = cv::imread(tex, cv::IMREAD_COLOR);
-    if (texture->image.empty()) {
-      return Status::Error(tex + ": not a readable image (and not a texture name)");
+    cv::Mat image;
+    if (!ReadImage(tex, &image).ok() || image.depth() != CV_8U) {
+      return Status::Error(tex + ": not a readable 8-bit image (and not a texture name)");
     }
+    if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
+    texture->image = image;
   }
   return Status::Ok();
 }

@@ -12,6 +12,7 @@
 
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"
+#include "io/image_file.h"
 #include "io/manifest.h"
 #include "io/memory.h"
 #include "io/ply.h"
@@ -521,6 +522,76 @@ TEST_F(IoTest, PlyRoundTrip) {
 // A scan's manifest lists every file of its raw/ and results/ (not what lies beside them), in
 // the format sha256sum reads (checked by sha256sum itself), and names each file missing,
 // changed or added since.
+// Image files without OpenCV's imgcodecs, read back by OpenCV as an outside reader: colour
+// stays in its order (a picture that is not symmetric in its channels: blue, green and red
+// differ everywhere), 16 bits stay 16, the TIFF's resolution tags hold the dpi, a float map's
+// channels are written in their own order, other formats are read by libvips, and a broken
+// file is an error naming it.
+TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
+  cv::Mat colour(37, 53, CV_8UC3), gray(37, 53, CV_8U), deep(37, 53, CV_16UC3);
+  for (int y = 0; y < colour.rows; ++y) {
+    for (int x = 0; x < colour.cols; ++x) {
+      colour.at<cv::Vec3b>(y, x) = cv::Vec3b(x, 100 + y, 200 + (x + y) % 50);
+      gray.at<uint8_t>(y, x) = static_cast<uint8_t>(3 * x + y);
+      deep.at<cv::Vec3w>(y, x) = cv::Vec3w(1000 * x + 7, 300 * y + 1, 65535 - x * y);
+    }
+  }
+  for (const cv::Mat& image : {colour, gray, deep}) {
+    for (const char* name : {"i.png", "i.tif"}) {
+      ASSERT_TRUE(WriteImage(Path(name), image).ok()) << name;
+      cv::Mat back;
+      ASSERT_TRUE(ReadImage(Path(name), &back).ok()) << name;
+      EXPECT_EQ(back.type(), image.type()) << name;
+      EXPECT_EQ(cv::norm(back, image, cv::NORM_INF), 0) << name << " " << image.type();
+      const cv::Mat theirs = cv::imread(Path(name), cv::IMREAD_UNCHANGED);
+      EXPECT_EQ(cv::norm(theirs, image, cv::NORM_INF), 0) << "OpenCV reads " << name;
+    }
+  }
+  // Stored, unfiltered (a frame's way) reads the same.
+  ASSERT_TRUE(WritePng(Path("stored.png"), gray, PngWriting{0, false}).ok());
+  cv::Mat back;
+  ASSERT_TRUE(ReadImage(Path("stored.png"), &back).ok());
+  EXPECT_EQ(cv::norm(back, gray, cv::NORM_INF), 0);
+  // The dpi in the TIFF's tags, and a float map of x y z written x first.
+  ASSERT_TRUE(WriteTiff(Path("dpi.tif"), colour, 400).ok());
+  TIFF* tif = TIFFOpen(Path("dpi.tif").c_str(), "r");
+  ASSERT_NE(tif, nullptr);
+  float xres = 0;
+  uint16_t unit = 0;
+  EXPECT_EQ(TIFFGetField(tif, TIFFTAG_XRESOLUTION, &xres), 1);
+  EXPECT_EQ(TIFFGetField(tif, TIFFTAG_RESOLUTIONUNIT, &unit), 1);
+  EXPECT_FLOAT_EQ(xres, 400);
+  EXPECT_EQ(unit, RESUNIT_INCH);
+  TIFFClose(tif);
+  cv::Mat points(5, 6, CV_32FC3, cv::Scalar(1.5f, -2.0f, 30.25f));
+  ASSERT_TRUE(WriteImage(Path("points.tiff"), points).ok());
+  tif = TIFFOpen(Path("points.tiff").c_str(), "r");
+  ASSERT_NE(tif, nullptr);
+  std::vector<float> row(TIFFScanlineSize(tif) / sizeof(float));
+  ASSERT_EQ(TIFFReadScanline(tif, row.data(), 0), 1);
+  EXPECT_EQ(row[0], 1.5f);
+  EXPECT_EQ(row[2], 30.25f);
+  TIFFClose(tif);
+  // JPEG, by libvips; a bilevel PNG widened to 8 bits.
+  ASSERT_TRUE(cv::imwrite(Path("i.jpg"), colour));
+  ASSERT_TRUE(ReadImage(Path("i.jpg"), &back).ok());
+  EXPECT_EQ(back.type(), CV_8UC3);
+  EXPECT_LT(cv::norm(back, cv::imread(Path("i.jpg")), cv::NORM_INF), 3);
+  cv::Mat bits = gray > 100;
+  ASSERT_TRUE(cv::imwrite(Path("bits.png"), bits, {cv::IMWRITE_PNG_BILEVEL, 1}));
+  ASSERT_TRUE(ReadImage(Path("bits.png"), &back).ok());
+  EXPECT_EQ(cv::norm(back, bits, cv::NORM_INF), 0);
+  // A PNG cut short, and no file at all.
+  std::ifstream whole(Path("i.png"), std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(whole)), {});
+  std::ofstream(Path("cut.png"), std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  Status s = ReadImage(Path("cut.png"), &back);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("cut.png: not a readable image"), std::string::npos) << s.message();
+  s = ReadImage(Path("none.png"), &back);
+  EXPECT_NE(s.message().find("none.png: file is missing"), std::string::npos) << s.message();
+}
+
 // The huge-page allocator (set for every later Mat of this test program, which changes no
 // other test's result): a large Mat's block is 2 MB aligned, a freed one serves the next Mat of
 // its size, small Mats and Mats over memory they do not own are as before.

@@ -6,6 +6,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "io/image_file.h"
 #include "io/json.h"
 #include "io/ply.h"
 #include "io/scan_io.h"
@@ -62,25 +63,20 @@ Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<c
 
 namespace {
 
-// OpenCV's TIFF parameters for a restored image: its dpi in the resolution tags in
-// orthographic view, none in camera view.
-std::vector<int> DpiParams(const RestoreResult& restored) {
-  if (restored.view != RestoreView::kOrthographic) return {};
-  const int dpi = static_cast<int>(std::lround(restored.dpi));
-  return {cv::IMWRITE_TIFF_RESUNIT, 2, cv::IMWRITE_TIFF_XDPI, dpi, cv::IMWRITE_TIFF_YDPI, dpi};
+// A restored image's dpi for its TIFF's resolution tags: in orthographic view; none (0) in
+// camera view.
+double TiffDpi(const RestoreResult& restored) {
+  return restored.view == RestoreView::kOrthographic ? std::round(restored.dpi) : 0;
 }
 
-// Writes `image` as the TIFF `tif` (with OpenCV's `params`), then its XMP and, with `profile`,
-// its ICC profile: the identity, vellum's name and version, `figures`, and `icc` (sRGB when it
-// is empty).
-Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, const std::vector<int>& params,
+// Writes `image` as the TIFF `tif` (resolution tags when dpi > 0), then its XMP and, with
+// `profile`, its ICC profile: the identity, vellum's name and version, `figures`, and `icc` (sRGB
+// when it is empty).
+Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, double dpi,
                        const ScanIdentity& identity, std::map<std::string, std::string> figures,
                        const IccProfile& icc, bool profile = true) {
-  try {
-    if (!cv::imwrite(tif, image, params)) return Status::Error(tif + ": cannot write image");
-  } catch (const cv::Exception& e) {
-    return Status::Error(tif + ": cannot write image: " + e.what());
-  }
+  const Status written = WriteTiff(tif, image, dpi);
+  if (!written.ok()) return written;
   XmpFields xmp;
   xmp.identity = identity;
   xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
@@ -98,7 +94,7 @@ Status WriteRestoredAlbedo(const std::string& dir, const RestoreResult& albedo,
                            const std::string& file) {
   std::map<std::string, std::string> with_encoding = figures;
   with_encoding["encoding"] = "linear reflectance: 65535 = albedo 1; 0 = not measured";
-  return WriteTiffMaster((fs::path(dir) / file).string(), albedo.image, DpiParams(albedo), identity,
+  return WriteTiffMaster((fs::path(dir) / file).string(), albedo.image, TiffDpi(albedo), identity,
                          with_encoding, IccProfile(),
                          /*profile=*/false);
 }
@@ -112,7 +108,7 @@ Status WriteRestoredLight(const std::string& dir, const std::string& name, const
   if (!s.ok()) return s;
   std::map<std::string, std::string> with_light = figures;
   with_light["light"] = name;
-  return WriteTiffMaster((folder / (name + ".tif")).string(), image, DpiParams(restored), identity,
+  return WriteTiffMaster((folder / (name + ".tif")).string(), image, TiffDpi(restored), identity,
                          with_light, icc);
 }
 
@@ -123,7 +119,7 @@ Status WriteNormalMap(const std::string& dir, const cv::Mat& normal_map,
   with_encoding["encoding"] =
       "normal map: red, green, blue = x (right), y (up), z (out of the page), each (c + 1) / 2 "
       "of 65535; 0 = not measured";
-  return WriteTiffMaster((fs::path(dir) / "normals.tif").string(), normal_map, DpiParams(restored),
+  return WriteTiffMaster((fs::path(dir) / "normals.tif").string(), normal_map, TiffDpi(restored),
                          identity, with_encoding, IccProfile(),
                          /*profile=*/false);
 }
@@ -131,7 +127,7 @@ Status WriteNormalMap(const std::string& dir, const cv::Mat& normal_map,
 Status WriteArchivalMaster(const std::string& dir, const cv::Mat& texture,
                            const ScanIdentity& identity, const IccProfile& icc) {
   return WriteTiffMaster(
-      (fs::path(dir) / "archival.tif").string(), texture, {}, identity,
+      (fs::path(dir) / "archival.tif").string(), texture, 0, identity,
       {{"view", "camera"}, {"master", "archival: the texture as captured, not flattened"}}, icc);
 }
 
@@ -166,7 +162,7 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
     figures["rotationDeg"] = JsonNumber(restored.rotation_deg).dump();
   }
   const Status written =
-      WriteTiffMaster(tif, restored.image, DpiParams(restored), identity, figures, icc);
+      WriteTiffMaster(tif, restored.image, TiffDpi(restored), identity, figures, icc);
   if (!written.ok()) return written;
   Json r;
   Json id = Json::object();

@@ -10,12 +10,12 @@
 #include <mutex>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <thread>
 #include <vips/vips8>
 
 #include "core/common/text.h"
+#include "io/image_file.h"
 #include "io/vips.h"
 #include "io/yaml_guard.h"
 
@@ -61,8 +61,11 @@ Status CheckImageHeader(const std::string& path, cv::Size* size, int max_bits = 
   uint32_t width = 0, height = 0;
   int bit_depth = 0;
   if (!PngHeader(path, &width, &height, &bit_depth)) {
-    return cv::haveImageReader(path) ? Status::Ok()
-                                     : Status::Error(path + ": not a readable image");
+    // Another format: one libvips reads, judged when it is read.
+    const bool known =
+        PathExists(path) && StartVips().ok() && vips_foreign_find_load(path.c_str()) != nullptr;
+    vips_error_clear();
+    return known ? Status::Ok() : Status::Error(path + ": not a readable image");
   }
   if (width == 0 || height == 0 || width > kMaxImageSide || height > kMaxImageSide) {
     return Status::Error(path + ": its header claims " + std::to_string(width) + "x" +
@@ -86,19 +89,11 @@ Status ReadImageFile(const std::string& path, cv::Mat* image, int max_bits = 8) 
   const Status header = CheckImageHeader(path, &claimed, max_bits);
   if (!header.ok()) return header;
   cv::Mat img;
-  try {
-    img = cv::imread(path, cv::IMREAD_UNCHANGED);
-  } catch (const std::exception&) {
-    img.release();
-  }
-  if (img.empty()) return Status::Error(path + ": not a readable image");
+  const Status read = ReadImage(path, &img);
+  if (!read.ok()) return read;
   if (img.depth() != CV_8U && !(max_bits == 16 && img.depth() == CV_16U)) {
     return Status::Error(
         path + (max_bits == 8 ? ": must be an 8-bit image" : ": must be an 8- or 16-bit image"));
-  }
-  if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_BGRA2BGR);
-  if (img.channels() != 1 && img.channels() != 3) {
-    return Status::Error(path + ": must be gray or colour");
   }
   *image = img;
   return Status::Ok();
@@ -130,31 +125,9 @@ Status MakeDirectories(const std::string& dir) {
   return Status::Ok();
 }
 
-Status WriteImage(const std::string& path, const cv::Mat& image) {
-  bool ok = false;
-  try {
-    ok = cv::imwrite(path, image);
-  } catch (const cv::Exception& e) {
-    return Status::Error(path + ": cannot write image: " + e.what());
-  }
-  return ok ? Status::Ok() : Status::Error(path + ": cannot write image");
-}
-
 Status WriteFrameImage(const std::string& path, const cv::Mat& frame) {
   if (frame.type() != CV_8UC1) return WriteImage(path, frame);
-  Status s = StartVips();
-  if (!s.ok()) return Status::Error(path + ": cannot write image: " + s.message());
-  const cv::Mat pixels = frame.isContinuous() ? frame : frame.clone();
-  try {
-    vips::VImage::new_from_memory(pixels.data, pixels.total(), pixels.cols, pixels.rows, 1,
-                                  VIPS_FORMAT_UCHAR)
-        .pngsave(path.c_str(), vips::VImage::option()
-                                   ->set("compression", 0)
-                                   ->set("filter", VIPS_FOREIGN_PNG_FILTER_NONE));
-  } catch (const vips::VError& e) {
-    return Status::Error(path + ": cannot write image: " + e.what());
-  }
-  return Status::Ok();
+  return WritePng(path, frame, PngWriting{0, false});
 }
 
 std::string LightFileName(const std::string& name) { return "light_" + name + ".png"; }

@@ -65,8 +65,6 @@ Status WriteScan(const std::string& dir, const Scan& scan);
 // Writes the projector images pattern_000.png, ... and scan.yaml (no camera size).
 Status WritePatterns(const std::string& dir, const PatternSequence& sequence);
 
-// Writes an image, creating nothing; errors name the file.
-Status WriteImage(const std::string& path, const cv::Mat& image);
 // Writes a structured-light frame (8-bit, one channel) as a PNG without row filters or
 // deflate: at 24 MP 60 ms against 280 ms for OpenCV's default PNG (bench/archive_bench), so
 // recording keeps up with a 5 fps camera; the file is the frame's own size (1.8 times the

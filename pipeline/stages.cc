@@ -13,6 +13,7 @@
 #include "core/report/pictures.h"
 #include "io/calibration_io.h"
 #include "io/iiif.h"
+#include "io/image_file.h"
 #include "io/json.h"
 #include "io/products.h"
 #include "io/ptm.h"

@@ -16,6 +16,7 @@
 
 #include "core/common/text.h"
 #include "io/calibration_io.h"
+#include "io/image_file.h"
 #include "io/json.h"
 #include "station/messages.h"
 #include "station/node.h"

@@ -7,11 +7,11 @@
 #include <fstream>
 #include <iterator>
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/common/text.h"
 #include "core/outline/outline.h"
+#include "io/image_file.h"
 #include "station/chain.h"
 #include "station/messages.h"
 #include "vellum/pattern_shown_t.hpp"
@@ -387,7 +387,11 @@ void ViewerNode::OnRestored(const restored_t& m) {
   auto load = [&](std::initializer_list<const char*> names) {
     for (const char* name : names) {
       const fs::path p = fs::path(m.results) / "report" / name;
-      if (fs::exists(p)) return cv::imread(p.string(), cv::IMREAD_COLOR);
+      cv::Mat picture;
+      if (fs::exists(p) && ReadImage(p.string(), &picture).ok() && picture.depth() == CV_8U) {
+        if (picture.channels() == 1) cv::cvtColor(picture, picture, cv::COLOR_GRAY2BGR);
+        return picture;
+      }
     }
     return cv::Mat();
   };
