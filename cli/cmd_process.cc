@@ -1,5 +1,3 @@
-#include <malloc.h>
-
 #include <cstdio>
 
 #include "cli/commands.h"
@@ -50,14 +48,10 @@ int RunProcess(const std::vector<std::string>& args) {
       "it.",
       specs);
   if (!flags.Parse(args)) return 0;
-  // One scan, processed once: a stage's freed buffers serve the next stage's instead of going
-  // back to the kernel (glibc maps buffers of 128 kB and up apart, and each new mapping's pages
-  // fault in zeroed, a quarter of the command's time on a 1600 x 1200 scan; its peak rises from
-  // 195 to 237 MB). Buffers over 32 MB (a 24 MP scan's images) are still mapped apart, so a
-  // large scan's peak stays about as it was.
-  mallopt(M_MMAP_THRESHOLD, 32 << 20);
-  mallopt(M_TRIM_THRESHOLD, 256 << 20);
-  UseHugePagesForLargeImages();
+  // One scan, processed once: fresh pages are dear (each faults in zeroed; on this project's
+  // VM touching 180 MB of new 4 kB pages takes about half a second), so large images go on huge
+  // pages and a stage's freed buffers serve the next stage's.
+  UseMemoryForOneRun();
   const std::string scan_dir = flags.Require("scan");
   const std::string calibration = flags.Require("calibration");
   const std::string out = flags.Require("out");

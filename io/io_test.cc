@@ -596,7 +596,7 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
 // other test's result): a large Mat's block is 2 MB aligned, a freed one serves the next Mat of
 // its size, small Mats and Mats over memory they do not own are as before.
 TEST(HugePages, LargeImagesAreAlignedAndTheirBlocksReused) {
-  UseHugePagesForLargeImages();
+  UseMemoryForOneRun();
   constexpr uintptr_t kTwoMb = uintptr_t{2} << 20;
   const uchar* first = nullptr;
   {

@@ -1,5 +1,6 @@
 #include "io/memory.h"
 
+#include <malloc.h>
 #include <sys/mman.h>
 
 #include <cstdint>
@@ -131,7 +132,9 @@ class HugePageMatAllocator final : public cv::MatAllocator {
 
 }  // namespace
 
-void UseHugePagesForLargeImages() {
+void UseMemoryForOneRun() {
+  mallopt(M_MMAP_THRESHOLD, 32 << 20);
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
   static HugePageMatAllocator* allocator = new HugePageMatAllocator;  // Outlives every Mat.
   cv::Mat::setDefaultAllocator(allocator);
 }

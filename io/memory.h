@@ -9,10 +9,15 @@
 
 namespace vellum {
 
-// Makes every cv::Mat of 2 MB or more (from here on, in this process) ask the kernel for
-// transparent huge pages: its block is aligned to 2 MB and advised MADV_HUGEPAGE. Smaller Mats,
-// and Mats that wrap memory they do not own, are as OpenCV makes them. Where the kernel gives
-// no huge pages (policy `never`), nothing changes but the alignment. Call once, before the work.
-void UseHugePagesForLargeImages();
+// Sets this process up for one run of the pipeline over a scan (`vellum process`):
+// - every cv::Mat of 2 MB or more asks the kernel for transparent huge pages: its block is
+//   aligned to 2 MB and advised MADV_HUGEPAGE, and a freed block is kept (up to 256 MB in all)
+//   for the next Mat of about its size, so a stage's images reuse the last stage's pages. Where
+//   the kernel gives no huge pages (policy `never`) only the alignment and the reuse remain;
+// - glibc keeps the rest of what is freed (buffers under 32 MB come from its heap, which is not
+//   given back under 256 MB) instead of mapping every buffer of 128 kB and up apart.
+// Smaller Mats, and Mats over memory they do not own, are as OpenCV makes them. Call once,
+// before the work. A long-lived daemon need not: its buffers live from scan to scan.
+void UseMemoryForOneRun();
 
 }  // namespace vellum
