@@ -28,7 +28,8 @@ bool ReadPng(std::FILE* file, cv::Mat* image, std::string* why) {
   png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, why, PngError, PngWarning);
   if (!png) return false;
   png_infop info = png_create_info_struct(png);
-  png_bytep* rows = nullptr;
+  // Set after setjmp and read after a longjmp: volatile, so its value then is the one set.
+  png_bytep* volatile rows = nullptr;
   if (!info || setjmp(png_jmpbuf(png))) {
     png_free(png, rows);
     png_destroy_read_struct(&png, &info, nullptr);
