@@ -2,7 +2,6 @@
 
 #include <cmath>
 #include <cstdio>
-#include <opencv2/imgproc.hpp>
 
 #include "io/image_file.h"
 
@@ -134,12 +133,9 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   const std::string tex = flags.Get("texture");
   if (!ParseTextureKind(tex, &texture->kind) || texture->kind == TextureKind::kImage) {
     texture->kind = TextureKind::kImage;
-    cv::Mat image;
-    if (!ReadImage(tex, &image).ok() || image.depth() != CV_8U) {
+    if (!ReadColourImage(tex, &texture->image).ok()) {
       return Status::Error(tex + ": not a readable 8-bit image (and not a texture name)");
     }
-    if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
-    texture->image = image;
   }
   return Status::Ok();
 }

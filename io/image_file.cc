@@ -66,6 +66,7 @@ bool ReadPng(std::FILE* file, cv::Mat* image, std::string* why) {
   return true;
 }
 
+// A vips image over `image` (held, in RGB order for 8- and 16-bit colour, in *hold).
 vips::VImage ToVips(const cv::Mat& image, cv::Mat* hold) {
   VipsBandFormat format = VIPS_FORMAT_UCHAR;
   switch (image.depth()) {
@@ -81,13 +82,13 @@ vips::VImage ToVips(const cv::Mat& image, cv::Mat* hold) {
     default:
       throw vips::VError("only 8-bit, 16-bit and float images are written");
   }
+  if (image.channels() != 1 && image.channels() != 3) {
+    throw vips::VError("only gray and colour images are written");
+  }
   if (image.channels() == 3 && image.depth() != CV_32F) {
     cv::cvtColor(image, *hold, cv::COLOR_BGR2RGB);
   } else {
     *hold = image.isContinuous() ? image : image.clone();
-  }
-  if (hold->channels() != 1 && hold->channels() != 3) {
-    throw vips::VError("only gray and colour images are written");
   }
   vips::VImage out =
       vips::VImage::new_from_memory(hold->data, hold->total() * hold->elemSize(), hold->cols,
@@ -140,6 +141,22 @@ Status ReadWithVips(const std::string& path, cv::Mat* image) {
   return Status::Ok();
 }
 
+// Writes `image` with `save` (a libvips saver and its options, given the image); errors name
+// the file.
+template <typename Save>
+Status SaveWithVips(const std::string& path, const cv::Mat& image, const Save& save) {
+  if (image.empty()) return Status::Error(path + ": cannot write an empty image");
+  const Status s = StartVips();
+  if (!s.ok()) return Status::Error(path + ": cannot write image: " + s.message());
+  try {
+    cv::Mat hold;
+    save(ToVips(image, &hold));
+  } catch (const vips::VError& e) {
+    return Status::Error(path + ": cannot write image: " + e.what());
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status ReadImage(const std::string& path, cv::Mat* image) {
@@ -165,33 +182,31 @@ Status ReadImage(const std::string& path, cv::Mat* image) {
   return Status::Ok();
 }
 
-Status WritePng(const std::string& path, const cv::Mat& image, const PngWriting& how) {
-  if (image.empty()) return Status::Error(path + ": cannot write an empty image");
-  if (image.depth() != CV_8U && image.depth() != CV_16U) {
-    return Status::Error(path + ": a PNG holds 8- or 16-bit samples");
-  }
-  Status s = StartVips();
-  if (!s.ok()) return Status::Error(path + ": cannot write image: " + s.message());
-  try {
-    cv::Mat hold;
-    ToVips(image, &hold)
-        .pngsave(path.c_str(), vips::VImage::option()
-                                   ->set("compression", how.level)
-                                   ->set("filter", how.filters ? VIPS_FOREIGN_PNG_FILTER_ALL
-                                                               : VIPS_FOREIGN_PNG_FILTER_NONE)
-                                   ->set("strip", true));
-  } catch (const vips::VError& e) {
-    return Status::Error(path + ": cannot write image: " + e.what());
-  }
+Status ReadColourImage(const std::string& path, cv::Mat* image) {
+  cv::Mat read;
+  const Status s = ReadImage(path, &read);
+  if (!s.ok()) return s;
+  if (read.depth() != CV_8U) return Status::Error(path + ": not an 8-bit image");
+  if (read.channels() == 1) cv::cvtColor(read, read, cv::COLOR_GRAY2BGR);
+  *image = read;
   return Status::Ok();
 }
 
+Status WritePng(const std::string& path, const cv::Mat& image, const PngWriting& how) {
+  if (!image.empty() && image.depth() != CV_8U && image.depth() != CV_16U) {
+    return Status::Error(path + ": a PNG holds 8- or 16-bit samples");
+  }
+  return SaveWithVips(path, image, [&](const vips::VImage& in) {
+    in.pngsave(path.c_str(), vips::VImage::option()
+                                 ->set("compression", how.level)
+                                 ->set("filter", how.filters ? VIPS_FOREIGN_PNG_FILTER_ALL
+                                                             : VIPS_FOREIGN_PNG_FILTER_NONE)
+                                 ->set("strip", true));
+  });
+}
+
 Status WriteTiff(const std::string& path, const cv::Mat& image, double dpi) {
-  if (image.empty()) return Status::Error(path + ": cannot write an empty image");
-  Status s = StartVips();
-  if (!s.ok()) return Status::Error(path + ": cannot write image: " + s.message());
-  try {
-    cv::Mat hold;
+  return SaveWithVips(path, image, [&](const vips::VImage& in) {
     auto options = vips::VImage::option()
                        ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_LZW)
                        ->set("strip", true);
@@ -201,11 +216,8 @@ Status WriteTiff(const std::string& path, const cv::Mat& image, double dpi) {
           ->set("yres", dpi / 25.4)
           ->set("resunit", VIPS_FOREIGN_TIFF_RESUNIT_INCH);
     }
-    ToVips(image, &hold).tiffsave(path.c_str(), options);
-  } catch (const vips::VError& e) {
-    return Status::Error(path + ": cannot write image: " + e.what());
-  }
-  return Status::Ok();
+    in.tiffsave(path.c_str(), options);
+  });
 }
 
 Status WriteImage(const std::string& path, const cv::Mat& image) {

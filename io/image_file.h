@@ -18,6 +18,9 @@ namespace vellum {
 // Reads an image file: gray or BGR, 8 or 16 bits a sample as the file has them (a PNG of 1, 2
 // or 4 bits, or of a palette, is widened to 8; alpha is dropped). Errors name the file.
 Status ReadImage(const std::string& path, cv::Mat* image);
+// Reads an 8-bit image as colour (BGR; gray is widened), for showing or as a texture; an
+// error for another depth.
+Status ReadColourImage(const std::string& path, cv::Mat* image);
 
 // How a PNG is written: zlib's level (0 stores), and whether rows are filtered (each row
 // predicted from its neighbours: smaller files, slower writes; no use on noisy fringes).

@@ -547,6 +547,14 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
       EXPECT_EQ(cv::norm(theirs, image, cv::NORM_INF), 0) << "OpenCV reads " << name;
     }
   }
+  // For showing or as a texture: gray widened to colour; 16 bits refused.
+  cv::Mat shown;
+  ASSERT_TRUE(WriteImage(Path("g.png"), gray).ok());
+  ASSERT_TRUE(ReadColourImage(Path("g.png"), &shown).ok());
+  ASSERT_EQ(shown.type(), CV_8UC3);
+  EXPECT_EQ(shown.at<cv::Vec3b>(5, 7), cv::Vec3b::all(gray.at<uint8_t>(5, 7)));
+  ASSERT_TRUE(WriteImage(Path("deep.png"), deep).ok());
+  EXPECT_FALSE(ReadColourImage(Path("deep.png"), &shown).ok());
   // Stored, unfiltered (a frame's way) reads the same.
   ASSERT_TRUE(WritePng(Path("stored.png"), gray, PngWriting{0, false}).ok());
   cv::Mat back;

@@ -3,7 +3,6 @@
 #include <cctype>
 #include <filesystem>
 #include <map>
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "io/image_file.h"

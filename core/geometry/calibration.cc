@@ -15,10 +15,18 @@ bool FiniteMatx(const double* v, int n) {
   return true;
 }
 
-// Applies OpenCV's distortion model to ideal normalised coordinates.
-cv::Point2d Distort(const cv::Vec<double, 5>& d, double x, double y) {
+// Applies OpenCV's distortion model to ideal normalised coordinates; with `jacobian`, also its
+// derivatives there (d distorted / d (x, y): symmetric, both off-diagonal terms the same).
+cv::Point2d Distort(const cv::Vec<double, 5>& d, double x, double y,
+                    cv::Matx22d* jacobian = nullptr) {
   const double r2 = x * x + y * y;
   const double radial = 1 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
+  if (jacobian) {
+    const double dradial = d[0] + r2 * (2 * d[1] + 3 * r2 * d[4]);  // d radial / d r2.
+    const double jxy = 2 * x * y * dradial + 2 * d[2] * x + 2 * d[3] * y;
+    *jacobian = cv::Matx22d(radial + 2 * x * x * dradial + 2 * d[2] * y + 6 * d[3] * x, jxy, jxy,
+                            radial + 2 * y * y * dradial + 6 * d[2] * y + 2 * d[3] * x);
+  }
   return {x * radial + 2 * d[2] * x * y + d[3] * (r2 + 2 * x * x),
           y * radial + d[2] * (r2 + 2 * y * y) + 2 * d[3] * x * y};
 }
@@ -104,27 +112,20 @@ cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel) const {
   // Newton's inversion of the distortion, refined until it reproduces the pixel: three or four
   // rounds where the fixed-point iteration x -= D(x) - xd took ten or more at a wide lens's
   // corners (the ray table of every camera pixel is made this way for each triangulation).
-  const cv::Vec<double, 5>& k = distortion;
   double x = xd, y = yd;
   for (int i = 0; i < 20; ++i) {
-    const double r2 = x * x + y * y;
-    const double radial = 1 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]));
-    const double dradial = k[0] + r2 * (2 * k[1] + 3 * r2 * k[4]);  // d radial / d r2.
-    const double ex = x * radial + 2 * k[2] * x * y + k[3] * (r2 + 2 * x * x) - xd;
-    const double ey = y * radial + k[2] * (r2 + 2 * y * y) + 2 * k[3] * x * y - yd;
+    cv::Matx22d j;
+    const cv::Point2d d = Distort(distortion, x, y, &j);
+    const double ex = d.x - xd, ey = d.y - yd;
     if (ex * ex + ey * ey < 1e-24) break;
-    // The Jacobian of Distort (symmetric: both off-diagonal terms are the same).
-    const double jxx = radial + 2 * x * x * dradial + 2 * k[2] * y + 6 * k[3] * x;
-    const double jyy = radial + 2 * y * y * dradial + 6 * k[2] * y + 2 * k[3] * x;
-    const double jxy = 2 * x * y * dradial + 2 * k[2] * x + 2 * k[3] * y;
-    const double det = jxx * jyy - jxy * jxy;
+    const double det = j(0, 0) * j(1, 1) - j(0, 1) * j(1, 0);
     if (!(std::fabs(det) > 1e-12)) {  // Past the model's fold: the plain step.
       x -= ex;
       y -= ey;
       continue;
     }
-    x -= (jyy * ex - jxy * ey) / det;
-    y -= (jxx * ey - jxy * ex) / det;
+    x -= (j(1, 1) * ex - j(0, 1) * ey) / det;
+    y -= (j(0, 0) * ey - j(1, 0) * ex) / det;
   }
   return {x, y};
 }

@@ -388,10 +388,7 @@ void ViewerNode::OnRestored(const restored_t& m) {
     for (const char* name : names) {
       const fs::path p = fs::path(m.results) / "report" / name;
       cv::Mat picture;
-      if (fs::exists(p) && ReadImage(p.string(), &picture).ok() && picture.depth() == CV_8U) {
-        if (picture.channels() == 1) cv::cvtColor(picture, picture, cv::COLOR_GRAY2BGR);
-        return picture;
-      }
+      if (fs::exists(p) && ReadColourImage(p.string(), &picture).ok()) return picture;
     }
     return cv::Mat();
   };
