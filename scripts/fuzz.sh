@@ -5,8 +5,9 @@
 # regression test once fixed.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   explore for that long per target (default 40)
 #   scripts/fuzz.sh --ci                   what CI runs: a fixed seed and a fixed number of
-#                                          runs per target (about 30 s each), so a result is
-#                                          repeatable; the corpus' regression inputs first
+#                                          runs per target (about 30 s each, at most 4
+#                                          minutes), so a result is repeatable; the corpus'
+#                                          regression inputs first
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode=time
@@ -27,7 +28,10 @@ for target in fuzz_messages fuzz_files fuzz_ply_roundtrip fuzz_scan_gate; do
   corpus=build-fuzz/corpus/$target
   if [ "$mode" = ci ]; then
     rm -rf "$corpus"
-    limit=(-seed=1 -runs="${runs[$target]}")
+    # At most 4 minutes a target as well: one CI run's fuzz_messages, same binary and seed,
+    # wandered into inputs taking 5-8 ms each (30 minutes for its runs, which take a second
+    # here); a crash still fails, the wall clock only bounds how far it explores.
+    limit=(-seed=1 -runs="${runs[$target]}" -max_total_time=240)
     echo "fuzz: $target, ${runs[$target]} runs from seed 1"
   else
     limit=(-max_total_time="$seconds")
