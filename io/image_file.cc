@@ -113,6 +113,24 @@ Status ReadWithVips(const std::string& path, cv::Mat* image) {
       return Status::Error(path + ": its header claims " + std::to_string(in.width()) + "x" +
                            std::to_string(in.height()) + " pixels; not read");
     }
+    // Colour that is not RGB (a CMYK or CIELAB file) goes to sRGB first, through the file's
+    // own profile or libvips' fallback for its space: its first three bands are not R, G, B.
+    switch (in.interpretation()) {
+      case VIPS_INTERPRETATION_CMYK:
+      case VIPS_INTERPRETATION_LAB:
+      case VIPS_INTERPRETATION_LABQ:
+      case VIPS_INTERPRETATION_LABS:
+      case VIPS_INTERPRETATION_LCH:
+      case VIPS_INTERPRETATION_CMC:
+      case VIPS_INTERPRETATION_XYZ:
+      case VIPS_INTERPRETATION_YXY:
+      case VIPS_INTERPRETATION_HSV:
+        in = in.colourspace(in.format() == VIPS_FORMAT_USHORT ? VIPS_INTERPRETATION_RGB16
+                                                              : VIPS_INTERPRETATION_sRGB);
+        break;
+      default:
+        break;
+    }
     const int bands = in.bands() >= 3 ? 3 : 1;
     if (in.bands() != bands) in = in.extract_band(0, vips::VImage::option()->set("n", bands));
     const VipsBandFormat format = in.format();

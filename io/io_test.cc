@@ -585,6 +585,35 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
   ASSERT_TRUE(ReadImage(Path("i.jpg"), &back).ok());
   EXPECT_EQ(back.type(), CV_8UC3);
   EXPECT_LT(cv::norm(back, cv::imread(Path("i.jpg")), cv::NORM_INF), 3);
+  // A CMYK TIFF (a printer's or a scanning bureau's file) is read as colour, not as its first
+  // three inks: cyan, yellow, black and paper, in that order, each where it should be.
+  tif = TIFFOpen(Path("cmyk.tif").c_str(), "w");
+  ASSERT_NE(tif, nullptr);
+  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4);
+  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 1);
+  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 4);
+  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
+  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_SEPARATED);
+  TIFFSetField(tif, TIFFTAG_INKSET, INKSET_CMYK);
+  uint8_t inks[16] = {255, 0, 0, 0, 0, 0, 255, 0, 0, 0, 0, 255, 0, 0, 0, 0};
+  ASSERT_EQ(TIFFWriteScanline(tif, inks, 0), 1);
+  TIFFClose(tif);
+  ASSERT_TRUE(ReadImage(Path("cmyk.tif"), &back).ok());
+  ASSERT_EQ(back.type(), CV_8UC3);
+  ASSERT_EQ(back.cols, 4);
+  const cv::Vec3b cyan = back.at<cv::Vec3b>(0, 0), yellow = back.at<cv::Vec3b>(0, 1),
+                  black = back.at<cv::Vec3b>(0, 2), paper = back.at<cv::Vec3b>(0, 3);
+  // BGR. The profile decides the exact values; which channels are high and low it does not.
+  EXPECT_LT(cyan[2], 100) << cyan;
+  EXPECT_GT(cyan[0], 150) << cyan;
+  EXPECT_GT(yellow[2], 150) << yellow;
+  EXPECT_GT(yellow[1], 150) << yellow;
+  EXPECT_LT(yellow[0], 100) << yellow;
+  EXPECT_LT(cv::norm(black, cv::NORM_INF), 100) << black;
+  EXPECT_GT(paper[0], 200) << paper;
+  EXPECT_GT(paper[1], 200) << paper;
+  EXPECT_GT(paper[2], 200) << paper;
   cv::Mat bits = gray > 100;
   ASSERT_TRUE(cv::imwrite(Path("bits.png"), bits, {cv::IMWRITE_PNG_BILEVEL, 1}));
   ASSERT_TRUE(ReadImage(Path("bits.png"), &back).ok());
