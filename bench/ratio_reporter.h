@@ -14,12 +14,23 @@ namespace vellum {
 class RatioReporter : public benchmark::ConsoleReporter {
  public:
   void ReportRuns(const std::vector<Run>& runs) override {
-    for (const Run& r : runs) times_[r.benchmark_name()] = r.GetAdjustedRealTime();
+    for (const Run& r : runs) {
+      times_[r.benchmark_name()] = r.GetAdjustedRealTime();
+      cpu_[r.benchmark_name()] = r.GetAdjustedCPUTime();
+    }
     ConsoleReporter::ReportRuns(runs);
   }
   // Real time (the benchmark's unit) of the first run whose name starts with `prefix`, or 0.
   double Time(const std::string& prefix) const {
     for (const auto& [name, t] : times_) {
+      if (name.rfind(prefix, 0) == 0) return t;
+    }
+    return 0.0;
+  }
+  // CPU time (the benchmark's unit) of the first run whose name starts with `prefix`, or 0:
+  // every thread's when the benchmark measures the process's CPU time.
+  double CpuTime(const std::string& prefix) const {
+    for (const auto& [name, t] : cpu_) {
       if (name.rfind(prefix, 0) == 0) return t;
     }
     return 0.0;
@@ -46,6 +57,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
 
  private:
   std::map<std::string, double> times_;
+  std::map<std::string, double> cpu_;
 };
 
 }  // namespace vellum
