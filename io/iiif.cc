@@ -87,13 +87,12 @@ Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid) {
   if (!s.ok()) return s;
   try {
     vips::VImage image = vips::VImage::new_from_file(tif.c_str());
-    image.tiffsave(pyramid.c_str(),
-                   vips::VImage::option()
-                       ->set("tile", true)
-                       ->set("pyramid", true)
-                       ->set("tile_width", 256)
-                       ->set("tile_height", 256)
-                       ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_DEFLATE));
+    image.tiffsave(pyramid.c_str(), vips::VImage::option()
+                                        ->set("tile", true)
+                                        ->set("pyramid", true)
+                                        ->set("tile_width", 256)
+                                        ->set("tile_height", 256)
+                                        ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_LZW));
   } catch (const vips::VError& e) {
     return Status::Error(pyramid + ": cannot write the pyramidal TIFF: " + e.what());
   }

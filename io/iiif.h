@@ -23,8 +23,10 @@ inline constexpr const char* kPyramidName = "restored_pyramid.tif";
 // The scan's own manifest, in its results folder.
 inline constexpr const char* kIiifManifestName = "iiif-manifest.json";
 
-// Writes `tif` as a tiled (256 x 256), pyramidal, deflate-compressed TIFF `pyramid`, keeping its
-// resolution, ICC profile and XMP.
+// Writes `tif` as a tiled (256 x 256), pyramidal, LZW-compressed TIFF `pyramid`, keeping its
+// resolution, ICC profile and XMP. LZW, not deflate: the same size within 3% at 24 MP, written
+// in a fifth of the time (libvips' deflate takes 0.85-0.97 s for a 12 MP page, LZW 0.2 s), and
+// TIFF's baseline, which every reader has.
 Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid);
 
 // `file`'s path relative to the served folder `root` ('/' between folders), as the web server

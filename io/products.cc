@@ -2,6 +2,7 @@
 
 #include <cctype>
 #include <filesystem>
+#include <future>
 #include <map>
 #include <opencv2/imgproc.hpp>
 
@@ -134,14 +135,18 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
                      const ScanIdentity& identity,
                      const std::map<std::string, std::string>& provenance, const IccProfile& icc) {
   const std::string tif = (fs::path(dir) / "restored.tif").string();
-  if (!restored.mask.empty()) {
-    const Status s = WriteImage((fs::path(dir) / "restored_mask.png").string(), restored.mask);
-    if (!s.ok()) return s;
-  }
-  if (!restored.sampling.empty()) {
-    const Status s = WriteImage((fs::path(dir) / "sampling_ppi.tif").string(), restored.sampling);
-    if (!s.ok()) return s;
-  }
+  // The mask and the sampling map on a second thread while this one writes the master: each
+  // write is mostly one compressor's work, and they share nothing.
+  std::future<Status> beside = std::async(std::launch::async, [&] {
+    if (!restored.mask.empty()) {
+      const Status s = WriteImage((fs::path(dir) / "restored_mask.png").string(), restored.mask);
+      if (!s.ok()) return s;
+    }
+    if (!restored.sampling.empty()) {
+      return WriteImage((fs::path(dir) / "sampling_ppi.tif").string(), restored.sampling);
+    }
+    return Status::Ok();
+  });
   // XMP names are camelCase (rotationDeg), restored.json's snake_case (rotation_deg).
   std::map<std::string, std::string> figures;
   for (const auto& [key, value] : provenance) {
@@ -162,6 +167,8 @@ Status WriteRestored(const std::string& dir, const RestoreResult& restored,
   }
   const Status written =
       WriteTiffMaster(tif, restored.image, TiffDpi(restored), identity, figures, icc);
+  const Status written_beside = beside.get();
+  if (!written_beside.ok()) return written_beside;
   if (!written.ok()) return written;
   Json r;
   Json id = Json::object();

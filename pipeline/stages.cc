@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <future>
 #include <map>
 #include <opencv2/imgproc.hpp>
 
@@ -488,12 +489,14 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   r.outputs.push_back(PageFile(page, "restored.tif"));
   if (!restored->mask.empty()) r.outputs.push_back(PageFile(page, "restored_mask.png"));
   if (!restored->sampling.empty()) r.outputs.push_back(PageFile(page, "sampling_ppi.tif"));
-  // The production master as a pyramid of tiles, for an IIIF image server (io/iiif.h).
-  s = stage.Output(PageFile(page, kPyramidName),
-                   WritePyramidalTiff((fs::path(dir) / "restored.tif").string(),
-                                      (fs::path(dir) / kPyramidName).string()));
-  if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back(PageFile(page, "restored.json"));
+  // The production master as a pyramid of tiles, for an IIIF image server (io/iiif.h), written
+  // on a second thread while this one makes the report's pictures: each is mostly one
+  // compressor's work, and neither needs the other.
+  std::future<Status> pyramid = std::async(std::launch::async, [&dir] {
+    return WritePyramidalTiff((fs::path(dir) / "restored.tif").string(),
+                              (fs::path(dir) / kPyramidName).string());
+  });
   // The whole restored page for the report (1400 px wide at most), with its scale bar.
   double bar_mm = 0;
   s = stage.Picture(results, "restored", RestoredWithScaleBar(*restored, 1400, &bar_mm));
@@ -508,7 +511,8 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   if (s.ok() && !restored->sampling.empty()) {
     s = stage.Picture(results, "sampling", SamplingPicture(restored->sampling));
   }
-  return stage.Finish(s);
+  const Status pyramid_written = stage.Output(PageFile(page, kPyramidName), pyramid.get());
+  return stage.Finish(pyramid_written.ok() ? s : pyramid_written);
 }
 
 namespace {
