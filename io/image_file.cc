@@ -137,10 +137,15 @@ Status ReadWithVips(const std::string& path, cv::Mat* image) {
     int depth = CV_8U;
     if (format == VIPS_FORMAT_USHORT) {
       depth = CV_16U;
-    } else if (format == VIPS_FORMAT_FLOAT) {
+    } else if (format == VIPS_FORMAT_FLOAT || format == VIPS_FORMAT_DOUBLE) {
+      if (format == VIPS_FORMAT_DOUBLE) in = in.cast(VIPS_FORMAT_FLOAT);
       depth = CV_32F;
     } else if (format != VIPS_FORMAT_UCHAR) {
-      in = in.cast(VIPS_FORMAT_UCHAR);
+      // Signed or 32-bit integers have no one meaning as light: cast, they would be clipped.
+      return Status::Error(path + ": its samples are " +
+                           vips_enum_nick(VIPS_TYPE_BAND_FORMAT, format) +
+                           "; images are read with 8- or 16-bit unsigned, or floating-point, "
+                           "samples");
     }
     cv::Mat read(in.height(), in.width(), CV_MAKETYPE(depth, bands));
     size_t bytes = 0;

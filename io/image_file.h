@@ -17,7 +17,8 @@ namespace vellum {
 
 // Reads an image file: gray or BGR, 8 or 16 bits a sample as the file has them (a PNG of 1, 2
 // or 4 bits, or of a palette, is widened to 8; alpha is dropped; CMYK or CIELAB colour is
-// converted to sRGB, through the file's profile if it has one). Errors name the file.
+// converted to sRGB, through the file's profile if it has one; floating-point samples are read
+// as float; signed or 32-bit integer samples are refused). Errors name the file.
 Status ReadImage(const std::string& path, cv::Mat* image);
 // Reads an 8-bit image as colour (BGR; gray is widened), for showing or as a texture; an
 // error for another depth.

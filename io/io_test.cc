@@ -614,6 +614,25 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
   EXPECT_GT(paper[0], 200) << paper;
   EXPECT_GT(paper[1], 200) << paper;
   EXPECT_GT(paper[2], 200) << paper;
+  // Samples of 32-bit integers are refused by name, not clipped to 8 bits.
+  auto write_gray_tiff = [&](const std::string& name, int bits, int format, const void* row) {
+    TIFF* t = TIFFOpen(Path(name).c_str(), "w");
+    ASSERT_NE(t, nullptr);
+    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, 2);
+    TIFFSetField(t, TIFFTAG_IMAGELENGTH, 1);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, 1);
+    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
+    TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, format);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
+    ASSERT_EQ(TIFFWriteScanline(t, const_cast<void*>(row), 0), 1);
+    TIFFClose(t);
+  };
+  const uint32_t wide[2] = {70000, 5};
+  write_gray_tiff("wide.tif", 32, SAMPLEFORMAT_UINT, wide);
+  const Status wide_read = ReadImage(Path("wide.tif"), &back);
+  EXPECT_FALSE(wide_read.ok());
+  EXPECT_NE(wide_read.message().find("wide.tif: its samples are uint"), std::string::npos)
+      << wide_read.message();
   cv::Mat bits = gray > 100;
   ASSERT_TRUE(cv::imwrite(Path("bits.png"), bits, {cv::IMWRITE_PNG_BILEVEL, 1}));
   ASSERT_TRUE(ReadImage(Path("bits.png"), &back).ok());
