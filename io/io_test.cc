@@ -585,20 +585,26 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
   ASSERT_TRUE(ReadImage(Path("i.jpg"), &back).ok());
   EXPECT_EQ(back.type(), CV_8UC3);
   EXPECT_LT(cv::norm(back, cv::imread(Path("i.jpg")), cv::NORM_INF), 3);
+  // One row of pixels as a TIFF, written by libtiff: `samples` a pixel of `bits` each.
+  auto write_row_tiff = [&](const std::string& name, int width, int samples, int bits, int format,
+                            int photometric, const void* row) {
+    TIFF* t = TIFFOpen(Path(name).c_str(), "w");
+    ASSERT_NE(t, nullptr);
+    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, width);
+    TIFFSetField(t, TIFFTAG_IMAGELENGTH, 1);
+    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, samples);
+    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
+    TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, format);
+    TIFFSetField(t, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, photometric);
+    if (photometric == PHOTOMETRIC_SEPARATED) TIFFSetField(t, TIFFTAG_INKSET, INKSET_CMYK);
+    ASSERT_EQ(TIFFWriteScanline(t, const_cast<void*>(row), 0), 1);
+    TIFFClose(t);
+  };
   // A CMYK TIFF (a printer's or a scanning bureau's file) is read as colour, not as its first
   // three inks: cyan, yellow, black and paper, in that order, each where it should be.
-  tif = TIFFOpen(Path("cmyk.tif").c_str(), "w");
-  ASSERT_NE(tif, nullptr);
-  TIFFSetField(tif, TIFFTAG_IMAGEWIDTH, 4);
-  TIFFSetField(tif, TIFFTAG_IMAGELENGTH, 1);
-  TIFFSetField(tif, TIFFTAG_SAMPLESPERPIXEL, 4);
-  TIFFSetField(tif, TIFFTAG_BITSPERSAMPLE, 8);
-  TIFFSetField(tif, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
-  TIFFSetField(tif, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_SEPARATED);
-  TIFFSetField(tif, TIFFTAG_INKSET, INKSET_CMYK);
-  uint8_t inks[16] = {255, 0, 0, 0, 0, 0, 255, 0, 0, 0, 0, 255, 0, 0, 0, 0};
-  ASSERT_EQ(TIFFWriteScanline(tif, inks, 0), 1);
-  TIFFClose(tif);
+  const uint8_t inks[16] = {255, 0, 0, 0, 0, 0, 255, 0, 0, 0, 0, 255, 0, 0, 0, 0};
+  write_row_tiff("cmyk.tif", 4, 4, 8, SAMPLEFORMAT_UINT, PHOTOMETRIC_SEPARATED, inks);
   ASSERT_TRUE(ReadImage(Path("cmyk.tif"), &back).ok());
   ASSERT_EQ(back.type(), CV_8UC3);
   ASSERT_EQ(back.cols, 4);
@@ -615,20 +621,8 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
   EXPECT_GT(paper[1], 200) << paper;
   EXPECT_GT(paper[2], 200) << paper;
   // Samples of 32-bit integers are refused by name, not clipped to 8 bits.
-  auto write_gray_tiff = [&](const std::string& name, int bits, int format, const void* row) {
-    TIFF* t = TIFFOpen(Path(name).c_str(), "w");
-    ASSERT_NE(t, nullptr);
-    TIFFSetField(t, TIFFTAG_IMAGEWIDTH, 2);
-    TIFFSetField(t, TIFFTAG_IMAGELENGTH, 1);
-    TIFFSetField(t, TIFFTAG_SAMPLESPERPIXEL, 1);
-    TIFFSetField(t, TIFFTAG_BITSPERSAMPLE, bits);
-    TIFFSetField(t, TIFFTAG_SAMPLEFORMAT, format);
-    TIFFSetField(t, TIFFTAG_PHOTOMETRIC, PHOTOMETRIC_MINISBLACK);
-    ASSERT_EQ(TIFFWriteScanline(t, const_cast<void*>(row), 0), 1);
-    TIFFClose(t);
-  };
   const uint32_t wide[2] = {70000, 5};
-  write_gray_tiff("wide.tif", 32, SAMPLEFORMAT_UINT, wide);
+  write_row_tiff("wide.tif", 2, 1, 32, SAMPLEFORMAT_UINT, PHOTOMETRIC_MINISBLACK, wide);
   const Status wide_read = ReadImage(Path("wide.tif"), &back);
   EXPECT_FALSE(wide_read.ok());
   EXPECT_NE(wide_read.message().find("wide.tif: its samples are uint"), std::string::npos)
