@@ -21,20 +21,10 @@ class RatioReporter : public benchmark::ConsoleReporter {
     ConsoleReporter::ReportRuns(runs);
   }
   // Real time (the benchmark's unit) of the first run whose name starts with `prefix`, or 0.
-  double Time(const std::string& prefix) const {
-    for (const auto& [name, t] : times_) {
-      if (name.rfind(prefix, 0) == 0) return t;
-    }
-    return 0.0;
-  }
+  double Time(const std::string& prefix) const { return First(times_, prefix); }
   // CPU time (the benchmark's unit) of the first run whose name starts with `prefix`, or 0:
   // every thread's when the benchmark measures the process's CPU time.
-  double CpuTime(const std::string& prefix) const {
-    for (const auto& [name, t] : cpu_) {
-      if (name.rfind(prefix, 0) == 0) return t;
-    }
-    return 0.0;
-  }
+  double CpuTime(const std::string& prefix) const { return First(cpu_, prefix); }
   // The median of a benchmark's repetitions (its "_median" aggregate), else its one run's time.
   double Median(const std::string& prefix) const {
     for (const auto& [name, t] : times_) {
@@ -56,6 +46,13 @@ class RatioReporter : public benchmark::ConsoleReporter {
   }
 
  private:
+  static double First(const std::map<std::string, double>& by_name, const std::string& prefix) {
+    for (const auto& [name, t] : by_name) {
+      if (name.rfind(prefix, 0) == 0) return t;
+    }
+    return 0.0;
+  }
+
   std::map<std::string, double> times_;
   std::map<std::string, double> cpu_;
 };
