@@ -55,40 +55,14 @@ bool ReadMatrix(const cv::FileNode& node, int rows, int cols, bool either_orient
   return true;
 }
 
-bool ReadSize(const cv::FileNode& node, cv::Size* size, std::string* why) {
-  if (node.empty() || node.isNone()) {
-    *why = "is missing";
-    return false;
-  }
-  if (node.isSeq()) {
-    if (node.size() != 2 || !node[0].isInt() || !node[1].isInt()) {
-      *why = "must be a [ width, height ] sequence of two integers";
-      return false;
-    }
-    *size = cv::Size(static_cast<int>(node[0]), static_cast<int>(node[1]));
-  } else {
-    cv::Mat m;
-    std::string sub;
-    if (!ReadMatrix(node, 1, 2, true, &m, &sub)) {
-      *why = "must be [ width, height ] or a 1x2 matrix (" + sub + ")";
-      return false;
-    }
-    *size = cv::Size(cvRound(m.at<double>(0)), cvRound(m.at<double>(1)));
-  }
-  if (size->width <= 0 || size->height <= 0) {
-    *why = "must be positive";
-    return false;
-  }
-  return true;
-}
-
 Status ReadDevice(const cv::FileStorage& fs, const std::string& path, const std::string& prefix,
                   CameraModel* model) {
   std::string why;
   auto fail = [&](const std::string& key) {
     return Status::Error(path + ": key '" + prefix + key + "' " + why);
   };
-  if (!ReadSize(fs[prefix + "size"], &model->size, &why)) return fail("size");
+  why = ReadSizeNode(fs[prefix + "size"], &model->size);
+  if (!why.empty()) return fail("size");
   cv::Mat m;
   if (!ReadMatrix(fs[prefix + "matrix"], 3, 3, false, &m, &why)) return fail("matrix");
   model->matrix = cv::Matx33d(m.ptr<double>());
@@ -202,13 +176,15 @@ Status ReadFlatField(const std::string& path, FlatField* field) {
     }
     if (!fs.root().isMap()) return Status::Error(path + ": not a flat field (expected keys)");
     cv::Size size;
-    fs["projector_size"] >> size;
+    const std::string size_problem = ReadSizeNode(fs["projector_size"], &size);
     const cv::FileNode cell = fs["cell_px"], reference = fs["reference_mm"];
     cv::Mat gain;
     fs["gain"] >> gain;
-    if (size.area() <= 0) return Status::Error(path + ": projector_size missing or empty");
-    if (!cell.isInt() || static_cast<int>(cell) < 1) {
-      return Status::Error(path + ": cell_px must be an integer >= 1");
+    if (!size_problem.empty())
+      return Status::Error(path + ": key 'projector_size' " + size_problem);
+    if (!cell.isInt() || static_cast<int>(cell) < 1 || static_cast<int>(cell) > kMaxImageSide) {
+      return Status::Error(path + ": cell_px must be an integer from 1 to " +
+                           std::to_string(kMaxImageSide));
     }
     if (!(reference.isReal() || reference.isInt()) || !(static_cast<double>(reference) > 0)) {
       return Status::Error(path + ": reference_mm must be a number > 0");
@@ -256,14 +232,15 @@ Status ReadStudioField(const std::string& path, StudioField* field) {
     }
     if (!fs.root().isMap()) return Status::Error(path + ": not a studio field (expected keys)");
     cv::Size size;
-    fs["camera_size"] >> size;
+    const std::string size_problem = ReadSizeNode(fs["camera_size"], &size);
     const cv::FileNode cell = fs["cell_px"];
     cv::Mat gain, lamps;
     fs["gain"] >> gain;
     fs["lamps"] >> lamps;
-    if (size.area() <= 0) return Status::Error(path + ": camera_size missing or empty");
-    if (!cell.isInt() || static_cast<int>(cell) < 1) {
-      return Status::Error(path + ": cell_px must be an integer >= 1");
+    if (!size_problem.empty()) return Status::Error(path + ": key 'camera_size' " + size_problem);
+    if (!cell.isInt() || static_cast<int>(cell) < 1 || static_cast<int>(cell) > kMaxImageSide) {
+      return Status::Error(path + ": cell_px must be an integer from 1 to " +
+                           std::to_string(kMaxImageSide));
     }
     if (lamps.empty() || lamps.cols != 3 || lamps.channels() != 1) {
       return Status::Error(path + ": lamps must be an N x 3 matrix (x, y, z mm of each lamp)");

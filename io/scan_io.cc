@@ -27,9 +27,6 @@ constexpr char kScanYaml[] = "scan.yaml";
 constexpr char kTexture[] = "texture.png";
 constexpr char kFormat[] = "vellum-scan";
 
-// The largest image a scan may hold, each side (a 24 MP camera is 6000 x 4000).
-constexpr uint32_t kMaxImageSide = 16384;
-
 // A PNG's size and sample depth from its header (the IHDR chunk that follows the signature),
 // read before the image is decoded: a header may claim gigabytes. False if the file is not a
 // PNG (OpenCV then judges it).
@@ -67,7 +64,9 @@ Status CheckImageHeader(const std::string& path, cv::Size* size, int max_bits = 
     vips_error_clear();
     return known ? Status::Ok() : Status::Error(path + ": not a readable image");
   }
-  if (width == 0 || height == 0 || width > kMaxImageSide || height > kMaxImageSide) {
+  // The largest image a scan may hold, each side: kMaxImageSide (yaml_guard.h).
+  constexpr uint32_t kMaxSide = kMaxImageSide;
+  if (width == 0 || height == 0 || width > kMaxSide || height > kMaxSide) {
     return Status::Error(path + ": its header claims " + std::to_string(width) + "x" +
                          std::to_string(height) + " pixels (at most " +
                          std::to_string(kMaxImageSide) + " each way); not read");
@@ -295,28 +294,13 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
     }
     auto read_size = [&](const char* key, cv::Size* size, bool required) {
       const cv::FileNode n = in[key];
-      if (n.empty() || n.isNone()) {
+      if (!required && (n.empty() || n.isNone())) {
         *size = cv::Size();
-        return required ? Status::Error(path + ": key '" + key + "' is missing") : Status::Ok();
+        return Status::Ok();
       }
-      if (n.isSeq() && n.size() == 2 && n[0].isInt() && n[1].isInt()) {
-        *size = cv::Size(static_cast<int>(n[0]), static_cast<int>(n[1]));
-      } else {
-        if (!MatrixNodeAtMost(n, 2)) {
-          return Status::Error(path + ": key '" + key + "' must be [ width, height ]");
-        }
-        cv::Mat m;
-        n >> m;
-        if (m.total() != 2) {
-          return Status::Error(path + ": key '" + key + "' must be [ width, height ]");
-        }
-        m.convertTo(m, CV_32S);
-        *size = cv::Size(m.at<int>(0), m.at<int>(1));
-      }
-      if (size->width <= 0 || size->height <= 0) {
-        return Status::Error(path + ": key '" + key + "' must be positive");
-      }
-      return Status::Ok();
+      const std::string problem = ReadSizeNode(n, size);
+      return problem.empty() ? Status::Ok()
+                             : Status::Error(path + ": key '" + key + "' " + problem);
     };
     Status s = read_size("projector_size", &sequence->projector_size, true);
     if (!s.ok()) return s;
@@ -358,9 +342,15 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
           if (!n[k].isInt()) return bad;
           v[k] = static_cast<int>(n[k]);
         }
+        // Within the camera's view, or within the largest one when scan.yaml does not say
+        // (the far edges summed in 64 bits: the numbers are the file's).
+        const cv::Size view =
+            camera_size->area() > 0 ? *camera_size : cv::Size(kMaxImageSide, kMaxImageSide);
+        if (v[0] < 0 || v[1] < 0 || v[2] <= 0 || v[3] <= 0 || int64_t{v[0]} + v[2] > view.width ||
+            int64_t{v[1]} + v[3] > view.height) {
+          return bad;
+        }
         const cv::Rect r(v[0], v[1], v[2], v[3]);
-        if (r.x < 0 || r.y < 0 || r.width <= 0 || r.height <= 0) return bad;
-        if (camera_size->area() > 0 && (r & cv::Rect(cv::Point(), *camera_size)) != r) return bad;
         *leaf_hint = r;
       }
     }

@@ -1,10 +1,12 @@
-// A guard for reading matrices from untrusted OpenCV YAML: `node >> mat` allocates whatever
-// rows x cols the file declares (a fuzzed calibration asked for 48 GB), so the declared size is
-// checked first.
+// Guards for reading untrusted OpenCV YAML: `node >> mat` allocates whatever rows x cols the
+// file declares (a fuzzed calibration asked for 48 GB), so the declared size is checked first;
+// the parser hangs on some texts, so they are refused first; and image sizes are bounded, so
+// that arithmetic on them cannot overflow (fuzz/fuzz_files found a 70000 x 70000 one).
 #pragma once
 
 #include <fstream>
 #include <iterator>
+#include <opencv2/core/mat.hpp>
 #include <opencv2/core/persistence.hpp>
 #include <string>
 
@@ -57,6 +59,45 @@ inline std::string YamlTextProblem(const std::string& path) {
     if (first != 0) return "the first entry is indented (it must start at column 0)";
     content = true;
   }
+  return "";
+}
+
+// The most pixels a side of any camera, projector or image vellum reads may have (a 150 MP
+// back is 14204 x 10652; a 24 MP camera 6000 x 4000). A bound, so that an area, a cell count or
+// a rectangle's far edge computed from a file's numbers always fits in an int.
+constexpr int kMaxImageSide = 16384;
+
+// Reads a [ width, height ] size from untrusted YAML: a sequence of two integers (how cv::Size
+// is written), or a matrix of two whole numbers. Returns "" and sets *size, or says what is
+// wrong ("is missing", "must be ...") for the caller to prefix with its file and key.
+inline std::string ReadSizeNode(const cv::FileNode& node, cv::Size* size) {
+  *size = cv::Size();
+  if (node.empty() || node.isNone()) return "is missing";
+  const std::string form = "must be [ width, height ], two whole numbers of pixels";
+  double w = 0, h = 0;
+  if (node.isSeq()) {
+    if (node.size() != 2 || !node[0].isInt() || !node[1].isInt()) return form;
+    w = static_cast<int>(node[0]);
+    h = static_cast<int>(node[1]);
+  } else {
+    if (!node.isMap() || !MatrixNodeAtMost(node, 2)) return form;
+    cv::Mat m;
+    try {
+      node >> m;
+    } catch (const std::exception&) {
+      return form;
+    }
+    if (m.total() != 2 || m.channels() != 1) return form;
+    m.convertTo(m, CV_64F);
+    w = m.at<double>(0);
+    h = m.at<double>(1);
+  }
+  // Whole numbers, finite, and in range, judged before any conversion to int.
+  if (!(w >= 1 && w <= kMaxImageSide && h >= 1 && h <= kMaxImageSide)) {
+    return "must be 1 to " + std::to_string(kMaxImageSide) + " pixels each way";
+  }
+  if (w != static_cast<int>(w) || h != static_cast<int>(h)) return form;
+  *size = cv::Size(static_cast<int>(w), static_cast<int>(h));
   return "";
 }
 
