@@ -175,6 +175,12 @@ bool PatternSequence::Check(std::string* why) const {
       *why = "a Gray pattern's bit " + std::to_string(s.bit) + " is out of range";
       return false;
     }
+    // A period, like the projector, within kMaxProjectorExtent: the checks below double it
+    // (fuzz/fuzz_files found a scan.yaml's period of 2e9 px overflowing an int).
+    if (s.kind == PatternKind::kPhase && (s.period_px < 1 || s.period_px > kMaxProjectorExtent)) {
+      *why = "a phase pattern's period of " + std::to_string(s.period_px) + " px is out of range";
+      return false;
+    }
   }
   if (Find(PatternKind::kWhite) < 0 || Find(PatternKind::kBlack) < 0) {
     *why = "the pattern sequence needs a white and a black pattern";

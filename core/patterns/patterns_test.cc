@@ -230,6 +230,13 @@ TEST(Patterns, AnAbsurdProjectorIsRefusedAtOnce) {
   seq.patterns[5].bit = 40;
   EXPECT_FALSE(seq.Check(&why));
   EXPECT_NE(why.find("out of range"), std::string::npos) << why;
+  // A phase period whose double overflowed an int (found by fuzz/fuzz_files).
+  seq = MakePatternSequence(PatternOptions());
+  for (PatternSpec& s : seq.patterns) {
+    if (s.kind == PatternKind::kPhase) s.period_px = 2000000000;
+  }
+  EXPECT_FALSE(seq.Check(&why));
+  EXPECT_NE(why.find("period of 2000000000 px is out of range"), std::string::npos) << why;
 }
 
 }  // namespace
