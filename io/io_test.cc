@@ -935,7 +935,7 @@ TEST(IoFuzzRegressions, SizesBeyondTheBoundAreRefusedNamingTheKey) {
 }
 
 // A PLY header declaring more data than the file holds is refused before anything is allocated
-// (a fuzzed mesh asked for 10^100 vertices).
+// (a fuzzed mesh asked for 10^100 vertices), and a face naming a vertex beyond them is refused.
 TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
   const std::string seed =
       VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-ply-huge-vertex-count";
@@ -954,6 +954,14 @@ TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
   EXPECT_NE(s.message().find("declares 1000000 vertices"), std::string::npos) << s.message();
   std::ofstream(path, std::ios::binary) << bytes.substr(1);
   EXPECT_FALSE(ReadQuadMeshPly(path, &vertices, &quads).ok());
+  // A face naming a vertex the file does not hold is refused, not handed on to be indexed.
+  ASSERT_TRUE(WriteQuadMeshPly(path, std::vector<cv::Vec3f>(4), {cv::Vec4i(0, 1, 4, 3)}, "").ok());
+  const Status beyond = ReadQuadMeshPly(path, &vertices, &quads);
+  EXPECT_FALSE(beyond.ok());
+  EXPECT_NE(beyond.message().find("face 0 names vertex 4 of 4"), std::string::npos)
+      << beyond.message();
+  ASSERT_TRUE(WriteQuadMeshPly(path, std::vector<cv::Vec3f>(4), {cv::Vec4i(0, 1, 2, 3)}, "").ok());
+  EXPECT_TRUE(ReadQuadMeshPly(path, &vertices, &quads).ok());
   std::remove(path.c_str());
 }
 

@@ -163,6 +163,12 @@ Status ReadQuadMeshPly(const std::string& path, std::vector<cv::Vec3f>* vertices
     f.read(reinterpret_cast<char*>(&count), 1);
     if (count != 4) return Status::Error(path + ": face " + std::to_string(k) + " is not a quad");
     f.read(reinterpret_cast<char*>((*quads)[k].val), 4 * sizeof(int));
+    for (int i = 0; f && i < 4; ++i) {
+      if ((*quads)[k][i] < 0 || (*quads)[k][i] >= nv) {
+        return Status::Error(path + ": face " + std::to_string(k) + " names vertex " +
+                             std::to_string((*quads)[k][i]) + " of " + std::to_string(nv));
+      }
+    }
   }
   if (!f) return Status::Error(path + ": truncated");
   return Status::Ok();
