@@ -1,7 +1,9 @@
 // libFuzzer: the files outside tools write. The first byte picks the reader: scan.yaml of a
-// scan directory, a calibration YAML, points.ply, a quad-mesh PLY, or a scan's texture.png
-// (the image header checked before decoding). The input is written to
-// a scratch file and read back; bad files must give an error Status, never a crash.
+// scan directory, a calibration YAML (and the flat and studio fields), points.ply, a quad-mesh
+// PLY, a scan's texture.png (the image header checked before decoding), the station's lights
+// file, a PTM, a scan directory's header (scan.yaml with its leaf hint, then its images), or a
+// daemon's `flag: value` config file. The input is written to a scratch file and read back; bad
+// files must give an error Status (or the flags' UsageError), never a crash.
 #include <unistd.h>
 
 #include <cstddef>
@@ -10,8 +12,10 @@
 #include <fstream>
 #include <string>
 
+#include "flags/flags.h"
 #include "io/calibration_io.h"
 #include "io/ply.h"
+#include "io/ptm.h"
 #include "io/scan_io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -22,8 +26,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       fs::temp_directory_path() / ("vellum_fuzz_files_" + std::to_string(getpid()));
   static const bool made = fs::create_directories(dir) || fs::exists(dir);
   (void)made;
-  const uint8_t kind = data[0] % 5;
-  const char* names[] = {"scan.yaml", "calibration.yaml", "points.ply", "mesh.ply", "texture.png"};
+  const uint8_t kind = data[0] % 9;
+  const char* names[] = {"scan.yaml", "calibration.yaml", "points.ply",
+                         "mesh.ply",  "texture.png",      "lights.yaml",
+                         "page.ptm",  "scan.yaml",        "vellum-decoder.yaml"};
   const fs::path path = dir / names[kind];
   {
     std::ofstream out(path, std::ios::binary);
@@ -62,6 +68,44 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     case 4: {
       cv::Mat texture;
       (void)ReadTexture(dir.string(), &texture);
+      break;
+    }
+    case 5: {
+      StationLights lights;
+      (void)ReadLightsFile(path.string(), &lights);
+      break;
+    }
+    case 6: {
+      PtmResult ptm;
+      (void)ReadPtm(path.string(), &ptm);
+      break;
+    }
+    case 7: {
+      // No texture.png beside it (unless an earlier input of kind 4 left one): the header's
+      // keys, the leaf hint among them, are read before the images are looked for.
+      Scan scan;
+      (void)ReadScanHeader(dir.string(), &scan);
+      break;
+    }
+    case 8: {
+      Flags flags("fuzz", "a daemon's flags",
+                  {{"config", "FILE", "config", ""},
+                   {"bus", "URL", "bus", "udpm://"},
+                   {"size", "WxH", "size", "4x3"},
+                   {"count", "N", "count", "1"},
+                   {"gain", "X", "gain", "1.5"},
+                   {"flag", "", "a switch", ""}});
+      auto quietly = [](auto read) {
+        try {
+          read();
+        } catch (const UsageError&) {
+        }
+      };
+      quietly([&] { (void)flags.Parse({"--config", path.string()}); });
+      quietly([&] { (void)flags.GetSize("size"); });
+      quietly([&] { (void)flags.GetInt("count", 0, 100); });
+      quietly([&] { (void)flags.GetDouble("gain", 0, 10); });
+      quietly([&] { (void)flags.GetBool("flag"); });
       break;
     }
   }

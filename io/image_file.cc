@@ -103,8 +103,8 @@ vips::VImage ToVips(const cv::Mat& image, cv::Mat* hold) {
 
 // Any other format, by libvips: its first three bands (or its first), in BGR order.
 Status ReadWithVips(const std::string& path, cv::Mat* image) {
-  Status s = StartVips();
-  if (!s.ok()) return Status::Error(path + ": " + s.message());
+  Status s = CheckVipsLoader(path);
+  if (!s.ok()) return s;
   try {
     vips::VImage in = vips::VImage::new_from_file(
         path.c_str(), vips::VImage::option()->set("access", VIPS_ACCESS_SEQUENTIAL));

@@ -17,6 +17,7 @@
 #include "io/memory.h"
 #include "io/ply.h"
 #include "io/products.h"
+#include "io/ptm.h"
 #include "io/scan_io.h"
 #include "io/xmp.h"
 
@@ -931,6 +932,72 @@ TEST(IoFuzzRegressions, SizesBeyondTheBoundAreRefusedNamingTheKey) {
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("scan.yaml: key 'camera_size' must be 1 to 16384"), std::string::npos)
       << s.message();
+  std::filesystem::remove_all(dir);
+}
+
+// A PTM's header is believed only as far as the file bears it out: a header claiming 65536 x
+// 65536 pixels (38 GB) over a few bytes, or a bias no byte can be offset by, is refused naming
+// the file; the seed the fuzzer starts from reads.
+TEST(IoFuzzRegressions, APtmClaimingMoreThanItHoldsIsRefusedBeforeAllocating) {
+  const std::string seed = VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/ptm_2x1";
+  std::ifstream in(seed, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(bytes.empty());
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("vellum_ptm_" + std::to_string(getpid()) + ".ptm"))
+          .string();
+  std::ofstream(path, std::ios::binary) << bytes.substr(1);
+  PtmResult ptm;
+  Status s = ReadPtm(path, &ptm);
+  ASSERT_TRUE(s.ok()) << s.message();
+  ASSERT_EQ(ptm.coefficients.size(), cv::Size(2, 1));
+  EXPECT_EQ(ptm.solved, 1);  // The first pixel's colour is black: not solved.
+  const struct {
+    std::string header, problem;
+  } cases[] = {
+      {"PTM_1.2\nPTM_FORMAT_LRGB\n65536 65536\n1 1 1 1 1 1\n0 0 0 0 0 0\n",
+       "page.ptm: shorter than its size says (65536x65536 pixels need 38654705664 bytes"},
+      {"PTM_1.2\nPTM_FORMAT_LRGB\n2 1\n1 1 1 1 1 1\n0 0 -2147483648 0 0 0\n",
+       "page.ptm: coefficient 2's scale"},
+      {"PTM_1.2\nPTM_FORMAT_LRGB\n2 1\n1 1 1 1e300 1 1\n0 0 0 0 0 0\n",
+       "page.ptm: coefficient 3's scale"},
+  };
+  const std::string page =
+      (std::filesystem::temp_directory_path() / ("vellum_ptm_" + std::to_string(getpid())))
+          .string() +
+      "page.ptm";
+  for (const auto& c : cases) {
+    std::ofstream(page, std::ios::binary) << c.header << std::string(18 + 6, '\x01');
+    s = ReadPtm(page, &ptm);
+    EXPECT_FALSE(s.ok()) << c.header;
+    EXPECT_NE(s.message().find(c.problem), std::string::npos) << s.message();
+  }
+  std::remove(path.c_str());
+  std::remove(page.c_str());
+}
+
+// Formats libvips knows but vellum does not read are refused naming the loader, before libvips'
+// loader runs: a malformed OpenEXR file, read as a scan's texture, leaked inside libvips 8.14
+// (found by fuzz/fuzz_files; under the fuzzer's LeakSanitizer a failure).
+TEST(IoFuzzRegressions, AFormatVellumDoesNotReadIsRefusedNamingIt) {
+  const std::string seed =
+      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-vips-openexr-leak";
+  std::ifstream in(seed, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_FALSE(bytes.empty());
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("vellum_io_exr_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "texture.png", std::ios::binary) << bytes.substr(1);
+  cv::Mat image;
+  Status s = ReadTexture(dir.string(), &image);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("texture.png: a file for libvips' Openexr loader; vellum reads PNG, "
+                             "TIFF, JPEG, JPEG 2000, WebP images"),
+            std::string::npos)
+      << s.message();
+  s = ReadImage((dir / "texture.png").string(), &image);
+  EXPECT_FALSE(s.ok());
   std::filesystem::remove_all(dir);
 }
 

@@ -90,8 +90,27 @@ Status ReadPtm(const std::string& path, PtmResult* ptm) {
     return Status::Error(path + ": bad size " + std::to_string(width) + "x" +
                          std::to_string(height));
   }
+  for (int k = 0; k < 6; ++k) {
+    // What a byte can be offset by, and a scale a float holds (the coefficients are floats).
+    if (bias[k] < 0 || bias[k] > 255 || !(std::abs(scale[k]) < 1e30)) {
+      return Status::Error(path + ": coefficient " + std::to_string(k) + "'s scale " +
+                           std::to_string(scale[k]) + " or bias " + std::to_string(bias[k]) +
+                           " is out of range (a finite scale, a bias of 0 to 255)");
+    }
+  }
   in.get();  // The newline after the biases.
   const size_t pixels = static_cast<size_t>(width) * height;
+  // The data the header promises must be in the file before it is allocated (a few bytes of
+  // header can claim 65536 x 65536 pixels, 38 GB).
+  const std::streamoff here = in.tellg();
+  in.seekg(0, std::ios::end);
+  const std::streamoff left = in.tellg() - here;
+  in.seekg(here);
+  if (here < 0 || left < static_cast<std::streamoff>(pixels * 9)) {
+    return Status::Error(path + ": shorter than its size says (" + std::to_string(width) + "x" +
+                         std::to_string(height) + " pixels need " + std::to_string(pixels * 9) +
+                         " bytes after the header)");
+  }
   std::vector<uint8_t> coefficients(pixels * 6), colour(pixels * 3);
   in.read(reinterpret_cast<char*>(coefficients.data()),
           static_cast<std::streamsize>(coefficients.size()));

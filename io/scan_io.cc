@@ -12,7 +12,6 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 #include <thread>
-#include <vips/vips8>
 
 #include "core/common/text.h"
 #include "io/image_file.h"
@@ -58,11 +57,8 @@ Status CheckImageHeader(const std::string& path, cv::Size* size, int max_bits = 
   uint32_t width = 0, height = 0;
   int bit_depth = 0;
   if (!PngHeader(path, &width, &height, &bit_depth)) {
-    // Another format: one libvips reads, judged when it is read.
-    const bool known =
-        PathExists(path) && StartVips().ok() && vips_foreign_find_load(path.c_str()) != nullptr;
-    vips_error_clear();
-    return known ? Status::Ok() : Status::Error(path + ": not a readable image");
+    // Another format: one vellum reads through libvips, judged when it is read.
+    return CheckVipsLoader(path);
   }
   // The largest image a scan may hold, each side: kMaxImageSide (yaml_guard.h).
   constexpr uint32_t kMaxSide = kMaxImageSide;

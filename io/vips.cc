@@ -20,4 +20,31 @@ Status StartVips() {
   return ok ? Status::Ok() : Status::Error(std::string("libvips: ") + vips_error_buffer());
 }
 
+Status CheckVipsLoader(const std::string& path) {
+  const Status s = StartVips();
+  if (!s.ok()) return Status::Error(path + ": " + s.message());
+  // libvips' loaders by class name, and what the error calls each format.
+  static const struct {
+    const char *loader, *format;
+  } kRead[] = {{"VipsForeignLoadPng", "PNG"},
+               {"VipsForeignLoadTiff", "TIFF"},
+               {"VipsForeignLoadJpeg", "JPEG"},
+               {"VipsForeignLoadJp2k", "JPEG 2000"},
+               {"VipsForeignLoadWebp", "WebP"}};
+  const char* found = vips_foreign_find_load(path.c_str());
+  vips_error_clear();
+  if (!found) return Status::Error(path + ": not a readable image");
+  const std::string loader = found;
+  for (const auto& r : kRead) {
+    if (loader.rfind(r.loader, 0) == 0) return Status::Ok();
+  }
+  std::string formats;
+  for (const auto& r : kRead) formats += std::string(formats.empty() ? "" : ", ") + r.format;
+  std::string name = loader.substr(std::string("VipsForeignLoad").size());
+  if (name.size() > 4 && name.compare(name.size() - 4, 4, "File") == 0)
+    name.resize(name.size() - 4);
+  return Status::Error(path + ": a file for libvips' " + name + " loader; vellum reads " + formats +
+                       " images");
+}
+
 }  // namespace vellum
