@@ -50,7 +50,9 @@ PatternOptions PatternOptionsFromFlags(const Flags& flags, cv::Size projector) {
 std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
   return {
       {"page", "SHAPE", prefix + "flat, curl, fold, cone, bump, ripple or gutter", "curl"},
-      {"texture", "KIND|FILE", prefix + "checkerboard, text, plain, or an image file of the page (PNG, TIFF, JPEG, JPEG 2000 or WebP)",
+      {"texture", "KIND|FILE",
+       prefix + "checkerboard, text, plain, or an image file of the page (PNG, TIFF, JPEG, JPEG "
+                "2000 or WebP)",
        "checkerboard"},
       {"page-size", "WxH", prefix + "page size, mm", "190x240"},
       {"centre", "X,Y", prefix + "where the page's centre lies on the table, mm", "0,0"},

@@ -835,6 +835,19 @@ TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
   EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
   Calibration calibration;
   EXPECT_FALSE(ReadCalibration((dir / "calibration.yaml").string(), &calibration).ok());
+  // The same throw from the station's lights file ended the process (its reader caught only
+  // cv::Exception; found once fuzz_files read lights files).
+  std::ifstream lights_in(VELLUM_SOURCE_DIR
+                          "/tests/fuzz_corpus/fuzz_files/regression-lights-yaml-length-error",
+                          std::ios::binary);
+  const std::string lights((std::istreambuf_iterator<char>(lights_in)),
+                           std::istreambuf_iterator<char>());
+  ASSERT_FALSE(lights.empty());
+  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights.substr(1);
+  StationLights station;
+  const Status s = ReadLightsFile((dir / "lights.yaml").string(), &station);
+  EXPECT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("lights.yaml: cannot parse"), std::string::npos) << s.message();
   std::filesystem::remove_all(dir);
 }
 

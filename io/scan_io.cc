@@ -264,7 +264,7 @@ Status ReadLightsFile(const std::string& path, StationLights* out) {
       }
       out->studio_channel = static_cast<int>(studio);
     }
-  } catch (const cv::Exception& e) {
+  } catch (const std::exception& e) {  // OpenCV's parser also throws std::length_error.
     return Status::Error(path + ": cannot parse: " + e.what());
   }
   return Status::Ok();
