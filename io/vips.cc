@@ -41,10 +41,11 @@ Status CheckVipsLoader(const std::string& path) {
   std::string formats;
   for (const auto& r : kRead) formats += std::string(formats.empty() ? "" : ", ") + r.format;
   std::string name = loader.substr(std::string("VipsForeignLoad").size());
-  if (name.size() > 4 && name.compare(name.size() - 4, 4, "File") == 0)
+  if (name.size() > 4 && name.compare(name.size() - 4, 4, "File") == 0) {
     name.resize(name.size() - 4);
-  return Status::Error(path + ": a file for libvips' " + name + " loader; vellum reads " + formats +
-                       " images");
+  }
+  return Status::Error(path + ": not a readable image (by its first bytes, one for libvips' " +
+                       name + " loader; vellum reads " + formats + ")");
 }
 
 }  // namespace vellum

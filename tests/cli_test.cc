@@ -487,7 +487,7 @@ TEST_F(CliTest, AFlatFieldGivesEachPageItsAlbedo) {
   r = RunVellum("process --scan " + leaf + " --calibration " + Rig() + " --out " + out +
                 "_junk --flatfield " + (root_ / "junk_field.yaml").string());
   EXPECT_EQ(r.exit_code, 2) << r.output;
-  EXPECT_NE(r.output.find("junk_field.yaml: projector_size missing"), std::string::npos)
+  EXPECT_NE(r.output.find("junk_field.yaml: key 'projector_size' is missing"), std::string::npos)
       << r.output;
 }
 
