@@ -817,19 +817,24 @@ TEST_F(IoTest, TheRestoredTiffCarriesItsIdentityInXmpBesideItsPixelsAndDpi) {
 namespace vellum {
 namespace {
 
+// A seed of fuzz/fuzz_files (tests/fuzz_corpus/fuzz_files/NAME) as the file the fuzzer wrote: its
+// bytes after the first, which picks the reader; empty if the seed cannot be read.
+std::string FuzzFileSeed(const std::string& name) {
+  std::ifstream in(VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/" + name, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  return bytes.empty() ? bytes : bytes.substr(1);
+}
+
 // Inputs the fuzzers found that made OpenCV's YAML reader throw std::length_error (not a
 // cv::Exception), which ended the reading process; now they are errors naming the file.
 TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
-  const std::string seed =
-      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-yaml-length-error";
-  std::ifstream in(seed, std::ios::binary);
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = FuzzFileSeed("regression-yaml-length-error");
   ASSERT_FALSE(bytes.empty());
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("vellum_io_regress_" + std::to_string(getpid()));
   std::filesystem::create_directories(dir);
-  std::ofstream(dir / "scan.yaml", std::ios::binary) << bytes.substr(1);
-  std::ofstream(dir / "calibration.yaml", std::ios::binary) << bytes.substr(1);
+  std::ofstream(dir / "scan.yaml", std::ios::binary) << bytes;
+  std::ofstream(dir / "calibration.yaml", std::ios::binary) << bytes;
   PatternSequence sequence;
   cv::Size camera;
   EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
@@ -837,13 +842,9 @@ TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
   EXPECT_FALSE(ReadCalibration((dir / "calibration.yaml").string(), &calibration).ok());
   // The same throw from the station's lights file ended the process (its reader caught only
   // cv::Exception; found once fuzz_files read lights files).
-  std::ifstream lights_in(VELLUM_SOURCE_DIR
-                          "/tests/fuzz_corpus/fuzz_files/regression-lights-yaml-length-error",
-                          std::ios::binary);
-  const std::string lights((std::istreambuf_iterator<char>(lights_in)),
-                           std::istreambuf_iterator<char>());
+  const std::string lights = FuzzFileSeed("regression-lights-yaml-length-error");
   ASSERT_FALSE(lights.empty());
-  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights.substr(1);
+  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights;
   StationLights station;
   const Status s = ReadLightsFile((dir / "lights.yaml").string(), &station);
   EXPECT_FALSE(s.ok());
@@ -952,14 +953,12 @@ TEST(IoFuzzRegressions, SizesBeyondTheBoundAreRefusedNamingTheKey) {
 // 65536 pixels (38 GB) over a few bytes, or a bias no byte can be offset by, is refused naming
 // the file; the seed the fuzzer starts from reads.
 TEST(IoFuzzRegressions, APtmClaimingMoreThanItHoldsIsRefusedBeforeAllocating) {
-  const std::string seed = VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/ptm_2x1";
-  std::ifstream in(seed, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = FuzzFileSeed("ptm_2x1");
   ASSERT_FALSE(bytes.empty());
   const std::string path =
       (std::filesystem::temp_directory_path() / ("vellum_ptm_" + std::to_string(getpid()) + ".ptm"))
           .string();
-  std::ofstream(path, std::ios::binary) << bytes.substr(1);
+  std::ofstream(path, std::ios::binary) << bytes;
   PtmResult ptm;
   Status s = ReadPtm(path, &ptm);
   ASSERT_TRUE(s.ok()) << s.message();
@@ -993,15 +992,12 @@ TEST(IoFuzzRegressions, APtmClaimingMoreThanItHoldsIsRefusedBeforeAllocating) {
 // loader runs: a malformed OpenEXR file, read as a scan's texture, leaked inside libvips 8.14
 // (found by fuzz/fuzz_files; under the fuzzer's LeakSanitizer a failure).
 TEST(IoFuzzRegressions, AFormatVellumDoesNotReadIsRefusedNamingIt) {
-  const std::string seed =
-      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-vips-openexr-leak";
-  std::ifstream in(seed, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = FuzzFileSeed("regression-vips-openexr-leak");
   ASSERT_FALSE(bytes.empty());
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("vellum_io_exr_" + std::to_string(getpid()));
   std::filesystem::create_directories(dir);
-  std::ofstream(dir / "texture.png", std::ios::binary) << bytes.substr(1);
+  std::ofstream(dir / "texture.png", std::ios::binary) << bytes;
   cv::Mat image;
   Status s = ReadTexture(dir.string(), &image);
   ASSERT_FALSE(s.ok());
@@ -1018,10 +1014,7 @@ TEST(IoFuzzRegressions, AFormatVellumDoesNotReadIsRefusedNamingIt) {
 // A PLY header declaring more data than the file holds is refused before anything is allocated
 // (a fuzzed mesh asked for 10^100 vertices), and a face naming a vertex beyond them is refused.
 TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
-  const std::string seed =
-      VELLUM_SOURCE_DIR "/tests/fuzz_corpus/fuzz_files/regression-ply-huge-vertex-count";
-  std::ifstream in(seed, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string bytes = FuzzFileSeed("regression-ply-huge-vertex-count");
   ASSERT_FALSE(bytes.empty());
   const std::string path =
       (std::filesystem::temp_directory_path() / ("vellum_ply_" + std::to_string(getpid()) + ".ply"))
@@ -1033,7 +1026,7 @@ TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
   const Status s = ReadQuadMeshPly(path, &vertices, &quads);
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("declares 1000000 vertices"), std::string::npos) << s.message();
-  std::ofstream(path, std::ios::binary) << bytes.substr(1);
+  std::ofstream(path, std::ios::binary) << bytes;
   EXPECT_FALSE(ReadQuadMeshPly(path, &vertices, &quads).ok());
   // A face naming a vertex the file does not hold is refused, not handed on to be indexed.
   ASSERT_TRUE(WriteQuadMeshPly(path, std::vector<cv::Vec3f>(4), {cv::Vec4i(0, 1, 4, 3)}, "").ok());
