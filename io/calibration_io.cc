@@ -180,8 +180,9 @@ Status ReadFlatField(const std::string& path, FlatField* field) {
     const cv::FileNode cell = fs["cell_px"], reference = fs["reference_mm"];
     cv::Mat gain;
     fs["gain"] >> gain;
-    if (!size_problem.empty())
+    if (!size_problem.empty()) {
       return Status::Error(path + ": key 'projector_size' " + size_problem);
+    }
     if (!cell.isInt() || static_cast<int>(cell) < 1 || static_cast<int>(cell) > kMaxImageSide) {
       return Status::Error(path + ": cell_px must be an integer from 1 to " +
                            std::to_string(kMaxImageSide));
