@@ -817,6 +817,12 @@ TEST_F(IoTest, TheRestoredTiffCarriesItsIdentityInXmpBesideItsPixelsAndDpi) {
 namespace vellum {
 namespace {
 
+// A scratch path of this process in the temporary directory: vellum_NAME_PID.
+std::filesystem::path Scratch(const std::string& name) {
+  return std::filesystem::temp_directory_path() /
+         ("vellum_" + name + "_" + std::to_string(getpid()));
+}
+
 // A seed of fuzz/fuzz_files (tests/fuzz_corpus/fuzz_files/NAME) as the file the fuzzer wrote: its
 // bytes after the first, which picks the reader; empty if the seed cannot be read.
 std::string FuzzFileSeed(const std::string& name) {
@@ -830,8 +836,7 @@ std::string FuzzFileSeed(const std::string& name) {
 TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
   const std::string bytes = FuzzFileSeed("regression-yaml-length-error");
   ASSERT_FALSE(bytes.empty());
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("vellum_io_regress_" + std::to_string(getpid()));
+  const std::filesystem::path dir = Scratch("io_regress");
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "scan.yaml", std::ios::binary) << bytes;
   std::ofstream(dir / "calibration.yaml", std::ios::binary) << bytes;
@@ -856,8 +861,7 @@ TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
 // refused, naming the problem, before OpenCV sees it. (A regression shows as a hang, which the
 // test's timeout turns into a failure.)
 TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("vellum_io_hang_" + std::to_string(getpid()));
+  const std::filesystem::path dir = Scratch("io_hang");
   std::filesystem::create_directories(dir);
   const struct {
     std::string text, problem;
@@ -897,8 +901,7 @@ TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
 // width wrapped): each is refused naming the file and the key, in every YAML reader of sizes,
 // and a size within the bound still reads, as a sequence or as a matrix.
 TEST(IoFuzzRegressions, SizesBeyondTheBoundAreRefusedNamingTheKey) {
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("vellum_io_sizes_" + std::to_string(getpid()));
+  const std::filesystem::path dir = Scratch("io_sizes");
   std::filesystem::create_directories(dir);
   const std::string path = (dir / "field.yaml").string();
   auto write = [&](const std::string& text) {
@@ -955,9 +958,7 @@ TEST(IoFuzzRegressions, SizesBeyondTheBoundAreRefusedNamingTheKey) {
 TEST(IoFuzzRegressions, APtmClaimingMoreThanItHoldsIsRefusedBeforeAllocating) {
   const std::string bytes = FuzzFileSeed("ptm_2x1");
   ASSERT_FALSE(bytes.empty());
-  const std::string path =
-      (std::filesystem::temp_directory_path() / ("vellum_ptm_" + std::to_string(getpid()) + ".ptm"))
-          .string();
+  const std::string path = Scratch("ptm").string() + "_page.ptm";
   std::ofstream(path, std::ios::binary) << bytes;
   PtmResult ptm;
   Status s = ReadPtm(path, &ptm);
@@ -974,18 +975,13 @@ TEST(IoFuzzRegressions, APtmClaimingMoreThanItHoldsIsRefusedBeforeAllocating) {
       {"PTM_1.2\nPTM_FORMAT_LRGB\n2 1\n1 1 1 1e300 1 1\n0 0 0 0 0 0\n",
        "page.ptm: coefficient 3's scale"},
   };
-  const std::string page =
-      (std::filesystem::temp_directory_path() / ("vellum_ptm_" + std::to_string(getpid())))
-          .string() +
-      "page.ptm";
   for (const auto& c : cases) {
-    std::ofstream(page, std::ios::binary) << c.header << std::string(18 + 6, '\x01');
-    s = ReadPtm(page, &ptm);
+    std::ofstream(path, std::ios::binary) << c.header << std::string(18 + 6, '\x01');
+    s = ReadPtm(path, &ptm);
     EXPECT_FALSE(s.ok()) << c.header;
     EXPECT_NE(s.message().find(c.problem), std::string::npos) << s.message();
   }
   std::remove(path.c_str());
-  std::remove(page.c_str());
 }
 
 // Formats libvips knows but vellum does not read are refused naming the loader, before libvips'
@@ -994,8 +990,7 @@ TEST(IoFuzzRegressions, APtmClaimingMoreThanItHoldsIsRefusedBeforeAllocating) {
 TEST(IoFuzzRegressions, AFormatVellumDoesNotReadIsRefusedNamingIt) {
   const std::string bytes = FuzzFileSeed("regression-vips-openexr-leak");
   ASSERT_FALSE(bytes.empty());
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("vellum_io_exr_" + std::to_string(getpid()));
+  const std::filesystem::path dir = Scratch("io_exr");
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "texture.png", std::ios::binary) << bytes;
   cv::Mat image;
@@ -1016,9 +1011,7 @@ TEST(IoFuzzRegressions, AFormatVellumDoesNotReadIsRefusedNamingIt) {
 TEST(IoFuzzRegressions, PlyCountsBeyondTheFileAreRefused) {
   const std::string bytes = FuzzFileSeed("regression-ply-huge-vertex-count");
   ASSERT_FALSE(bytes.empty());
-  const std::string path =
-      (std::filesystem::temp_directory_path() / ("vellum_ply_" + std::to_string(getpid()) + ".ply"))
-          .string();
+  const std::string path = Scratch("ply").string() + ".ply";
   std::ofstream(path, std::ios::binary) << "ply\nformat binary_little_endian 1.0\n"
                                         << "element vertex 1000000\nelement face 0\nend_header\n";
   std::vector<cv::Vec3f> vertices;
