@@ -107,6 +107,7 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   });
   // Where the operator said the leaf is (scan.yaml, or SCAN_STARTED at the station).
   if (!scan.leaf_hint.empty()) r.Text("operator", "leaf_hint", LeafHintText(scan.leaf_hint));
+  if (scan.object != ObjectKind::kAuto) r.Text("operator", "object", ToString(scan.object));
   r.Text("sizes", "camera", SizeText(scan.camera_size));
   r.Text("sizes", "projector", SizeText(scan.sequence.projector_size));
   r.Number("sizes", "patterns", static_cast<double>(scan.sequence.patterns.size()));
@@ -193,6 +194,9 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
     r.Text("outline", "hint", LeafHintText(o.hint));
     r.Text("outline", "hint_from", scan_hint.empty() ? "options" : "scan");
   }
+  const ObjectKind said = ReportedObject(earlier);
+  if (said != ObjectKind::kAuto) o.object = said;
+  r.Text("outline", "object", ToString(o.object));
   *outline = FindLeaf(points, texture, o);
   if (!outline->status.ok()) return stage.Finish(outline->status);
   r.Text("outline", "method", outline->method);
