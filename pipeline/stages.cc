@@ -227,7 +227,10 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
       low += lo <= 0;
     }
   }
-  const double share_measured = leaf > 0 ? static_cast<double>(measured) / leaf : 0;
+  // Measured: of the leaf found by every cue, the share with a point (FindLeaf's), which counts
+  // what the mask leaves out for want of points (a shadow at the rim, a side seen edge-on).
+  const double share_measured = std::min(leaf > 0 ? static_cast<double>(measured) / leaf : 0.0,
+                                         outline->measured_share);
   const double share_high = leaf > 0 ? static_cast<double>(high) / leaf : 0;
   const double share_low = leaf > 0 ? static_cast<double>(low) / leaf : 0;
   r.Number("outline", "valid_in_leaf", share_measured);
@@ -289,6 +292,7 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
                "% of the leaf's rim is set apart from what surrounds it (found by " +
                outline->method + "); check the outline in the report, or give a hint");
   }
+  for (const OutlineDoubt& doubt : outline->doubts) r.Warn(doubt.code, doubt.message);
   Status s = stage.Picture(results, "texture", texture);
   if (s.ok()) s = stage.Picture(results, "outline", DrawOutline(texture, *outline));
   return stage.Finish(s);
@@ -319,6 +323,14 @@ StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const Cam
   r.Number("sheet", "skirt_nodes", mesh->skirt);
   r.Number("sheet", "springs", static_cast<double>(mesh->springs.size()));
   r.Number("sheet", "quads", static_cast<double>(mesh->quads.size()));
+  const double crease = CreaseShortening(points, page_mask, *mesh);
+  r.Number("sheet", "crease_shortening_mm", crease);
+  if (crease > options.limits.max_crease_shortening_mm) {
+    r.Warn("crease_sharp",
+           "a sharp crease crosses the leaf: the sheet's straight springs span it short, and the "
+           "restored page is about " + Fixed(crease, 2) +
+               " mm short across it (the sheet's cells are wider than the crease's bend)");
+  }
   return stage.Finish(Status::Ok());
 }
 

@@ -83,8 +83,8 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   const std::string out = (fs::temp_directory_path() / ("vellum_family_" + std::to_string(getpid())))
                               .string();
   fs::remove_all(out);
-  const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
   const char* dump = std::getenv("VELLUM_FAMILY_DUMP");
+  const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
   auto finish = [&] {
     if (dump && !o.met) {
       const std::string dir = std::string(dump) + "/" + std::to_string(s.seed);
@@ -127,9 +127,25 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
     if (flat.rms_mm > 0.08) missed << name << "sheet " << flat.rms_mm << " mm RMS; ";
     if (flat.mirrored) missed << name << "sheet mirrored; ";
     const Rigid2D to_true = FlatToTrue(mine, page);
-    const int off = MaskOffLeaf(page, to_true, pages[k], 1.5);
+    cv::Mat off_leaf;
+    const int off = MaskOffLeaf(page, to_true, pages[k], 1.5, nullptr, &off_leaf);
     o.off_mask += off;
-    if (off > 0) missed << name << off << " restored mask pixels off the leaf; ";
+    if (off > 0) {
+      missed << name << off << " restored mask pixels off the leaf; ";
+      if (dump) {
+        // The restored page with its mask's pixels off the leaf in red.
+        cv::Mat show = page.restored.image;
+        if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
+        if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
+        show = show.clone();
+        cv::dilate(off_leaf, off_leaf, cv::Mat::ones(5, 5, CV_8U));
+        show.setTo(cv::Scalar(0, 0, 255), off_leaf);
+        fs::create_directories(std::string(dump) + "/" + std::to_string(s.seed));
+        cv::imwrite(std::string(dump) + "/" + std::to_string(s.seed) + "/off_leaf" +
+                        (page.name.empty() ? "" : "_" + page.name) + ".png",
+                    show);
+      }
+    }
     if (s.texture.kind == TextureKind::kCheckerboard) {
       const std::vector<cv::Point2d> corners = TrueCorners(pages[k].options().size_mm, s.texture);
       const Measured m = ExperimentOne(page, MeasureCorners(page, to_true, corners),

@@ -506,4 +506,85 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
   return mesh;
 }
 
+double CreaseShortening(const cv::Mat& points, const cv::Mat& page_mask, const Mesh& mesh) {
+  const cv::Rect view(2, 2, points.cols - 4, points.rows - 4);
+  // The surface's point at `at` (sub-pixel): the measured page points of its 4 x 4 neighbourhood
+  // weighted by a tent three pixels wide (centred exactly on it: no staircase along a slanted
+  // line; wide enough that the points' noise adds little to a path).
+  auto surface = [&](cv::Point2d at, cv::Vec3d* out) {
+    const cv::Point c(static_cast<int>(std::floor(at.x)), static_cast<int>(std::floor(at.y)));
+    if (!view.contains(c) || !page_mask.at<uint8_t>(c)) return false;
+    cv::Vec3d sum(0, 0, 0);
+    double weight = 0;
+    for (int v = c.y - 1; v <= c.y + 2; ++v) {
+      const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+      const uint8_t* in = page_mask.ptr<uint8_t>(v);
+      const double wv = std::max(0.0, 1.5 - std::fabs(v - at.y));
+      for (int u = c.x - 1; u <= c.x + 2; ++u) {
+        const double w = wv * std::max(0.0, 1.5 - std::fabs(u - at.x));
+        const cv::Vec3f& p = row[u];
+        if (w > 0 && !(in[u] && std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]))) {
+          return false;
+        }
+        sum += w * cv::Vec3d(p);
+        weight += w;
+      }
+    }
+    *out = sum / weight;
+    return true;
+  };
+  // How much longer than the chord the page is between two measured nodes (mm; 0 where the line
+  // between them is not all measured page).
+  auto excess = [&](int a, int b) {
+    if (mesh.kind[a] != NodeKind::kMeasured || mesh.kind[b] != NodeKind::kMeasured) return 0.0;
+    const cv::Point2d pa = mesh.pixel[a], pb = mesh.pixel[b];
+    const int steps = static_cast<int>(std::ceil(cv::norm(pb - pa) / 2));  // Every 2 pixels.
+    if (steps < 2) return 0.0;
+    double length = 0;
+    cv::Vec3d last = mesh.point[a], x;
+    for (int k = 1; k < steps; ++k) {
+      if (!surface(pa + (pb - pa) * (static_cast<double>(k) / steps), &x)) return 0.0;
+      length += cv::norm(x - last);
+      last = x;
+    }
+    length += cv::norm(mesh.point[b] - last);
+    const double chord = cv::norm(mesh.point[b] - mesh.point[a]);
+    // A crease's step: 4% to 30% (noise, ink's edges and gentle bends stay well below 4%; a
+    // crease of 90 degrees makes 29%, more is a defect of the data).
+    return length > 1.04 * chord && length < 1.3 * chord ? length - chord : 0.0;
+  };
+  // A crease runs across many rows or columns; a defect of the data (a flying point, a hole's
+  // edge) lengthens the path of a spring or two: the sums' 80th percentile over the rows, and
+  // over the columns, where they have any measured spring.
+  auto percentile = [](std::vector<double> sums) {
+    if (sums.empty()) return 0.0;
+    const size_t k = sums.size() * 8 / 10;
+    std::nth_element(sums.begin(), sums.begin() + k, sums.end());
+    return sums[k];
+  };
+  std::vector<double> rows, cols;
+  for (int j = 0; j < mesh.rows; ++j) {
+    double sum = 0;
+    bool any = false;
+    for (int i = 0; i + 1 < mesh.cols; ++i) {
+      const int a = mesh.Index(i, j), b = mesh.Index(i + 1, j);
+      any = any || (mesh.kind[a] == NodeKind::kMeasured && mesh.kind[b] == NodeKind::kMeasured);
+      sum += excess(a, b);
+    }
+    if (any) rows.push_back(sum);
+  }
+  for (int i = 0; i < mesh.cols; ++i) {
+    double sum = 0;
+    bool any = false;
+    for (int j = 0; j + 1 < mesh.rows; ++j) {
+      const int a = mesh.Index(i, j), b = mesh.Index(i, j + 1);
+      any = any || (mesh.kind[a] == NodeKind::kMeasured && mesh.kind[b] == NodeKind::kMeasured);
+      sum += excess(a, b);
+    }
+    if (any) cols.push_back(sum);
+  }
+  const double most = std::max(percentile(rows), percentile(cols));
+  return most;
+}
+
 }  // namespace vellum

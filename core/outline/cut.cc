@@ -151,9 +151,19 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
     if (surroundish[i]) look_surround.Add(bins[i], 1);
   }
   look_surround.Finish();
-  const double even = -std::log(static_cast<double>(Look::kBins));
+  // Unlike the surround: less likely under its look than all but a twentieth of its own samples
+  // (a leaf reaching into the view's outer tenth puts some of its look there).
   auto unlike_surround = [&] {
-    for (int i = 0; i < n; ++i) strange[i] = look_surround.empty() || look_surround.Log(bins[i]) < even;
+    std::vector<double> typical;
+    for (int i = 0; i < n; ++i) {
+      if (surroundish[i]) typical.push_back(look_surround.Log(bins[i]));
+    }
+    double least = -1e300;
+    if (!typical.empty()) {
+      std::nth_element(typical.begin(), typical.begin() + typical.size() / 20, typical.end());
+      least = typical[typical.size() / 20];
+    }
+    for (int i = 0; i < n; ++i) strange[i] = typical.empty() || look_surround.Log(bins[i]) < least;
   };
   unlike_surround();
   for (int i = 0; i < n; ++i) {
@@ -186,6 +196,8 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
           to_leaf += options.border_cost;
         }
         if (barred[i]) to_leaf = 1e6;
+        if (getenv("CUT_DEBUG") && bx >= 270 && bx <= 290 && by >= 18 && by <= 28 && bx % 3 == 0 && by % 2 == 0)
+          fprintf(stderr, "blk %d,%d bin %d leafy %d sur %d look %.2f/%.2f h %.2f/%.2f -> %.2f/%.2f\n", bx, by, bins[i], leafy[i], surroundish[i], look_leaf.Log(bins[i]), look_surround.Log(bins[i]), height_leaf[i], height_surround[i], to_leaf, to_surround);
         graph.addVtx();
         // The source side is the leaf: a block left there pays its cost to call it leaf (the
         // link to the sink, cut), one moved to the sink its cost to call it surround.

@@ -8,50 +8,54 @@
 namespace vellum {
 namespace outline {
 
-// An open book's gutter: a straight valley down the leaf from which the surface rises at least
-// `options.gutter_rise_mm` on both sides, a crease (within gutter_width_mm each side rises
-// gutter_crease_mm, or is hidden from view), not a trough. Splits the leaf into its left and
-// right pages; false if there is no such valley.
 bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
                    const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
                    bool* parted) {
-  if (parted) *parted = true;
-  const double rise = options.gutter_rise_mm;
   const cv::Rect box = cv::boundingRect(leaf);
   if (box.width < 20 || box.height < 20) return false;
   std::vector<cv::Point2f> valley;
+  int apart = 0;  // Valley rows where the two sides do not meet (a gap, or a band out of view).
+  constexpr int kApart = 12;  // Pixels either side of the valley's point.
   for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
     const float* row = z.ptr<float>(v);
     const uint8_t* in = leaf.ptr<uint8_t>(v);
-    // The lowest leaf point in the middle half of the row, and the highest on either side.
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    // The lowest leaf point in the middle three fifths of the row's leaf.
+    int first = -1, last = -1;
+    for (int u = box.x; u < box.x + box.width; ++u) {
+      if (!in[u]) continue;
+      if (first < 0) first = u;
+      last = u;
+    }
+    if (first < 0 || last - first < 20) continue;
     int lowest = -1;
-    for (int u = box.x + box.width / 4; u < box.x + box.width * 3 / 4; ++u) {
+    for (int u = first + (last - first) / 5; u <= last - (last - first) / 5; ++u) {
       if (in[u] && Valid(row[u]) && (lowest < 0 || row[u] < row[lowest])) lowest = u;
     }
-    if (lowest < 0) continue;
-    float high_left = kNoData, high_right = kNoData;
-    for (int u = box.x; u < box.x + box.width; ++u) {
-      if (!in[u] || !Valid(row[u])) continue;
-      if (u < lowest) high_left = std::max(high_left, row[u]);
-      if (u > lowest) high_right = std::max(high_right, row[u]);
-    }
-    if (!(high_left - row[lowest] >= rise && high_right - row[lowest] >= rise)) continue;
-    // A crease: near the valley, each side rises steeply or is out of sight.
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    if (lowest < 0 || !std::isfinite(p[lowest][0])) continue;
+    // Each side rises gutter_rise_mm within gutter_reach_mm, and gutter_crease_mm within
+    // gutter_width_mm (or has no point that near: hidden in the gutter).
     const cv::Point2f bottom(p[lowest][0], p[lowest][1]);
-    if (!std::isfinite(bottom.x) || !std::isfinite(bottom.y)) continue;
-    float near_left = kNoData, near_right = kNoData;
-    for (int u = box.x; u < box.x + box.width; ++u) {
+    float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData};
+    for (int u = first; u <= last; ++u) {
       if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
-      if (cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom) > options.gutter_width_mm) continue;
-      (u < lowest ? near_left : near_right) = std::max(u < lowest ? near_left : near_right, row[u]);
+      const double d = cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom);
+      const int side = u > lowest;
+      if (d <= options.gutter_reach_mm) high[side] = std::max(high[side], row[u]);
+      if (d <= options.gutter_width_mm) near[side] = std::max(near[side], row[u]);
     }
-    auto steep = [&](float near) {
-      return near == kNoData || near - row[lowest] >= options.gutter_crease_mm;
-    };
-    if (steep(near_left) && steep(near_right)) {
-      valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
+    bool valley_here = true;
+    for (int side = 0; side < 2; ++side) {
+      valley_here = valley_here && high[side] - row[lowest] >= options.gutter_rise_mm &&
+                    (near[side] == kNoData || near[side] - row[lowest] >= options.gutter_crease_mm);
     }
+    if (!valley_here) continue;
+    valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
+    bool gap = false;
+    for (int u = std::max(first, lowest - kApart); u <= std::min(last, lowest + kApart); ++u) {
+      gap = gap || !in[u];
+    }
+    apart += gap;
   }
   // Most rows must show the valley, on one straight line.
   const int rows = (box.height * 8 / 10) / 4;
@@ -63,6 +67,7 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     off += std::fabs((p.x - x0) * vy - (p.y - y0) * vx) > 8;  // Pixels from the line.
   }
   if (off > static_cast<int>(valley.size()) / 4) return false;
+  if (parted) *parted = 2 * apart >= static_cast<int>(valley.size());
   *left = cv::Mat::zeros(leaf.size(), CV_8U);
   *right = cv::Mat::zeros(leaf.size(), CV_8U);
   // Where the line falls within a couple of pixels of the end of a run of leaf pixels that is a

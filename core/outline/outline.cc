@@ -28,10 +28,10 @@ bool OutlineOptions::Check(std::string* why) const {
   if (!(step_mm > 0) || scale_px < 1 || scale_px > 16 || !(max_slope_deg > 0) ||
       !(edge_contrast > 0) || blocks_across < 16 || band_px < 0 ||
       !(min_area > 0 && min_area < 1) || !(max_view_share > 0 && max_view_share <= 1) ||
-      border_px < 0 || !(gutter_rise_mm > 0) || !(gutter_width_mm > 0) ||
-      !(gutter_crease_mm >= 0)) {
+      border_px < 0 || !(gutter_rise_mm > 0) || !(gutter_reach_mm > 0) ||
+      !(gutter_width_mm > 0) || !(gutter_crease_mm >= 0)) {
     *why =
-        "step_mm, max_slope_deg, edge_contrast, gutter_rise_mm and gutter_width_mm must be > 0, "
+        "step_mm, max_slope_deg, edge_contrast and the gutter's rise, reach and width must be > 0, "
         "scale_px in [1, 16], blocks_across >= 16, band_px, border_px and gutter_crease_mm >= 0, "
         "min_area in (0, 1), max_view_share in (0, 1]";
     return false;
@@ -97,12 +97,42 @@ cv::Mat Largest(const cv::Mat& mask) {
   return best ? labels == best : cv::Mat(mask.size(), CV_8U, cv::Scalar(0));
 }
 
-// Whether `inner` (blocks) is a leaf lying on `outer` (a support or a frame around it): of at
-// least `min_blocks` and at most 90% of it, its outline inside `outer` (four fifths of it at
-// least two blocks in from outer's), and set apart there (seven tenths of it by a rim, a texture
-// edge or unmeasured blocks).
+// The largest 8-connected part of `found` (blocks) not touching the grid's border; a doubt in
+// `out` when the next largest is at least half its size.
+cv::Mat LargestWithin(const cv::Mat& found, Outline* out) {
+  cv::Mat labels, stats, centroids;
+  const int count = cv::connectedComponentsWithStats(found, labels, stats, centroids, 8, CV_32S);
+  int best = 0, second = 0;
+  auto area = [&](int l) { return l ? stats.at<int>(l, cv::CC_STAT_AREA) : 0; };
+  for (int l = 1; l < count; ++l) {
+    const cv::Rect box(stats.at<int>(l, cv::CC_STAT_LEFT), stats.at<int>(l, cv::CC_STAT_TOP),
+                       stats.at<int>(l, cv::CC_STAT_WIDTH), stats.at<int>(l, cv::CC_STAT_HEIGHT));
+    if (box.x == 0 || box.y == 0 || box.br().x == found.cols || box.br().y == found.rows) continue;
+    if (area(l) > area(best)) {
+      second = best;
+      best = l;
+    } else if (area(l) > area(second)) {
+      second = l;
+    }
+  }
+  if (best && 2 * area(second) >= area(best)) {
+    out->doubts.push_back(
+        {"leaf_ambiguous",
+         "nothing lies at the centre of the view, and two objects of like size lie off it: the "
+         "larger was taken for the leaf; check the outline in the report, or draw a leaf hint "
+         "over the leaf in the viewer (or give --leaf-hint) and scan again"});
+  }
+  return best ? labels == best : cv::Mat(found.size(), CV_8U, cv::Scalar(0));
+}
+
+// Whether `inner` (blocks) is a leaf lying on `outer` (a support or a frame around it, whose
+// plane `above` is measured from): of at least `min_blocks` and at most 90% of it, its outline
+// inside `outer` (four fifths of it at least two blocks in from outer's) and set apart there
+// (seven tenths of it by a rim, a texture edge or unmeasured blocks), and standing off that plane
+// (its median height off it at least 0.03 mm and three times the blocks' noise). A region of a
+// flat leaf's own texture (its dark squares, a miniature) lies on the leaf's plane.
 bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
-            int min_blocks) {
+            const cv::Mat& above, int min_blocks) {
   const int area = cv::countNonZero(inner);
   if (area < std::max(1, min_blocks) || area > 0.9 * cv::countNonZero(outer)) return false;
   cv::Mat eroded, deep, apart;
@@ -112,8 +142,21 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
             cv::Scalar(0));
   cv::dilate((blocks.rim > 0.5f) | (blocks.edge > 1.0f) | (blocks.valid < 0.5f), apart, cv::Mat());
   const int total = cv::countNonZero(rim);
-  return total > 0 && cv::countNonZero(rim & deep) >= 0.8 * total &&
-         cv::countNonZero(rim & apart) >= 0.7 * total;
+  if (total == 0 || cv::countNonZero(rim & deep) < 0.8 * total ||
+      cv::countNonZero(rim & apart) < 0.7 * total) {
+    return false;
+  }
+  std::vector<float> off, noise;
+  for (int by = 0; by < inner.rows; ++by) {
+    for (int bx = 0; bx < inner.cols; ++bx) {
+      const float d = above.at<float>(by, bx), n = blocks.noise.at<float>(by, bx);
+      if (!inner.at<uint8_t>(by, bx) || std::isnan(d)) continue;
+      off.push_back(std::fabs(d));
+      if (!std::isnan(n)) noise.push_back(n);
+    }
+  }
+  if (off.size() * 2 < static_cast<size_t>(area)) return false;  // Mostly unmeasured.
+  return outline::Median(&off) >= std::max(0.03, 3 * outline::Median(&noise));
 }
 
 }  // namespace
@@ -146,10 +189,16 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   std::vector<Plane> planes = FitSurround(blocks, options.surround);
   cv::Mat above = AboveSurround(blocks, planes);
   const cv::Mat seed = SeedBlocks(blocks, size, options.hint);
-  cv::Mat cut = AtSeed(
-      CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut), seed);
+  const cv::Mat first =
+      CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
+  cv::Mat cut = AtSeed(first, seed);
   const double area_min = options.min_area * size.area();
   const int min_blocks = static_cast<int>(area_min / (block * block));
+  if (cv::countNonZero(cut) < min_blocks && options.hint.empty()) {
+    // Nothing at the view's centre: the leaf lies off it. The largest part found that does not
+    // run off the view, flagged when another almost as large was found too.
+    cut = LargestWithin(first, &out);
+  }
   // What was found may be a support or a frame with the leaf on it: cut again inside it, against
   // the plane along its outline (twice: a leaf in a frame on a support).
   for (int level = 0; level < 2 && cv::countNonZero(cut) > 0; ++level) {
@@ -162,7 +211,21 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     const cv::Mat inner_cut = CutLeaf(blocks, above_more, seed, ring, cut, options.cut);
     cv::Mat inner = AtSeed(inner_cut, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut);
-    if (!LiesOn(blocks, cut, inner, min_blocks)) break;
+    if (!LiesOn(blocks, cut, inner, above_more, min_blocks)) {
+      // What was found lies on a plane well above the table, and nothing on it stands off it: a
+      // support or a box, maybe, with the leaf flush on it or elsewhere.
+      double lowest = 1e9;
+      for (const Plane& known : planes) lowest = std::min(lowest, known.c);
+      if (plane.c - lowest > 1.0) {
+        out.doubts.push_back(
+            {"leaf_ambiguous",
+             "what was found as the leaf lies on a plane " + Fixed(plane.c - lowest, 1) +
+                 " mm above the table with nothing standing on it: a support or a box, perhaps, "
+                 "with the leaf flush on it or beside it: check the outline in the report, draw "
+                 "a leaf hint over the leaf in the viewer (or give --leaf-hint) and scan again"});
+      }
+      break;
+    }
     cut = inner;
     planes = more;
     above = above_more;
@@ -176,15 +239,13 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // Brought to the pixel; what it holds without a height, where that reaches beyond it (a
   // shadow, the leaf seen edge-on), is not restored.
   cv::Mat region = RefineRim(cut, cues, block, options.band_px);
-  cv::Mat full_seed;
-  cv::resize(seed, full_seed, seed.size() * block, 0, 0, cv::INTER_NEAREST);
-  cv::copyMakeBorder(full_seed, full_seed, 0, size.height - full_seed.rows, 0,
-                     size.width - full_seed.cols, cv::BORDER_CONSTANT, cv::Scalar(0));
-  region = AtSeed(region, full_seed);
+  cv::Mat full_cut;
+  cv::resize(cut, full_cut, cut.size() * block, 0, 0, cv::INTER_NEAREST);
+  cv::copyMakeBorder(full_cut, full_cut, 0, size.height - full_cut.rows, 0,
+                     size.width - full_cut.cols, cv::BORDER_REPLICATE);
+  region = AtSeed(region, full_cut);
   const cv::Mat measured = cues.z > -1e3f;
-  out.measured_share =
-      static_cast<double>(cv::countNonZero(region & measured)) / std::max(1, cv::countNonZero(region));
-  cv::Mat leaf = AtSeed(region & measured, full_seed);
+  cv::Mat leaf = AtSeed(region & measured, full_cut);
   if (cv::countNonZero(leaf) < area_min) {
     out.status = Status::Error("no leaf found: too little of it was measured in 3D");
     return out;
@@ -195,17 +256,36 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
   out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf);
+  out.measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
+                       std::max(1, cv::countNonZero(leaf | region));
   out.confidence = RimConfidence(leaf, cues);
   out.touches_border = TouchesBorder(leaf, options.border_px);
   out.method = "cut";
   out.mask = leaf;
+  // An open book: its two pages at the gutter. Split when the operator says it is a book, or,
+  // on auto, when the two sides are parted along the valley (two sheets); a valley whose sides
+  // meet is one creased leaf as well as a book's two pages, and is flagged.
   cv::Mat left, right;
   bool parted = false;
-  if (options.find_spread && options.object != ObjectKind::kLeaf &&
-      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right, &parted)) {
+  const bool valley = options.find_spread && options.object != ObjectKind::kLeaf &&
+                      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right,
+                                    &parted);
+  if (valley && (options.object == ObjectKind::kBook || parted)) {
     out.pages = {left, right};
   } else {
     out.pages = {leaf};
+    if (valley) {
+      out.doubts.push_back(
+          {"object_ambiguous",
+           "a sharp valley runs down the leaf, its two sides meeting in it: one creased leaf, or "
+           "an open book's two pages; restored as one leaf: say object: book (vellum scan "
+           "--object book, or in the viewer) to restore two pages, or object: leaf"});
+    } else if (options.find_spread && options.object == ObjectKind::kBook) {
+      out.doubts.push_back(
+          {"object_ambiguous",
+           "said to be an open book, but no gutter was found between two pages (a valley both "
+           "pages rise from): restored as one leaf; check the outline in the report"});
+    }
   }
   out.status = Status::Ok();
   return out;

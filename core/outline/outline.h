@@ -38,16 +38,16 @@ struct SurroundOptions {
 // thickness) and thinly beyond (its bends).
 struct CutOptions {
   double plane_mm = 0.01;       // How far the surround itself strays from its plane, mm.
-  double flush_share = 0.1;     // Share of a leaf lying flush with what it rests on.
+  double flush_share = 0.15;    // Share of a leaf lying flush with what it rests on.
   double thickness_mm = 0.5;    // A leaf's rim stands up to this high, mm.
   double max_off = 4;           // The height's evidence for leaf is clipped to this...
   double max_on = 2.5;          // ... and for surround to this.
   double look_weight = 1;       // The look's log-likelihood ratio per block, weighted by this...
   double max_look = 3;          // ... and clipped to this.
   double border_cost = 2;       // A block on the view's border costs this much to call leaf.
-  double smooth = 1.5;          // The outline's cost between two blocks...
+  double smooth = 1.0;          // The outline's cost between two blocks...
   double smooth_floor = 0.25;   // ... falling to this share of it across a rim or an edge.
-  int rounds = 2;               // The look relearned from the last cut this many times.
+  int rounds = 0;               // The look relearned from the last cut this many times.
   bool Check(std::string* why) const;
 };
 
@@ -62,7 +62,7 @@ struct OutlineOptions {
   int blocks_across = 400;  // The cut decides on blocks: the view's longer side in this many.
   SurroundOptions surround;
   CutOptions cut;
-  int band_px = 3;  // RefineRim moves the cut's outline by up to a block and this many pixels.
+  int band_px = 8;  // RefineRim moves the cut's outline by up to a block and this many pixels.
   // The leaf.
   double min_area = 0.02;        // A leaf covers at least this share of the image.
   double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
@@ -73,14 +73,22 @@ struct OutlineOptions {
   // What the operator says lies there: a leaf is never split, a book always looked for as two
   // pages (a warning when they are not found), auto splits on strong evidence only.
   ObjectKind object = ObjectKind::kAuto;
-  double gutter_rise_mm = 15;  // A spread's pages rise at least this much from the gutter, mm.
-  // A gutter is a crease, not a trough: within gutter_width_mm of it each page rises at least
-  // gutter_crease_mm (or is hidden in it). A leaf rolled into a trough (a cone, a roll) rises
-  // gently from its lowest line and stays one leaf.
-  double gutter_width_mm = 10;
-  double gutter_crease_mm = 3;
+  // A gutter (SplitAtGutter) is a valley from which each page rises gutter_rise_mm within
+  // gutter_reach_mm, sharply: gutter_crease_mm within gutter_width_mm (a book's pages at 20
+  // degrees rise 1.1 mm in 3 mm; a trough, a roll or a ripple rises gently from its lowest line
+  // and stays one leaf).
+  double gutter_rise_mm = 2;
+  double gutter_reach_mm = 40;
+  double gutter_width_mm = 3;
+  double gutter_crease_mm = 0.6;
 
   bool Check(std::string* why) const;
+};
+
+// Why an outline is doubtful: a warning for the report, with its code (outline_uncertain,
+// object_ambiguous, ...) and a message for the operator that says what to do.
+struct OutlineDoubt {
+  std::string code, message;
 };
 
 struct Outline {
@@ -90,11 +98,12 @@ struct Outline {
   double confidence = 0;         // Share of the rim where the leaf is set apart from its surround.
   bool touches_border = false;   // The leaf runs off the camera's view.
   std::string method;            // How it was found: "cut" (every cue at once).
-  // Share of the leaf found (by any cue) that has a 3D point; what has none where it reaches
-  // the leaf's outline (a shadow, a side seen edge-on) is not in `mask`.
-  double measured_share = 1;
+  // Share of the leaf found (by any cue) that has a 3D point: what has none where it reaches the
+  // leaf's outline (a shadow, a side seen edge-on) is not in `mask`, and holes filled are.
+  double measured_share = 0;
   int holes = 0;                 // Holes in the leaf that show what is under it.
   cv::Vec4f gutter{0, 0, 0, 0};  // A spread's gutter line in the image: (vx, vy, x0, y0).
+  std::vector<OutlineDoubt> doubts;  // What makes it doubtful (none: found with confidence).
 };
 
 // Finds the leaf in an organised point map (CV_32FC3, mm, NaN where invalid) and its texture

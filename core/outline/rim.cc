@@ -64,6 +64,10 @@ void Flood(const cv::Mat& strength, cv::Mat* labels) {
   }
 }
 
+namespace {
+constexpr float kUnmeasuredLevel = 4;  // Rim-threshold units: a strong rim.
+}  // namespace
+
 cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, int block, int band) {
   const cv::Size size = cues.gray.size();
   // The cut at full size (the view's last partial row and column of blocks as their neighbours).
@@ -71,17 +75,24 @@ cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, int block, int band) {
   cv::resize(cut, full, cut.size() * block, 0, 0, cv::INTER_NEAREST);
   cv::copyMakeBorder(full, full, 0, size.height - full.rows, 0, size.width - full.cols,
                      cv::BORDER_REPLICATE);
-  // Seeds: what lies farther than a block and the band from the cut's outline, on either side.
+  // Seeds: what lies farther than a block and the band from the cut's outline, on either side,
+  // and the middle of any part of the surround narrower than that (a hole, the gap between a
+  // book's pages keeps a seed: the ridge of its distance from the outline, three pixels in at
+  // least). A narrow part of the leaf gets none: the cut's errors are such parts (blocks of the
+  // surround beside a raised edge, whose heights the edge's blur biases).
   const int reach = block + band;
-  const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * reach + 1, 2 * reach + 1});
-  cv::Mat inside, outside;
-  cv::erode(full, inside, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(255));
-  cv::erode(~full, outside, disc, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(255));
   cv::Mat labels(size, CV_8U, cv::Scalar(0));
-  labels.setTo(1, inside);
-  labels.setTo(2, outside);
-  // Flooded on the stronger of the rim and the texture's edge.
+  cv::Mat distance, widest;
+  cv::distanceTransform(full, distance, cv::DIST_L2, 3);
+  labels.setTo(1, distance >= reach);
+  cv::distanceTransform(~full, distance, cv::DIST_L2, 3);
+  cv::dilate(distance, widest, cv::Mat());
+  labels.setTo(2, (distance >= reach) | ((distance >= widest) & (distance >= 3)));
+  // Flooded on the stronger of the rim and the texture's edge; a pixel without a height is a
+  // crest of its own (the floods meet across a band without heights: a shadow beside a raised
+  // edge, or the edge seen edge-on, does not carry the leaf onto what lies beyond it).
   cv::Mat level = cv::max(cues.rim, cues.edge);
+  level.setTo(cv::Scalar(kUnmeasuredLevel), (cues.z < -1e3f) & (level < kUnmeasuredLevel));
   Flood(level, &labels);
   return labels == 1;
 }

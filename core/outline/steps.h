@@ -136,12 +136,13 @@ bool TouchesBorder(const cv::Mat& leaf, int border);
 int SidesTouched(const cv::Mat& mask, int border);
 
 // ---- SplitAtGutter ----
-// An open book's gutter: a straight valley down the leaf from which the surface rises at least
-// `options.gutter_rise_mm` on both sides, a crease (within gutter_width_mm each side rises
-// gutter_crease_mm, or is hidden from view), not a trough. Splits the leaf into its left and
-// right pages; false if there is no such valley. `parted` (if given): whether the two sides are
-// parted along it (a gap, or a band out of view, between them along most of the valley: two
-// sheets, not one creased leaf).
+// An open book's gutter: a straight valley down the leaf (through each row's lowest point in the
+// middle three fifths of the leaf), from which the surface rises at least gutter_rise_mm within
+// gutter_reach_mm on both sides, and sharply: gutter_crease_mm within gutter_width_mm (or is
+// hidden in it). A trough (a cone, a roll, a ripple) rises gently from its lowest line. Splits
+// the leaf into its left and right pages; false if there is no such valley. `parted` (if given):
+// whether the two sides are parted along most of it (a gap, or a band out of view, between them:
+// two sheets, not one creased leaf).
 bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
                    const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
                    bool* parted = nullptr);
