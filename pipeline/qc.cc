@@ -133,7 +133,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
                   report.Number("flattening", "folded_quads", page));
     strain += buf;
   }
-  check("flattening", {"strain_high", "crease_sharp"}, {"fold_over"}, false, strain);
+  check("flattening", {"strain_high"}, {"fold_over"}, false, strain);
   check("outline", {"outline_uncertain", "leaf_ambiguous", "object_ambiguous"}, {}, false,
         Percent(report.Number("outline", "confidence")) + " of the rim set apart (" +
             report.Text("outline", "method") + ")");

@@ -323,14 +323,6 @@ StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const Cam
   r.Number("sheet", "skirt_nodes", mesh->skirt);
   r.Number("sheet", "springs", static_cast<double>(mesh->springs.size()));
   r.Number("sheet", "quads", static_cast<double>(mesh->quads.size()));
-  const double crease = CreaseShortening(points, page_mask, *mesh);
-  r.Number("sheet", "crease_shortening_mm", crease);
-  if (crease > options.limits.max_crease_shortening_mm) {
-    r.Warn("crease_sharp",
-           "a sharp crease crosses the leaf: the sheet's straight springs span it short, and the "
-           "restored page is about " + Fixed(crease, 2) +
-               " mm short across it (the sheet's cells are wider than the crease's bend)");
-  }
   return stage.Finish(Status::Ok());
 }
 

@@ -35,8 +35,6 @@ struct WarningLimits {
   double min_raised_hole = 0.02;
   double max_mean_strain = 0.002;     // Mean relative spring-length error after flattening.
   double max_strain = 0.05;           // Largest relative spring-length error.
-  // What a sharp crease may take from the restored page across it (CreaseShortening), mm.
-  double max_crease_shortening_mm = 0.05;
   cv::Size2d expected_leaf_mm{0, 0};  // The leaf's size as the operator expects it (0: none).
   double size_tolerance = 0.1;        // Relative difference from it that is doubtful.
   // Share of the leaf's pixels that may be clipped (at the camera's maximum, or 0): above it,

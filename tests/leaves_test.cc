@@ -906,7 +906,7 @@ INSTANTIATE_TEST_SUITE_P(Scenes, Leaves,
                                            Scene{"burnt_support_curl", PageShape::kCurl, true,
                                                  false, false, OutlineKind::kBurnt, 0.3},
                                            Scene{"ripple", PageShape::kRipple, false, false, false,
-                                                 OutlineKind::kRectangle, 0.08, true},
+                                                 OutlineKind::kRectangle, 0.08, false},
                                            Scene{"spread", PageShape::kFlat, false, false, true}),
                          [](const ::testing::TestParamInfo<Scene>& info) {
                            return std::string(info.param.name);

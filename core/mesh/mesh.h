@@ -78,14 +78,4 @@ cv::Size GridForError(const Mesh& mesh, double max_error_px, int max_nodes = 400
 void ConnectSheet(bool bend_springs, const std::function<cv::Point2d(const cv::Vec3d&)>& project,
                   Mesh* mesh);
 
-// How much the sheet's straight springs shorten the page across a sharp crease, mm: along each
-// row and column of the grid, the sum over its springs of how much longer the measured page is
-// between their nodes (along the straight image line, every 2 pixels, each point its measured
-// neighbours weighted by a tent 3 pixels wide) than the chord, where that is 4% or more (a
-// spring 4 mm across a crease whose sides slope 30 degrees each way is 13% short; noise, ink's
-// edges and gentle bends lengthen a path by well under 4%, and more than 30% is a defect of the
-// data); the 80th percentile of those sums over the rows, or over the columns, whichever is more
-// (a crease crosses many; a flying point or a hole's edge, one or two).
-double CreaseShortening(const cv::Mat& points, const cv::Mat& page_mask, const Mesh& mesh);
-
 }  // namespace vellum

@@ -25,50 +25,6 @@ bool CutOptions::Check(std::string* why) const {
 }
 
 namespace outline {
-namespace {
-
-// A look: a histogram of the blocks' colours over 32 brightness levels and 4 x 4 hues (red and
-// blue each against green), so a gray texture uses the brightness alone.
-class Look {
- public:
-  static constexpr int kLevels = 32, kHues = 4, kBins = kLevels * kHues * kHues;
-  static int Bin(const cv::Vec3b& c) {
-    const int level = (c[0] + 2 * c[1] + c[2]) / 4 / (256 / kLevels);
-    const int red = std::clamp((c[2] - c[1] + 256) * kHues / 512, 0, kHues - 1);
-    const int blue = std::clamp((c[0] - c[1] + 256) * kHues / 512, 0, kHues - 1);
-    return (level * kHues + red) * kHues + blue;
-  }
-  void Add(int bin, double weight) {
-    counts_[bin] += weight;
-    total_ += weight;
-  }
-  // Log-probabilities: each bin's count smoothed with its brightness neighbours (weights 1, 2,
-  // 1), with a floor of a fiftieth of an even share, normalised.
-  void Finish() {
-    std::array<double, kBins> smooth{};
-    double sum = 0;
-    for (int b = 0; b < kBins; ++b) {
-      const int level = b / (kHues * kHues), hue = b % (kHues * kHues);
-      double s = 2 * counts_[b], weight = 2;
-      for (int d : {-1, 1}) {
-        if (level + d < 0 || level + d >= kLevels) continue;
-        s += counts_[(level + d) * kHues * kHues + hue];
-        weight += 1;
-      }
-      smooth[b] = s / weight + 0.02 * total_ / kBins + 1e-6;
-      sum += smooth[b];
-    }
-    for (int b = 0; b < kBins; ++b) log_[b] = std::log(smooth[b] / sum);
-  }
-  double Log(int bin) const { return log_[bin]; }
-  bool empty() const { return total_ <= 0; }
-
- private:
-  std::array<double, kBins> counts_{}, log_{};
-  double total_ = 0;
-};
-
-}  // namespace
 
 
 cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above) {
@@ -90,8 +46,8 @@ cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above) {
   return out;
 }
 
-cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
-                const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options) {
+Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
+            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options) {
   const cv::Size g = blocks.grid;
   const int n = g.area();
   // The heights' costs, which do not change from round to round: (to call it leaf, to call it
@@ -141,9 +97,12 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
   // surround and those of the seed that look unlike the surround (less likely under its look
   // than under an even one: the seed may hold some of the surround, and ink as dark as a dark
   // table teaches nothing).
-  cv::Mat leaf(g, CV_8U, cv::Scalar(0));
+  Cut cut;
+  cv::Mat& leaf = cut.leaf;
+  leaf = cv::Mat(g, CV_8U, cv::Scalar(0));
+  Look& look_leaf = cut.look_leaf;
+  Look& look_surround = cut.look_surround;
   std::vector<uint8_t> leafy(n, 0), surroundish(n, 0), barred(n, 0), strange(n, 0);
-  Look look_surround;
   for (int i = 0; i < n; ++i) {
     const int by = i / g.width, bx = i % g.width;
     barred[i] = !allowed.empty() && !allowed.at<uint8_t>(by, bx);
@@ -173,7 +132,7 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
     surroundish[i] = surroundish[i] && !leafy[i];
   }
   for (int round = 0; round <= options.rounds; ++round) {
-    Look look_leaf;
+    look_leaf = Look();
     look_surround = Look();
     for (int i = 0; i < n; ++i) {
       if (leafy[i]) look_leaf.Add(bins[i], 1);
@@ -196,8 +155,6 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
           to_leaf += options.border_cost;
         }
         if (barred[i]) to_leaf = 1e6;
-        if (getenv("CUT_DEBUG") && bx >= 270 && bx <= 290 && by >= 18 && by <= 28 && bx % 3 == 0 && by % 2 == 0)
-          fprintf(stderr, "blk %d,%d bin %d leafy %d sur %d look %.2f/%.2f h %.2f/%.2f -> %.2f/%.2f\n", bx, by, bins[i], leafy[i], surroundish[i], look_leaf.Log(bins[i]), look_surround.Log(bins[i]), height_leaf[i], height_surround[i], to_leaf, to_surround);
         graph.addVtx();
         // The source side is the leaf: a block left there pays its cost to call it leaf (the
         // link to the sink, cut), one moved to the sink its cost to call it surround.
@@ -209,7 +166,9 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
       if (down[i] > 0) graph.addEdges(i, i + g.width, down[i], down[i]);
     }
     graph.maxFlow();
-    for (int i = 0; i < n; ++i) leaf.at<uint8_t>(i / g.width, i % g.width) = graph.inSourceSegment(i) ? 255 : 0;
+    for (int i = 0; i < n; ++i) {
+      leaf.at<uint8_t>(i / g.width, i % g.width) = graph.inSourceSegment(i) ? 255 : 0;
+    }
     if (round == options.rounds) break;
     // The looks relearned from this cut: the surround's from what it left, the leaf's from what
     // it took but for what lies on the surround and looks like it (a support as bright as paper,
@@ -221,7 +180,7 @@ cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
       surroundish[i] = !in && !barred[i];
     }
   }
-  return leaf;
+  return cut;
 }
 
 }  // namespace outline

@@ -189,15 +189,14 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   std::vector<Plane> planes = FitSurround(blocks, options.surround);
   cv::Mat above = AboveSurround(blocks, planes);
   const cv::Mat seed = SeedBlocks(blocks, size, options.hint);
-  const cv::Mat first =
-      CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
-  cv::Mat cut = AtSeed(first, seed);
+  Cut found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
+  cv::Mat cut = AtSeed(found.leaf, seed);
   const double area_min = options.min_area * size.area();
   const int min_blocks = static_cast<int>(area_min / (block * block));
   if (cv::countNonZero(cut) < min_blocks && options.hint.empty()) {
     // Nothing at the view's centre: the leaf lies off it. The largest part found that does not
     // run off the view, flagged when another almost as large was found too.
-    cut = LargestWithin(first, &out);
+    cut = LargestWithin(found.leaf, &out);
   }
   // What was found may be a support or a frame with the leaf on it: cut again inside it, against
   // the plane along its outline (twice: a leaf in a frame on a support).
@@ -208,9 +207,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     std::vector<Plane> more = planes;
     more.push_back(plane);
     const cv::Mat above_more = AboveSurround(blocks, more);
-    const cv::Mat inner_cut = CutLeaf(blocks, above_more, seed, ring, cut, options.cut);
-    cv::Mat inner = AtSeed(inner_cut, seed);
-    if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut);
+    Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, cut, options.cut);
+    cv::Mat inner = AtSeed(inner_cut.leaf, seed);
+    if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     if (!LiesOn(blocks, cut, inner, above_more, min_blocks)) {
       // What was found lies on a plane well above the table, and nothing on it stands off it: a
       // support or a box, maybe, with the leaf flush on it or elsewhere.
@@ -229,6 +228,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     cut = inner;
     planes = more;
     above = above_more;
+    found = inner_cut;
   }
   if (cv::countNonZero(cut) * block * block < area_min) {
     out.status = Status::Error(
@@ -236,9 +236,10 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
         "by its height or its look");
     return out;
   }
-  // Brought to the pixel; what it holds without a height, where that reaches beyond it (a
-  // shadow, the leaf seen edge-on), is not restored.
-  cv::Mat region = RefineRim(cut, cues, block, options.band_px);
+  // Brought to the pixel, over the pixels with a height: what the cut holds without one, where
+  // that reaches its outline (a shadow, a side seen edge-on), is not restored.
+  cv::Mat region = RefineRim(cut, cues, points, planes, found.look_leaf, found.look_surround,
+                             block, options.band_px);
   cv::Mat full_cut;
   cv::resize(cut, full_cut, cut.size() * block, 0, 0, cv::INTER_NEAREST);
   cv::copyMakeBorder(full_cut, full_cut, 0, size.height - full_cut.rows, 0,
@@ -256,8 +257,10 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
   out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf);
+  // The rim's mixed pixels out, once the holes are settled (their rims are the leaf's too).
+  TrimRim(cues.z, 10 * options.step_mm, &leaf);
   out.measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
-                       std::max(1, cv::countNonZero(leaf | region));
+                       std::max(1, cv::countNonZero(leaf | full_cut));
   out.confidence = RimConfidence(leaf, cues);
   out.touches_border = TouchesBorder(leaf, options.border_px);
   out.method = "cut";

@@ -1,6 +1,7 @@
 // Flood, RefineRim and the outline's figures (steps.h).
 #include <algorithm>
 #include <cmath>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/outline/steps.h"
@@ -64,11 +65,9 @@ void Flood(const cv::Mat& strength, cv::Mat* labels) {
   }
 }
 
-namespace {
-constexpr float kUnmeasuredLevel = 4;  // Rim-threshold units: a strong rim.
-}  // namespace
-
-cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, int block, int band) {
+cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
+                  const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
+                  int block, int band) {
   const cv::Size size = cues.gray.size();
   // The cut at full size (the view's last partial row and column of blocks as their neighbours).
   cv::Mat full;
@@ -88,13 +87,88 @@ cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, int block, int band) {
   cv::distanceTransform(~full, distance, cv::DIST_L2, 3);
   cv::dilate(distance, widest, cv::Mat());
   labels.setTo(2, (distance >= reach) | ((distance >= widest) & (distance >= 3)));
-  // Flooded on the stronger of the rim and the texture's edge; a pixel without a height is a
-  // crest of its own (the floods meet across a band without heights: a shadow beside a raised
-  // edge, or the edge seen edge-on, does not carry the leaf onto what lies beyond it).
+  // And the surround seen in a well of the cut's leaf: a pixel on a surround plane (within 0.2
+  // mm: a dark table's points are that noisy) that looks like the surround, with the leaf a
+  // millimetre or more above it within four pixels (the table between an open book's pages,
+  // narrower than the cut's blocks resolve).
+  if (!planes.empty() && !leaf.empty() && !surround.empty()) {
+    cv::Mat highest;
+    cv::dilate(cues.z, highest, cv::Mat::ones(9, 9, CV_8U));
+    cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+      for (int v = range.start; v < range.end; ++v) {
+        const uint8_t* in = full.ptr<uint8_t>(v);
+        const float* z = cues.z.ptr<float>(v);
+        const float* high = highest.ptr<float>(v);
+        const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+        const cv::Vec3b* colour = cues.colour.ptr<cv::Vec3b>(v);
+        uint8_t* label = labels.ptr<uint8_t>(v);
+        for (int u = 0; u < size.width; ++u) {
+          if (!in[u] || !Valid(z[u]) || high[u] < z[u] + 1.0f || !std::isfinite(p[u][0])) continue;
+          double nearest = 1e9;
+          for (const Plane& plane : planes) {
+            nearest = std::min(nearest, std::fabs(z[u] - plane.At(p[u][0], p[u][1])));
+          }
+          const int bin = Look::Bin(colour[u]);
+          if (nearest <= 0.2 && surround.Log(bin) - leaf.Log(bin) > 1.0) label[u] = 2;
+        }
+      }
+    });
+  }
+  // Flooded on the stronger of the rim and the texture's edge, over the pixels with a height: a
+  // band without heights (a shadow beside a raised edge, the edge seen edge-on) stops both floods,
+  // and never carries the leaf onto what lies beyond it.
   cv::Mat level = cv::max(cues.rim, cues.edge);
-  level.setTo(cv::Scalar(kUnmeasuredLevel), (cues.z < -1e3f) & (level < kUnmeasuredLevel));
+  level.setTo(cv::Scalar(-1), cues.z < -1e3f);
   Flood(level, &labels);
   return labels == 1;
+}
+
+void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
+  constexpr int kReach = 4;  // The window: 9 x 9 pixels.
+  for (int pass = 0; pass < 2; ++pass) {
+    cv::Mat eroded, inner;
+    cv::erode(*leaf, eroded, cv::Mat());
+    cv::erode(*leaf, inner, cv::Mat::ones(5, 5, CV_8U));
+    const cv::Mat rim = *leaf & ~eroded;
+    std::vector<cv::Point> rim_pixels;
+    cv::findNonZero(rim, rim_pixels);
+    std::vector<uint8_t> drop(rim_pixels.size(), 0);
+    cv::parallel_for_(cv::Range(0, static_cast<int>(rim_pixels.size())), [&](const cv::Range& r) {
+      for (int k = r.start; k < r.end; ++k) {
+        const cv::Point p = rim_pixels[k];
+        const float zp = z.at<float>(p);
+        if (!Valid(zp)) continue;
+        // A plane z = a + b du + c dv through the leaf's pixels two or more inside the rim.
+        cv::Matx33d ata = cv::Matx33d::zeros();
+        cv::Vec3d atb(0, 0, 0);
+        int n = 0;
+        for (int dv = -kReach; dv <= kReach; ++dv) {
+          const int v = p.y + dv;
+          if (v < 0 || v >= z.rows) continue;
+          for (int du = -kReach; du <= kReach; ++du) {
+            const int u = p.x + du;
+            if (u < 0 || u >= z.cols || !inner.at<uint8_t>(v, u)) continue;
+            const float zz = z.at<float>(v, u);
+            if (!Valid(zz)) continue;
+            const cv::Vec3d row(1, du, dv);
+            ata += row * row.t();
+            atb += row * static_cast<double>(zz);
+            ++n;
+          }
+        }
+        cv::Vec3d plane;
+        if (n < 12 || !cv::solve(ata, atb, plane, cv::DECOMP_CHOLESKY)) continue;
+        // Off it by more than `off_mm` and what its slope gives over two pixels.
+        const double slope = std::hypot(plane[1], plane[2]);
+        drop[k] = std::fabs(zp - plane[0]) > off_mm + 2 * slope;
+      }
+    });
+    int dropped = 0;
+    for (size_t k = 0; k < rim_pixels.size(); ++k) {
+      if (drop[k]) leaf->at<uint8_t>(rim_pixels[k]) = 0, ++dropped;
+    }
+    if (dropped == 0) break;
+  }
 }
 
 double RimConfidence(const cv::Mat& leaf, const Cues& cues) {

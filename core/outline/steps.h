@@ -15,6 +15,8 @@
 // Internal to core/outline; the public API is outline.h.
 #pragma once
 
+#include <array>
+#include <cmath>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -95,12 +97,61 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
 cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes);
 
 // ---- CutLeaf ----
+// A look: a histogram of colours over 32 brightness levels and 4 x 4 hues (red and blue each
+// against green), so a gray texture uses the brightness alone; CutLeaf learns one for the leaf
+// and one for the surround.
+class Look {
+ public:
+  static constexpr int kLevels = 32, kHues = 4, kBins = kLevels * kHues * kHues;
+  static int Bin(const cv::Vec3b& c) {
+    const int level = (c[0] + 2 * c[1] + c[2]) / 4 / (256 / kLevels);
+    const int red = std::clamp((c[2] - c[1] + 256) * kHues / 512, 0, kHues - 1);
+    const int blue = std::clamp((c[0] - c[1] + 256) * kHues / 512, 0, kHues - 1);
+    return (level * kHues + red) * kHues + blue;
+  }
+  void Add(int bin, double weight) {
+    counts_[bin] += weight;
+    total_ += weight;
+  }
+  // Log-probabilities: each bin's count smoothed with its brightness neighbours (weights 1, 2,
+  // 1), with a floor of a fiftieth of an even share, normalised.
+  void Finish() {
+    std::array<double, kBins> smooth{};
+    double sum = 0;
+    for (int b = 0; b < kBins; ++b) {
+      const int level = b / (kHues * kHues), hue = b % (kHues * kHues);
+      double s = 2 * counts_[b], weight = 2;
+      for (int d : {-1, 1}) {
+        if (level + d < 0 || level + d >= kLevels) continue;
+        s += counts_[(level + d) * kHues * kHues + hue];
+        weight += 1;
+      }
+      smooth[b] = s / weight + 0.02 * total_ / kBins + 1e-6;
+      sum += smooth[b];
+    }
+    for (int b = 0; b < kBins; ++b) log_[b] = std::log(smooth[b] / sum);
+  }
+  double Log(int bin) const { return log_[bin]; }
+  bool empty() const { return total_ <= 0; }
+
+ private:
+  std::array<double, kBins> counts_{}, log_{};
+  double total_ = 0;
+};
+
+
+// A cut: leaf (255) against surround (0) over the blocks, and the looks it learned.
+struct Cut {
+  cv::Mat leaf;
+  Look look_leaf, look_surround;
+};
+
 // Leaf (255) against surround (0) over the blocks, from `above` (AboveSurround), the blocks'
 // look, and `seed` (blocks where the leaf is expected: its look is learned there first, with the
 // blocks well off the surround). The surround's first look is learned from `surround` (blocks);
 // only blocks of `allowed` (all, when empty) may be leaf.
-cv::Mat CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
-                const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options);
+Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
+            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options);
 // The blocks a first cut learns the surround's look from: those on it (within twice their
 // noise) in the grid's outer tenth, and those on its border without a height.
 cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above);
@@ -118,7 +169,18 @@ bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vec
 void Flood(const cv::Mat& level, cv::Mat* labels);
 // The block mask `cut` (CutLeaf) at full size, its outline moved to the crest of the rims and
 // edges within `band` pixels of it.
-cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, int block, int band);
+// Seeds of the surround also where a pixel inside the cut lies on one of `planes` and looks like
+// the surround (by the cut's looks) with the leaf well above it close by: the table between an
+// open book's pages, narrower than the blocks resolve.
+cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
+                  const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
+                  int block, int band);
+
+// The leaf's rim pixels whose heights do not continue its surface (off a plane through the leaf
+// two or more pixels inside, in a 9 x 9 window, by more than `off_mm` and what its slope gives
+// over two pixels) taken out, twice over: the mixed pixels of a raised edge, half leaf and half
+// what lies below, that the restored page would carry beyond the leaf's edge.
+void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf);
 
 // ---- FillHoles ----
 // Fills the holes of `leaf` that show no other surface (heights on the leaf's surface around
