@@ -33,16 +33,29 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
       if (in[u] && Valid(row[u]) && (lowest < 0 || row[u] < row[lowest])) lowest = u;
     }
     if (lowest < 0 || !std::isfinite(p[lowest][0])) continue;
-    // Each side rises gutter_rise_mm within gutter_reach_mm, and gutter_crease_mm within
-    // gutter_width_mm (or has no point that near: hidden in the gutter).
+    // Each side rises gutter_rise_mm within gutter_reach_mm of the bottom, and gutter_crease_mm
+    // within gutter_width_mm of where that side begins (across a gap between the pages, the far
+    // page begins at its first point; a side with no point that near is hidden in the gutter).
     const cv::Point2f bottom(p[lowest][0], p[lowest][1]);
+    cv::Point2f begins[2] = {bottom, bottom};
+    for (int side = 0; side < 2; ++side) {
+      for (int u = lowest + (side ? 1 : -1); u >= first && u <= last; u += side ? 1 : -1) {
+        if (!in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
+        if (cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom) <= options.gutter_width_mm) {
+          begins[side] = cv::Point2f(p[u][0], p[u][1]);
+        }
+        break;
+      }
+    }
     float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData};
     for (int u = first; u <= last; ++u) {
       if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
-      const double d = cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom);
+      const cv::Point2f at(p[u][0], p[u][1]);
       const int side = u > lowest;
-      if (d <= options.gutter_reach_mm) high[side] = std::max(high[side], row[u]);
-      if (d <= options.gutter_width_mm) near[side] = std::max(near[side], row[u]);
+      if (cv::norm(at - bottom) <= options.gutter_reach_mm) high[side] = std::max(high[side], row[u]);
+      if (cv::norm(at - begins[side]) <= options.gutter_width_mm) {
+        near[side] = std::max(near[side], row[u]);
+      }
     }
     bool valley_here = true;
     for (int side = 0; side < 2; ++side) {

@@ -263,6 +263,20 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
                        std::max(1, cv::countNonZero(leaf | full_cut));
   out.confidence = RimConfidence(leaf, cues);
   out.touches_border = TouchesBorder(leaf, options.border_px);
+  // Plausibility: a leaf lies inside the view; what fills most of it, or reaches two or more of
+  // its sides, is more likely the table or a support.
+  const int sides = SidesTouched(leaf, options.border_px);
+  const double view_share =
+      static_cast<double>(cv::countNonZero(leaf)) / std::max(1, cv::countNonZero(measured));
+  if (sides >= 2 || view_share > options.max_view_share) {
+    out.doubts.push_back(
+        {"outline_uncertain",
+         "the leaf found covers " + Fixed(100 * view_share, 0) + "% of what was measured and " +
+             "reaches " + std::to_string(sides) +
+             " of the view's sides: more likely the table or a support than a leaf; check the "
+             "outline in the report, or draw a leaf hint in the viewer (--leaf-hint) and scan "
+             "again"});
+  }
   out.method = "cut";
   out.mask = leaf;
   // An open book: its two pages at the gutter. Split when the operator says it is a book, or,

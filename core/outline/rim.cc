@@ -114,17 +114,18 @@ cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
       }
     });
   }
-  // Flooded on the stronger of the rim and the texture's edge, over the pixels with a height: a
-  // band without heights (a shadow beside a raised edge, the edge seen edge-on) stops both floods,
-  // and never carries the leaf onto what lies beyond it.
-  cv::Mat level = cv::max(cues.rim, cues.edge);
+  // Flooded on the rim and the texture's edge together (the edge, sharp, places the outline
+  // within the rim's band, which the decoder's fit spreads over 7 pixels), over the pixels with a
+  // height: a band without heights (a shadow beside a raised edge, the edge seen edge-on) stops
+  // both floods, and never carries the leaf onto what lies beyond it.
+  cv::Mat level = cues.rim + cues.edge;
   level.setTo(cv::Scalar(-1), cues.z < -1e3f);
   Flood(level, &labels);
   return labels == 1;
 }
 
 void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
-  constexpr int kReach = 4;  // The window: 9 x 9 pixels.
+  constexpr int kReach = 5;  // The window: 11 x 11 pixels (at a corner, 16 pixels inside).
   for (int pass = 0; pass < 2; ++pass) {
     cv::Mat eroded, inner;
     cv::erode(*leaf, eroded, cv::Mat());

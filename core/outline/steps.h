@@ -177,7 +177,7 @@ cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
                   int block, int band);
 
 // The leaf's rim pixels whose heights do not continue its surface (off a plane through the leaf
-// two or more pixels inside, in a 9 x 9 window, by more than `off_mm` and what its slope gives
+// two or more pixels inside, in an 11 x 11 window, by more than `off_mm` and what its slope gives
 // over two pixels) taken out, twice over: the mixed pixels of a raised edge, half leaf and half
 // what lies below, that the restored page would carry beyond the leaf's edge.
 void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf);

@@ -166,12 +166,25 @@ bool RansacPlane(const std::vector<cv::Vec3f>& samples, const std::vector<float>
     collect(p, &in);
     if (in.size() > best_in.size()) best_in.swap(in), best = p;
   }
-  // Refined on its inliers, twice.
+  // Refined on its inliers, twice, the second time on those within three times the first fit's
+  // own scatter (a board's edge, its heights spread by the decoder's fit, stays out).
   for (int round = 0; round < 2 && best_in.size() >= 3; ++round) {
     std::vector<cv::Vec3f> points;
     for (int m : best_in) points.push_back(samples[m]);
     if (!FitPlane(points, &best)) break;
     collect(best, &best_in);
+    if (round == 0 && best_in.size() >= 3) {
+      std::vector<float> off;
+      for (int m : best_in) off.push_back(std::fabs(samples[m][2] - best.At(samples[m][0], samples[m][1])));
+      const double scatter = 1.4826 * Median(&off);
+      std::vector<int> close;
+      for (int m : best_in) {
+        if (std::fabs(samples[m][2] - best.At(samples[m][0], samples[m][1])) <= std::max(3 * scatter, 0.003)) {
+          close.push_back(m);
+        }
+      }
+      if (close.size() >= 3) best_in.swap(close);
+    }
   }
   if (best_in.size() < least || std::hypot(best.a, best.b) > max_slope) return false;
   best.inliers = static_cast<int>(best_in.size());

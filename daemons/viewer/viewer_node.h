@@ -72,6 +72,8 @@ class ViewerNode {
   const std::string& light_prompt() const { return prompt_.text; }
   // The leaf hint the next scan carries, as fractions of the camera's view; empty when none.
   const cv::Rect2d& leaf_hint() const { return hint_; }
+  // What the operator says the scans of this sequence are ('o' turns it: auto, leaf, book).
+  ObjectKind object() const { return object_; }
   // Where the preview was last drawn on the window (its pixels); empty before any.
   cv::Rect preview_area() const { return preview_at_; }
 
@@ -109,6 +111,7 @@ class ViewerNode {
   int shown_ = -1;
   Clock::time_point next_draw_;
   ScanIdentity next_;
+  ObjectKind object_ = ObjectKind::kAuto;  // The sequence's object, sent with each request.
   std::vector<ScanIdentity> history_;  // The identities of the scans asked for, for undo.
   int editing_ = -1;                   // The field being edited, or -1.
   bool sheet_ = false;                 // The contact sheet is shown.
