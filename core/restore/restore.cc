@@ -272,6 +272,12 @@ double UprightAngle(const cv::Mat& mask) {
   const auto& outline = *std::max_element(
       contours.begin(), contours.end(),
       [](const auto& a, const auto& b) { return cv::contourArea(a) < cv::contourArea(b); });
+  // A rectangle (it fills its smallest enclosing rectangle to 97%): that rectangle's turn. Every
+  // point of its four edges counts, where the segments below would count a pixel staircase's.
+  const cv::RotatedRect box = cv::minAreaRect(outline);
+  if (box.size.area() > 0 && cv::contourArea(outline) >= 0.97 * box.size.area()) {
+    return box.angle - 90.0 * std::round(box.angle / 90.0);
+  }
   // The outline's segments, their directions folded into [0, 90) degrees, weighted by length.
   std::vector<cv::Point> poly;
   cv::approxPolyDP(outline, poly, 1.5, true);
@@ -316,7 +322,7 @@ double UprightAngle(const cv::Mat& mask) {
     }
     angle = peak;
   } else {
-    angle = cv::minAreaRect(outline).angle;
+    angle = box.angle;
   }
   angle -= 90.0 * std::round(angle / 90.0);  // Into [-45, 45].
   return angle;
