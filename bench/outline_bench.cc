@@ -11,13 +11,13 @@
 #include <cstdio>
 #include <vector>
 
+#include "bench/baseline/outline_v1.h"
 #include "bench/ratio_reporter.h"
 #include "core/decode/decode.h"
 #include "core/geometry/triangulate.h"
 #include "core/mesh/mesh.h"
 #include "core/outline/outline.h"
 #include "core/sim/evaluate.h"
-#include "bench/baseline/outline_v1.h"
 
 namespace vellum {
 namespace {

@@ -33,8 +33,7 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
                      const ScanIdentity& identity = ScanIdentity(),
                      const std::vector<ScanLight>& lights = {},
-                     const cv::Rect& leaf_hint = cv::Rect(),
-                     ObjectKind object = ObjectKind::kAuto);
+                     const cv::Rect& leaf_hint = cv::Rect(), ObjectKind object = ObjectKind::kAuto);
 
 // A station's extra lights (issue 17), as vellum-projector and vellum-lights read them from one
 // YAML file: `lights`, a sequence of {name, direction: [x, y, z], channel} (direction optional, as

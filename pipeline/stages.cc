@@ -229,8 +229,8 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
   }
   // Measured: of the leaf found by every cue, the share with a point (FindLeaf's), which counts
   // what the mask leaves out for want of points (a shadow at the rim, a side seen edge-on).
-  const double share_measured = std::min(leaf > 0 ? static_cast<double>(measured) / leaf : 0.0,
-                                         outline->measured_share);
+  const double share_measured =
+      std::min(leaf > 0 ? static_cast<double>(measured) / leaf : 0.0, outline->measured_share);
   const double share_high = leaf > 0 ? static_cast<double>(high) / leaf : 0;
   const double share_low = leaf > 0 ? static_cast<double>(low) / leaf : 0;
   r.Number("outline", "valid_in_leaf", share_measured);

@@ -81,9 +81,9 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
   }
   ObjectKind object;
   if (!m.object.empty() && !ParseObjectKind(m.object, &object)) {
-    return Refuse(what + ": SCAN_STARTED with object '" + Printable(m.object, 40) +
-                      "' (leaf, book or auto)",
-                  "scans refused");
+    return Refuse(
+        what + ": SCAN_STARTED with object '" + Printable(m.object, 40) + "' (leaf, book or auto)",
+        "scans refused");
   }
   std::vector<std::string> names;
   std::string bad;

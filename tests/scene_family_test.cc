@@ -24,6 +24,8 @@
 // also meet at least 90% of its scans and raise false alarms on at most 5% of those it meets.
 // VELLUM_FAMILY_TABLE=FILE writes the counts as a Markdown table; VELLUM_FAMILY_DUMP=DIR keeps
 // each missed scan's results and a picture of its outline against the truth.
+#include "core/sim/scene_family.h"
+
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -36,7 +38,6 @@
 #include <sstream>
 
 #include "core/sim/evaluate.h"
-#include "core/sim/scene_family.h"
 #include "pipeline/process.h"
 #include "tests/page_measure.h"
 
@@ -81,8 +82,8 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   input.scan = AsScan(scan);
   input.scan.object = s.said;
   input.calibration = scan.gantry->rig();
-  const std::string out = (fs::temp_directory_path() / ("vellum_family_" + std::to_string(getpid())))
-                              .string();
+  const std::string out =
+      (fs::temp_directory_path() / ("vellum_family_" + std::to_string(getpid()))).string();
   fs::remove_all(out);
   const char* dump = std::getenv("VELLUM_FAMILY_DUMP");
   const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
@@ -106,7 +107,8 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
     return finish();
   }
   o.holes = result.outline.holes;
-  for (const Warning& w : result.report.Warnings()) o.warnings += (o.warnings.empty() ? "" : ",") + w.code;
+  for (const Warning& w : result.report.Warnings())
+    o.warnings += (o.warnings.empty() ? "" : ",") + w.code;
   o.flagged = !o.warnings.empty();
   const GroundTruth& truth = scan.gantry->truth();
   const std::vector<Page>& pages = scan.gantry->pages();
@@ -119,9 +121,8 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
     const std::string name = page.name.empty() ? "" : page.name + " page: ";
     GroundTruth mine = truth;
     mine.on_page = truth.page_index == static_cast<int>(k + 1);
-    const double iou = k < result.outline.pages.size()
-                           ? MaskIoU(result.outline.pages[k], mine.on_page)
-                           : 0.0;
+    const double iou =
+        k < result.outline.pages.size() ? MaskIoU(result.outline.pages[k], mine.on_page) : 0.0;
     o.iou = std::min(o.iou, iou);
     if (iou < 0.98) missed << name << "outline IoU " << iou << "; ";
     const FlatErrorStats flat = CompareFlat(mine, page.mesh, page.flat.flat);
@@ -247,11 +248,11 @@ class MustShowScenes : public ::testing::TestWithParam<Named> {};
 TEST_P(MustShowScenes, MeetTheBarsWithNoWarning) {
   const Named& named = GetParam();
   const Outcome o = ScanAndMeasure(named.scene);
-  std::printf("[must] %-34s %s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
-              "mask off %d | %s%s%s\n",
-              named.name.c_str(), o.met ? "met " : "MISS", o.iou, o.sheet_mm, o.exp1_px, o.exp1_mm,
-              o.rigid_mm, o.off_mask, o.warnings.c_str(), o.missed.empty() ? "" : " | ",
-              o.missed.c_str());
+  std::printf(
+      "[must] %-34s %s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
+      "mask off %d | %s%s%s\n",
+      named.name.c_str(), o.met ? "met " : "MISS", o.iou, o.sheet_mm, o.exp1_px, o.exp1_mm,
+      o.rigid_mm, o.off_mask, o.warnings.c_str(), o.missed.empty() ? "" : " | ", o.missed.c_str());
   EXPECT_TRUE(o.met) << o.missed;
   EXPECT_FALSE(o.flagged) << o.warnings;
   if (named.scene.page.outline == OutlineKind::kBurnt) {
@@ -271,12 +272,14 @@ TEST(SceneFamily, EveryScanMeetsTheBarsOrIsFlagged) {
   for (uint64_t seed = first; seed < first + count; ++seed) {
     const FamilyScene scene = DrawFamilyScene(seed);
     const Outcome o = ScanAndMeasure(scene);
-    (o.met ? (o.flagged ? met_flagged : met_clean) : (o.flagged ? missed_flagged : missed_silent))++;
-    std::printf("[family] %-4s %-7s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
-                "mask off %d | %s | %s%s%s\n",
-                o.met ? "met" : "MISS", o.flagged ? "flagged" : "clean", o.iou, o.sheet_mm,
-                o.exp1_px, o.exp1_mm, o.rigid_mm, o.off_mask, scene.Describe().c_str(),
-                o.warnings.c_str(), o.missed.empty() ? "" : " | ", o.missed.c_str());
+    (o.met ? (o.flagged ? met_flagged : met_clean)
+           : (o.flagged ? missed_flagged : missed_silent))++;
+    std::printf(
+        "[family] %-4s %-7s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
+        "mask off %d | %s | %s%s%s\n",
+        o.met ? "met" : "MISS", o.flagged ? "flagged" : "clean", o.iou, o.sheet_mm, o.exp1_px,
+        o.exp1_mm, o.rigid_mm, o.off_mask, scene.Describe().c_str(), o.warnings.c_str(),
+        o.missed.empty() ? "" : " | ", o.missed.c_str());
     std::fflush(stdout);
     if (!o.met && !o.flagged) {
       ADD_FAILURE() << "silent and wrong: " << scene.Describe() << ": " << o.missed;

@@ -47,8 +47,8 @@ void StepDisagreement(const float* row, const float* rb, const float* ra, const 
   // there).
   auto disagree = [slope](float fb, float nb, float na, float fa) {
     const float at_before = 3 * na - 2 * fa - nb, at_after = na - 3 * nb + 2 * fb;
-    const float lo = std::fabs(at_before) < std::fabs(at_after) ? std::fabs(at_before)
-                                                                 : std::fabs(at_after);
+    const float lo =
+        std::fabs(at_before) < std::fabs(at_after) ? std::fabs(at_before) : std::fabs(at_after);
     const float gap = at_before * at_after > 0.0f ? lo : 0.0f;  // Opposite signs: they meet.
     const float d = gap - 0.5f * std::fabs(na - nb) / slope;
     return d > 0.0f ? d : 0.0f;  // NaN (a missing height) gives 0: no evidence.

@@ -26,7 +26,6 @@ bool CutOptions::Check(std::string* why) const {
 
 namespace outline {
 
-
 cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above) {
   const cv::Size g = blocks.grid;
   cv::Mat out(g, CV_8U, cv::Scalar(0));
@@ -68,12 +67,13 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
       const double sigma = std::hypot(noise, options.plane_mm), a = std::fabs(d);
       // log N(d; 0, sigma), and the leaf's density: flush, or spread over its thickness (half its
       // mass) and thinly over the next 100 mm (the other half).
-      const double log_on = -0.5 * (a / sigma) * (a / sigma) - std::log(sigma * std::sqrt(2 * M_PI));
-      const double leaf_spread = a <= options.thickness_mm ? spread : spread * options.thickness_mm / 100;
-      const double log_leaf =
-          std::log(options.flush_share * std::exp(log_on) + leaf_spread);
-      const double ratio =
-          std::clamp(log_leaf - log_on, -options.max_on, options.max_off) * blocks.valid.at<float>(by, bx);
+      const double log_on =
+          -0.5 * (a / sigma) * (a / sigma) - std::log(sigma * std::sqrt(2 * M_PI));
+      const double leaf_spread =
+          a <= options.thickness_mm ? spread : spread * options.thickness_mm / 100;
+      const double log_leaf = std::log(options.flush_share * std::exp(log_on) + leaf_spread);
+      const double ratio = std::clamp(log_leaf - log_on, -options.max_on, options.max_off) *
+                           blocks.valid.at<float>(by, bx);
       (ratio > 0 ? height_surround : height_leaf)[i] = static_cast<float>(std::fabs(ratio));
       on[i] = a <= 2 * sigma;
     }

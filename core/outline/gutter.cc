@@ -52,7 +52,8 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
       if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
       const cv::Point2f at(p[u][0], p[u][1]);
       const int side = u > lowest;
-      if (cv::norm(at - bottom) <= options.gutter_reach_mm) high[side] = std::max(high[side], row[u]);
+      if (cv::norm(at - bottom) <= options.gutter_reach_mm)
+        high[side] = std::max(high[side], row[u]);
       if (cv::norm(at - begins[side]) <= options.gutter_width_mm) {
         near[side] = std::max(near[side], row[u]);
       }

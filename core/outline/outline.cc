@@ -28,8 +28,8 @@ bool OutlineOptions::Check(std::string* why) const {
   if (!(step_mm > 0) || scale_px < 1 || scale_px > 16 || !(max_slope_deg > 0) ||
       !(edge_contrast > 0) || blocks_across < 16 || band_px < 0 ||
       !(min_area > 0 && min_area < 1) || !(max_view_share > 0 && max_view_share <= 1) ||
-      border_px < 0 || !(gutter_rise_mm > 0) || !(gutter_reach_mm > 0) ||
-      !(gutter_width_mm > 0) || !(gutter_crease_mm >= 0)) {
+      border_px < 0 || !(gutter_rise_mm > 0) || !(gutter_reach_mm > 0) || !(gutter_width_mm > 0) ||
+      !(gutter_crease_mm >= 0)) {
     *why =
         "step_mm, max_slope_deg, edge_contrast and the gutter's rise, reach and width must be > 0, "
         "scale_px in [1, 16], blocks_across >= 16, band_px, border_px and gutter_crease_mm >= 0, "
@@ -92,7 +92,8 @@ cv::Mat Largest(const cv::Mat& mask) {
   const int count = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
   int best = 0;
   for (int l = 1; l < count; ++l) {
-    if (!best || stats.at<int>(l, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = l;
+    if (!best || stats.at<int>(l, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA))
+      best = l;
   }
   return best ? labels == best : cv::Mat(mask.size(), CV_8U, cv::Scalar(0));
 }
@@ -238,8 +239,8 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   // Brought to the pixel, over the pixels with a height: what the cut holds without one, where
   // that reaches its outline (a shadow, a side seen edge-on), is not restored.
-  cv::Mat region = RefineRim(cut, cues, points, planes, found.look_leaf, found.look_surround,
-                             block, options.band_px);
+  cv::Mat region = RefineRim(cut, cues, points, planes, found.look_leaf, found.look_surround, block,
+                             options.band_px);
   cv::Mat full_cut;
   cv::resize(cut, full_cut, cut.size() * block, 0, 0, cv::INTER_NEAREST);
   cv::copyMakeBorder(full_cut, full_cut, 0, size.height - full_cut.rows, 0,
@@ -284,9 +285,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // meet is one creased leaf as well as a book's two pages, and is flagged.
   cv::Mat left, right;
   bool parted = false;
-  const bool valley = options.find_spread && options.object != ObjectKind::kLeaf &&
-                      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right,
-                                    &parted);
+  const bool valley =
+      options.find_spread && options.object != ObjectKind::kLeaf &&
+      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right, &parted);
   if (valley && (options.object == ObjectKind::kBook || parted)) {
     out.pages = {left, right};
   } else {

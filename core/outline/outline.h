@@ -37,17 +37,17 @@ struct SurroundOptions {
 // leaf flush with what it rests on) and the rest spread evenly over 0 to thickness_mm (a leaf's
 // thickness) and thinly beyond (its bends).
 struct CutOptions {
-  double plane_mm = 0.01;       // How far the surround itself strays from its plane, mm.
-  double flush_share = 0.15;    // Share of a leaf lying flush with what it rests on.
-  double thickness_mm = 0.5;    // A leaf's rim stands up to this high, mm.
-  double max_off = 4;           // The height's evidence for leaf is clipped to this...
-  double max_on = 2.5;          // ... and for surround to this.
-  double look_weight = 1;       // The look's log-likelihood ratio per block, weighted by this...
-  double max_look = 3;          // ... and clipped to this.
-  double border_cost = 2;       // A block on the view's border costs this much to call leaf.
-  double smooth = 1.0;          // The outline's cost between two blocks...
-  double smooth_floor = 0.25;   // ... falling to this share of it across a rim or an edge.
-  int rounds = 0;               // The look relearned from the last cut this many times.
+  double plane_mm = 0.01;      // How far the surround itself strays from its plane, mm.
+  double flush_share = 0.15;   // Share of a leaf lying flush with what it rests on.
+  double thickness_mm = 0.5;   // A leaf's rim stands up to this high, mm.
+  double max_off = 4;          // The height's evidence for leaf is clipped to this...
+  double max_on = 2.5;         // ... and for surround to this.
+  double look_weight = 1;      // The look's log-likelihood ratio per block, weighted by this...
+  double max_look = 3;         // ... and clipped to this.
+  double border_cost = 2;      // A block on the view's border costs this much to call leaf.
+  double smooth = 1.0;         // The outline's cost between two blocks...
+  double smooth_floor = 0.25;  // ... falling to this share of it across a rim or an edge.
+  int rounds = 0;              // The look relearned from the last cut this many times.
   bool Check(std::string* why) const;
 };
 
@@ -93,16 +93,16 @@ struct OutlineDoubt {
 
 struct Outline {
   Status status = Status::Error("outline not found (not run)");
-  cv::Mat mask;                  // CV_8U 255 on the leaf (on both pages of a spread), holes out.
-  std::vector<cv::Mat> pages;    // One mask per page: the leaf, or a spread's left then right.
-  double confidence = 0;         // Share of the rim where the leaf is set apart from its surround.
-  bool touches_border = false;   // The leaf runs off the camera's view.
-  std::string method;            // How it was found: "cut" (every cue at once).
+  cv::Mat mask;                 // CV_8U 255 on the leaf (on both pages of a spread), holes out.
+  std::vector<cv::Mat> pages;   // One mask per page: the leaf, or a spread's left then right.
+  double confidence = 0;        // Share of the rim where the leaf is set apart from its surround.
+  bool touches_border = false;  // The leaf runs off the camera's view.
+  std::string method;           // How it was found: "cut" (every cue at once).
   // Share of the leaf found (by any cue) that has a 3D point: what has none where it reaches the
   // leaf's outline (a shadow, a side seen edge-on) is not in `mask`, and holes filled are.
   double measured_share = 0;
-  int holes = 0;                 // Holes in the leaf that show what is under it.
-  cv::Vec4f gutter{0, 0, 0, 0};  // A spread's gutter line in the image: (vx, vy, x0, y0).
+  int holes = 0;                     // Holes in the leaf that show what is under it.
+  cv::Vec4f gutter{0, 0, 0, 0};      // A spread's gutter line in the image: (vx, vy, x0, y0).
   std::vector<OutlineDoubt> doubts;  // What makes it doubtful (none: found with confidence).
 };
 

@@ -183,8 +183,7 @@ TEST(RaisedHole, TheLeafOnASupportTakenForTheLeafIsARaisedHole) {
   for (int v = 0; v < support.rows; ++v) {
     for (int u = 0; u < support.cols; ++u) {
       const float z = truth.points.at<cv::Vec3f>(v, u)[2];
-      support.at<uint8_t>(v, u) = truth.page_index.at<uint8_t>(v, u) == 0 && z > 4.5f &&
-                                          z < 5.5f &&
+      support.at<uint8_t>(v, u) = truth.page_index.at<uint8_t>(v, u) == 0 && z > 4.5f && z < 5.5f &&
                                           std::isfinite(map.points.at<cv::Vec3f>(v, u)[2])
                                       ? 255
                                       : 0;

@@ -23,9 +23,7 @@ void Flood(const cv::Mat& strength, cv::Mat* labels) {
     const size_t row = static_cast<size_t>(v + 1) * stride + 1;
     for (int u = 0; u < w; ++u) {
       const float x = s[u] * 32;
-      level[row + u] = !(x >= 0)          ? -1
-                       : x >= kLevels - 1 ? kLevels - 1
-                                          : static_cast<int16_t>(x);
+      level[row + u] = !(x >= 0) ? -1 : x >= kLevels - 1 ? kLevels - 1 : static_cast<int16_t>(x);
       label[row + u] = in[u];
     }
   }
@@ -191,7 +189,8 @@ int SidesTouched(const cv::Mat& mask, int border) {
   const int b = std::max(1, border);
   if (mask.cols <= 2 * b || mask.rows <= 2 * b) return 4;
   const cv::Rect sides[4] = {cv::Rect(0, 0, b, mask.rows), cv::Rect(mask.cols - b, 0, b, mask.rows),
-                             cv::Rect(0, 0, mask.cols, b), cv::Rect(0, mask.rows - b, mask.cols, b)};
+                             cv::Rect(0, 0, mask.cols, b),
+                             cv::Rect(0, mask.rows - b, mask.cols, b)};
   int touched = 0;
   for (const cv::Rect& side : sides) touched += cv::countNonZero(mask(side)) > 0;
   return touched;

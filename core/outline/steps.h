@@ -139,7 +139,6 @@ class Look {
   double total_ = 0;
 };
 
-
 // A cut: leaf (255) against surround (0) over the blocks, and the looks it learned.
 struct Cut {
   cv::Mat leaf;

@@ -23,10 +23,10 @@ cv::Mat Points(cv::Size size, const std::function<double(int, int)>& height, dou
     for (int u = 0; u < size.width; ++u) {
       const double z = height(u, v);
       points.at<cv::Vec3f>(v, u) =
-          std::isnan(z) ? cv::Vec3f(NAN, NAN, NAN)
-                        : cv::Vec3f(static_cast<float>(u * kPixelMm),
-                                    static_cast<float>(v * kPixelMm),
-                                    static_cast<float>(z + rng.gaussian(noise_mm)));
+          std::isnan(z)
+              ? cv::Vec3f(NAN, NAN, NAN)
+              : cv::Vec3f(static_cast<float>(u * kPixelMm), static_cast<float>(v * kPixelMm),
+                          static_cast<float>(z + rng.gaussian(noise_mm)));
     }
   }
   return points;
@@ -100,10 +100,11 @@ TEST(RimStrength, AStepIsARimAndACreaseIsNot) {
   EXPECT_GT(step.first, 1.5);
   EXPECT_LT(step.second, 0.1);
   const double slope = std::tan(30 * M_PI / 180) * kPixelMm;  // mm per pixel.
-  const auto crease = strongest_near(
-      Points(size, [&](int u, int) { return 10 + std::fabs(u - step_at) * slope; }));
+  const auto crease =
+      strongest_near(Points(size, [&](int u, int) { return 10 + std::fabs(u - step_at) * slope; }));
   EXPECT_LT(crease.first, 0.5);
-  const auto plane = strongest_near(Points(size, [&](int u, int v) { return 0.01 * u + 0.02 * v; }));
+  const auto plane =
+      strongest_near(Points(size, [&](int u, int v) { return 0.01 * u + 0.02 * v; }));
   EXPECT_LT(plane.first, 0.1);
 }
 
@@ -151,14 +152,13 @@ TEST(CutLeaf, EachCueAloneFindsTheLeafWhereItSuffices) {
                {"flush, alike", 0.0, 150, 150, false}};
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
-    const cv::Mat points =
-        Points(size, [&](int u, int v) { return in_leaf(u, v) ? c.rim_mm : 0.0; }, 0.01);
+    const cv::Mat points = Points(
+        size, [&](int u, int v) { return in_leaf(u, v) ? c.rim_mm : 0.0; }, 0.01);
     const cv::Mat texture =
         Texture(size, [&](int u, int v) { return in_leaf(u, v) ? c.leaf_level : c.table_level; });
     const Scene s = Prepare(points, texture);
-    const cv::Mat seed = BlocksWhere(s.blocks, [&](int u, int v) {
-      return u >= 160 && u < 240 && v >= 120 && v < 180;
-    });
+    const cv::Mat seed = BlocksWhere(
+        s.blocks, [&](int u, int v) { return u >= 160 && u < 240 && v >= 120 && v < 180; });
     const Cut cut =
         CutLeaf(s.blocks, s.above, seed, OuterSurround(s.blocks, s.above), cv::Mat(), CutOptions());
     const cv::Mat truth = BlocksWhere(s.blocks, in_leaf);
@@ -177,15 +177,13 @@ TEST(RefineRim, BringsTheCutsOutlineToThePixel) {
   const cv::Rect leaf(51, 41, 98, 78);
   auto in_leaf = [&](int u, int v) { return leaf.contains(cv::Point(u, v)); };
   const cv::Mat points = Points(size, [&](int u, int v) { return in_leaf(u, v) ? 0.2 : 0.0; });
-  const cv::Mat texture =
-      Texture(size, [&](int u, int v) { return in_leaf(u, v) ? 200.0 : 80.0; });
+  const cv::Mat texture = Texture(size, [&](int u, int v) { return in_leaf(u, v) ? 200.0 : 80.0; });
   const OutlineOptions options;
   const Cues cues = MeasureCues(points, texture, options);
   const int block = 4;
   cv::Mat cut(size.height / block, size.width / block, CV_8U, cv::Scalar(0));
   cut(cv::Rect(12, 9, 26, 21)).setTo(255);  // Pixels 48..151 x 36..119: 3 to 5 pixels too big.
-  const cv::Mat refined =
-      RefineRim(cut, cues, points, {}, Look(), Look(), block, options.band_px);
+  const cv::Mat refined = RefineRim(cut, cues, points, {}, Look(), Look(), block, options.band_px);
   cv::Mat truth(size, CV_8U, cv::Scalar(0));
   truth(leaf).setTo(255);
   // Within a pixel all round: 98 x 78 px, a pixel more each side is 352 pixels.

@@ -69,10 +69,9 @@ Blocks MakeBlocks(const Cues& cues, const cv::Mat& points, int size) {
         b.x.at<float>(by, bx) = n ? static_cast<float>(sx / n) : kNaN;
         b.y.at<float>(by, bx) = n ? static_cast<float>(sy / n) : kNaN;
         b.z.at<float>(by, bx) = n ? static_cast<float>(sz / n) : kNaN;
-        b.colour.at<cv::Vec3b>(by, bx) =
-            cv::Vec3b(cv::saturate_cast<uint8_t>(colour[0] / area),
-                      cv::saturate_cast<uint8_t>(colour[1] / area),
-                      cv::saturate_cast<uint8_t>(colour[2] / area));
+        b.colour.at<cv::Vec3b>(by, bx) = cv::Vec3b(cv::saturate_cast<uint8_t>(colour[0] / area),
+                                                   cv::saturate_cast<uint8_t>(colour[1] / area),
+                                                   cv::saturate_cast<uint8_t>(colour[2] / area));
         b.rim.at<float>(by, bx) = rim;
         b.edge.at<float>(by, bx) = edge;
       }
@@ -134,7 +133,6 @@ bool FitPlane(const std::vector<cv::Vec3f>& points, Plane* plane) {
   return true;
 }
 
-
 // The plane with the most of `samples[candidates]` within tolerance (the option's, or three times
 // a sample's noise where that is more), level within max_tilt_deg, by RANSAC from `rng`, refined
 // by least squares on its inliers; false unless it holds at least `least`.
@@ -175,11 +173,13 @@ bool RansacPlane(const std::vector<cv::Vec3f>& samples, const std::vector<float>
     collect(best, &best_in);
     if (round == 0 && best_in.size() >= 3) {
       std::vector<float> off;
-      for (int m : best_in) off.push_back(std::fabs(samples[m][2] - best.At(samples[m][0], samples[m][1])));
+      for (int m : best_in)
+        off.push_back(std::fabs(samples[m][2] - best.At(samples[m][0], samples[m][1])));
       const double scatter = 1.4826 * Median(&off);
       std::vector<int> close;
       for (int m : best_in) {
-        if (std::fabs(samples[m][2] - best.At(samples[m][0], samples[m][1])) <= std::max(3 * scatter, 0.003)) {
+        if (std::fabs(samples[m][2] - best.At(samples[m][0], samples[m][1])) <=
+            std::max(3 * scatter, 0.003)) {
           close.push_back(m);
         }
       }
@@ -194,7 +194,6 @@ bool RansacPlane(const std::vector<cv::Vec3f>& samples, const std::vector<float>
 }
 
 }  // namespace
-
 
 std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& options) {
   const cv::Size g = blocks.grid;

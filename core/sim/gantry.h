@@ -27,8 +27,8 @@ struct LightOptions {
   // wood grain or cloth does: a smooth random pattern of `grain_seed`, features 2 to 40 mm.
   double grain = 0.0;
   uint64_t grain_seed = 1;
-  double shadow_bias_mm = 1.0;    // Depth tolerance of the projector shadow test, mm.
-  int albedo_supersampling = 4;   // Albedo samples per pixel side (area-integrates ink edges).
+  double shadow_bias_mm = 1.0;   // Depth tolerance of the projector shadow test, mm.
+  int albedo_supersampling = 4;  // Albedo samples per pixel side (area-integrates ink edges).
   // The camera as another renderer or a real one draws it: its lens blurs the image (a
   // Gaussian of this sigma, camera pixels, before the noise), and photon (shot) noise adds a
   // standard deviation of shot_noise_dn at full scale, falling as the square root of the level.
@@ -147,7 +147,7 @@ class VirtualGantry {
   LightOptions light_;
   SceneOptions scene_;
   std::vector<Page> pages_;
-  cv::Mat background_albedo_;  // CV_32F albedo of the scene behind each pixel.
+  cv::Mat background_albedo_;           // CV_32F albedo of the scene behind each pixel.
   std::vector<cv::Vec3d> grain_waves_;  // The surround's grain: (kx, ky rad/mm, phase) each.
   GroundTruth truth_;
   cv::Mat projector_map_;  // CV_32FC2 projector pixel hit by each camera pixel's point.

@@ -56,9 +56,9 @@ const char* ToString(PageShape shape) {
 }
 
 bool ParsePageShape(const std::string& text, PageShape* shape) {
-  for (PageShape s : {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone,
-                      PageShape::kBump, PageShape::kRipple, PageShape::kGutter,
-                      PageShape::kProfile}) {
+  for (PageShape s :
+       {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone, PageShape::kBump,
+        PageShape::kRipple, PageShape::kGutter, PageShape::kProfile}) {
     if (text == ToString(s)) {
       *shape = s;
       return true;
@@ -108,8 +108,8 @@ Page::Page(const PageOptions& options) : options_(options) {
   } else if (options.shape == PageShape::kProfile) {
     const double a = options.profile_angle_deg * kDeg;
     across_dir_ = {std::cos(a), std::sin(a)};
-    sigma_origin_ = std::min({0.0, across_dir_[0] * w, across_dir_[1] * h,
-                              across_dir_.dot(cv::Vec2d(w, h))});
+    sigma_origin_ =
+        std::min({0.0, across_dir_[0] * w, across_dir_[1] * h, across_dir_.dot(cv::Vec2d(w, h))});
     for (const cv::Vec2d& segment : options.profile) forward_.push_back({segment[0], segment[1]});
   }
   if (options.shape == PageShape::kFold) {

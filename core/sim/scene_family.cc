@@ -29,21 +29,20 @@ cv::Mat ColourPage(cv::Size2d page_mm, cv::RNG& rng) {
       int baseline = 0;
       const cv::Size text = cv::getTextSize(word, cv::FONT_HERSHEY_COMPLEX, 0.8, 2, &baseline);
       if (x + text.width > size.width - margin) break;
-      cv::putText(image, word, cv::Point(x, y), cv::FONT_HERSHEY_COMPLEX, 0.8, ink, 2,
-                  cv::LINE_AA);
+      cv::putText(image, word, cv::Point(x, y), cv::FONT_HERSHEY_COMPLEX, 0.8, ink, 2, cv::LINE_AA);
       x += text.width + text.height / 2;
     }
   }
   const cv::Rect initial(margin, margin, 3 * line, 3 * line);
   cv::rectangle(image, initial, colours[rng.uniform(0, 2)], cv::FILLED);
   const int bw = size.width / 3, bh = size.height / 4;
-  const cv::Rect block(rng.uniform(margin, std::max(margin + 1, size.width - margin - bw)),
-                       rng.uniform(size.height / 3, std::max(size.height / 3 + 1,
-                                                             size.height - margin - bh)),
-                       bw, bh);
+  const cv::Rect block(
+      rng.uniform(margin, std::max(margin + 1, size.width - margin - bw)),
+      rng.uniform(size.height / 3, std::max(size.height / 3 + 1, size.height - margin - bh)), bw,
+      bh);
   cv::rectangle(image, block, colours[rng.uniform(0, 4)], cv::FILLED);
-  cv::circle(image, (block.tl() + block.br()) / 2, std::min(bw, bh) / 3,
-             colours[rng.uniform(0, 4)], cv::FILLED, cv::LINE_AA);
+  cv::circle(image, (block.tl() + block.br()) / 2, std::min(bw, bh) / 3, colours[rng.uniform(0, 4)],
+             cv::FILLED, cv::LINE_AA);
   return image;
 }
 
@@ -57,9 +56,8 @@ void RandomProfile(PageOptions* page, cv::RNG& rng) {
   double theta = 0;
   for (int k = rng.uniform(2, 6); k > 0; --k) {
     const double length = rng.uniform(20.0, 80.0);
-    double curvature = rng.uniform(0, 10) < 3 ? 0.0
-                                              : (rng.uniform(0, 2) ? 1 : -1) /
-                                                    rng.uniform(25.0, 200.0);
+    double curvature =
+        rng.uniform(0, 10) < 3 ? 0.0 : (rng.uniform(0, 2) ? 1 : -1) / rng.uniform(25.0, 200.0);
     // Keep the slope within the limit at the arc's end.
     const double end = theta + curvature * length;
     if (std::fabs(end) > limit) curvature = ((end > 0 ? limit : -limit) - theta) / length;
@@ -91,8 +89,8 @@ bool InView(const FamilyScene& s, double margin_px) {
     const Page page(o);
     const double w = o.size_mm.width, h = o.size_mm.height;
     for (double f = 0; f <= 1.0; f += 0.01) {
-      for (const cv::Vec2d& st : {cv::Vec2d(f * w, 0), cv::Vec2d(f * w, h), cv::Vec2d(0, f * h),
-                                  cv::Vec2d(w, f * h)}) {
+      for (const cv::Vec2d& st :
+           {cv::Vec2d(f * w, 0), cv::Vec2d(f * w, h), cv::Vec2d(0, f * h), cv::Vec2d(w, f * h)}) {
         const cv::Point2d p = rig.camera.Project(page.Point(st[0], st[1]));
         if (!(p.x >= margin_px && p.y >= margin_px && p.x <= view.width - 1 - margin_px &&
               p.y <= view.height - 1 - margin_px)) {
@@ -115,7 +113,7 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
   const struct {
     const char* name;
     double weight;
-  } shapes[] = {{"flat", 8},  {"curl", 14},   {"fold", 12},        {"wave", 10},   {"cone", 10},
+  } shapes[] = {{"flat", 8},   {"curl", 14},   {"fold", 12},        {"wave", 10},  {"cone", 10},
                 {"ripple", 6}, {"crease", 12}, {"developable", 14}, {"spread", 14}};
   double total = 0;
   for (const auto& shape : shapes) total += shape.weight;
@@ -152,8 +150,8 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
     RandomProfile(&page, rng);
   }
   // What it rests on, and how high its rim stands above that.
-  page.thickness_mm = chance(0.3) ? std::vector<double>{0.0, 0.05, 0.1}[rng.uniform(0, 3)]
-                                  : rng.uniform(0.0, 0.5);
+  page.thickness_mm =
+      chance(0.3) ? std::vector<double>{0.0, 0.05, 0.1}[rng.uniform(0, 3)] : rng.uniform(0.0, 0.5);
   SceneOptions& scene = s.scene;
   scene.spread = spread;
   if (spread) {
@@ -174,10 +172,10 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
   // What is on the page.
   TextureOptions& texture = s.texture;
   const double kind = rng.uniform(0.0, 1.0);
-  texture.kind = kind < 0.35   ? TextureKind::kText
-                 : kind < 0.7  ? TextureKind::kCheckerboard
-                 : kind < 0.8  ? TextureKind::kPlain
-                               : TextureKind::kImage;
+  texture.kind = kind < 0.35  ? TextureKind::kText
+                 : kind < 0.7 ? TextureKind::kCheckerboard
+                 : kind < 0.8 ? TextureKind::kPlain
+                              : TextureKind::kImage;
   texture.paper_albedo = rng.uniform(0.6, 0.92);
   texture.ink_albedo = rng.uniform(0.04, 0.4);
   texture.square_mm = rng.uniform(8.0, 14.0);
@@ -229,8 +227,8 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
                             page.size_mm.width + 2 * m, page.size_mm.height + 2 * m);
     const double l = rng.uniform(15.0, 80.0), r = rng.uniform(15.0, 80.0),
                  b = rng.uniform(15.0, 80.0), t = rng.uniform(15.0, 80.0);
-    scene.frame_mm = cv::Rect2d(window.x - l, window.y - b, window.width + l + r,
-                                window.height + b + t);
+    scene.frame_mm =
+        cv::Rect2d(window.x - l, window.y - b, window.width + l + r, window.height + b + t);
   }
   // What the operator says it is: half the time, nothing (auto).
   s.said = chance(0.5) ? ObjectKind::kAuto : spread ? ObjectKind::kBook : ObjectKind::kLeaf;

@@ -21,11 +21,11 @@ namespace vellum {
 
 struct FamilyScene {
   uint64_t seed = 0;
-  std::string shape;        // flat, curl, fold, wave, cone, ripple, crease, developable, spread.
-  PageOptions page;         // For a spread, each page's (the gantry makes both).
-  TextureOptions texture;   // kCheckerboard where Experiment I can be measured.
-  LightOptions light;       // The renderer: noise, blur, defocus, ambient, the table.
-  SceneOptions scene;       // Support, frame or spread.
+  std::string shape;       // flat, curl, fold, wave, cone, ripple, crease, developable, spread.
+  PageOptions page;        // For a spread, each page's (the gantry makes both).
+  TextureOptions texture;  // kCheckerboard where Experiment I can be measured.
+  LightOptions light;      // The renderer: noise, blur, defocus, ambient, the table.
+  SceneOptions scene;      // Support, frame or spread.
   ObjectKind said = ObjectKind::kAuto;  // What the operator says it is.
 
   bool book() const { return scene.spread; }

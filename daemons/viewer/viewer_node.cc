@@ -549,8 +549,7 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
   const int form_lines = editing_ >= 0 ? kFormFields + 1 : 2;
   y = std::max(y + 6, h - 8 - 18 * form_lines);
   if (editing_ < 0) {
-    cv::putText(canvas,
-                "next scan: " + Describe(next_) + "  (" + ToString(object_) + ")",
+    cv::putText(canvas, "next scan: " + Describe(next_) + "  (" + ToString(object_) + ")",
                 cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1,
                 cv::LINE_AA);
     cv::putText(canvas, "e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom",
