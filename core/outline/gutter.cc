@@ -84,30 +84,54 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
   if (parted) *parted = 2 * apart >= static_cast<int>(valley.size());
   *left = cv::Mat::zeros(leaf.size(), CV_8U);
   *right = cv::Mat::zeros(leaf.size(), CV_8U);
-  // Where the line falls within a couple of pixels of the end of a run of leaf pixels that is a
-  // page's body (the line runs through each row's lowest point, which can be the first pixel of
-  // the far page's wall, beyond the gap between the pages), the whole run is that page's.
-  constexpr int kEdge = 2, kBody = 20, kGap = 8;
+  // Where the pages part in a row (a gap in the leaf within kApart pixels of the line), the
+  // split follows the gap nearest the line: the line runs through each row's lowest point, which
+  // can be the first pixels of the far page's wall, beyond the gap between the pages. A row with
+  // no gap of its own (noise closed it) takes the median gap of the rows around it.
+  constexpr float kNone = -1e9f;
+  std::vector<float> line_at(leaf.rows), gap_at(leaf.rows, kNone);
+  // Each page's last pixel before a gap: seen at a grazing angle down the gutter, its point mixes
+  // both walls, so it is left out of both pages.
+  std::vector<std::pair<int, int>> grazing(leaf.rows, {-1, -1});
   for (int v = 0; v < leaf.rows; ++v) {
     // The line's column at this row (the gutter runs down the image).
-    float at = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
+    line_at[v] = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
     const uint8_t* in = leaf.ptr<uint8_t>(v);
-    const int c = static_cast<int>(std::floor(at));
-    if (c >= 0 && c < leaf.cols && in[c]) {
-      int a = c, b = c;
-      while (a > 0 && in[a - 1]) --a;
-      while (b + 1 < leaf.cols && in[b + 1]) ++b;
-      // The gap beyond the run's end, up to kGap pixels.
-      auto gap = [&](int u, int step) {
-        int n = 0;
-        while (n < kGap && u >= 0 && u < leaf.cols && !in[u]) ++n, u += step;
-        return n;
-      };
-      if (b - a + 1 >= kBody && c - a <= kEdge && gap(a - 1, -1) >= kGap) at = a;
-      if (b - a + 1 >= kBody && b - c <= kEdge && gap(b + 1, 1) >= kGap) at = b + 1.0f;
+    const int c = static_cast<int>(std::floor(line_at[v]));
+    int best = -1;
+    for (int d = 0; d <= kApart && best < 0; ++d) {
+      for (const int u : {c - d, c + d}) {
+        if (u > 0 && u + 1 < leaf.cols && !in[u] && best < 0) best = u;
+      }
     }
+    if (best < 0) continue;
+    // The gap's ends; it parts the pages only with leaf on both sides near it.
+    int a = best, b = best;
+    while (a > 0 && !in[a - 1]) --a;
+    while (b + 1 < leaf.cols && !in[b + 1]) ++b;
+    if (a > 0 && b + 1 < leaf.cols && a >= c - 2 * kApart && b <= c + 2 * kApart) {
+      gap_at[v] = 0.5f * (a + b) + 0.5f - line_at[v];
+      grazing[v] = {a - 1, b + 1};
+    }
+  }
+  constexpr int kRows = 24;  // Rows either side a closed row borrows its gap from.
+  for (int v = 0; v < leaf.rows; ++v) {
+    float at = line_at[v];
+    if (gap_at[v] != kNone) {
+      at += gap_at[v];
+    } else {
+      std::vector<float> near;
+      for (int w = std::max(0, v - kRows); w <= std::min(leaf.rows - 1, v + kRows); ++w) {
+        if (gap_at[w] != kNone) near.push_back(gap_at[w]);
+      }
+      if (near.size() >= kRows / 2) {
+        std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
+        at += near[near.size() / 2];
+      }
+    }
+    const uint8_t* in = leaf.ptr<uint8_t>(v);
     for (int u = 0; u < leaf.cols; ++u) {
-      if (!in[u]) continue;
+      if (!in[u] || u == grazing[v].first || u == grazing[v].second) continue;
       (u < at ? left : right)->at<uint8_t>(v, u) = 255;
     }
   }

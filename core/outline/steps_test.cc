@@ -273,7 +273,14 @@ TEST(SplitAtGutter, FindsAValleyAndWhetherItsSidesAreParted) {
     EXPECT_EQ(parted, c.parted);
     EXPECT_NEAR(line[2] + (150 - line[3]) * line[0] / line[1], middle, 6);  // The gutter's column.
     EXPECT_EQ(cv::countNonZero(left & right), 0);
-    EXPECT_EQ(cv::countNonZero(left | right), cv::countNonZero(mask));
+    // The pages cover the leaf, but for the column either side of a gap (seen at a grazing angle
+    // down the gutter, those pixels' points mix both walls).
+    cv::Mat grazing(size, CV_8U, cv::Scalar(0));
+    if (c.gap_px > 0) {
+      grazing(cv::Rect(middle - c.gap_px / 2 - 1, 30, 1, 240)).setTo(255);
+      grazing(cv::Rect(middle + c.gap_px / 2, 30, 1, 240)).setTo(255);
+    }
+    EXPECT_EQ(cv::countNonZero((left | right) ^ (mask & ~grazing)), 0);
   }
 }
 
