@@ -10,11 +10,12 @@ namespace outline {
 
 bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
                    const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
-                   bool* parted) {
+                   GutterSigns* signs) {
   const cv::Rect box = cv::boundingRect(leaf);
   if (box.width < 20 || box.height < 20) return false;
   std::vector<cv::Point2f> valley;
   int apart = 0;  // Valley rows where the two sides do not meet (a gap, or a band out of view).
+  int level = 0;  // Valley rows where both sides level off beyond the bend.
   constexpr int kApart = 12;  // Pixels either side of the valley's point.
   for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
     const float* row = z.ptr<float>(v);
@@ -47,13 +48,18 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
         break;
       }
     }
-    float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData};
+    float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData},
+          beyond[2] = {kNoData, kNoData};
     for (int u = first; u <= last; ++u) {
       if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
       const cv::Point2f at(p[u][0], p[u][1]);
       const int side = u > lowest;
-      if (cv::norm(at - bottom) <= options.gutter_reach_mm)
+      const double from_bottom = cv::norm(at - bottom);
+      if (from_bottom <= options.gutter_reach_mm) {
         high[side] = std::max(high[side], row[u]);
+      } else if (from_bottom <= 2 * options.gutter_reach_mm) {
+        beyond[side] = std::max(beyond[side], row[u]);
+      }
       if (cv::norm(at - begins[side]) <= options.gutter_width_mm) {
         near[side] = std::max(near[side], row[u]);
       }
@@ -65,6 +71,12 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     }
     if (!valley_here) continue;
     valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
+    bool levels = true;
+    for (int side = 0; side < 2; ++side) {
+      levels = levels && beyond[side] != kNoData &&
+               beyond[side] - high[side] < 0.5f * (high[side] - row[lowest]);
+    }
+    level += levels;
     bool gap = false;
     for (int u = std::max(first, lowest - kApart); u <= std::min(last, lowest + kApart); ++u) {
       gap = gap || !in[u];
@@ -81,7 +93,10 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     off += std::fabs((p.x - x0) * vy - (p.y - y0) * vx) > 8;  // Pixels from the line.
   }
   if (off > static_cast<int>(valley.size()) / 4) return false;
-  if (parted) *parted = 2 * apart >= static_cast<int>(valley.size());
+  if (signs) {
+    signs->parted = 2 * apart >= static_cast<int>(valley.size());
+    signs->bound = 2 * level >= static_cast<int>(valley.size());
+  }
   *left = cv::Mat::zeros(leaf.size(), CV_8U);
   *right = cv::Mat::zeros(leaf.size(), CV_8U);
   // Where the pages part in a row (a gap in the leaf within kApart pixels of the line), the

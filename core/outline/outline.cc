@@ -281,14 +281,15 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   out.method = "cut";
   out.mask = leaf;
   // An open book: its two pages at the gutter. Split when the operator says it is a book, or,
-  // on auto, when the two sides are parted along the valley (two sheets); a valley whose sides
-  // meet is one creased leaf as well as a book's two pages, and is flagged.
+  // on auto, when the two sides are parted along the valley (two sheets) or level off beyond
+  // its bend (pages on a book block); any other valley is one creased leaf as well as a book's
+  // two pages, and is flagged.
   cv::Mat left, right;
-  bool parted = false;
+  GutterSigns signs;
   const bool valley =
       options.find_spread && options.object != ObjectKind::kLeaf &&
-      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right, &parted);
-  if (valley && (options.object == ObjectKind::kBook || parted)) {
+      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right, &signs);
+  if (valley && (options.object == ObjectKind::kBook || signs.parted || signs.bound)) {
     out.pages = {left, right};
   } else {
     out.pages = {leaf};

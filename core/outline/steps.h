@@ -201,11 +201,19 @@ int SidesTouched(const cv::Mat& mask, int border);
 // middle three fifths of the leaf), from which the surface rises at least gutter_rise_mm within
 // gutter_reach_mm on both sides, and sharply: gutter_crease_mm within gutter_width_mm (or is
 // hidden in it). A trough (a cone, a roll, a ripple) rises gently from its lowest line. Splits
-// the leaf into its left and right pages; false if there is no such valley. `parted` (if given):
-// whether the two sides are parted along most of it (a gap, or a band out of view, between them:
-// two sheets, not one creased leaf).
+// the leaf into its left and right pages; false if there is no such valley. `signs` (if given):
+// what says the valley is a book's gutter and not a creased leaf's fold.
+struct GutterSigns {
+  // The two sides are parted along most of the valley (a gap, or a band out of view, between
+  // them): two sheets.
+  bool parted = false;
+  // Along most of the valley, both sides level off beyond the bend (from gutter_reach_mm to
+  // twice that, they rise less than half what they rose within it): pages lying on a book block.
+  // A loose creased leaf's halves rise straight on, or curl further up, as nothing holds them.
+  bool bound = false;
+};
 bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
                    const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
-                   bool* parted = nullptr);
+                   GutterSigns* signs = nullptr);
 
 }  // namespace vellum::outline

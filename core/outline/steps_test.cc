@@ -234,29 +234,33 @@ TEST(FillHoles, KeepsAHoleShowingWhatIsUnderAndFillsOneThatShowsNothing) {
 
 // An open book's gutter: pages rising 30 degrees into a valley down the middle. With a gap
 // between the pages (the table shows in it) they are parted: two sheets. Meeting in the valley
-// they are found as a gutter but not parted (one creased leaf would look the same). A leaf rolled
-// into a trough (a circle of 100 mm radius) has no gutter.
-TEST(SplitAtGutter, FindsAValleyAndWhetherItsSidesAreParted) {
-  const cv::Size size(400, 300);
-  const int middle = 200;
+// they are found as a gutter but not parted (one creased leaf would look the same), unless they
+// level off beyond the bend as pages lying on a book block do. A leaf rolled into a trough (a
+// circle of 100 mm radius) has no gutter.
+TEST(SplitAtGutter, FindsAValleyAndWhatSaysItIsABooksGutter) {
+  const cv::Size size(800, 300);  // 200 x 75 mm.
+  const int middle = 400;
   const double slope = std::tan(30 * M_PI / 180) * kPixelMm;
   const OutlineOptions options;
   cv::Mat leaf(size, CV_8U, cv::Scalar(0));
-  leaf(cv::Rect(40, 30, 320, 240)).setTo(255);
+  leaf(cv::Rect(40, 30, 720, 240)).setTo(255);
   struct Case {
     const char* name;
     std::function<double(int, int)> height;
     int gap_px;
-    bool split, parted;
+    bool split, parted, bound;
   } cases[] = {
-      {"gap", [&](int u, int) { return std::fabs(u - middle) * slope; }, 8, true, true},
-      {"meeting", [&](int u, int) { return std::fabs(u - middle) * slope; }, 0, true, false},
+      {"gap", [&](int u, int) { return std::fabs(u - middle) * slope; }, 8, true, true, false},
+      {"meeting", [&](int u, int) { return std::fabs(u - middle) * slope; }, 0, true, false, false},
+      {"bound",  // Rising 62 degrees out of the gutter, level 15 mm above it by 30 mm out.
+       [&](int u, int) { return 15 * (1 - std::exp(-std::fabs(u - middle) * kPixelMm / 8)); }, 0,
+       true, false, true},
       {"trough",
        [&](int u, int) {
          const double x = (u - middle) * kPixelMm;
          return 100 - std::sqrt(100.0 * 100 - x * x);
        },
-       0, false, false}};
+       0, false, false, false}};
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     cv::Mat mask = leaf.clone();
@@ -266,11 +270,12 @@ TEST(SplitAtGutter, FindsAValleyAndWhetherItsSidesAreParted) {
     const cv::Mat z = SmoothHeights(points, &zn);
     cv::Vec4f line;
     cv::Mat left, right;
-    bool parted = false;
-    const bool split = SplitAtGutter(points, z, mask, options, &line, &left, &right, &parted);
+    GutterSigns signs;
+    const bool split = SplitAtGutter(points, z, mask, options, &line, &left, &right, &signs);
     EXPECT_EQ(split, c.split);
     if (!split) continue;
-    EXPECT_EQ(parted, c.parted);
+    EXPECT_EQ(signs.parted, c.parted);
+    EXPECT_EQ(signs.bound, c.bound);
     EXPECT_NEAR(line[2] + (150 - line[3]) * line[0] / line[1], middle, 6);  // The gutter's column.
     EXPECT_EQ(cv::countNonZero(left & right), 0);
     // The pages cover the leaf, but for the column either side of a gap (seen at a grazing angle
