@@ -1,7 +1,9 @@
 // Finding the leaf and building its sheet on a 1600x1200 scan (default rig, curled checkerboard
-// leaf on the dark table), beside the baseline in the same run: the paper's brightness
-// segmentation (SegmentPage) with the paper's 45 x 45 sheet. The bar: the shape's way
-// adds at most 50 ms.
+// leaf on the dark table), beside the baselines in the same run: the paper's brightness
+// segmentation (SegmentPage) with the paper's 45 x 45 sheet, and FindLeaf as it stood before it
+// became one cut over every cue (bench/baseline/outline_v1: the height flood, brightness as a
+// fallback). The bars: the shape's way and its sheet add at most 50 ms to the paper's; finding
+// the leaf by every cue at once takes at most 50 ms more than the height flood did.
 //
 //   ./build/bench/outline_bench
 #include <benchmark/benchmark.h>
@@ -9,6 +11,7 @@
 #include <cstdio>
 #include <vector>
 
+#include "bench/baseline/outline_v1.h"
 #include "bench/ratio_reporter.h"
 #include "core/decode/decode.h"
 #include "core/geometry/triangulate.h"
@@ -64,6 +67,15 @@ void BM_Baseline_SegmentPage_Sheet45(benchmark::State& state) {
   }
 }
 
+void BM_Baseline_FindLeafV1(benchmark::State& state) {
+  const Fixture& f = Shared();
+  for (auto _ : state) {
+    const baseline::Outline outline = baseline::FindLeaf(f.points, f.texture);
+    if (!outline.status.ok()) state.SkipWithError(outline.status.message().c_str());
+    benchmark::DoNotOptimize(outline.mask.data);
+  }
+}
+
 void BM_Vellum_FindLeaf(benchmark::State& state) {
   const Fixture& f = Shared();
   for (auto _ : state) {
@@ -85,7 +97,7 @@ void BM_Vellum_FindLeaf_SheetAuto(benchmark::State& state) {
   }
 }
 
-// Each benchmark is repeated, the repetitions of all four interleaved in random order (main), and
+// Each benchmark is repeated, the repetitions of all five interleaved in random order (main), and
 // the medians compared: this machine is shared, and its speed drifts over a run.
 void Repeated(benchmark::internal::Benchmark* b) {
   b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.4)->Repetitions(9);
@@ -93,6 +105,7 @@ void Repeated(benchmark::internal::Benchmark* b) {
 }
 BENCHMARK(BM_Baseline_SegmentPage)->Apply(Repeated);
 BENCHMARK(BM_Baseline_SegmentPage_Sheet45)->Apply(Repeated);
+BENCHMARK(BM_Baseline_FindLeafV1)->Apply(Repeated);
 BENCHMARK(BM_Vellum_FindLeaf)->Apply(Repeated);
 BENCHMARK(BM_Vellum_FindLeaf_SheetAuto)->Apply(Repeated);
 
@@ -116,6 +129,14 @@ int main(int argc, char** argv) {
         "brightness "
         "rule and a 45x45 sheet: %.1f ms added (bar: 50 ms), ratio %.2fx\n",
         ours, base, ours - base, ours / base);
+  }
+  const double flood = reporter.Median("BM_Baseline_FindLeafV1");
+  const double cut = reporter.Median("BM_Vellum_FindLeaf/");
+  if (flood > 0 && cut > 0) {
+    std::printf(
+        "finding the leaf by every cue at once (medians): %.1f ms against %.1f ms for the height "
+        "flood it replaced: %.1f ms added (bar: 50 ms), ratio %.2fx\n",
+        cut, flood, cut - flood, cut / flood);
   }
   benchmark::Shutdown();
   return 0;

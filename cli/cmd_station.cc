@@ -153,6 +153,11 @@ int RunScan(const std::vector<std::string>& args) {
                    "fractions of the camera's view (0..1, x right, y down; as the viewer's drawn "
                    "hint)",
                    ""});
+  specs.push_back({"object", "KIND",
+                   "what lies on the table: leaf (never split into two pages), book (an open "
+                   "book: two pages at a gutter) or auto (split only on strong evidence, else "
+                   "flagged)",
+                   "auto"});
   specs.push_back({"timeout", "S", "give up after this long", "600"});
   specs.push_back({"wait", "S",
                    "wait this long for every daemon's heartbeat before asking (no projector: "
@@ -205,6 +210,11 @@ int RunScan(const std::vector<std::string>& args) {
     }
     station::ToLeafHint(cv::Rect2d(x, y, w, h), request.leaf_hint);
   }
+  ObjectKind object = ObjectKind::kAuto;
+  if (!ParseObjectKind(flags.Get("object"), &object)) {
+    throw UsageError("--object must be leaf, book or auto, got '" + flags.Get("object") + "'");
+  }
+  request.object = ToString(object);
   Follower follower(&node, request.scan_id);
   // The request goes out once every daemon of the station is heard (a heartbeat a second), or
   // --wait has passed: one sent before the projector listens would be lost. Without the

@@ -194,6 +194,11 @@ std::vector<Flags::Spec> FlattenFlagSpecs() {
       {"leaf-hint", "X,Y,W,H",
        "camera pixels inside the leaf, where the scene is ambiguous (default: the view's centre)",
        ""},
+      {"object", "KIND",
+       "what lies on the table: leaf (never split into two pages), book (an open book: two "
+       "pages at a gutter) or auto (split only on strong evidence, else flagged); scan.yaml's "
+       "object outranks it",
+       "auto"},
   };
 }
 
@@ -257,6 +262,9 @@ void FlattenGroupFromFlags(const Flags& flags, PipelineOptions* options) {
   const std::string hint = flags.Get("leaf-hint");
   if (!hint.empty() && !ParseLeafHint(hint, &options->outline.hint)) {
     throw UsageError("--leaf-hint must be X,Y,W,H in camera pixels, got '" + hint + "'");
+  }
+  if (!ParseObjectKind(flags.Get("object"), &options->outline.object)) {
+    throw UsageError("--object must be leaf, book or auto, got '" + flags.Get("object") + "'");
   }
 }
 

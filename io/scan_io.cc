@@ -129,7 +129,7 @@ std::string LightFileName(const std::string& name) { return "light_" + name + ".
 
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
                      const ScanIdentity& identity, const std::vector<ScanLight>& lights,
-                     const cv::Rect& leaf_hint) {
+                     const cv::Rect& leaf_hint, ObjectKind object) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   try {
     cv::FileStorage out(path, cv::FileStorage::WRITE);
@@ -145,6 +145,7 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
       out << "leaf_hint"
           << std::vector<int>{leaf_hint.x, leaf_hint.y, leaf_hint.width, leaf_hint.height};
     }
+    if (object != ObjectKind::kAuto) out << "object" << ToString(object);
     out << "texture" << kTexture;
     if (!lights.empty()) {
       out << "lights"
@@ -271,7 +272,8 @@ Status ReadLightsFile(const std::string& path, StationLights* out) {
 }
 
 Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity, std::vector<ScanLight>* lights, cv::Rect* leaf_hint) {
+                    ScanIdentity* identity, std::vector<ScanLight>* lights, cv::Rect* leaf_hint,
+                    ObjectKind* object) {
   const std::string path = (fs::path(dir) / kScanYaml).string();
   if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
@@ -348,6 +350,14 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
         }
         const cv::Rect r(v[0], v[1], v[2], v[3]);
         *leaf_hint = r;
+      }
+    }
+    if (object) {
+      *object = ObjectKind::kAuto;
+      const cv::FileNode n = in["object"];
+      if (!n.empty() && !n.isNone() &&
+          (!n.isString() || !ParseObjectKind(static_cast<std::string>(n), object))) {
+        return Status::Error(path + ": key 'object' must be leaf, book or auto");
       }
     }
     const cv::FileNode list = in["patterns"];
@@ -428,7 +438,7 @@ Status MissingFrame(const std::string& path, int k, const Scan& scan) {
 
 Status ReadScanHeader(const std::string& dir, Scan* scan) {
   Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights,
-                          &scan->leaf_hint);
+                          &scan->leaf_hint, &scan->object);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = ReadImageFile((root / kTexture).string(), &scan->texture, 16);
@@ -529,7 +539,7 @@ Status WriteScan(const std::string& dir, const Scan& scan) {
     }
   }
   s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity, scan.lights,
-                    scan.leaf_hint);
+                    scan.leaf_hint, scan.object);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = WriteImage((root / kTexture).string(), scan.texture);

@@ -23,16 +23,17 @@ std::string LightFileName(const std::string& name);  // "light_raking-090.png"
 // `lights`: a sequence of {name, direction: [x, y, z]}, direction optional) into *lights when
 // given, names and directions only (the images are light_<name>.png); the operator's
 // `leaf_hint: [x, y, width, height]` (camera pixels, within camera_size when that is given) into
-// *leaf_hint when given, empty when absent.
+// *leaf_hint when given, empty when absent; what the object is (`object: leaf | book | auto`)
+// into *object when given, auto when absent.
 Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
                     ScanIdentity* identity = nullptr, std::vector<ScanLight>* lights = nullptr,
-                    cv::Rect* leaf_hint = nullptr);
+                    cv::Rect* leaf_hint = nullptr, ObjectKind* object = nullptr);
 // Writes scan.yaml; camera_size may be empty; identity keys only when set; `lights` by name and
-// direction; leaf_hint when not empty.
+// direction; leaf_hint when not empty; object when not auto.
 Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
                      const ScanIdentity& identity = ScanIdentity(),
                      const std::vector<ScanLight>& lights = {},
-                     const cv::Rect& leaf_hint = cv::Rect());
+                     const cv::Rect& leaf_hint = cv::Rect(), ObjectKind object = ObjectKind::kAuto);
 
 // A station's extra lights (issue 17), as vellum-projector and vellum-lights read them from one
 // YAML file: `lights`, a sequence of {name, direction: [x, y, z], channel} (direction optional, as

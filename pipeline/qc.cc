@@ -134,7 +134,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
     strain += buf;
   }
   check("flattening", {"strain_high"}, {"fold_over"}, false, strain);
-  check("outline", {"outline_uncertain", "leaf_ambiguous"}, {}, false,
+  check("outline", {"outline_uncertain", "leaf_ambiguous", "object_ambiguous"}, {}, false,
         Percent(report.Number("outline", "confidence")) + " of the rim set apart (" +
             report.Text("outline", "method") + ")");
   const double high = report.Number("exposure", "clipped_highlights");

@@ -371,6 +371,13 @@ cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages) {
   return hint;
 }
 
+ObjectKind ReportedObject(const std::vector<StageReport>& stages) {
+  const ReportValue* v = FindValue(stages, "operator", "object");
+  ObjectKind object = ObjectKind::kAuto;
+  if (v && v->is_text) ParseObjectKind(v->text, &object);
+  return object;
+}
+
 void StageReport::Text(const std::string& section, const std::string& key,
                        const std::string& value) {
   ReportValue v;

@@ -107,6 +107,7 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   });
   // Where the operator said the leaf is (scan.yaml, or SCAN_STARTED at the station).
   if (!scan.leaf_hint.empty()) r.Text("operator", "leaf_hint", LeafHintText(scan.leaf_hint));
+  if (scan.object != ObjectKind::kAuto) r.Text("operator", "object", ToString(scan.object));
   r.Text("sizes", "camera", SizeText(scan.camera_size));
   r.Text("sizes", "projector", SizeText(scan.sequence.projector_size));
   r.Number("sizes", "patterns", static_cast<double>(scan.sequence.patterns.size()));
@@ -193,6 +194,9 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
     r.Text("outline", "hint", LeafHintText(o.hint));
     r.Text("outline", "hint_from", scan_hint.empty() ? "options" : "scan");
   }
+  const ObjectKind said = ReportedObject(earlier);
+  if (said != ObjectKind::kAuto) o.object = said;
+  r.Text("outline", "object", ToString(o.object));
   *outline = FindLeaf(points, texture, o);
   if (!outline->status.ok()) return stage.Finish(outline->status);
   r.Text("outline", "method", outline->method);
@@ -223,7 +227,10 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
       low += lo <= 0;
     }
   }
-  const double share_measured = leaf > 0 ? static_cast<double>(measured) / leaf : 0;
+  // Measured: of the leaf found by every cue, the share with a point (FindLeaf's), which counts
+  // what the mask leaves out for want of points (a shadow at the rim, a side seen edge-on).
+  const double share_measured =
+      std::min(leaf > 0 ? static_cast<double>(measured) / leaf : 0.0, outline->measured_share);
   const double share_high = leaf > 0 ? static_cast<double>(high) / leaf : 0;
   const double share_low = leaf > 0 ? static_cast<double>(low) / leaf : 0;
   r.Number("outline", "valid_in_leaf", share_measured);
@@ -285,6 +292,7 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
                "% of the leaf's rim is set apart from what surrounds it (found by " +
                outline->method + "); check the outline in the report, or give a hint");
   }
+  for (const OutlineDoubt& doubt : outline->doubts) r.Warn(doubt.code, doubt.message);
   Status s = stage.Picture(results, "texture", texture);
   if (s.ok()) s = stage.Picture(results, "outline", DrawOutline(texture, *outline));
   return stage.Finish(s);

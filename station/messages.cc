@@ -232,6 +232,8 @@ cv::Rect LeafHintPixels(const float hint[4], cv::Size camera) {
 void FromStarted(const scan_started_t& m, Scan* scan) {
   scan->identity = FromMessage(m.identity);
   scan->leaf_hint = LeafHintPixels(m.leaf_hint, scan->camera_size);
+  scan->object = ObjectKind::kAuto;
+  if (!m.object.empty()) ParseObjectKind(m.object, &scan->object);  // ScanGate refuses others.
 }
 
 void ToLeafHint(const cv::Rect2d& fraction, float hint[4]) {

@@ -20,6 +20,7 @@
 #include "vellum/capture_v1_t.hpp"
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/scan_started_v2_t.hpp"
+#include "vellum/scan_started_v3_t.hpp"
 #include "vellum/status_t.hpp"
 
 namespace vellum::station {
@@ -73,6 +74,14 @@ scan_started_t StartedFrom(const Earlier& old) {
 
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg) {
   if (SafeDecode<scan_started_t>(data, size, msg)) return true;
+  scan_started_v3_t v3;
+  if (SafeDecode<scan_started_v3_t>(data, size, &v3)) {
+    *msg = StartedFrom(v3);
+    msg->light_count = v3.light_count;
+    msg->lights = std::move(v3.lights);
+    std::copy(v3.leaf_hint, v3.leaf_hint + 4, msg->leaf_hint);
+    return true;  // No object: auto.
+  }
   scan_started_v2_t v2;
   if (SafeDecode<scan_started_v2_t>(data, size, &v2)) {
     *msg = StartedFrom(v2);

@@ -71,7 +71,8 @@ bool SafeDecode(const void* data, int64_t size, Msg* msg) {
 // The recorded messages whose type grew (issue 17: extra lights): a CAPTURE or SCAN_STARTED of
 // a log recorded before decodes through its earlier type (capture_v1_t, scan_started_v1_t), as a
 // scan without extra lights, so every scan's log stays readable and playable; a SCAN_STARTED
-// recorded before the leaf hint (scan_started_v2_t), as a scan without a hint.
+// recorded before the leaf hint (scan_started_v2_t), as a scan without a hint; one recorded before
+// the object (scan_started_v3_t), as a scan whose object is auto.
 bool SafeDecode(const void* data, int64_t size, capture_t* msg);
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg);
 // Likewise a CALIBRATION recorded before it carried the working volume and the scale error

@@ -79,6 +79,12 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
     return Refuse(what + ": SCAN_STARTED with pattern_count " + std::to_string(m.pattern_count),
                   "scans refused");
   }
+  ObjectKind object;
+  if (!m.object.empty() && !ParseObjectKind(m.object, &object)) {
+    return Refuse(
+        what + ": SCAN_STARTED with object '" + Printable(m.object, 40) + "' (leaf, book or auto)",
+        "scans refused");
+  }
   std::vector<std::string> names;
   std::string bad;
   if (!LightNames(m, &names, &bad)) {

@@ -407,7 +407,7 @@ Status ScanRecorder::Write(const calibration_t& calibration) {
 
 Status ScanRecorder::Finish(const Scan& scan) {
   return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity, scan.lights,
-                       scan.leaf_hint);
+                       scan.leaf_hint, scan.object);
 }
 
 }  // namespace vellum::station

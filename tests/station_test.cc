@@ -1269,11 +1269,12 @@ TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFail
 }
 
 // A small leaf off the view's centre on a support as bright as it (the default rig): asked for
-// with no hint, the support is taken for the leaf and the scan says so (leaf_ambiguous, exit 3);
-// with the operator's hint (`vellum scan --leaf-hint`, as the viewer's drawn box: fractions of
-// the view) it travels SCAN_REQUEST -> SCAN_STARTED -> raw/scan.yaml (camera pixels), the leaf
-// is restored clean at its own size, and `vellum process` on the raw folder gives the same.
-TEST_F(StationTest, TheOperatorsLeafHintFindsALeafOffTheCentreOfASupport) {
+// with no hint, it is found there (the support is what it lies on) and restored clean; with the
+// operator's hint (`vellum scan --leaf-hint`, as the viewer's drawn box: fractions of the view)
+// and word for what it is (--object leaf) both travel SCAN_REQUEST -> SCAN_STARTED ->
+// raw/scan.yaml (the hint in camera pixels), the leaf is restored clean at its own size, and
+// `vellum process` on the raw folder gives the same.
+TEST_F(StationTest, TheOperatorsLeafHintAndObjectReachTheScanAndALeafOffTheCentreIsFound) {
   const std::string rig = kSource + "/config/default_calibration.yaml";
   Start(Daemon("vellum-camera"),
         {"--backend", "sim", "--rig", rig, "--page", "curl", "--scene", "support", "--page-size",
@@ -1292,13 +1293,13 @@ TEST_F(StationTest, TheOperatorsLeafHintFindsALeafOffTheCentreOfASupport) {
     return rest.substr(0, rest.find('\n'));
   };
   std::string out;
-  EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 3) << out;
-  EXPECT_NE(out.find("leaf_ambiguous"), std::string::npos) << out;
+  EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 0) << out;
+  EXPECT_NE(out.find("quality: pass"), std::string::npos) << out;
   // The leaf lies 100 mm right and 60 mm up of the view's centre on the default rig (0.25 mm
   // pixels, y down): camera pixels about 1000..1400 across and 100..620 down. A box in its
   // middle, as fractions of the 1600 x 1200 view.
   ASSERT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300", "--leaf-hint",
-                     "0.6875,0.1666667,0.125,0.25"},
+                     "0.6875,0.1666667,0.125,0.25", "--object", "leaf"},
                     &out),
             0)
       << out;
@@ -1309,7 +1310,9 @@ TEST_F(StationTest, TheOperatorsLeafHintFindsALeafOffTheCentreOfASupport) {
   Scan recorded;
   ASSERT_TRUE(ReadScanHeader(raw, &recorded).ok());
   EXPECT_EQ(recorded.leaf_hint, cv::Rect(1100, 200, 200, 300));
+  EXPECT_EQ(recorded.object, ObjectKind::kLeaf);
   const nlohmann::json report = nlohmann::json::parse(ReadText(results + "/report.json"));
+  EXPECT_EQ(report["outline"]["object"], "leaf") << report["outline"].dump();
   EXPECT_EQ(report["outline"]["hint_from"], "scan") << report["outline"].dump();
   EXPECT_EQ(report["outline"]["hint"], "1100,200,200,300") << report["outline"].dump();
   EXPECT_TRUE(report["warnings"].empty()) << report["warnings"].dump();

@@ -17,38 +17,93 @@
 #include <string>
 #include <vector>
 
+#include "core/common/object_kind.h"
 #include "core/common/status.h"
 
 namespace vellum {
 
+// The surround: the planes the leaf lies on and among (FitSurround).
+struct SurroundOptions {
+  int max_planes = 3;          // Table, support, frame.
+  double min_share = 0.08;     // A plane holds at least this share of the samples.
+  double tolerance_mm = 0.05;  // Its inliers lie this close to it, mm (more where noisier).
+  double max_tilt_deg = 20;    // A surround is near level, degrees.
+  bool Check(std::string* why) const;
+};
+
+// Leaf against surround (CutLeaf): one energy over every cue, its terms in nats (natural log
+// likelihood ratios). A block's height above the surround, d, is N(0, sigma) on the surround
+// (sigma: the block's noise and plane_mm together); on a leaf, flush_share of it is so too (a
+// leaf flush with what it rests on) and the rest spread evenly over 0 to thickness_mm (a leaf's
+// thickness) and thinly beyond (its bends).
+struct CutOptions {
+  double plane_mm = 0.01;      // How far the surround itself strays from its plane, mm.
+  double flush_share = 0.15;   // Share of a leaf lying flush with what it rests on.
+  double thickness_mm = 0.5;   // A leaf's rim stands up to this high, mm.
+  double max_off = 4;          // The height's evidence for leaf is clipped to this...
+  double max_on = 2.5;         // ... and for surround to this.
+  double look_weight = 1;      // The look's log-likelihood ratio per block, weighted by this...
+  double max_look = 3;         // ... and clipped to this.
+  double border_cost = 2;      // A block on the view's border costs this much to call leaf.
+  double smooth = 1.0;         // The outline's cost between two blocks...
+  double smooth_floor = 0.25;  // ... falling to this share of it across a rim or an edge.
+  int rounds = 0;              // The look relearned from the last cut this many times.
+  bool Check(std::string* why) const;
+};
+
 struct OutlineOptions {
-  double step_mm = 0.08;       // A height step this high is a rim, mm.
-  int scale_px = 3;            // Steps measured across 2 x this many pixels (the decoder's fit).
-  int gap_px = 4;              // Rims are closed over gaps of up to twice this, in pixels.
-  double max_slope_deg = 80;   // A surface seen steeper than this is a silhouette (a rim).
-  double min_area = 0.02;      // A leaf covers at least this share of the image.
-  cv::Rect hint;               // Camera pixels inside the leaf (empty: the centre of the view).
-  int border_px = 2;           // A leaf within this of the image border runs off the view.
-  bool find_spread = true;     // Look for two pages meeting at a gutter.
-  double gutter_rise_mm = 15;  // A spread's pages rise at least this much from the gutter, mm.
-  // A gutter is a crease, not a trough: within gutter_width_mm of it each page rises at least
-  // gutter_crease_mm (or is hidden in it). A leaf rolled into a trough (a cone, a roll) rises
-  // gently from its lowest line and stays one leaf.
-  double gutter_width_mm = 10;
-  double gutter_crease_mm = 3;
+  // The cues (MeasureCues).
+  double step_mm = 0.08;        // A height step this high is a rim, mm.
+  int scale_px = 3;             // Steps measured across 2 x this many pixels (the decoder's fit).
+  double max_slope_deg = 80;    // A surface seen steeper than this is a silhouette (a rim).
+  double edge_contrast = 0.05;  // A texture edge: brightness changing by this share of the
+                                // paper's per pixel.
+  // The cut (MakeBlocks, FitSurround, CutLeaf, RefineRim).
+  int blocks_across = 400;  // The cut decides on blocks: the view's longer side in this many.
+  SurroundOptions surround;
+  CutOptions cut;
+  int band_px = 8;  // RefineRim moves the cut's outline by up to a block and this many pixels.
+  // The leaf.
+  double min_area = 0.02;        // A leaf covers at least this share of the image.
+  double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
+  cv::Rect hint;                 // Camera pixels inside the leaf (empty: the centre of the view).
+  int border_px = 2;             // A leaf within this of the image border runs off the view.
+  // Spreads (SplitAtGutter).
+  bool find_spread = true;  // Look for two pages meeting at a gutter.
+  // What the operator says lies there: a leaf is never split, a book always looked for as two
+  // pages (a warning when they are not found), auto splits on strong evidence only.
+  ObjectKind object = ObjectKind::kAuto;
+  // A gutter (SplitAtGutter) is a valley from which each page rises gutter_rise_mm within
+  // gutter_reach_mm, sharply: gutter_crease_mm within gutter_width_mm (a book's pages at 20
+  // degrees rise 1.1 mm in 3 mm; a trough, a roll or a ripple rises gently from its lowest line
+  // and stays one leaf).
+  double gutter_rise_mm = 2;
+  double gutter_reach_mm = 40;
+  double gutter_width_mm = 3;
+  double gutter_crease_mm = 0.6;
 
   bool Check(std::string* why) const;
 };
 
+// Why an outline is doubtful: a warning for the report, with its code (outline_uncertain,
+// object_ambiguous, ...) and a message for the operator that says what to do.
+struct OutlineDoubt {
+  std::string code, message;
+};
+
 struct Outline {
   Status status = Status::Error("outline not found (not run)");
-  cv::Mat mask;                  // CV_8U 255 on the leaf (on both pages of a spread), holes out.
-  std::vector<cv::Mat> pages;    // One mask per page: the leaf, or a spread's left then right.
-  double confidence = 0;         // Share of the rim where the leaf is set apart from its surround.
-  bool touches_border = false;   // The leaf runs off the camera's view.
-  std::string method;            // "shape", or "brightness" when the shape found no leaf.
-  int holes = 0;                 // Holes in the leaf that show what is under it.
-  cv::Vec4f gutter{0, 0, 0, 0};  // A spread's gutter line in the image: (vx, vy, x0, y0).
+  cv::Mat mask;                 // CV_8U 255 on the leaf (on both pages of a spread), holes out.
+  std::vector<cv::Mat> pages;   // One mask per page: the leaf, or a spread's left then right.
+  double confidence = 0;        // Share of the rim where the leaf is set apart from its surround.
+  bool touches_border = false;  // The leaf runs off the camera's view.
+  std::string method;           // How it was found: "cut" (every cue at once).
+  // Share of the leaf found (by any cue) that has a 3D point: what has none where it reaches the
+  // leaf's outline (a shadow, a side seen edge-on) is not in `mask`, and holes filled are.
+  double measured_share = 0;
+  int holes = 0;                     // Holes in the leaf that show what is under it.
+  cv::Vec4f gutter{0, 0, 0, 0};      // A spread's gutter line in the image: (vx, vy, x0, y0).
+  std::vector<OutlineDoubt> doubts;  // What makes it doubtful (none: found with confidence).
 };
 
 // Finds the leaf in an organised point map (CV_32FC3, mm, NaN where invalid) and its texture

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/object_kind.h"
 #include "core/patterns/patterns.h"
 
 namespace vellum {
@@ -107,6 +108,9 @@ struct Scan {
   // The operator's hint where the scene is ambiguous: camera pixels inside the leaf (scan.yaml's
   // leaf_hint; drawn in vellum-viewer); empty when none. It outranks the options' hint.
   cv::Rect leaf_hint;
+  // What the operator says lies on the table (scan.yaml's `object`): a leaf, an open book, or
+  // auto (vellum decides). It outranks the options'.
+  ObjectKind object = ObjectKind::kAuto;
 };
 
 }  // namespace vellum

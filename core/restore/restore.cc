@@ -265,13 +265,52 @@ SamplingSummary SummarizeSampling(const cv::Mat& sampling) {
   return out;
 }
 
+namespace {
+// An angle, degrees, into [-45, 45].
+double Wrap90(double angle) { return angle - 90.0 * std::round(angle / 90.0); }
+}  // namespace
+
 double UprightAngle(const cv::Mat& mask) {
+  // How far (degrees) the straight stretches' direction may stray from a rectangle's sides.
+  constexpr double kStray = 0.5;
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
   if (contours.empty()) return 0;
   const auto& outline = *std::max_element(
       contours.begin(), contours.end(),
       [](const auto& a, const auto& b) { return cv::contourArea(a) < cv::contourArea(b); });
+  // A rectangle (it fills its smallest enclosing rectangle to 97%): the mean direction of its
+  // four sides, each a line fitted to the outline's points along it (the rectangle's own angle
+  // snaps to its pixel staircase's hull).
+  const cv::RotatedRect box = cv::minAreaRect(outline);
+  double sides = std::numeric_limits<double>::quiet_NaN();
+  if (box.size.area() > 0 && cv::contourArea(outline) >= 0.97 * box.size.area()) {
+    cv::Point2f corner[4];
+    box.points(corner);
+    double sum = 0, total = 0;
+    for (int k = 0; k < 4; ++k) {
+      const cv::Point2f a = corner[k], b = corner[(k + 1) % 4];
+      const double length = cv::norm(b - a);
+      if (length < 10) continue;
+      const cv::Point2f along = (b - a) / static_cast<float>(length);
+      // The points within 3 pixels of this side, away from its corners (a tenth of it each end).
+      std::vector<cv::Point2f> side;
+      for (const cv::Point& p : outline) {
+        const cv::Point2f d = cv::Point2f(p) - a;
+        const double t = d.dot(along), off = std::fabs(d.x * along.y - d.y * along.x);
+        if (off <= 3 && t > 0.1 * length && t < 0.9 * length) side.push_back(p);
+      }
+      if (side.size() < 10) continue;
+      cv::Vec4f line;
+      cv::fitLine(side, line, cv::DIST_HUBER, 0, 0.01, 0.01);
+      double angle = std::atan2(line[1], line[0]) * 180 / M_PI - box.angle;
+      angle -= 90.0 * std::round(angle / 90.0);  // Off the rectangle's own angle.
+      sum += angle * side.size();
+      total += side.size();
+    }
+    sides = box.angle + (total > 0 ? sum / total : 0);
+    sides -= 90.0 * std::round(sides / 90.0);
+  }
   // The outline's segments, their directions folded into [0, 90) degrees, weighted by length.
   std::vector<cv::Point> poly;
   cv::approxPolyDP(outline, poly, 1.5, true);
@@ -315,8 +354,11 @@ double UprightAngle(const cv::Mat& mask) {
       if (std::fabs(shift) < 1e-3) break;
     }
     angle = peak;
+    // A rectangle's fitted sides, where the straight stretches found above stray from them (a
+    // curled leaf's sides bow: approximated as segments, they lean off its turn).
+    if (std::isfinite(sides) && std::fabs(Wrap90(angle - sides)) > kStray) angle = sides;
   } else {
-    angle = cv::minAreaRect(outline).angle;
+    angle = std::isfinite(sides) ? sides : box.angle;
   }
   angle -= 90.0 * std::round(angle / 90.0);  // Into [-45, 45].
   return angle;

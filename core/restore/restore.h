@@ -111,9 +111,10 @@ SheetFrame RestoredSheetFrame(const Mesh& mesh, const std::vector<cv::Point2d>& 
 Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& images,
                    std::vector<cv::Mat>* out, double outside = 0);
 
-// The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the
-// direction of its straight edges when they make up most of its outline, else the sides of its
-// minimum-area rectangle.
+// The turn (degrees, in (-45, 45]) that sets a leaf upright from its restored mask: the sides of
+// its minimum-area rectangle when it nearly fills it (a rectangular leaf, curled or not), else the
+// direction of its straight edges when they make up most of its outline (a torn or burnt leaf
+// with straight stretches), else the sides of that rectangle again.
 double UprightAngle(const cv::Mat& mask);
 
 }  // namespace vellum

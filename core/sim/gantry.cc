@@ -124,6 +124,15 @@ VirtualGantry::VirtualGantry(const Calibration& rig, const PageOptions& page_opt
                              const TextureOptions& texture_options, const LightOptions& light,
                              const SceneOptions& scene)
     : rig_(rig), light_(light), scene_(scene) {
+  if (light.grain > 0) {
+    // Eight waves of random direction, wavelength 2 to 40 mm and phase.
+    cv::RNG rng(light.grain_seed);
+    for (int k = 0; k < 8; ++k) {
+      const double angle = rng.uniform(0.0, M_PI), length = rng.uniform(2.0, 40.0);
+      grain_waves_.emplace_back(2 * M_PI * std::cos(angle) / length,
+                                2 * M_PI * std::sin(angle) / length, rng.uniform(0.0, 2 * M_PI));
+    }
+  }
   PageOptions base = page_options;
   base.base_mm = scene.support ? scene.support_height_mm : 0.0;
   if (scene.spread) {
@@ -159,22 +168,23 @@ cv::Vec3d VirtualGantry::Background(const cv::Vec3d& centre, const cv::Vec3d& ra
     return x[0] >= r.x && x[0] <= r.x + r.width && x[1] >= r.y && x[1] <= r.y + r.height;
   };
   const double base = scene_.support ? scene_.support_height_mm : 0.0;
-  if (scene_.frame) {
-    const cv::Vec3d x = at(base + scene_.frame_thickness_mm);
-    if (inside(scene_.frame_mm, x) && !inside(FrameWindow(), x)) {
-      *albedo = scene_.frame_albedo;
-      return x;
-    }
-  }
-  if (scene_.support) {
-    const cv::Vec3d x = at(scene_.support_height_mm);
-    if (inside(scene_.support_mm, x)) {
-      *albedo = scene_.support_albedo;
-      return x;
-    }
-  }
+  cv::Vec3d x = at(0.0);
   *albedo = light_.table_albedo;
-  return at(0.0);
+  const cv::Vec3d on_frame = at(base + scene_.frame_thickness_mm);
+  const cv::Vec3d on_support = at(scene_.support_height_mm);
+  if (scene_.frame && inside(scene_.frame_mm, on_frame) && !inside(FrameWindow(), on_frame)) {
+    *albedo = scene_.frame_albedo;
+    x = on_frame;
+  } else if (scene_.support && inside(scene_.support_mm, on_support)) {
+    *albedo = scene_.support_albedo;
+    x = on_support;
+  }
+  if (!grain_waves_.empty()) {
+    double sum = 0;
+    for (const cv::Vec3d& w : grain_waves_) sum += std::sin(w[0] * x[0] + w[1] * x[1] + w[2]);
+    *albedo *= 1 + light_.grain * sum / grain_waves_.size();
+  }
+  return x;
 }
 
 cv::Rect2d VirtualGantry::FrameWindow() const {
@@ -360,6 +370,9 @@ cv::Mat VirtualGantry::RenderFrame(const cv::Mat& projector_image, uint64_t seed
   cv::RNG rng(seed);
   rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
   cv::Mat frame(rig_.camera.size, CV_8U);
+  const bool plain = light_.camera_blur_px <= 0 && light_.shot_noise_dn <= 0;
+  cv::Mat clean;  // The light before the camera's lens and noise, where those are modelled.
+  if (!plain) clean.create(rig_.camera.size, CV_32F);
   const int pw = pattern.cols, ph = pattern.rows;
   cv::parallel_for_(cv::Range(0, frame.rows), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
@@ -382,11 +395,34 @@ cv::Mat VirtualGantry::RenderFrame(const cv::Mat& projector_image, uint64_t seed
           light = (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x0 + 1]) +
                   fy * ((1 - fx) * r1[x0] + fx * r1[x0 + 1]);
         }
-        out[u] = cv::saturate_cast<uint8_t>(std::lround(offset[u] + gain[u] * light + n[u]));
+        if (plain) {
+          out[u] = cv::saturate_cast<uint8_t>(std::lround(offset[u] + gain[u] * light + n[u]));
+        } else {
+          clean.at<float>(v, u) = offset[u] + gain[u] * light;
+        }
       }
     }
   });
+  if (!plain) {
+    Camera(&clean, noise, seed);
+    clean.convertTo(frame, CV_8U);  // Rounds and saturates.
+  }
   return frame;
+}
+
+void VirtualGantry::Camera(cv::Mat* clean, const cv::Mat& noise, uint64_t seed) const {
+  if (light_.camera_blur_px > 0) {
+    cv::GaussianBlur(*clean, *clean, cv::Size(0, 0), light_.camera_blur_px, 0,
+                     cv::BORDER_REPLICATE);
+  }
+  if (light_.shot_noise_dn > 0) {
+    cv::Mat shot(clean->size(), clean->type()), level;
+    cv::RNG rng(seed ^ 0x5eed5eed5eedULL);
+    rng.fill(shot, cv::RNG::NORMAL, 0.0, light_.shot_noise_dn);
+    cv::sqrt(cv::max(*clean, 0.0) / 255.0, level);
+    *clean += shot.mul(level);
+  }
+  *clean += noise;
 }
 
 std::vector<SceneLight> RakingLights(int count, double elevation_deg, double azimuth_deg) {
@@ -429,7 +465,7 @@ cv::Mat VirtualGantry::RenderLight(const SceneLight& light, uint64_t seed) const
   cv::Mat noise(level.size(), CV_32F);
   cv::RNG rng(seed);
   rng.fill(noise, cv::RNG::NORMAL, 0.0, light_.noise_dn);
-  level += noise;
+  Camera(&level, noise, seed);
   cv::Mat frame;
   if (light_.texture_bits == 16) {
     level.convertTo(frame, CV_16U, 65535.0 / 255.0);
@@ -456,7 +492,13 @@ cv::Mat VirtualGantry::RenderTexture(uint64_t seed) const {
       lit = lit.mul(studio3);
     }
   }
-  cv::Mat light = lit * (255.0 * light_.studio_light) + noise;
+  cv::Mat light;
+  if (light_.camera_blur_px <= 0 && light_.shot_noise_dn <= 0) {
+    light = lit * (255.0 * light_.studio_light) + noise;
+  } else {
+    light = lit * (255.0 * light_.studio_light);
+    Camera(&light, noise, seed);
+  }
   if (light_.texture_bits == 16) {
     light.convertTo(frame, CV_16U, 65535.0 / 255.0);  // Rounds and saturates.
   } else {

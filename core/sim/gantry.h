@@ -23,8 +23,17 @@ struct LightOptions {
   double defocus_sigma_px = 0.7;  // Projector defocus, Gaussian sigma, projector pixels.
   double noise_dn = 1.5;          // Camera noise standard deviation, DN.
   double table_albedo = 0.35;     // Reflectance of the table around the page.
-  double shadow_bias_mm = 1.0;    // Depth tolerance of the projector shadow test, mm.
-  int albedo_supersampling = 4;   // Albedo samples per pixel side (area-integrates ink edges).
+  // The surround's albedo (table, support, frame) varies by up to this share either way, as
+  // wood grain or cloth does: a smooth random pattern of `grain_seed`, features 2 to 40 mm.
+  double grain = 0.0;
+  uint64_t grain_seed = 1;
+  double shadow_bias_mm = 1.0;   // Depth tolerance of the projector shadow test, mm.
+  int albedo_supersampling = 4;  // Albedo samples per pixel side (area-integrates ink edges).
+  // The camera as another renderer or a real one draws it: its lens blurs the image (a
+  // Gaussian of this sigma, camera pixels, before the noise), and photon (shot) noise adds a
+  // standard deviation of shot_noise_dn at full scale, falling as the square root of the level.
+  double camera_blur_px = 0.0;
+  double shot_noise_dn = 0.0;
   // The studio-light texture's bits per sample: 8, or 16 (a camera that gives more than 8 bits,
   // its full scale at 65535; the noise in the same DN of an 8-bit full scale). The structured
   // light frames are 8-bit either way.
@@ -130,12 +139,16 @@ class VirtualGantry {
   // and that surface's albedo.
   cv::Vec3d Background(const cv::Vec3d& centre, const cv::Vec3d& ray, double* albedo) const;
   cv::Rect2d FrameWindow() const;
+  // A camera image `clean` (CV_32F levels, or CV_32FC3) blurred by the lens and given the
+  // camera's noise (read noise `noise`, the same type, and shot noise from `seed`).
+  void Camera(cv::Mat* clean, const cv::Mat& noise, uint64_t seed) const;
 
   Calibration rig_;
   LightOptions light_;
   SceneOptions scene_;
   std::vector<Page> pages_;
-  cv::Mat background_albedo_;  // CV_32F albedo of the scene behind each pixel.
+  cv::Mat background_albedo_;           // CV_32F albedo of the scene behind each pixel.
+  std::vector<cv::Vec3d> grain_waves_;  // The surround's grain: (kx, ky rad/mm, phase) each.
   GroundTruth truth_;
   cv::Mat projector_map_;  // CV_32FC2 projector pixel hit by each camera pixel's point.
   cv::Mat gain_;           // CV_32F DN per unit projector intensity (0 in shadow).

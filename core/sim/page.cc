@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace vellum {
 namespace {
@@ -48,13 +49,16 @@ const char* ToString(PageShape shape) {
       return "ripple";
     case PageShape::kGutter:
       return "gutter";
+    case PageShape::kProfile:
+      return "profile";
   }
   return "?";
 }
 
 bool ParsePageShape(const std::string& text, PageShape* shape) {
-  for (PageShape s : {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone,
-                      PageShape::kBump, PageShape::kRipple, PageShape::kGutter}) {
+  for (PageShape s :
+       {PageShape::kFlat, PageShape::kCurl, PageShape::kFold, PageShape::kCone, PageShape::kBump,
+        PageShape::kRipple, PageShape::kGutter, PageShape::kProfile}) {
     if (text == ToString(s)) {
       *shape = s;
       return true;
@@ -76,7 +80,7 @@ Page::Page(const PageOptions& options) : options_(options) {
     sigma_origin_ = across_dir_.dot(cv::Vec2d(w / 2, h / 2));
     const double slope = options.fold_slope_deg * kDeg;
     const double half_arc = slope * options.fold_radius_mm;
-    forward_ = {{half_arc, -1.0 / options.fold_radius_mm}};
+    forward_ = {{half_arc, (options.fold_valley ? 1.0 : -1.0) / options.fold_radius_mm}};
     backward_ = forward_;
   } else if (options.shape == PageShape::kRipple) {
     // From the s = 0 edge: half an arc up, then arcs of alternating curvature, each turning
@@ -101,9 +105,16 @@ Page::Page(const PageOptions& options) : options_(options) {
       sigma_origin_ = 0.0;
     }
     forward_ = {{w - bend, 0.0}, {1e9, -1.0 / options.gutter_radius_mm}};
+  } else if (options.shape == PageShape::kProfile) {
+    const double a = options.profile_angle_deg * kDeg;
+    across_dir_ = {std::cos(a), std::sin(a)};
+    sigma_origin_ =
+        std::min({0.0, across_dir_[0] * w, across_dir_[1] * h, across_dir_.dot(cv::Vec2d(w, h))});
+    for (const cv::Vec2d& segment : options.profile) forward_.push_back({segment[0], segment[1]});
   }
   if (options.shape == PageShape::kFold) {
-    double zmin = 0;
+    // A ridge rests on its edges (the corners are lowest), a valley on its fold line.
+    double zmin = options.fold_valley ? ShapePoint(w / 2, h / 2)[2] : 0.0;
     for (double s : {0.0, w}) {
       for (double t : {0.0, h}) zmin = std::min(zmin, ShapePoint(s, t)[2]);
     }
@@ -112,6 +123,20 @@ Page::Page(const PageOptions& options) : options_(options) {
     // The lowest point across the page rests at z = 0 (the profile does not vary along t).
     double zmin = 0;
     for (int k = 0; k <= 1000; ++k) zmin = std::min(zmin, ShapePoint(w * k / 1000.0, 0)[2]);
+    z_offset_ = -zmin;
+  } else if (options.shape == PageShape::kProfile) {
+    // The same at any angle: the lowest point of the profile over the page's extent across it,
+    // sampled every 0.1 mm.
+    double lo = 0, hi = 0;
+    for (double s : {0.0, w}) {
+      for (double t : {0.0, h}) {
+        const double sigma = across_dir_.dot(cv::Vec2d(s, t)) - sigma_origin_;
+        lo = std::min(lo, sigma), hi = std::max(hi, sigma);
+      }
+    }
+    double zmin = std::numeric_limits<double>::infinity();
+    const int n = std::max(1, static_cast<int>(std::ceil((hi - lo) / 0.1)));
+    for (int k = 0; k <= n; ++k) zmin = std::min(zmin, Profile(lo + (hi - lo) * k / n)[1]);
     z_offset_ = -zmin;
   }
   if (options.outline == OutlineKind::kBurnt) {
@@ -205,7 +230,8 @@ cv::Vec3d Page::ShapePoint(double s, double t) const {
     case PageShape::kCurl:
     case PageShape::kFold:
     case PageShape::kRipple:
-    case PageShape::kGutter: {
+    case PageShape::kGutter:
+    case PageShape::kProfile: {
       const cv::Vec2d st(s, t);
       const double sigma = across_dir_.dot(st) - sigma_origin_;
       const cv::Vec2d along(-across_dir_[1], across_dir_[0]);

@@ -19,6 +19,9 @@ enum class PageShape {
   kBump,    // Flat with a Gaussian bubble (not developable: real vellum).
   kRipple,  // Ripples across the page: arcs of alternating curvature, steep slopes.
   kGutter,  // A page of an open book in a cradle: flat, then bending down into the gutter.
+  // Any generalised cylinder: a chain of constant-curvature segments (PageOptions::profile)
+  // across the page from its edge, at any angle (random developable sheets, captured shapes).
+  kProfile,
 };
 
 enum class OutlineKind {
@@ -31,13 +34,14 @@ bool ParsePageShape(const std::string& text, PageShape* shape);
 
 struct PageOptions {
   PageShape shape = PageShape::kFlat;
-  cv::Size2d size_mm{190.0, 240.0};      // Page width (s) and height (t), mm.
-  cv::Vec2d centre_mm{0.0, 0.0};         // World x, y of the flat page's centre, mm.
-  double curl_radius_mm = 60.0;          // kCurl: radius of the rolled part, mm.
-  double curl_length_mm = 70.0;          // kCurl: arc length of the rolled part, mm.
-  double fold_angle_deg = 35.0;          // kFold: fold line direction from the page's s axis.
-  double fold_radius_mm = 15.0;          // kFold: radius of the rounded ridge, mm.
-  double fold_slope_deg = 12.0;          // kFold: slope of each flank, degrees.
+  cv::Size2d size_mm{190.0, 240.0};  // Page width (s) and height (t), mm.
+  cv::Vec2d centre_mm{0.0, 0.0};     // World x, y of the flat page's centre, mm.
+  double curl_radius_mm = 60.0;      // kCurl: radius of the rolled part, mm.
+  double curl_length_mm = 70.0;      // kCurl: arc length of the rolled part, mm.
+  double fold_angle_deg = 35.0;      // kFold: fold line direction from the page's s axis.
+  double fold_radius_mm = 15.0;      // kFold: radius of the rounded ridge, mm.
+  double fold_slope_deg = 12.0;      // kFold: slope of each flank, degrees.
+  bool fold_valley = false;  // kFold: the fold is a valley (a V, lowest along it), not a ridge.
   double cone_half_angle_deg = 35.0;     // kCone: cone half-angle, degrees.
   double cone_apex_distance_mm = 250.0;  // kCone: apex distance below the page's t = 0 edge.
   double bump_height_mm = 3.0;           // kBump: peak height, mm.
@@ -47,8 +51,13 @@ struct PageOptions {
   bool gutter_left = false;              // kGutter: the gutter is at the s = 0 edge (else s = w).
   double gutter_radius_mm = 45.0;        // kGutter: radius of the bend into the gutter, mm.
   double gutter_angle_deg = 70.0;        // kGutter: how far the page turns down, degrees.
-  double thickness_mm = 0.2;             // The leaf's thickness: it lies this far above its base.
-  double base_mm = 0.0;                  // Height of what it rests on (a support's top), mm.
+  // kProfile: the profile's segments from the page's edge across it, each (length mm,
+  // curvature 1/mm; positive turns up), continued straight past the last; the direction across
+  // is profile_angle_deg from the page's s axis. The lowest point rests on the base.
+  std::vector<cv::Vec2d> profile;
+  double profile_angle_deg = 0.0;
+  double thickness_mm = 0.2;  // The leaf's thickness: it lies this far above its base.
+  double base_mm = 0.0;       // Height of what it rests on (a support's top), mm.
   OutlineKind outline = OutlineKind::kRectangle;
   double burn_depth_mm = 10.0;  // kBurnt: the deepest the edges are eaten, mm.
   int holes = 3;                // kBurnt: holes burnt through the leaf.

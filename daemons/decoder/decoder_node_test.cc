@@ -130,7 +130,7 @@ TEST_F(DecoderNodeTest, RecordsAScanAndSendsItDownTheChain) {
 
 // The operator's leaf hint (drawn in the viewer: fractions of the camera's view on the bus)
 // reaches scan.yaml and the decode stage's report in the camera's pixels, exactly, and the log
-// keeps it (a replay or an export finds the same).
+// keeps it (a replay or an export finds the same); so does what the operator says the object is.
 TEST_F(DecoderNodeTest, TheOperatorsLeafHintIsRecordedInCameraPixels) {
   Node node("vellum-decoder", &bus_.lcm());
   DecoderNode decoder(&node, options_);
@@ -141,26 +141,31 @@ TEST_F(DecoderNodeTest, TheOperatorsLeafHintIsRecordedInCameraPixels) {
   // grid shows.
   hinted.leaf_hint =
       cv::Rect(camera.width / 7, camera.height / 3 + 1, camera.width / 5 + 3, camera.height / 4);
+  hinted.object = ObjectKind::kBook;
   testing::PublishScan(bus_.probe(), hinted, 12);
   ASSERT_TRUE(bus_.RunUntil([&] { return !correspondence->empty(); }));
   const ScanFolder folder = ScanFolder::For(data_, 12);
   Scan recorded;
   ASSERT_TRUE(ReadScanHeader(folder.raw(), &recorded).ok());
   EXPECT_EQ(recorded.leaf_hint, hinted.leaf_hint);
+  EXPECT_EQ(recorded.object, ObjectKind::kBook);
   std::vector<StageReport> stages;
   ASSERT_TRUE(FromMessages(correspondence->back().stages, &stages).ok());
   EXPECT_EQ(ReportedLeafHint(stages), hinted.leaf_hint);
+  EXPECT_EQ(ReportedObject(stages), ObjectKind::kBook);
   Scan logged;
   bool has_calibration = false;
   calibration_t calibration;
   int64_t id = 0;
   ASSERT_TRUE(ReadScanLog(folder.log(), 12, &logged, &has_calibration, &calibration, &id).ok());
   EXPECT_EQ(logged.leaf_hint, hinted.leaf_hint);
+  EXPECT_EQ(logged.object, ObjectKind::kBook);
   // A scan without one has none.
   PublishScan(13);
   ASSERT_TRUE(bus_.RunUntil([&] { return correspondence->back().scan_id == 13; }));
   ASSERT_TRUE(ReadScanHeader(ScanFolder::For(data_, 13).raw(), &recorded).ok());
   EXPECT_TRUE(recorded.leaf_hint.empty());
+  EXPECT_EQ(recorded.object, ObjectKind::kAuto);
 }
 
 TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {

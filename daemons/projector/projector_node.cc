@@ -82,6 +82,7 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
   started.light_count = static_cast<int32_t>(options_.lights.size());
   for (const ScanLight& l : options_.lights) started.lights.push_back(ToMessage(l));
   std::copy(m.leaf_hint, m.leaf_hint + 4, started.leaf_hint);
+  started.object = m.object;
   node_->Publish(channel::kScanStarted, &started);
   if (options_.calibration) {
     calibration_t c{};

@@ -310,6 +310,7 @@ void ViewerNode::OnKey(SDL_Keycode key) {
       r.identity = ToMessage(next_);
       if (next_ == ScanIdentity()) r.identity.label = "from vellum-viewer";
       ToLeafHint(hint_, r.leaf_hint);
+      r.object = ToString(object_);
       node_->Publish(channel::kScanRequest, &r);
       progress_ = "scan " + std::to_string(r.scan_id) + " requested: " + Describe(next_);
       Started(r.scan_id);
@@ -320,6 +321,15 @@ void ViewerNode::OnKey(SDL_Keycode key) {
     }
     case SDLK_c:
       sheet_ = !sheet_;
+      break;
+    case SDLK_o:  // What the sequence's scans are: auto, then a leaf, then an open book.
+      object_ = object_ == ObjectKind::kAuto   ? ObjectKind::kLeaf
+                : object_ == ObjectKind::kLeaf ? ObjectKind::kBook
+                                               : ObjectKind::kAuto;
+      progress_ = std::string("the next scans are ") +
+                  (object_ == ObjectKind::kLeaf   ? "a single leaf each (never split)"
+                   : object_ == ObjectKind::kBook ? "an open book each (two pages)"
+                                                  : "leaf or book, as vellum finds (auto)");
       break;
     case SDLK_h:
       ClearHint();
@@ -539,10 +549,12 @@ void ViewerNode::DrawLeft(cv::Mat& canvas, int top, int width) const {
   const int form_lines = editing_ >= 0 ? kFormFields + 1 : 2;
   y = std::max(y + 6, h - 8 - 18 * form_lines);
   if (editing_ < 0) {
-    cv::putText(canvas, "next scan: " + Describe(next_), cv::Point(12, y + 12),
-                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
-    cv::putText(canvas, "e: edit   u: undo the last advance   z: 100% zoom", cv::Point(12, y + 30),
-                cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
+    cv::putText(canvas, "next scan: " + Describe(next_) + "  (" + ToString(object_) + ")",
+                cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1,
+                cv::LINE_AA);
+    cv::putText(canvas, "e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom",
+                cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160), 1,
+                cv::LINE_AA);
     return;
   }
   cv::putText(canvas, "identity of the next scan (Tab: next field, Return: done)",

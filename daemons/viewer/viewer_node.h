@@ -72,6 +72,8 @@ class ViewerNode {
   const std::string& light_prompt() const { return prompt_.text; }
   // The leaf hint the next scan carries, as fractions of the camera's view; empty when none.
   const cv::Rect2d& leaf_hint() const { return hint_; }
+  // What the operator says the scans of this sequence are ('o' turns it: auto, leaf, book).
+  ObjectKind object() const { return object_; }
   // Where the preview was last drawn on the window (its pixels); empty before any.
   cv::Rect preview_area() const { return preview_at_; }
 
@@ -109,13 +111,14 @@ class ViewerNode {
   int shown_ = -1;
   Clock::time_point next_draw_;
   ScanIdentity next_;
-  std::vector<ScanIdentity> history_;  // The identities of the scans asked for, for undo.
-  int editing_ = -1;                   // The field being edited, or -1.
-  bool sheet_ = false;                 // The contact sheet is shown.
-  bool zoom_ = false;                  // The preview at 100%: the focus crop.
-  cv::Mat focus_;                      // PREVIEW_FOCUS: the view's centre, full resolution, BGR.
-  double focus_sharpness_ = 0;         // Its Laplacian's variance.
-  int64_t scan_ = 0;                   // The scan in progress (or last asked for).
+  ObjectKind object_ = ObjectKind::kAuto;  // The sequence's object, sent with each request.
+  std::vector<ScanIdentity> history_;      // The identities of the scans asked for, for undo.
+  int editing_ = -1;                       // The field being edited, or -1.
+  bool sheet_ = false;                     // The contact sheet is shown.
+  bool zoom_ = false;                      // The preview at 100%: the focus crop.
+  cv::Mat focus_;               // PREVIEW_FOCUS: the view's centre, full resolution, BGR.
+  double focus_sharpness_ = 0;  // Its Laplacian's variance.
+  int64_t scan_ = 0;            // The scan in progress (or last asked for).
   int64_t failed_scan_ = 0;
   std::string failure_;
   std::map<std::string, int64_t> error_utime_;  // Each process's last error seen.

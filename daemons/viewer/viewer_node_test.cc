@@ -506,5 +506,29 @@ TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
   EXPECT_TRUE(LeafHintPixels(requests->back().leaf_hint, cv::Size(1600, 1200)).empty());
 }
 
+// What the sequence's scans are, as the operator says it: 'o' turns it from auto to a leaf, to
+// an open book and back, it stays for the scans after, and every request carries it.
+TEST_F(ViewerNodeTest, OSaysWhetherTheScansAreLeavesOrABookAndEachRequestCarriesIt) {
+  Node node("vellum-viewer", &bus_.lcm());
+  ViewerNode viewer(&node, Window());
+  bus_.AddTick([&] { viewer.Tick(); });
+  auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  EXPECT_EQ(viewer.object(), ObjectKind::kAuto);
+  PushKey(SDLK_s);
+  ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 1; }, 10));
+  EXPECT_EQ(requests->back().object, "auto");
+  PushKey(SDLK_o);
+  PushKey(SDLK_o);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.object() == ObjectKind::kBook; }, 10));
+  EXPECT_NE(viewer.progress().find("open book"), std::string::npos) << viewer.progress();
+  for (size_t k = 2; k <= 3; ++k) {
+    PushKey(SDLK_s);
+    ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == k; }, 10));
+    EXPECT_EQ(requests->back().object, "book");
+  }
+  PushKey(SDLK_o);
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.object() == ObjectKind::kAuto; }, 10));
+}
+
 }  // namespace
 }  // namespace vellum::station

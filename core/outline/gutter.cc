@@ -1,0 +1,185 @@
+// SplitAtGutter and UnseenAtGutter: an open book's two pages.
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "core/outline/steps.h"
+
+namespace vellum {
+namespace outline {
+
+bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
+                   const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
+                   GutterSigns* signs) {
+  const cv::Rect box = cv::boundingRect(leaf);
+  if (box.width < 20 || box.height < 20) return false;
+  std::vector<cv::Point2f> valley;
+  int apart = 0;  // Valley rows where the two sides do not meet (a gap, or a band out of view).
+  int level = 0;  // Valley rows where both sides level off beyond the bend.
+  constexpr int kApart = 12;  // Pixels either side of the valley's point.
+  for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
+    const float* row = z.ptr<float>(v);
+    const uint8_t* in = leaf.ptr<uint8_t>(v);
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    // The lowest leaf point in the middle three fifths of the row's leaf.
+    int first = -1, last = -1;
+    for (int u = box.x; u < box.x + box.width; ++u) {
+      if (!in[u]) continue;
+      if (first < 0) first = u;
+      last = u;
+    }
+    if (first < 0 || last - first < 20) continue;
+    int lowest = -1;
+    for (int u = first + (last - first) / 5; u <= last - (last - first) / 5; ++u) {
+      if (in[u] && Valid(row[u]) && (lowest < 0 || row[u] < row[lowest])) lowest = u;
+    }
+    if (lowest < 0 || !std::isfinite(p[lowest][0])) continue;
+    // Each side rises gutter_rise_mm within gutter_reach_mm of the bottom, and gutter_crease_mm
+    // within gutter_width_mm of where that side begins (across a gap between the pages, the far
+    // page begins at its first point; a side with no point that near is hidden in the gutter).
+    const cv::Point2f bottom(p[lowest][0], p[lowest][1]);
+    cv::Point2f begins[2] = {bottom, bottom};
+    for (int side = 0; side < 2; ++side) {
+      for (int u = lowest + (side ? 1 : -1); u >= first && u <= last; u += side ? 1 : -1) {
+        if (!in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
+        if (cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom) <= options.gutter_width_mm) {
+          begins[side] = cv::Point2f(p[u][0], p[u][1]);
+        }
+        break;
+      }
+    }
+    float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData},
+          beyond[2] = {kNoData, kNoData};
+    for (int u = first; u <= last; ++u) {
+      if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
+      const cv::Point2f at(p[u][0], p[u][1]);
+      const int side = u > lowest;
+      const double from_bottom = cv::norm(at - bottom);
+      if (from_bottom <= options.gutter_reach_mm) {
+        high[side] = std::max(high[side], row[u]);
+      } else if (from_bottom <= 2 * options.gutter_reach_mm) {
+        beyond[side] = std::max(beyond[side], row[u]);
+      }
+      if (cv::norm(at - begins[side]) <= options.gutter_width_mm) {
+        near[side] = std::max(near[side], row[u]);
+      }
+    }
+    bool valley_here = true;
+    for (int side = 0; side < 2; ++side) {
+      valley_here = valley_here && high[side] - row[lowest] >= options.gutter_rise_mm &&
+                    (near[side] == kNoData || near[side] - row[lowest] >= options.gutter_crease_mm);
+    }
+    if (!valley_here) continue;
+    valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
+    bool levels = true;
+    for (int side = 0; side < 2; ++side) {
+      levels = levels && beyond[side] != kNoData &&
+               beyond[side] - high[side] < 0.5f * (high[side] - row[lowest]);
+    }
+    level += levels;
+    bool gap = false;
+    for (int u = std::max(first, lowest - kApart); u <= std::min(last, lowest + kApart); ++u) {
+      gap = gap || !in[u];
+    }
+    apart += gap;
+  }
+  // Most rows must show the valley, on one straight line.
+  const int rows = (box.height * 8 / 10) / 4;
+  if (static_cast<int>(valley.size()) < rows * 2 / 3 || valley.size() < 5) return false;
+  cv::fitLine(valley, *line, cv::DIST_HUBER, 0, 0.01, 0.01);
+  const float vx = (*line)[0], vy = (*line)[1], x0 = (*line)[2], y0 = (*line)[3];
+  int off = 0;
+  for (const cv::Point2f& p : valley) {
+    off += std::fabs((p.x - x0) * vy - (p.y - y0) * vx) > 8;  // Pixels from the line.
+  }
+  if (off > static_cast<int>(valley.size()) / 4) return false;
+  if (signs) {
+    signs->parted = 2 * apart >= static_cast<int>(valley.size());
+    signs->bound = 2 * level >= static_cast<int>(valley.size());
+  }
+  *left = cv::Mat::zeros(leaf.size(), CV_8U);
+  *right = cv::Mat::zeros(leaf.size(), CV_8U);
+  // Where the pages part in a row (a gap in the leaf within kApart pixels of the line), the
+  // split follows the gap nearest the line: the line runs through each row's lowest point, which
+  // can be the first pixels of the far page's wall, beyond the gap between the pages. A row with
+  // no gap of its own (noise closed it) takes the median gap of the rows around it.
+  constexpr float kNone = -1e9f;
+  std::vector<float> line_at(leaf.rows), gap_at(leaf.rows, kNone);
+  // Each page's last pixel before a gap: seen at a grazing angle down the gutter, its point mixes
+  // both walls, so it is left out of both pages.
+  std::vector<std::pair<int, int>> grazing(leaf.rows, {-1, -1});
+  for (int v = 0; v < leaf.rows; ++v) {
+    // The line's column at this row (the gutter runs down the image).
+    line_at[v] = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
+    const uint8_t* in = leaf.ptr<uint8_t>(v);
+    const int c = static_cast<int>(std::floor(line_at[v]));
+    int best = -1;
+    for (int d = 0; d <= kApart && best < 0; ++d) {
+      for (const int u : {c - d, c + d}) {
+        if (u > 0 && u + 1 < leaf.cols && !in[u] && best < 0) best = u;
+      }
+    }
+    if (best < 0) continue;
+    // The gap's ends; it parts the pages only with leaf on both sides near it.
+    int a = best, b = best;
+    while (a > 0 && !in[a - 1]) --a;
+    while (b + 1 < leaf.cols && !in[b + 1]) ++b;
+    if (a > 0 && b + 1 < leaf.cols && a >= c - 2 * kApart && b <= c + 2 * kApart) {
+      gap_at[v] = 0.5f * (a + b) + 0.5f - line_at[v];
+      grazing[v] = {a - 1, b + 1};
+    }
+  }
+  constexpr int kRows = 24;  // Rows either side a closed row borrows its gap from.
+  for (int v = 0; v < leaf.rows; ++v) {
+    float at = line_at[v];
+    if (gap_at[v] != kNone) {
+      at += gap_at[v];
+    } else {
+      std::vector<float> near;
+      for (int w = std::max(0, v - kRows); w <= std::min(leaf.rows - 1, v + kRows); ++w) {
+        if (gap_at[w] != kNone) near.push_back(gap_at[w]);
+      }
+      if (near.size() >= kRows / 2) {
+        std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
+        at += near[near.size() / 2];
+      }
+    }
+    const uint8_t* in = leaf.ptr<uint8_t>(v);
+    for (int u = 0; u < leaf.cols; ++u) {
+      if (!in[u] || u == grazing[v].first || u == grazing[v].second) continue;
+      (u < at ? left : right)->at<uint8_t>(v, u) = 255;
+    }
+  }
+  return true;
+}
+
+}  // namespace outline
+
+GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline) {
+  GutterGap gap;
+  if (outline.pages.size() != 2 || points.type() != CV_32FC3) return gap;
+  const cv::Mat &left = outline.pages[0], &right = outline.pages[1];
+  if (left.size() != points.size() || right.size() != points.size()) return gap;
+  const cv::Rect box = cv::boundingRect(outline.mask);
+  std::vector<float> lengths;
+  for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    const uint8_t *in_left = left.ptr<uint8_t>(v), *in_right = right.ptr<uint8_t>(v);
+    auto measured = [&](int u) { return std::isfinite(p[u][2]); };
+    int last_left = -1, first_right = -1;
+    for (int u = box.x; u < box.x + box.width; ++u) {
+      if (in_left[u] && measured(u)) last_left = u;
+      if (first_right < 0 && in_right[u] && measured(u)) first_right = u;
+    }
+    if (last_left < 0 || first_right < 0 || first_right <= last_left) continue;
+    lengths.push_back(static_cast<float>(cv::norm(p[first_right] - p[last_left])));
+  }
+  gap.rows = static_cast<int>(lengths.size());
+  if (lengths.empty()) return gap;
+  std::sort(lengths.begin(), lengths.end());
+  gap.median_mm = lengths[lengths.size() / 2];
+  gap.p95_mm = lengths[std::min(lengths.size() - 1, lengths.size() * 95 / 100)];
+  return gap;
+}
+
+}  // namespace vellum

@@ -1,0 +1,199 @@
+// Flood, RefineRim and the outline's figures (steps.h).
+#include <algorithm>
+#include <cmath>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/outline/steps.h"
+
+namespace vellum::outline {
+
+void Flood(const cv::Mat& strength, cv::Mat* labels) {
+  constexpr int kLevels = 256;
+  const int w = strength.cols, h = strength.rows;
+  // Each pixel's level (its strength in 1/32 of a unit, capped), or -1 where it is not flooded
+  // (negative or NaN), and its label: flat, row-major and framed by a pixel not flooded, so a
+  // neighbour is an offset and never out of bounds.
+  const int stride = w + 2;
+  std::vector<int16_t> level(static_cast<size_t>(stride) * (h + 2), -1);
+  std::vector<uint8_t> label(level.size(), 0);
+  for (int v = 0; v < h; ++v) {
+    const float* s = strength.ptr<float>(v);
+    const uint8_t* in = labels->ptr<uint8_t>(v);
+    const size_t row = static_cast<size_t>(v + 1) * stride + 1;
+    for (int u = 0; u < w; ++u) {
+      const float x = s[u] * 32;
+      level[row + u] = !(x >= 0) ? -1 : x >= kLevels - 1 ? kLevels - 1 : static_cast<int16_t>(x);
+      label[row + u] = in[u];
+    }
+  }
+  const int around[4] = {1, -1, stride, -stride};
+  // A pixel is queued once: it is taken at the level of its first queueing (later ones come
+  // from higher levels), so a pixel queued is marked as if it had no height.
+  constexpr int16_t kQueued = -2;
+  std::vector<std::vector<int>> buckets(kLevels);
+  // The floods start from the seeds' edges: unlabelled pixels with a height beside a seed.
+  for (int at = stride; at < stride * (h + 1); ++at) {
+    if (label[at] != 0 || level[at] < 0) continue;
+    if (label[at + 1] | label[at - 1] | label[at + stride] | label[at - stride]) {
+      buckets[level[at]].push_back(at);
+      level[at] = kQueued;
+    }
+  }
+  for (int l = 0; l < kLevels; ++l) {
+    for (size_t k = 0; k < buckets[l].size(); ++k) {
+      const int at = buckets[l][k];
+      if (label[at] != 0) continue;
+      // The label of the flood that reached it: a labelled 4-neighbour.
+      uint8_t from = 0;
+      for (int d = 0; d < 4 && !from; ++d) from = label[at + around[d]];
+      if (!from) continue;
+      label[at] = from;
+      for (int d = 0; d < 4; ++d) {
+        const int next = at + around[d];
+        if (label[next] != 0 || level[next] < 0) continue;
+        buckets[std::max<int>(l, level[next])].push_back(next);
+        level[next] = kQueued;
+      }
+    }
+    std::vector<int>().swap(buckets[l]);
+  }
+  for (int v = 0; v < h; ++v) {
+    std::copy_n(label.data() + static_cast<size_t>(v + 1) * stride + 1, w, labels->ptr<uint8_t>(v));
+  }
+}
+
+cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
+                  const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
+                  int block, int band) {
+  const cv::Size size = cues.gray.size();
+  // The cut at full size (the view's last partial row and column of blocks as their neighbours).
+  cv::Mat full;
+  cv::resize(cut, full, cut.size() * block, 0, 0, cv::INTER_NEAREST);
+  cv::copyMakeBorder(full, full, 0, size.height - full.rows, 0, size.width - full.cols,
+                     cv::BORDER_REPLICATE);
+  // Seeds: what lies farther than a block and the band from the cut's outline, on either side,
+  // and the middle of any part of the surround narrower than that (a hole, the gap between a
+  // book's pages keeps a seed: the ridge of its distance from the outline, three pixels in at
+  // least). A narrow part of the leaf gets none: the cut's errors are such parts (blocks of the
+  // surround beside a raised edge, whose heights the edge's blur biases).
+  const int reach = block + band;
+  cv::Mat labels(size, CV_8U, cv::Scalar(0));
+  cv::Mat distance, widest;
+  cv::distanceTransform(full, distance, cv::DIST_L2, 3);
+  labels.setTo(1, distance >= reach);
+  cv::distanceTransform(~full, distance, cv::DIST_L2, 3);
+  cv::dilate(distance, widest, cv::Mat());
+  labels.setTo(2, (distance >= reach) | ((distance >= widest) & (distance >= 3)));
+  // And the surround seen in a well of the cut's leaf: a pixel on a surround plane (within 0.2
+  // mm: a dark table's points are that noisy) that looks like the surround, with the leaf a
+  // millimetre or more above it within four pixels (the table between an open book's pages,
+  // narrower than the cut's blocks resolve).
+  if (!planes.empty() && !leaf.empty() && !surround.empty()) {
+    cv::Mat highest;
+    cv::dilate(cues.z, highest, cv::Mat::ones(9, 9, CV_8U));
+    cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+      for (int v = range.start; v < range.end; ++v) {
+        const uint8_t* in = full.ptr<uint8_t>(v);
+        const float* z = cues.z.ptr<float>(v);
+        const float* high = highest.ptr<float>(v);
+        const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+        const cv::Vec3b* colour = cues.colour.ptr<cv::Vec3b>(v);
+        uint8_t* label = labels.ptr<uint8_t>(v);
+        for (int u = 0; u < size.width; ++u) {
+          if (!in[u] || !Valid(z[u]) || high[u] < z[u] + 1.0f || !std::isfinite(p[u][0])) continue;
+          double nearest = 1e9;
+          for (const Plane& plane : planes) {
+            nearest = std::min(nearest, std::fabs(z[u] - plane.At(p[u][0], p[u][1])));
+          }
+          const int bin = Look::Bin(colour[u]);
+          if (nearest <= 0.2 && surround.Log(bin) - leaf.Log(bin) > 1.0) label[u] = 2;
+        }
+      }
+    });
+  }
+  // Flooded on the rim and the texture's edge together (the edge, sharp, places the outline
+  // within the rim's band, which the decoder's fit spreads over 7 pixels), over the pixels with a
+  // height: a band without heights (a shadow beside a raised edge, the edge seen edge-on) stops
+  // both floods, and never carries the leaf onto what lies beyond it.
+  cv::Mat level = cues.rim + cues.edge;
+  level.setTo(cv::Scalar(-1), cues.z < -1e3f);
+  Flood(level, &labels);
+  return labels == 1;
+}
+
+void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
+  constexpr int kReach = 5;  // The window: 11 x 11 pixels (at a corner, 16 pixels inside).
+  for (int pass = 0; pass < 2; ++pass) {
+    cv::Mat eroded, inner;
+    cv::erode(*leaf, eroded, cv::Mat());
+    cv::erode(*leaf, inner, cv::Mat::ones(5, 5, CV_8U));
+    const cv::Mat rim = *leaf & ~eroded;
+    std::vector<cv::Point> rim_pixels;
+    cv::findNonZero(rim, rim_pixels);
+    std::vector<uint8_t> drop(rim_pixels.size(), 0);
+    cv::parallel_for_(cv::Range(0, static_cast<int>(rim_pixels.size())), [&](const cv::Range& r) {
+      for (int k = r.start; k < r.end; ++k) {
+        const cv::Point p = rim_pixels[k];
+        const float zp = z.at<float>(p);
+        if (!Valid(zp)) continue;
+        // A plane z = a + b du + c dv through the leaf's pixels two or more inside the rim.
+        cv::Matx33d ata = cv::Matx33d::zeros();
+        cv::Vec3d atb(0, 0, 0);
+        int n = 0;
+        for (int dv = -kReach; dv <= kReach; ++dv) {
+          const int v = p.y + dv;
+          if (v < 0 || v >= z.rows) continue;
+          for (int du = -kReach; du <= kReach; ++du) {
+            const int u = p.x + du;
+            if (u < 0 || u >= z.cols || !inner.at<uint8_t>(v, u)) continue;
+            const float zz = z.at<float>(v, u);
+            if (!Valid(zz)) continue;
+            const cv::Vec3d row(1, du, dv);
+            ata += row * row.t();
+            atb += row * static_cast<double>(zz);
+            ++n;
+          }
+        }
+        cv::Vec3d plane;
+        if (n < 12 || !cv::solve(ata, atb, plane, cv::DECOMP_CHOLESKY)) continue;
+        // Off it by more than `off_mm` and what its slope gives over two pixels.
+        const double slope = std::hypot(plane[1], plane[2]);
+        drop[k] = std::fabs(zp - plane[0]) > off_mm + 2 * slope;
+      }
+    });
+    int dropped = 0;
+    for (size_t k = 0; k < rim_pixels.size(); ++k) {
+      if (drop[k]) leaf->at<uint8_t>(rim_pixels[k]) = 0, ++dropped;
+    }
+    if (dropped == 0) break;
+  }
+}
+
+double RimConfidence(const cv::Mat& leaf, const Cues& cues) {
+  cv::Mat eroded;
+  cv::erode(leaf, eroded, cv::Mat());
+  const cv::Mat rim = leaf & ~eroded;
+  cv::Mat apart = (cues.rim > 0.5f) | (cues.edge > 1.0f);
+  cv::dilate(apart, apart, cv::Mat(), cv::Point(-1, -1), 3);
+  cv::Mat no_data = cues.z < -1e3f;
+  cv::dilate(no_data, no_data, cv::Mat(), cv::Point(-1, -1), 2);
+  const int total = cv::countNonZero(rim);
+  if (total == 0) return 0;
+  return static_cast<double>(cv::countNonZero(rim & (apart | no_data))) / total;
+}
+
+bool TouchesBorder(const cv::Mat& leaf, int border) { return SidesTouched(leaf, border) > 0; }
+
+int SidesTouched(const cv::Mat& mask, int border) {
+  const int b = std::max(1, border);
+  if (mask.cols <= 2 * b || mask.rows <= 2 * b) return 4;
+  const cv::Rect sides[4] = {cv::Rect(0, 0, b, mask.rows), cv::Rect(mask.cols - b, 0, b, mask.rows),
+                             cv::Rect(0, 0, mask.cols, b),
+                             cv::Rect(0, mask.rows - b, mask.cols, b)};
+  int touched = 0;
+  for (const cv::Rect& side : sides) touched += cv::countNonZero(mask(side)) > 0;
+  return touched;
+}
+
+}  // namespace vellum::outline

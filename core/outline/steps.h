@@ -1,0 +1,219 @@
+// The steps of finding the leaf (FindLeaf, outline.h), each on its own and tested on small
+// synthetic maps (steps_test.cc):
+//   MeasureCues      every cue per camera pixel: the heights, the rims (steps in the surface and
+//                    silhouettes, not creases), the texture's edges
+//   MakeBlocks       the cues gathered into blocks of a few pixels, for the cut
+//   FitSurround      the planes the leaf lies on and among (table, support, frame), from the
+//                    outermost measured blocks of the view
+//   CutLeaf          leaf against surround over the blocks: one energy over every cue (the
+//                    heights off the surround, the look learned from each side, the view's
+//                    border, the rims and edges between blocks), minimised by a graph cut
+//   RefineRim        the cut's outline brought to the pixel: a watershed on the rims and edges
+//                    in a band around it
+//   FillHoles        holes that show no other surface filled, the rest kept
+//   SplitAtGutter    an open book's two pages at the valley between them
+// Internal to core/outline; the public API is outline.h.
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "core/outline/outline.h"
+
+namespace vellum::outline {
+
+constexpr float kNoData = -1e4f;  // Heights below -1e3 mean "no point".
+inline bool Valid(float z) { return z > -1e3f; }
+
+// The median of `values` (reordered); 0 when empty.
+double Median(std::vector<float>* values);
+
+// ---- MeasureCues ----
+struct Cues {
+  cv::Mat gray;    // CV_8U, the texture's brightness.
+  cv::Mat colour;  // CV_8UC3 (B, G, R), gray repeated for a gray texture.
+  cv::Mat z;       // CV_32F heights, mm, robustly smoothed; kNoData where none.
+  cv::Mat zn;      // The same with NaN where none.
+  cv::Mat rim;     // CV_32F rim strength (steps, silhouettes) in units of the rim threshold there.
+  cv::Mat edge;    // CV_32F the texture's edge strength in units of options.edge_contrast.
+  double bright = 255;  // The paper's brightness: the level 95% of the texture lies at or below.
+};
+// Every pixel's cues from the point map (CV_32FC3, mm, NaN where none) and its texture.
+Cues MeasureCues(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options);
+
+// Heights of the point map, each the median of its own and the means of its opposite
+// neighbours where both have a point: an isolated outlier is dropped, a step stays sharp.
+// kNoData where there is no height; `nan` (if given) gets NaN there instead.
+cv::Mat SmoothHeights(const cv::Mat& points, cv::Mat* nan = nullptr);
+
+// How strongly each pixel lies on a rim, mm: where the surface steps (it is not continuous: the
+// surface on either side, extrapolated linearly, does not meet within `scale` pixels of the pixel;
+// a crease or a bend, where it meets, is no rim), or turns nearly parallel to the camera's rays
+// (steeper than max_slope_deg: a silhouette). Along rows, columns and both diagonals.
+cv::Mat RimStrength(const cv::Mat& points, const cv::Mat& zn, int scale, double max_slope_deg);
+
+// The texture's paper brightness: the level 95% of its pixels are at or below (gray levels).
+double BrightLevel(const cv::Mat& gray);
+
+// The height step that counts as a rim at each pixel, mm: `step` where the surface is at least
+// half as bright as paper, more where it is darker (the decoder's noise goes as 1/brightness).
+// `darkest`: judged by the darkest brightness near the pixel (cautious) rather than the mean.
+// `in_steps` (if given) is divided by it in the same pass.
+cv::Mat StepThreshold(const cv::Mat& gray, double bright, double step, int scale, bool darkest,
+                      cv::Mat* in_steps = nullptr);
+
+// ---- MakeBlocks ----
+// The cues over square blocks of `size` pixels (the view's last partial row and column of
+// blocks dropped): what the cut decides on.
+struct Blocks {
+  int size = 4;     // Pixels a side.
+  cv::Size grid;    // Blocks across and down.
+  cv::Mat valid;    // CV_32F share of the block's pixels with a height.
+  cv::Mat x, y, z;  // CV_32F the mean world point of those pixels, mm (NaN without any).
+  cv::Mat noise;    // CV_32F the standard error of z, mm (from the scatter within the block).
+  cv::Mat colour;   // CV_8UC3 the block's mean colour.
+  cv::Mat rim;      // CV_32F the strongest rim in the block (Cues::rim).
+  cv::Mat edge;     // CV_32F the strongest texture edge in the block (Cues::edge).
+};
+// Block size: the view's longer side over `target` blocks, at least 2 px.
+int BlockSize(cv::Size view, int target);
+Blocks MakeBlocks(const Cues& cues, const cv::Mat& points, int size);
+
+// ---- FitSurround ----
+// A plane of the surround: z = a x + b y + c (world mm).
+struct Plane {
+  double a = 0, b = 0, c = 0;
+  int inliers = 0;
+  double At(double x, double y) const { return a * x + b * y + c; }
+};
+// The surround's planes, from the samples: the outermost measured blocks of each row and column
+// of the grid (within its outer quarter), by RANSAC (deterministic), one plane after another.
+std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& options);
+// Each block's signed height above the nearest of `planes` (mm, NaN where unmeasured; the
+// block's height where there are no planes).
+cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes);
+
+// ---- CutLeaf ----
+// A look: a histogram of colours over 32 brightness levels and 4 x 4 hues (red and blue each
+// against green), so a gray texture uses the brightness alone; CutLeaf learns one for the leaf
+// and one for the surround.
+class Look {
+ public:
+  static constexpr int kLevels = 32, kHues = 4, kBins = kLevels * kHues * kHues;
+  static int Bin(const cv::Vec3b& c) {
+    const int level = (c[0] + 2 * c[1] + c[2]) / 4 / (256 / kLevels);
+    const int red = std::clamp((c[2] - c[1] + 256) * kHues / 512, 0, kHues - 1);
+    const int blue = std::clamp((c[0] - c[1] + 256) * kHues / 512, 0, kHues - 1);
+    return (level * kHues + red) * kHues + blue;
+  }
+  void Add(int bin, double weight) {
+    counts_[bin] += weight;
+    total_ += weight;
+  }
+  // Log-probabilities: each bin's count smoothed with its brightness neighbours (weights 1, 2,
+  // 1), with a floor of a fiftieth of an even share, normalised.
+  void Finish() {
+    std::array<double, kBins> smooth{};
+    double sum = 0;
+    for (int b = 0; b < kBins; ++b) {
+      const int level = b / (kHues * kHues), hue = b % (kHues * kHues);
+      double s = 2 * counts_[b], weight = 2;
+      for (int d : {-1, 1}) {
+        if (level + d < 0 || level + d >= kLevels) continue;
+        s += counts_[(level + d) * kHues * kHues + hue];
+        weight += 1;
+      }
+      smooth[b] = s / weight + 0.02 * total_ / kBins + 1e-6;
+      sum += smooth[b];
+    }
+    for (int b = 0; b < kBins; ++b) log_[b] = std::log(smooth[b] / sum);
+  }
+  double Log(int bin) const { return log_[bin]; }
+  bool empty() const { return total_ <= 0; }
+
+ private:
+  std::array<double, kBins> counts_{}, log_{};
+  double total_ = 0;
+};
+
+// A cut: leaf (255) against surround (0) over the blocks, and the looks it learned.
+struct Cut {
+  cv::Mat leaf;
+  Look look_leaf, look_surround;
+};
+
+// Leaf (255) against surround (0) over the blocks, from `above` (AboveSurround), the blocks'
+// look, and `seed` (blocks where the leaf is expected: its look is learned there first, with the
+// blocks well off the surround). The surround's first look is learned from `surround` (blocks);
+// only blocks of `allowed` (all, when empty) may be leaf.
+Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
+            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options);
+// The blocks a first cut learns the surround's look from: those on it (within twice their
+// noise) in the grid's outer tenth, and those on its border without a height.
+cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above);
+
+// A support or a frame found inside `leaf` (blocks): when the blocks along its outline lie on
+// one plane (most of them within the tolerance) that is not one of `planes`, that plane (a
+// support's top, a frame's face), with the blocks on it in *ring. False when there is none.
+bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vector<Plane>& planes,
+                       const SurroundOptions& options, Plane* plane, cv::Mat* ring);
+
+// ---- RefineRim ----
+// Labels (1 leaf, 2 surround) spread from their seeds, lowest `level` first (a watershed: two
+// floods meet on the crest between them). `labels` holds the seeds on input; pixels whose level
+// is negative are not flooded.
+void Flood(const cv::Mat& level, cv::Mat* labels);
+// The block mask `cut` (CutLeaf) at full size, its outline moved to the crest of the rims and
+// edges within `band` pixels of it.
+// Seeds of the surround also where a pixel inside the cut lies on one of `planes` and looks like
+// the surround (by the cut's looks) with the leaf well above it close by: the table between an
+// open book's pages, narrower than the blocks resolve.
+cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
+                  const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
+                  int block, int band);
+
+// The leaf's rim pixels whose heights do not continue its surface (off a plane through the leaf
+// two or more pixels inside, in an 11 x 11 window, by more than `off_mm` and what its slope gives
+// over two pixels) taken out, twice over: the mixed pixels of a raised edge, half leaf and half
+// what lies below, that the restored page would carry beyond the leaf's edge.
+void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf);
+
+// ---- FillHoles ----
+// Fills the holes of `leaf` that show no other surface (heights on the leaf's surface around
+// them, or, without heights, looking like the leaf), and returns how many it keeps.
+int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
+              cv::Mat* leaf);
+
+// ---- the outline's figures ----
+// Share of the leaf's rim pixels set apart from what is beside them: on a rim or a texture edge,
+// beside pixels without a height, or at the image border.
+double RimConfidence(const cv::Mat& leaf, const Cues& cues);
+// Whether the leaf runs off the view: leaf pixels within `border` of the image edge.
+bool TouchesBorder(const cv::Mat& leaf, int border);
+// How many of the view's four sides the mask reaches (within `border` pixels).
+int SidesTouched(const cv::Mat& mask, int border);
+
+// ---- SplitAtGutter ----
+// An open book's gutter: a straight valley down the leaf (through each row's lowest point in the
+// middle three fifths of the leaf), from which the surface rises at least gutter_rise_mm within
+// gutter_reach_mm on both sides, and sharply: gutter_crease_mm within gutter_width_mm (or is
+// hidden in it). A trough (a cone, a roll, a ripple) rises gently from its lowest line. Splits
+// the leaf into its left and right pages; false if there is no such valley. `signs` (if given):
+// what says the valley is a book's gutter and not a creased leaf's fold.
+struct GutterSigns {
+  // The two sides are parted along most of the valley (a gap, or a band out of view, between
+  // them): two sheets.
+  bool parted = false;
+  // Along most of the valley, both sides level off beyond the bend (from gutter_reach_mm to
+  // twice that, they rise less than half what they rose within it): pages lying on a book block.
+  // A loose creased leaf's halves rise straight on, or curl further up, as nothing holds them.
+  bool bound = false;
+};
+bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
+                   const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
+                   GutterSigns* signs = nullptr);
+
+}  // namespace vellum::outline

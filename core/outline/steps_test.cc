@@ -1,0 +1,293 @@
+// The steps of finding the leaf (steps.h), each on small synthetic maps whose answer is known:
+// heights in mm on a grid of 0.25 mm pixels (the default rig's), a texture of known brightness.
+#include "core/outline/steps.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <opencv2/imgproc.hpp>
+
+namespace vellum::outline {
+namespace {
+
+constexpr double kPixelMm = 0.25;
+
+// A point map of `size` pixels whose height at pixel (u, v) is height(u, v) (NaN: no point), x
+// and y the pixel's place in mm, with Gaussian noise of `noise_mm` in z.
+cv::Mat Points(cv::Size size, const std::function<double(int, int)>& height, double noise_mm = 0,
+               uint64_t seed = 1) {
+  cv::Mat points(size, CV_32FC3);
+  cv::RNG rng(seed);
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      const double z = height(u, v);
+      points.at<cv::Vec3f>(v, u) =
+          std::isnan(z)
+              ? cv::Vec3f(NAN, NAN, NAN)
+              : cv::Vec3f(static_cast<float>(u * kPixelMm), static_cast<float>(v * kPixelMm),
+                          static_cast<float>(z + rng.gaussian(noise_mm)));
+    }
+  }
+  return points;
+}
+
+// A gray texture of `size` whose level at (u, v) is level(u, v), with 1.5 DN of noise.
+cv::Mat Texture(cv::Size size, const std::function<double(int, int)>& level) {
+  cv::Mat texture(size, CV_8U);
+  cv::RNG rng(2);
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      texture.at<uint8_t>(v, u) = cv::saturate_cast<uint8_t>(level(u, v) + rng.gaussian(1.5));
+    }
+  }
+  return texture;
+}
+
+// Everything the cut needs from `points` and `texture`, at the default options.
+struct Scene {
+  Cues cues;
+  Blocks blocks;
+  std::vector<Plane> planes;
+  cv::Mat above;
+};
+
+Scene Prepare(const cv::Mat& points, const cv::Mat& texture) {
+  Scene s;
+  const OutlineOptions options;
+  s.cues = MeasureCues(points, texture, options);
+  s.blocks = MakeBlocks(s.cues, points, BlockSize(points.size(), options.blocks_across));
+  s.planes = FitSurround(s.blocks, options.surround);
+  s.above = AboveSurround(s.blocks, s.planes);
+  return s;
+}
+
+// The blocks of `blocks` whose centre's pixel `inside` holds.
+cv::Mat BlocksWhere(const Blocks& blocks, const std::function<bool(int, int)>& inside) {
+  cv::Mat out(blocks.grid, CV_8U, cv::Scalar(0));
+  for (int by = 0; by < blocks.grid.height; ++by) {
+    for (int bx = 0; bx < blocks.grid.width; ++bx) {
+      const int u = bx * blocks.size + blocks.size / 2, v = by * blocks.size + blocks.size / 2;
+      out.at<uint8_t>(by, bx) = inside(u, v) ? 255 : 0;
+    }
+  }
+  return out;
+}
+
+double IoU(const cv::Mat& a, const cv::Mat& b) {
+  const double both = cv::countNonZero(a & b), either = cv::countNonZero(a | b);
+  return either > 0 ? both / either : 0;
+}
+
+// A step in the surface is a rim; a crease, where the surface bends sharply but goes on, and a
+// plane are not. The step is 0.2 mm (a leaf's thickness): strength over 1 (the rim threshold)
+// on it; the crease turns 60 degrees (30 each way, a sharp fold): well under it.
+TEST(RimStrength, AStepIsARimAndACreaseIsNot) {
+  const cv::Size size(120, 40);
+  const int step_at = 60;
+  const cv::Mat texture(size, CV_8U, cv::Scalar(200));
+  const OutlineOptions options;
+  auto strongest_near = [&](const cv::Mat& points) {
+    const Cues cues = MeasureCues(points, texture, options);
+    double strongest = 0;
+    cv::minMaxLoc(cues.rim(cv::Rect(step_at - 4, 10, 8, 20)), nullptr, &strongest);
+    double elsewhere = 0;
+    cv::minMaxLoc(cues.rim(cv::Rect(10, 10, 30, 20)), nullptr, &elsewhere);
+    return std::make_pair(strongest, elsewhere);
+  };
+  const auto step =
+      strongest_near(Points(size, [&](int u, int) { return u >= step_at ? 0.2 : 0.0; }));
+  EXPECT_GT(step.first, 1.5);
+  EXPECT_LT(step.second, 0.1);
+  const double slope = std::tan(30 * M_PI / 180) * kPixelMm;  // mm per pixel.
+  const auto crease =
+      strongest_near(Points(size, [&](int u, int) { return 10 + std::fabs(u - step_at) * slope; }));
+  EXPECT_LT(crease.first, 0.5);
+  const auto plane =
+      strongest_near(Points(size, [&](int u, int v) { return 0.01 * u + 0.02 * v; }));
+  EXPECT_LT(plane.first, 0.1);
+}
+
+// The surround's planes from the view's outermost measured blocks: a table at z = 0 around a
+// board 5 mm high that reaches the view's left and right edges, a leaf 0.2 mm thick in the
+// middle (which is not sampled).
+TEST(FitSurround, FindsTheTableAndASupportReachingTheViewsEdge) {
+  const cv::Size size(400, 300);
+  const cv::Mat points = Points(
+      size,
+      [&](int u, int v) {
+        const bool board = v >= 60 && v < 240;
+        const bool leaf = board && u >= 150 && u < 250 && v >= 100 && v < 200;
+        return leaf ? 5.2 : board ? 5.0 : 0.0;
+      },
+      0.005);
+  const Scene s = Prepare(points, cv::Mat(size, CV_8U, cv::Scalar(120)));
+  ASSERT_EQ(s.planes.size(), 2u);
+  std::vector<double> heights{s.planes[0].c, s.planes[1].c};
+  std::sort(heights.begin(), heights.end());
+  EXPECT_NEAR(heights[0], 0.0, 0.01);
+  EXPECT_NEAR(heights[1], 5.0, 0.01);
+  for (const Plane& p : s.planes) EXPECT_LT(std::hypot(p.a, p.b), 1e-4);
+  // Above the nearest: the leaf stands 0.2 mm off the board, the board and the table on theirs.
+  const int b = s.blocks.size;
+  EXPECT_NEAR(s.above.at<float>(150 / b, 200 / b), 0.2f, 0.01f);
+  EXPECT_NEAR(s.above.at<float>(80 / b, 50 / b), 0.0f, 0.01f);
+  EXPECT_NEAR(s.above.at<float>(20 / b, 200 / b), 0.0f, 0.01f);
+}
+
+// One energy over every cue: a leaf is found by its height off the table where it looks like the
+// table (0.1 mm, ten times the table's noise), by its look where it lies flush (0 mm: a bright
+// leaf on a dark table), and not at all where neither sets it apart (flush and looking alike: the
+// cut has nothing to go on, and finds no leaf rather than the table).
+TEST(CutLeaf, EachCueAloneFindsTheLeafWhereItSuffices) {
+  const cv::Size size(400, 300);
+  const cv::Rect leaf(120, 80, 160, 140);
+  auto in_leaf = [&](int u, int v) { return leaf.contains(cv::Point(u, v)); };
+  struct Case {
+    const char* name;
+    double rim_mm, leaf_level, table_level;
+    bool found;
+  } cases[] = {{"raised, alike", 0.1, 150, 150, true},
+               {"flush, bright on dark", 0.0, 200, 60, true},
+               {"flush, alike", 0.0, 150, 150, false}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const cv::Mat points = Points(
+        size, [&](int u, int v) { return in_leaf(u, v) ? c.rim_mm : 0.0; }, 0.01);
+    const cv::Mat texture =
+        Texture(size, [&](int u, int v) { return in_leaf(u, v) ? c.leaf_level : c.table_level; });
+    const Scene s = Prepare(points, texture);
+    const cv::Mat seed = BlocksWhere(
+        s.blocks, [&](int u, int v) { return u >= 160 && u < 240 && v >= 120 && v < 180; });
+    const Cut cut =
+        CutLeaf(s.blocks, s.above, seed, OuterSurround(s.blocks, s.above), cv::Mat(), CutOptions());
+    const cv::Mat truth = BlocksWhere(s.blocks, in_leaf);
+    if (c.found) {
+      EXPECT_GE(IoU(cut.leaf, truth), 0.95);
+    } else {
+      EXPECT_LT(cv::countNonZero(cut.leaf), cv::countNonZero(truth) / 4);
+    }
+  }
+}
+
+// The cut's outline, a block off, is brought onto the crest of the rims and edges: a leaf whose
+// edge is a texture edge and a 0.2 mm step, from a cut 3 pixels too big all round.
+TEST(RefineRim, BringsTheCutsOutlineToThePixel) {
+  const cv::Size size(200, 160);
+  const cv::Rect leaf(51, 41, 98, 78);
+  auto in_leaf = [&](int u, int v) { return leaf.contains(cv::Point(u, v)); };
+  const cv::Mat points = Points(size, [&](int u, int v) { return in_leaf(u, v) ? 0.2 : 0.0; });
+  const cv::Mat texture = Texture(size, [&](int u, int v) { return in_leaf(u, v) ? 200.0 : 80.0; });
+  const OutlineOptions options;
+  const Cues cues = MeasureCues(points, texture, options);
+  const int block = 4;
+  cv::Mat cut(size.height / block, size.width / block, CV_8U, cv::Scalar(0));
+  cut(cv::Rect(12, 9, 26, 21)).setTo(255);  // Pixels 48..151 x 36..119: 3 to 5 pixels too big.
+  const cv::Mat refined = RefineRim(cut, cues, points, {}, Look(), Look(), block, options.band_px);
+  cv::Mat truth(size, CV_8U, cv::Scalar(0));
+  truth(leaf).setTo(255);
+  // Within a pixel all round: 98 x 78 px, a pixel more each side is 352 pixels.
+  EXPECT_LE(cv::countNonZero(refined ^ truth), 360);
+  EXPECT_GE(IoU(refined, truth), 0.95);
+}
+
+// A raised edge's mixed pixels (half leaf, half table) are not the leaf: a plateau 20 mm up
+// whose outermost ring of pixels stands at 10 mm loses that ring and no more.
+TEST(TrimRim, TakesTheRaisedEdgesMixedPixelsOut) {
+  const cv::Size size(100, 100);
+  const cv::Rect plateau(20, 20, 60, 60);
+  cv::Mat z(size, CV_32F, cv::Scalar(0));
+  z(plateau).setTo(20.0f);
+  cv::Mat leaf(size, CV_8U, cv::Scalar(0));
+  leaf(plateau).setTo(255);
+  // Its outermost ring mixed.
+  cv::Mat ring = leaf.clone();
+  ring(cv::Rect(21, 21, 58, 58)).setTo(0);
+  z.setTo(10.0f, ring);
+  TrimRim(z, 0.8, &leaf);
+  EXPECT_EQ(cv::countNonZero(leaf), 58 * 58);
+  EXPECT_EQ(cv::countNonZero(leaf & ring), 0);
+}
+
+// A hole that shows the table under the leaf (its heights 0.3 mm below the leaf's) is kept; a
+// hole without heights that looks like the leaf (its points lost to ink or a shadow) is filled.
+TEST(FillHoles, KeepsAHoleShowingWhatIsUnderAndFillsOneThatShowsNothing) {
+  const cv::Size size(200, 200);
+  const cv::Point2f real(60, 100), lost(140, 100);
+  auto in = [](int u, int v, cv::Point2f c) { return std::hypot(u - c.x, v - c.y) < 15; };
+  cv::Mat z(size, CV_32F, cv::Scalar(0.3));
+  cv::Mat gray(size, CV_8U, cv::Scalar(200));
+  cv::Mat leaf(size, CV_8U, cv::Scalar(255));
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      if (in(u, v, real)) z.at<float>(v, u) = 0.0f, gray.at<uint8_t>(v, u) = 60;
+      if (in(u, v, lost)) z.at<float>(v, u) = kNoData;
+      if (in(u, v, real) || in(u, v, lost)) leaf.at<uint8_t>(v, u) = 0;
+    }
+  }
+  const OutlineOptions options;
+  const cv::Mat threshold = StepThreshold(gray, 200, options.step_mm, options.scale_px, true);
+  EXPECT_EQ(FillHoles(z, gray, threshold, 200, &leaf), 1);
+  EXPECT_EQ(leaf.at<uint8_t>(cv::Point(real)), 0);
+  EXPECT_EQ(leaf.at<uint8_t>(cv::Point(lost)), 255);
+}
+
+// An open book's gutter: pages rising 30 degrees into a valley down the middle. With a gap
+// between the pages (the table shows in it) they are parted: two sheets. Meeting in the valley
+// they are found as a gutter but not parted (one creased leaf would look the same), unless they
+// level off beyond the bend as pages lying on a book block do. A leaf rolled into a trough (a
+// circle of 100 mm radius) has no gutter.
+TEST(SplitAtGutter, FindsAValleyAndWhatSaysItIsABooksGutter) {
+  const cv::Size size(800, 300);  // 200 x 75 mm.
+  const int middle = 400;
+  const double slope = std::tan(30 * M_PI / 180) * kPixelMm;
+  const OutlineOptions options;
+  cv::Mat leaf(size, CV_8U, cv::Scalar(0));
+  leaf(cv::Rect(40, 30, 720, 240)).setTo(255);
+  struct Case {
+    const char* name;
+    std::function<double(int, int)> height;
+    int gap_px;
+    bool split, parted, bound;
+  } cases[] = {
+      {"gap", [&](int u, int) { return std::fabs(u - middle) * slope; }, 8, true, true, false},
+      {"meeting", [&](int u, int) { return std::fabs(u - middle) * slope; }, 0, true, false, false},
+      {"bound",  // Rising 62 degrees out of the gutter, level 15 mm above it by 30 mm out.
+       [&](int u, int) { return 15 * (1 - std::exp(-std::fabs(u - middle) * kPixelMm / 8)); }, 0,
+       true, false, true},
+      {"trough",
+       [&](int u, int) {
+         const double x = (u - middle) * kPixelMm;
+         return 100 - std::sqrt(100.0 * 100 - x * x);
+       },
+       0, false, false, false}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    cv::Mat mask = leaf.clone();
+    if (c.gap_px > 0) mask.colRange(middle - c.gap_px / 2, middle + c.gap_px / 2).setTo(0);
+    const cv::Mat points = Points(size, c.height);
+    cv::Mat zn;
+    const cv::Mat z = SmoothHeights(points, &zn);
+    cv::Vec4f line;
+    cv::Mat left, right;
+    GutterSigns signs;
+    const bool split = SplitAtGutter(points, z, mask, options, &line, &left, &right, &signs);
+    EXPECT_EQ(split, c.split);
+    if (!split) continue;
+    EXPECT_EQ(signs.parted, c.parted);
+    EXPECT_EQ(signs.bound, c.bound);
+    EXPECT_NEAR(line[2] + (150 - line[3]) * line[0] / line[1], middle, 6);  // The gutter's column.
+    EXPECT_EQ(cv::countNonZero(left & right), 0);
+    // The pages cover the leaf, but for the column either side of a gap (seen at a grazing angle
+    // down the gutter, those pixels' points mix both walls).
+    cv::Mat grazing(size, CV_8U, cv::Scalar(0));
+    if (c.gap_px > 0) {
+      grazing(cv::Rect(middle - c.gap_px / 2 - 1, 30, 1, 240)).setTo(255);
+      grazing(cv::Rect(middle + c.gap_px / 2, 30, 1, 240)).setTo(255);
+    }
+    EXPECT_EQ(cv::countNonZero((left | right) ^ (mask & ~grazing)), 0);
+  }
+}
+
+}  // namespace
+}  // namespace vellum::outline

@@ -1,0 +1,307 @@
+// The scene family (core/sim/scene_family.h) through `vellum process`'s pipeline (RunPipeline),
+// each scan against the virtual gantry's truth: a property test over scenes nobody tuned for.
+// Every scan either meets the bars or raises a warning (exit 3): a wrong and silent result is
+// the one outcome not allowed. Each scan is counted as met and unflagged, met but flagged (a
+// false alarm), missed but flagged, or missed and unflagged (silent and wrong); an error (no
+// leaf found) is loud, and counts as missed but flagged.
+//
+// The bars, per page (a leaf, or each page of a spread), and why they hold:
+// - the pages: one for a leaf, two for a book (left and right);
+// - the outline: IoU >= 0.98 against the pixels that see the page (on a 600 x 800 px leaf, the
+//   outline within about 3 px all round: the decoder's fit spreads a rim over 3 px);
+// - the flattened sheet against the true flat page: RMS <= 0.08 mm after a rigid fit, not
+//   mirrored (the sheet's nodes are good to about 0.01 mm where measured; the bar leaves room
+//   for the rim's extrapolated cells);
+// - Experiment I on a checkerboard page: its corners against the page's true layout after a
+//   least-squares homography, mean <= 0.15 px and 0.04 mm, and against the true page (rigid, in
+//   mm through the restored page's own map) RMS <= 0.08 mm, the mirrored fit at least ten times
+//   worse; at least 3/4 of the corners measured (1/2 on a burnt leaf, whose edges eat corners);
+// - the restored mask: no pixel farther than 1.5 mm from the leaf (the rim's mixed pixels: 5 px
+//   of the camera's 0.25 mm, and a pixel of the restored page).
+//
+// The sample: VELLUM_FAMILY_SCENES scenes (default 20, what CI runs) from seed
+// VELLUM_FAMILY_FIRST (default 1). With 200 or more (ctest -L family_full, by hand), the run must
+// also meet at least 90% of its scans and raise false alarms on at most 5% of those it meets.
+// VELLUM_FAMILY_TABLE=FILE writes the counts as a Markdown table; VELLUM_FAMILY_DUMP=DIR keeps
+// each missed scan's results and a picture of its outline against the truth.
+#include "core/sim/scene_family.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sstream>
+
+#include "core/sim/evaluate.h"
+#include "pipeline/process.h"
+#include "tests/page_measure.h"
+
+namespace vellum {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Outcome {
+  bool met = false, flagged = false;
+  std::string missed;    // Why the bars were not met.
+  std::string warnings;  // The warning codes, or the error.
+  double iou = 1, sheet_mm = 0, exp1_px = 0, exp1_mm = 0, rigid_mm = 0;
+  int off_mask = 0;
+  int holes = 0;  // Holes in the outline found.
+};
+
+uint64_t EnvNumber(const char* name, uint64_t fallback) {
+  const char* v = std::getenv(name);
+  return v && *v ? std::strtoull(v, nullptr, 10) : fallback;
+}
+
+// A picture of the found outline (blue: leaf missed; red: taken beyond the leaf) on the texture.
+void DumpOutline(const std::string& path, const cv::Mat& texture, const cv::Mat& found,
+                 const cv::Mat& truth) {
+  cv::Mat show = texture;
+  if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
+  if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
+  show = show.clone();
+  show.setTo(cv::Scalar(255, 0, 0), truth & ~found);
+  show.setTo(cv::Scalar(0, 0, 255), found & ~truth);
+  cv::imwrite(path, show);
+}
+
+Outcome ScanAndMeasure(const FamilyScene& s) {
+  Outcome o;
+  const SimulatedScan scan =
+      SimulateScan(DefaultRig(), s.page, s.texture, s.scene, s.seed, s.light);
+  ProcessInput input;
+  input.scan_dir = "family-" + std::to_string(s.seed);
+  input.calibration_path = "the virtual gantry's rig";
+  input.scan = AsScan(scan);
+  input.scan.object = s.said;
+  input.calibration = scan.gantry->rig();
+  const std::string out =
+      (fs::temp_directory_path() / ("vellum_family_" + std::to_string(getpid()))).string();
+  fs::remove_all(out);
+  const char* dump = std::getenv("VELLUM_FAMILY_DUMP");
+  const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
+  auto finish = [&] {
+    if (dump && !o.met) {
+      const std::string dir = std::string(dump) + "/" + std::to_string(s.seed);
+      fs::create_directories(dir);
+      fs::copy(out, dir, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+      if (!result.outline.mask.empty()) {
+        DumpOutline(dir + "/outline_vs_truth.png", input.scan.texture, result.outline.mask,
+                    scan.gantry->truth().on_page);
+      }
+    }
+    fs::remove_all(out);
+    return o;
+  };
+  if (!result.status.ok()) {
+    o.flagged = true;  // An error is loud.
+    o.missed = "error";
+    o.warnings = result.status.message();
+    return finish();
+  }
+  o.holes = result.outline.holes;
+  for (const Warning& w : result.report.Warnings())
+    o.warnings += (o.warnings.empty() ? "" : ",") + w.code;
+  o.flagged = !o.warnings.empty();
+  const GroundTruth& truth = scan.gantry->truth();
+  const std::vector<Page>& pages = scan.gantry->pages();
+  std::ostringstream missed;
+  if (result.pages.size() != pages.size()) {
+    missed << result.pages.size() << " pages found of " << pages.size() << "; ";
+  }
+  for (size_t k = 0; k < std::min(pages.size(), result.pages.size()); ++k) {
+    const PageResult& page = result.pages[k];
+    const std::string name = page.name.empty() ? "" : page.name + " page: ";
+    GroundTruth mine = truth;
+    mine.on_page = truth.page_index == static_cast<int>(k + 1);
+    const double iou =
+        k < result.outline.pages.size() ? MaskIoU(result.outline.pages[k], mine.on_page) : 0.0;
+    o.iou = std::min(o.iou, iou);
+    if (iou < 0.98) missed << name << "outline IoU " << iou << "; ";
+    const FlatErrorStats flat = CompareFlat(mine, page.mesh, page.flat.flat);
+    o.sheet_mm = std::max(o.sheet_mm, flat.rms_mm);
+    if (flat.rms_mm > 0.08) missed << name << "sheet " << flat.rms_mm << " mm RMS; ";
+    if (flat.mirrored) missed << name << "sheet mirrored; ";
+    const Rigid2D to_true = FlatToTrue(mine, page);
+    cv::Mat off_leaf;
+    const int off = MaskOffLeaf(page, to_true, pages[k], 1.5, nullptr, &off_leaf);
+    o.off_mask += off;
+    if (off > 0) {
+      missed << name << off << " restored mask pixels off the leaf; ";
+      if (dump) {
+        // The restored page with its mask's pixels off the leaf in red.
+        cv::Mat show = page.restored.image;
+        if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
+        if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
+        show = show.clone();
+        cv::dilate(off_leaf, off_leaf, cv::Mat::ones(5, 5, CV_8U));
+        show.setTo(cv::Scalar(0, 0, 255), off_leaf);
+        fs::create_directories(std::string(dump) + "/" + std::to_string(s.seed));
+        cv::imwrite(std::string(dump) + "/" + std::to_string(s.seed) + "/off_leaf" +
+                        (page.name.empty() ? "" : "_" + page.name) + ".png",
+                    show);
+      }
+    }
+    if (s.texture.kind == TextureKind::kCheckerboard) {
+      const std::vector<cv::Point2d> corners = TrueCorners(pages[k].options().size_mm, s.texture);
+      const Measured m = ExperimentOne(page, MeasureCorners(page, to_true, corners),
+                                       LayoutControl(corners, page.restored.dpi), corners);
+      o.exp1_px = std::max(o.exp1_px, m.mean_px);
+      o.exp1_mm = std::max(o.exp1_mm, m.mean_mm);
+      o.rigid_mm = std::max(o.rigid_mm, m.rms_mm);
+      const bool burnt = s.page.outline == OutlineKind::kBurnt;
+      if (m.corners < static_cast<int>(corners.size()) * (burnt ? 2 : 3) / 4) {
+        missed << name << m.corners << " of " << corners.size() << " corners; ";
+      } else if (m.mean_px > 0.15 || m.mean_mm > 0.04 || m.rms_mm > 0.08 ||
+                 !(m.rms_mirrored_mm > 10 * m.rms_mm)) {
+        missed << name << "Experiment I " << m.mean_px << " px, " << m.mean_mm << " mm, rigid "
+               << m.rms_mm << " mm (mirrored " << m.rms_mirrored_mm << "); ";
+      }
+    }
+  }
+  o.missed = missed.str();
+  o.met = o.missed.empty();
+  return finish();
+}
+
+// The scenes the issue names, each to meet every bar with no warning: a curled, folded, waved and
+// coned leaf lying with its rim 0, 0.05 and 0.1 mm above a dark table (albedo 0.15: the rim's
+// step at 0 mm is nothing, at 0.05 mm a tenth of a millimetre's noise on the table; the leaf's
+// look sets it apart), a 0.1 mm leaf on a support as bright as paper (0.8) and in a paper frame
+// (the step alone sets it apart), a burnt folded leaf 0.1 mm thick (whole, every hole kept), and
+// open books whose pages rise 70 and 30 degrees into a gutter 2 mm wide (two pages). Checkerboard
+// pages, for Experiment I; the default renderer (noise 1.5 DN, no blur).
+struct Named {
+  std::string name;
+  FamilyScene scene;
+};
+
+std::vector<Named> MustShow() {
+  std::vector<Named> out;
+  auto base = [](uint64_t seed) {
+    FamilyScene s;
+    s.seed = seed;
+    s.texture.kind = TextureKind::kCheckerboard;
+    s.light.table_albedo = 0.15;
+    s.said = ObjectKind::kAuto;
+    return s;
+  };
+  const struct {
+    const char* name;
+    PageShape shape;
+  } shapes[] = {{"curl", PageShape::kCurl},
+                {"fold", PageShape::kFold},
+                {"wave", PageShape::kRipple},
+                {"cone", PageShape::kCone}};
+  uint64_t seed = 100;
+  for (const auto& shape : shapes) {
+    for (double rim : {0.0, 0.05, 0.1}) {
+      FamilyScene s = base(seed++);
+      s.shape = shape.name;
+      s.page.shape = shape.shape;
+      if (shape.shape == PageShape::kRipple) s.page.ripple_slope_deg = 20;  // A wave.
+      s.page.thickness_mm = rim;
+      char name[64];
+      std::snprintf(name, sizeof(name), "%s_rim_%03.0f_um_dark_table", shape.name, rim * 1000);
+      out.push_back({name, s});
+    }
+  }
+  FamilyScene support = base(seed++);
+  support.shape = "curl";
+  support.page.shape = PageShape::kCurl;
+  support.page.thickness_mm = 0.1;
+  support.scene.support = true;
+  support.scene.support_albedo = 0.8;
+  out.push_back({"curl_rim_100_um_light_support", support});
+  FamilyScene frame = support;
+  frame.seed = seed++;
+  frame.scene.support = false;
+  frame.scene.frame = true;
+  out.push_back({"curl_rim_100_um_paper_frame", frame});
+  FamilyScene burnt = base(seed++);
+  burnt.shape = "fold";
+  burnt.page.shape = PageShape::kFold;
+  burnt.page.thickness_mm = 0.1;
+  burnt.page.outline = OutlineKind::kBurnt;
+  out.push_back({"burnt_fold_rim_100_um_dark_table", burnt});
+  for (double angle : {70.0, 30.0}) {
+    FamilyScene book = base(seed++);
+    book.shape = "spread";
+    book.page.size_mm = {170.0, 230.0};
+    book.scene.spread = true;
+    book.page.gutter_angle_deg = angle;
+    book.light.table_albedo = 0.35;
+    out.push_back({"spread_" + std::to_string(static_cast<int>(angle)) + "_deg", book});
+  }
+  return out;
+}
+
+class MustShowScenes : public ::testing::TestWithParam<Named> {};
+
+TEST_P(MustShowScenes, MeetTheBarsWithNoWarning) {
+  const Named& named = GetParam();
+  const Outcome o = ScanAndMeasure(named.scene);
+  std::printf(
+      "[must] %-34s %s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
+      "mask off %d | %s%s%s\n",
+      named.name.c_str(), o.met ? "met " : "MISS", o.iou, o.sheet_mm, o.exp1_px, o.exp1_mm,
+      o.rigid_mm, o.off_mask, o.warnings.c_str(), o.missed.empty() ? "" : " | ", o.missed.c_str());
+  EXPECT_TRUE(o.met) << o.missed;
+  EXPECT_FALSE(o.flagged) << o.warnings;
+  if (named.scene.page.outline == OutlineKind::kBurnt) {
+    EXPECT_EQ(o.holes, named.scene.page.holes) << "every hole kept, none added";
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Issue, MustShowScenes, ::testing::ValuesIn(MustShow()),
+                         [](const ::testing::TestParamInfo<Named>& info) {
+                           return info.param.name;
+                         });
+
+TEST(SceneFamily, EveryScanMeetsTheBarsOrIsFlagged) {
+  const uint64_t count = EnvNumber("VELLUM_FAMILY_SCENES", 20);
+  const uint64_t first = EnvNumber("VELLUM_FAMILY_FIRST", 1);
+  int met_clean = 0, met_flagged = 0, missed_flagged = 0, missed_silent = 0;
+  for (uint64_t seed = first; seed < first + count; ++seed) {
+    const FamilyScene scene = DrawFamilyScene(seed);
+    const Outcome o = ScanAndMeasure(scene);
+    (o.met ? (o.flagged ? met_flagged : met_clean)
+           : (o.flagged ? missed_flagged : missed_silent))++;
+    std::printf(
+        "[family] %-4s %-7s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
+        "mask off %d | %s | %s%s%s\n",
+        o.met ? "met" : "MISS", o.flagged ? "flagged" : "clean", o.iou, o.sheet_mm, o.exp1_px,
+        o.exp1_mm, o.rigid_mm, o.off_mask, scene.Describe().c_str(), o.warnings.c_str(),
+        o.missed.empty() ? "" : " | ", o.missed.c_str());
+    std::fflush(stdout);
+    if (!o.met && !o.flagged) {
+      ADD_FAILURE() << "silent and wrong: " << scene.Describe() << ": " << o.missed;
+    }
+  }
+  const int met = met_clean + met_flagged;
+  char table[1024];
+  std::snprintf(table, sizeof(table),
+                "| scenes | met, unflagged | met, flagged (false alarms) | missed, flagged | "
+                "missed, unflagged (silent) |\n|---|---|---|---|---|\n| %llu (seeds %llu-%llu) | "
+                "%d | %d | %d | %d |\n",
+                static_cast<unsigned long long>(count), static_cast<unsigned long long>(first),
+                static_cast<unsigned long long>(first + count - 1), met_clean, met_flagged,
+                missed_flagged, missed_silent);
+  std::printf("%s", table);
+  if (const char* path = std::getenv("VELLUM_FAMILY_TABLE")) std::ofstream(path) << table;
+  EXPECT_EQ(missed_silent, 0);
+  if (count >= 200) {
+    EXPECT_GE(met, 0.9 * count) << "met";
+    EXPECT_LE(met_flagged, 0.05 * met) << "false alarms";
+  }
+}
+
+}  // namespace
+}  // namespace vellum
