@@ -130,8 +130,10 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     }
   }
   constexpr int kRows = 24;  // Rows either side a closed row borrows its gap from.
+  constexpr float kMeet = 1.5f;
   for (int v = 0; v < leaf.rows; ++v) {
     float at = line_at[v];
+    bool meet = false;  // The pages meet at the line in this row.
     if (gap_at[v] != kNone) {
       at += gap_at[v];
     } else {
@@ -142,11 +144,16 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
       if (near.size() >= kRows / 2) {
         std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
         at += near[near.size() / 2];
+      } else {
+        meet = true;
       }
     }
     const uint8_t* in = leaf.ptr<uint8_t>(v);
     for (int u = 0; u < leaf.cols; ++u) {
       if (!in[u] || u == grazing[v].first || u == grazing[v].second) continue;
+      // Where the pages meet, the pixels within kMeet of the line belong to both (the line is
+      // fitted to the rows' lowest points to about a pixel): left out of both.
+      if (meet && std::fabs(u + 0.5f - at) < kMeet) continue;
       (u < at ? left : right)->at<uint8_t>(v, u) = 255;
     }
   }

@@ -201,6 +201,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   // What was found may be a support or a frame with the leaf on it: cut again inside it, against
   // the plane along its outline (twice: a leaf in a frame on a support).
+  double raised_mm = 0;  // What was found lies this high above the table, nothing standing on it.
   for (int level = 0; level < 2 && cv::countNonZero(cut) > 0; ++level) {
     Plane plane;
     cv::Mat ring;
@@ -216,14 +217,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
       // support or a box, maybe, with the leaf flush on it or elsewhere.
       double lowest = 1e9;
       for (const Plane& known : planes) lowest = std::min(lowest, known.c);
-      if (plane.c - lowest > 1.0) {
-        out.doubts.push_back(
-            {"leaf_ambiguous",
-             "what was found as the leaf lies on a plane " + Fixed(plane.c - lowest, 1) +
-                 " mm above the table with nothing standing on it: a support or a box, perhaps, "
-                 "with the leaf flush on it or beside it: check the outline in the report, draw "
-                 "a leaf hint over the leaf in the viewer (or give --leaf-hint) and scan again"});
-      }
+      if (plane.c - lowest > 1.0) raised_mm = plane.c - lowest;
       break;
     }
     cut = inner;
@@ -305,6 +299,16 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
            "said to be an open book, but no gutter was found between two pages (a valley both "
            "pages rise from): restored as one leaf; check the outline in the report"});
     }
+  }
+  // On a raised plane with nothing standing on it: a support or a box, perhaps, unless two pages
+  // were found rising from a gutter on it (an open book's block, which a support does not have).
+  if (raised_mm > 0 && out.pages.size() < 2) {
+    out.doubts.push_back(
+        {"leaf_ambiguous",
+         "what was found as the leaf lies on a plane " + Fixed(raised_mm, 1) +
+             " mm above the table with nothing standing on it: a support or a box, perhaps, "
+             "with the leaf flush on it or beside it: check the outline in the report, draw "
+             "a leaf hint over the leaf in the viewer (or give --leaf-hint) and scan again"});
   }
   out.status = Status::Ok();
   return out;
