@@ -59,29 +59,32 @@ cv::Mat SeedBlocks(const outline::Blocks& blocks, cv::Size view, const cv::Rect&
 // The parts of `mask` (8-connected) that cover much of `seed`: each at least a quarter of the
 // best's cover and a tenth of the seed. Empty when none covers it.
 cv::Mat AtSeed(const cv::Mat& mask, const cv::Mat& seed) {
+  cv::Mat out(mask.size(), CV_8U, cv::Scalar(0));
+  // Within the mask's bounding box: every part lies in it, and a seed outside it votes for none.
+  const cv::Rect box = cv::boundingRect(mask);
+  if (box.empty()) return out;
   cv::Mat labels;
-  const int count = cv::connectedComponents(mask, labels, 8, CV_32S);
+  const int count = cv::connectedComponents(mask(box), labels, 8, CV_32S);
   std::vector<int> votes(count, 0);
-  for (int v = 0; v < seed.rows; ++v) {
-    const uint8_t* s = seed.ptr<uint8_t>(v);
+  for (int v = 0; v < box.height; ++v) {
+    const uint8_t* s = seed.ptr<uint8_t>(box.y + v) + box.x;
     const int* l = labels.ptr<int>(v);
-    for (int u = 0; u < seed.cols; ++u) {
+    for (int u = 0; u < box.width; ++u) {
       if (s[u]) ++votes[l[u]];
     }
   }
   votes[0] = 0;
   const int most = *std::max_element(votes.begin(), votes.end());
   const int seed_area = cv::countNonZero(seed);
-  cv::Mat out(mask.size(), CV_8U, cv::Scalar(0));
   if (most == 0) return out;
   std::vector<uint8_t> keep(count, 0);
   for (int l = 1; l < count; ++l) {
     keep[l] = votes[l] >= std::max(1, most / 4) && votes[l] * 10 >= seed_area;
   }
-  for (int v = 0; v < mask.rows; ++v) {
+  for (int v = 0; v < box.height; ++v) {
     const int* l = labels.ptr<int>(v);
-    uint8_t* o = out.ptr<uint8_t>(v);
-    for (int u = 0; u < mask.cols; ++u) o[u] = keep[l[u]] ? 255 : 0;
+    uint8_t* o = out.ptr<uint8_t>(box.y + v) + box.x;
+    for (int u = 0; u < box.width; ++u) o[u] = keep[l[u]] ? 255 : 0;
   }
   return out;
 }

@@ -78,29 +78,36 @@ cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
   // least). A narrow part of the leaf gets none: the cut's errors are such parts (blocks of the
   // surround beside a raised edge, whose heights the edge's blur biases).
   const int reach = block + band;
-  cv::Mat labels(size, CV_8U, cv::Scalar(0));
+  // Worked within the cut's box (and a margin, for exactly the same result as over the view):
+  // beyond it, everything is surround farther than `reach` from the leaf.
+  const cv::Rect view(0, 0, size.width, size.height);
+  const cv::Rect box = cv::boundingRect(full);
+  auto grown = [&](int by) { return (box - cv::Point(by, by) + cv::Size(2 * by, 2 * by)) & view; };
+  const cv::Rect in_leaf = grown(1), near_leaf = grown(reach + 2);
+  cv::Mat labels(size, CV_8U, cv::Scalar(2));
+  labels(near_leaf).setTo(0);
   cv::Mat distance, widest;
-  cv::distanceTransform(full, distance, cv::DIST_L2, 3);
-  labels.setTo(1, distance >= reach);
-  cv::distanceTransform(~full, distance, cv::DIST_L2, 3);
+  cv::distanceTransform(full(in_leaf), distance, cv::DIST_L2, 3);
+  labels(in_leaf).setTo(1, distance >= reach);
+  cv::distanceTransform(~full(near_leaf), distance, cv::DIST_L2, 3);
   cv::dilate(distance, widest, cv::Mat());
-  labels.setTo(2, (distance >= reach) | ((distance >= widest) & (distance >= 3)));
+  labels(near_leaf).setTo(2, (distance >= reach) | ((distance >= widest) & (distance >= 3)));
   // And the surround seen in a well of the cut's leaf: a pixel on a surround plane (within 0.2
   // mm: a dark table's points are that noisy) that looks like the surround, with the leaf a
   // millimetre or more above it within four pixels (the table between an open book's pages,
   // narrower than the cut's blocks resolve).
   if (!planes.empty() && !leaf.empty() && !surround.empty()) {
-    cv::Mat highest;
-    cv::dilate(cues.z, highest, cv::Mat::ones(9, 9, CV_8U));
-    cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& range) {
+    cv::Mat highest;  // Over the cut's box (a view of the heights: the dilation sees past it).
+    cv::dilate(cues.z(box), highest, cv::Mat::ones(9, 9, CV_8U));
+    cv::parallel_for_(cv::Range(box.y, box.y + box.height), [&](const cv::Range& range) {
       for (int v = range.start; v < range.end; ++v) {
         const uint8_t* in = full.ptr<uint8_t>(v);
         const float* z = cues.z.ptr<float>(v);
-        const float* high = highest.ptr<float>(v);
+        const float* high = highest.ptr<float>(v - box.y) - box.x;
         const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
         const cv::Vec3b* colour = cues.colour.ptr<cv::Vec3b>(v);
         uint8_t* label = labels.ptr<uint8_t>(v);
-        for (int u = 0; u < size.width; ++u) {
+        for (int u = box.x; u < box.x + box.width; ++u) {
           if (!in[u] || !Valid(z[u]) || high[u] < z[u] + 1.0f || !std::isfinite(p[u][0])) continue;
           double nearest = 1e9;
           for (const Plane& plane : planes) {
@@ -124,13 +131,19 @@ cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
 
 void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
   constexpr int kReach = 5;  // The window: 11 x 11 pixels (at a corner, 16 pixels inside).
+  // Within the leaf's box: outside it, no rim and no inner pixel (the erosions of a view of the
+  // mask see past it, so they are the view's own).
+  const cv::Rect box = cv::boundingRect(*leaf);
+  if (box.empty()) return;
   for (int pass = 0; pass < 2; ++pass) {
     cv::Mat eroded, inner;
-    cv::erode(*leaf, eroded, cv::Mat());
-    cv::erode(*leaf, inner, cv::Mat::ones(5, 5, CV_8U));
-    const cv::Mat rim = *leaf & ~eroded;
+    const cv::Mat in_box = (*leaf)(box);
+    cv::erode(in_box, eroded, cv::Mat());
+    cv::erode(in_box, inner, cv::Mat::ones(5, 5, CV_8U));
+    const cv::Mat rim = in_box & ~eroded;
     std::vector<cv::Point> rim_pixels;
     cv::findNonZero(rim, rim_pixels);
+    for (cv::Point& p : rim_pixels) p += box.tl();
     std::vector<uint8_t> drop(rim_pixels.size(), 0);
     cv::parallel_for_(cv::Range(0, static_cast<int>(rim_pixels.size())), [&](const cv::Range& r) {
       for (int k = r.start; k < r.end; ++k) {
@@ -143,10 +156,12 @@ void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
         int n = 0;
         for (int dv = -kReach; dv <= kReach; ++dv) {
           const int v = p.y + dv;
-          if (v < 0 || v >= z.rows) continue;
+          if (v < box.y || v >= box.y + box.height) continue;
           for (int du = -kReach; du <= kReach; ++du) {
             const int u = p.x + du;
-            if (u < 0 || u >= z.cols || !inner.at<uint8_t>(v, u)) continue;
+            if (!box.contains(cv::Point(u, v)) || !inner.at<uint8_t>(v - box.y, u - box.x)) {
+              continue;
+            }
             const float zz = z.at<float>(v, u);
             if (!Valid(zz)) continue;
             const cv::Vec3d row(1, du, dv);
