@@ -303,13 +303,12 @@ double UprightAngle(const cv::Mat& mask) {
       if (side.size() < 10) continue;
       cv::Vec4f line;
       cv::fitLine(side, line, cv::DIST_HUBER, 0, 0.01, 0.01);
-      double angle = std::atan2(line[1], line[0]) * 180 / M_PI - box.angle;
-      angle -= 90.0 * std::round(angle / 90.0);  // Off the rectangle's own angle.
+      // Off the rectangle's own angle.
+      const double angle = Wrap90(std::atan2(line[1], line[0]) * 180 / M_PI - box.angle);
       sum += angle * side.size();
       total += side.size();
     }
-    sides = box.angle + (total > 0 ? sum / total : 0);
-    sides -= 90.0 * std::round(sides / 90.0);
+    sides = Wrap90(box.angle + (total > 0 ? sum / total : 0));
   }
   // The outline's segments, their directions folded into [0, 90) degrees, weighted by length.
   std::vector<cv::Point> poly;
@@ -345,8 +344,7 @@ double UprightAngle(const cv::Mat& mask) {
     for (int pass = 0; pass < 8; ++pass) {
       double sum = 0, total = 0;
       for (const auto& [a, l] : segments) {
-        double d = a - peak;
-        d -= 90.0 * std::round(d / 90.0);
+        const double d = Wrap90(a - peak);
         if (std::fabs(d) <= 2.0) sum += d * l, total += l;
       }
       const double shift = total > 0 ? sum / total : 0;
@@ -360,8 +358,7 @@ double UprightAngle(const cv::Mat& mask) {
   } else {
     angle = std::isfinite(sides) ? sides : box.angle;
   }
-  angle -= 90.0 * std::round(angle / 90.0);  // Into [-45, 45].
-  return angle;
+  return Wrap90(angle);
 }
 
 Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& images,
