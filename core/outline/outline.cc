@@ -236,12 +236,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   // Brought to the pixel, over the pixels with a height: what the cut holds without one, where
   // that reaches its outline (a shadow, a side seen edge-on), is not restored.
-  cv::Mat region = RefineRim(cut, cues, points, planes, found.look_leaf, found.look_surround, block,
-                             options.band_px);
-  cv::Mat full_cut;
-  cv::resize(cut, full_cut, cut.size() * block, 0, 0, cv::INTER_NEAREST);
-  cv::copyMakeBorder(full_cut, full_cut, 0, size.height - full_cut.rows, 0,
-                     size.width - full_cut.cols, cv::BORDER_REPLICATE);
+  const cv::Mat full_cut = BlocksToPixels(cut, block, size);
+  cv::Mat region = RefineRim(full_cut, cues, points, planes, found.look_leaf, found.look_surround,
+                             block, options.band_px);
   region = AtSeed(region, full_cut);
   const cv::Mat measured = cues.z > -1e3f;
   cv::Mat leaf = AtSeed(region & measured, full_cut);

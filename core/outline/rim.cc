@@ -63,15 +63,18 @@ void Flood(const cv::Mat& strength, cv::Mat* labels) {
   }
 }
 
-cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
+cv::Mat BlocksToPixels(const cv::Mat& blocks, int block, cv::Size size) {
+  cv::Mat full;
+  cv::resize(blocks, full, blocks.size() * block, 0, 0, cv::INTER_NEAREST);
+  cv::copyMakeBorder(full, full, 0, size.height - full.rows, 0, size.width - full.cols,
+                     cv::BORDER_REPLICATE);
+  return full;
+}
+
+cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
                   const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
                   int block, int band) {
   const cv::Size size = cues.gray.size();
-  // The cut at full size (the view's last partial row and column of blocks as their neighbours).
-  cv::Mat full;
-  cv::resize(cut, full, cut.size() * block, 0, 0, cv::INTER_NEAREST);
-  cv::copyMakeBorder(full, full, 0, size.height - full.rows, 0, size.width - full.cols,
-                     cv::BORDER_REPLICATE);
   // Seeds: what lies farther than a block and the band from the cut's outline, on either side,
   // and the middle of any part of the surround narrower than that (a hole, the gap between a
   // book's pages keeps a seed: the ridge of its distance from the outline, three pixels in at

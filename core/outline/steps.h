@@ -166,12 +166,15 @@ bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vec
 // floods meet on the crest between them). `labels` holds the seeds on input; pixels whose level
 // is negative are not flooded.
 void Flood(const cv::Mat& level, cv::Mat* labels);
-// The block mask `cut` (CutLeaf) at full size, its outline moved to the crest of the rims and
-// edges within `band` pixels of it.
+// A block mask (CutLeaf's, blocks of `block` pixels) at the view's `size` (the view's last
+// partial row and column of blocks as their neighbours).
+cv::Mat BlocksToPixels(const cv::Mat& blocks, int block, cv::Size size);
+// The cut `full` (CutLeaf's, at full size: BlocksToPixels), its outline moved to the crest of the
+// rims and edges within a block and `band` pixels of it.
 // Seeds of the surround also where a pixel inside the cut lies on one of `planes` and looks like
 // the surround (by the cut's looks) with the leaf well above it close by: the table between an
 // open book's pages, narrower than the blocks resolve.
-cv::Mat RefineRim(const cv::Mat& cut, const Cues& cues, const cv::Mat& points,
+cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
                   const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
                   int block, int band);
 

@@ -183,7 +183,8 @@ TEST(RefineRim, BringsTheCutsOutlineToThePixel) {
   const int block = 4;
   cv::Mat cut(size.height / block, size.width / block, CV_8U, cv::Scalar(0));
   cut(cv::Rect(12, 9, 26, 21)).setTo(255);  // Pixels 48..151 x 36..119: 3 to 5 pixels too big.
-  const cv::Mat refined = RefineRim(cut, cues, points, {}, Look(), Look(), block, options.band_px);
+  const cv::Mat refined = RefineRim(BlocksToPixels(cut, block, size), cues, points, {}, Look(),
+                                    Look(), block, options.band_px);
   cv::Mat truth(size, CV_8U, cv::Scalar(0));
   truth(leaf).setTo(255);
   // Within a pixel all round: 98 x 78 px, a pixel more each side is 352 pixels.
