@@ -52,7 +52,8 @@ struct Outcome {
   std::string warnings;  // The warning codes, or the error.
   double iou = 1, sheet_mm = 0, exp1_px = 0, exp1_mm = 0, rigid_mm = 0;
   int off_mask = 0;
-  int holes = 0;  // Holes in the outline found.
+  int holes = 0;        // Holes in the outline found.
+  std::string figures;  // The pipeline's own figures, per page, for reading a run's table.
 };
 
 uint64_t EnvNumber(const char* name, uint64_t fallback) {
@@ -110,6 +111,16 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   for (const Warning& w : result.report.Warnings())
     o.warnings += (o.warnings.empty() ? "" : ",") + w.code;
   o.flagged = !o.warnings.empty();
+  for (const std::string& page : result.report.Pages()) {
+    char figures[160];
+    std::snprintf(figures, sizeof(figures), "%s%sstrain %.4f/%.4f warp %.2f px grid %s",
+                  o.figures.empty() ? "" : "; ", page.empty() ? "" : (page + " ").c_str(),
+                  result.report.Number("flattening", "mean_strain", page),
+                  result.report.Number("flattening", "max_strain", page),
+                  result.report.Number("sheet", "warp_error_px", page),
+                  result.report.Text("sheet", "grid", page).c_str());
+    o.figures += figures;
+  }
   const GroundTruth& truth = scan.gantry->truth();
   const std::vector<Page>& pages = scan.gantry->pages();
   std::ostringstream missed;
@@ -276,10 +287,10 @@ TEST(SceneFamily, EveryScanMeetsTheBarsOrIsFlagged) {
            : (o.flagged ? missed_flagged : missed_silent))++;
     std::printf(
         "[family] %-4s %-7s IoU %.4f sheet %.3f mm, Exp I %.3f px %.4f mm rigid %.3f mm, "
-        "mask off %d | %s | %s%s%s\n",
+        "mask off %d | %s | %s%s%s | %s\n",
         o.met ? "met" : "MISS", o.flagged ? "flagged" : "clean", o.iou, o.sheet_mm, o.exp1_px,
         o.exp1_mm, o.rigid_mm, o.off_mask, scene.Describe().c_str(), o.warnings.c_str(),
-        o.missed.empty() ? "" : " | ", o.missed.c_str());
+        o.missed.empty() ? "" : " | ", o.missed.c_str(), o.figures.c_str());
     std::fflush(stdout);
     if (!o.met && !o.flagged) {
       ADD_FAILURE() << "silent and wrong: " << scene.Describe() << ": " << o.missed;

@@ -16,7 +16,7 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
   std::vector<cv::Point2f> valley;
   int apart = 0;  // Valley rows where the two sides do not meet (a gap, or a band out of view).
   int level = 0;  // Valley rows where both sides level off beyond the bend.
-  constexpr int kApart = 12;  // Pixels either side of the valley's point.
+  const int near_px = options.gutter_apart_px;  // Pixels either side of the valley's point.
   for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
     const float* row = z.ptr<float>(v);
     const uint8_t* in = leaf.ptr<uint8_t>(v);
@@ -78,7 +78,7 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     }
     level += levels;
     bool gap = false;
-    for (int u = std::max(first, lowest - kApart); u <= std::min(last, lowest + kApart); ++u) {
+    for (int u = std::max(first, lowest - near_px); u <= std::min(last, lowest + near_px); ++u) {
       gap = gap || !in[u];
     }
     apart += gap;
@@ -99,7 +99,7 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
   }
   *left = cv::Mat::zeros(leaf.size(), CV_8U);
   *right = cv::Mat::zeros(leaf.size(), CV_8U);
-  // Where the pages part in a row (a gap in the leaf within kApart pixels of the line), the
+  // Where the pages part in a row (a gap in the leaf within near_px pixels of the line), the
   // split follows the gap nearest the line: the line runs through each row's lowest point, which
   // can be the first pixels of the far page's wall, beyond the gap between the pages. A row with
   // no gap of its own (noise closed it) takes the median gap of the rows around it.
@@ -114,7 +114,7 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     const uint8_t* in = leaf.ptr<uint8_t>(v);
     const int c = static_cast<int>(std::floor(line_at[v]));
     int best = -1;
-    for (int d = 0; d <= kApart && best < 0; ++d) {
+    for (int d = 0; d <= near_px && best < 0; ++d) {
       for (const int u : {c - d, c + d}) {
         if (u > 0 && u + 1 < leaf.cols && !in[u] && best < 0) best = u;
       }
@@ -124,13 +124,13 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     int a = best, b = best;
     while (a > 0 && !in[a - 1]) --a;
     while (b + 1 < leaf.cols && !in[b + 1]) ++b;
-    if (a > 0 && b + 1 < leaf.cols && a >= c - 2 * kApart && b <= c + 2 * kApart) {
+    if (a > 0 && b + 1 < leaf.cols && a >= c - 2 * near_px && b <= c + 2 * near_px) {
       gap_at[v] = 0.5f * (a + b) + 0.5f - line_at[v];
       grazing[v] = {a - 1, b + 1};
     }
   }
-  constexpr int kRows = 24;  // Rows either side a closed row borrows its gap from.
-  constexpr float kMeet = 1.5f;
+  const int borrow = options.gutter_borrow_rows;  // Rows either side a closed row borrows from.
+  const float meet_px = static_cast<float>(options.gutter_meet_px);
   for (int v = 0; v < leaf.rows; ++v) {
     float at = line_at[v];
     bool meet = false;  // The pages meet at the line in this row.
@@ -138,10 +138,10 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
       at += gap_at[v];
     } else {
       std::vector<float> near;
-      for (int w = std::max(0, v - kRows); w <= std::min(leaf.rows - 1, v + kRows); ++w) {
+      for (int w = std::max(0, v - borrow); w <= std::min(leaf.rows - 1, v + borrow); ++w) {
         if (gap_at[w] != kNone) near.push_back(gap_at[w]);
       }
-      if (near.size() >= kRows / 2) {
+      if (near.size() >= static_cast<size_t>(borrow / 2)) {
         std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
         at += near[near.size() / 2];
       } else {
@@ -151,9 +151,9 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
     const uint8_t* in = leaf.ptr<uint8_t>(v);
     for (int u = 0; u < leaf.cols; ++u) {
       if (!in[u] || u == grazing[v].first || u == grazing[v].second) continue;
-      // Where the pages meet, the pixels within kMeet of the line belong to both (the line is
+      // Where the pages meet, the pixels within meet_px of the line belong to both (the line is
       // fitted to the rows' lowest points to about a pixel): left out of both.
-      if (meet && std::fabs(u + 0.5f - at) < kMeet) continue;
+      if (meet && std::fabs(u + 0.5f - at) < meet_px) continue;
       (u < at ? left : right)->at<uint8_t>(v, u) = 255;
     }
   }

@@ -36,6 +36,17 @@ bool OutlineOptions::Check(std::string* why) const {
         "min_area in (0, 1), max_view_share in (0, 1]";
     return false;
   }
+  if (!(well_plane_mm > 0) || !(well_depth_mm > 0) || !(well_look >= 0) || !(trim_off_mm > 0) ||
+      !(lies_on_mm >= 0) || !(lies_on_apart >= 0 && lies_on_apart <= 1) || !(raised_plane_mm > 0)) {
+    *why =
+        "well_plane_mm, well_depth_mm, trim_off_mm and raised_plane_mm must be > 0, well_look and "
+        "lies_on_mm >= 0, lies_on_apart in [0, 1]";
+    return false;
+  }
+  if (gutter_apart_px < 1 || gutter_borrow_rows < 1 || !(gutter_meet_px >= 0)) {
+    *why = "gutter_apart_px and gutter_borrow_rows must be >= 1, gutter_meet_px >= 0";
+    return false;
+  }
   return surround.Check(why) && cut.Check(why);
 }
 
@@ -132,11 +143,12 @@ cv::Mat LargestWithin(const cv::Mat& found, Outline* out) {
 // Whether `inner` (blocks) is a leaf lying on `outer` (a support or a frame around it, whose
 // plane `above` is measured from): of at least `min_blocks` and at most 90% of it, its outline
 // inside `outer` (four fifths of it at least two blocks in from outer's) and set apart there
-// (seven tenths of it by a rim, a texture edge or unmeasured blocks), and standing off that plane
-// (its median height off it at least 0.03 mm and three times the blocks' noise). A region of a
-// flat leaf's own texture (its dark squares, a miniature) lies on the leaf's plane.
+// (options.lies_on_apart of it by a rim, a texture edge or unmeasured blocks), and standing off
+// that plane (its median height off it at least options.lies_on_mm and three times the blocks'
+// noise). A region of a flat leaf's own texture (its dark squares, a miniature) lies on the
+// leaf's plane.
 bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
-            const cv::Mat& above, int min_blocks) {
+            const cv::Mat& above, int min_blocks, const OutlineOptions& options) {
   const int area = cv::countNonZero(inner);
   if (area < std::max(1, min_blocks) || area > 0.9 * cv::countNonZero(outer)) return false;
   cv::Mat eroded, deep, apart;
@@ -147,7 +159,7 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
   cv::dilate((blocks.rim > 0.5f) | (blocks.edge > 1.0f) | (blocks.valid < 0.5f), apart, cv::Mat());
   const int total = cv::countNonZero(rim);
   if (total == 0 || cv::countNonZero(rim & deep) < 0.8 * total ||
-      cv::countNonZero(rim & apart) < 0.7 * total) {
+      cv::countNonZero(rim & apart) < options.lies_on_apart * total) {
     return false;
   }
   std::vector<float> off, noise;
@@ -160,7 +172,7 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
     }
   }
   if (off.size() * 2 < static_cast<size_t>(area)) return false;  // Mostly unmeasured.
-  return outline::Median(&off) >= std::max(0.03, 3 * outline::Median(&noise));
+  return outline::Median(&off) >= std::max(options.lies_on_mm, 3 * outline::Median(&noise));
 }
 
 }  // namespace
@@ -215,12 +227,12 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, cut, options.cut);
     cv::Mat inner = AtSeed(inner_cut.leaf, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
-    if (!LiesOn(blocks, cut, inner, above_more, min_blocks)) {
+    if (!LiesOn(blocks, cut, inner, above_more, min_blocks, options)) {
       // What was found lies on a plane well above the table, and nothing on it stands off it: a
       // support or a box, maybe, with the leaf flush on it or elsewhere.
       double lowest = 1e9;
       for (const Plane& known : planes) lowest = std::min(lowest, known.c);
-      if (plane.c - lowest > 1.0) raised_mm = plane.c - lowest;
+      if (plane.c - lowest > options.raised_plane_mm) raised_mm = plane.c - lowest;
       break;
     }
     cut = inner;
@@ -238,7 +250,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // that reaches its outline (a shadow, a side seen edge-on), is not restored.
   const cv::Mat full_cut = BlocksToPixels(cut, block, size);
   cv::Mat region = RefineRim(full_cut, cues, points, planes, found.look_leaf, found.look_surround,
-                             block, options.band_px);
+                             block, options);
   region = AtSeed(region, full_cut);
   const cv::Mat measured = cues.z > -1e3f;
   cv::Mat leaf = AtSeed(region & measured, full_cut);
@@ -253,7 +265,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
                                          options.scale_px, /*darkest=*/true);
   out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf);
   // The rim's mixed pixels out, once the holes are settled (their rims are the leaf's too).
-  TrimRim(cues.z, 10 * options.step_mm, &leaf);
+  TrimRim(cues.z, options.trim_off_mm, &leaf);
   out.measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
                        std::max(1, cv::countNonZero(leaf | full_cut));
   out.confidence = RimConfidence(leaf, cues);

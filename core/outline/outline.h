@@ -62,7 +62,26 @@ struct OutlineOptions {
   int blocks_across = 400;  // The cut decides on blocks: the view's longer side in this many.
   SurroundOptions surround;
   CutOptions cut;
+  // The rim (RefineRim, TrimRim).
   int band_px = 8;  // RefineRim moves the cut's outline by up to a block and this many pixels.
+  // The surround seen in a well of the leaf (the table between an open book's pages, narrower
+  // than the cut's blocks): a pixel within well_plane_mm of a surround plane (a dark table's
+  // points are that noisy), with the leaf at least well_depth_mm above it within four pixels,
+  // that looks like the surround by at least well_look nats.
+  double well_plane_mm = 0.2;
+  double well_depth_mm = 1.0;
+  double well_look = 1.0;
+  // A rim pixel off the leaf's surface by more than this (and what its slope gives over two
+  // pixels) is a mixed pixel, half leaf and half what lies below: trimmed, mm.
+  double trim_off_mm = 0.8;
+  // A leaf on a support or in a frame (the cut again inside what was found): it stands at least
+  // lies_on_mm (and three times its noise) off the plane along its outline, and lies_on_apart of
+  // its outline is set apart there (a rim, an edge, unmeasured). What was found, lying on a plane
+  // more than raised_plane_mm above the table with nothing standing on it, may be a support itself
+  // (flagged).
+  double lies_on_mm = 0.03;
+  double lies_on_apart = 0.7;
+  double raised_plane_mm = 1.0;
   // The leaf.
   double min_area = 0.02;        // A leaf covers at least this share of the image.
   double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
@@ -81,6 +100,13 @@ struct OutlineOptions {
   double gutter_reach_mm = 40;
   double gutter_width_mm = 3;
   double gutter_crease_mm = 0.6;
+  // The gap between the pages is looked for within gutter_apart_px of the valley's line; a row
+  // where it closed borrows the median of gutter_borrow_rows rows either side; where the pages
+  // meet, the pixels within gutter_meet_px of the line are left out of both (the line is fitted
+  // to the rows' lowest points to about a pixel).
+  int gutter_apart_px = 12;
+  int gutter_borrow_rows = 24;
+  double gutter_meet_px = 1.5;
 
   bool Check(std::string* why) const;
 };

@@ -73,14 +73,14 @@ cv::Mat BlocksToPixels(const cv::Mat& blocks, int block, cv::Size size) {
 
 cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
                   const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
-                  int block, int band) {
+                  int block, const OutlineOptions& options) {
   const cv::Size size = cues.gray.size();
   // Seeds: what lies farther than a block and the band from the cut's outline, on either side,
   // and the middle of any part of the surround narrower than that (a hole, the gap between a
   // book's pages keeps a seed: the ridge of its distance from the outline, three pixels in at
   // least). A narrow part of the leaf gets none: the cut's errors are such parts (blocks of the
   // surround beside a raised edge, whose heights the edge's blur biases).
-  const int reach = block + band;
+  const int reach = block + options.band_px;
   // Worked within the cut's box (and a margin, for exactly the same result as over the view):
   // beyond it, everything is surround farther than `reach` from the leaf.
   const cv::Rect view(0, 0, size.width, size.height);
@@ -95,13 +95,13 @@ cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
   cv::distanceTransform(~full(near_leaf), distance, cv::DIST_L2, 3);
   cv::dilate(distance, widest, cv::Mat());
   labels(near_leaf).setTo(2, (distance >= reach) | ((distance >= widest) & (distance >= 3)));
-  // And the surround seen in a well of the cut's leaf: a pixel on a surround plane (within 0.2
-  // mm: a dark table's points are that noisy) that looks like the surround, with the leaf a
-  // millimetre or more above it within four pixels (the table between an open book's pages,
-  // narrower than the cut's blocks resolve).
+  // And the surround seen in a well of the cut's leaf: a pixel on a surround plane that looks
+  // like the surround, with the leaf well above it within four pixels (the table between an open
+  // book's pages, narrower than the cut's blocks resolve; options.well_*).
   if (!planes.empty() && !leaf.empty() && !surround.empty()) {
     cv::Mat highest;  // Over the cut's box (a view of the heights: the dilation sees past it).
     cv::dilate(cues.z(box), highest, cv::Mat::ones(9, 9, CV_8U));
+    const float depth = static_cast<float>(options.well_depth_mm);
     cv::parallel_for_(cv::Range(box.y, box.y + box.height), [&](const cv::Range& range) {
       for (int v = range.start; v < range.end; ++v) {
         const uint8_t* in = full.ptr<uint8_t>(v);
@@ -111,13 +111,18 @@ cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
         const cv::Vec3b* colour = cues.colour.ptr<cv::Vec3b>(v);
         uint8_t* label = labels.ptr<uint8_t>(v);
         for (int u = box.x; u < box.x + box.width; ++u) {
-          if (!in[u] || !Valid(z[u]) || high[u] < z[u] + 1.0f || !std::isfinite(p[u][0])) continue;
+          if (!in[u] || !Valid(z[u]) || high[u] < z[u] + depth || !std::isfinite(p[u][0])) {
+            continue;
+          }
           double nearest = 1e9;
           for (const Plane& plane : planes) {
             nearest = std::min(nearest, std::fabs(z[u] - plane.At(p[u][0], p[u][1])));
           }
           const int bin = Look::Bin(colour[u]);
-          if (nearest <= 0.2 && surround.Log(bin) - leaf.Log(bin) > 1.0) label[u] = 2;
+          if (nearest <= options.well_plane_mm &&
+              surround.Log(bin) - leaf.Log(bin) > options.well_look) {
+            label[u] = 2;
+          }
         }
       }
     });

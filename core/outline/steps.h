@@ -170,13 +170,13 @@ void Flood(const cv::Mat& level, cv::Mat* labels);
 // partial row and column of blocks as their neighbours).
 cv::Mat BlocksToPixels(const cv::Mat& blocks, int block, cv::Size size);
 // The cut `full` (CutLeaf's, at full size: BlocksToPixels), its outline moved to the crest of the
-// rims and edges within a block and `band` pixels of it.
+// rims and edges within a block and options.band_px pixels of it.
 // Seeds of the surround also where a pixel inside the cut lies on one of `planes` and looks like
-// the surround (by the cut's looks) with the leaf well above it close by: the table between an
-// open book's pages, narrower than the blocks resolve.
+// the surround (by the cut's looks) with the leaf well above it close by (options.well_*): the
+// table between an open book's pages, narrower than the blocks resolve.
 cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
                   const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
-                  int block, int band);
+                  int block, const OutlineOptions& options);
 
 // The leaf's rim pixels whose heights do not continue its surface (off a plane through the leaf
 // two or more pixels inside, in an 11 x 11 window, by more than `off_mm` and what its slope gives

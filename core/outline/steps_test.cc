@@ -7,6 +7,9 @@
 #include <cmath>
 #include <functional>
 #include <opencv2/imgproc.hpp>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace vellum::outline {
 namespace {
@@ -183,8 +186,8 @@ TEST(RefineRim, BringsTheCutsOutlineToThePixel) {
   const int block = 4;
   cv::Mat cut(size.height / block, size.width / block, CV_8U, cv::Scalar(0));
   cut(cv::Rect(12, 9, 26, 21)).setTo(255);  // Pixels 48..151 x 36..119: 3 to 5 pixels too big.
-  const cv::Mat refined = RefineRim(BlocksToPixels(cut, block, size), cues, points, {}, Look(),
-                                    Look(), block, options.band_px);
+  const cv::Mat refined =
+      RefineRim(BlocksToPixels(cut, block, size), cues, points, {}, Look(), Look(), block, options);
   cv::Mat truth(size, CV_8U, cv::Scalar(0));
   truth(leaf).setTo(255);
   // Within a pixel all round: 98 x 78 px, a pixel more each side is 352 pixels.
@@ -300,3 +303,44 @@ TEST(SplitAtGutter, FindsAValleyAndWhatSaysItIsABooksGutter) {
 
 }  // namespace
 }  // namespace vellum::outline
+
+namespace vellum {
+namespace {
+
+// Every threshold of finding the leaf is an option with its unit, and Check() refuses a value
+// out of its range (FindLeaf then fails with the reason instead of finding a wrong leaf).
+TEST(OutlineOptions, CheckRefusesEachThresholdOutOfItsRange) {
+  std::string why;
+  ASSERT_TRUE(OutlineOptions().Check(&why)) << why;
+  const std::vector<std::pair<const char*, std::function<void(OutlineOptions*)>>> bad = {
+      {"step_mm", [](OutlineOptions* o) { o->step_mm = 0; }},
+      {"band_px", [](OutlineOptions* o) { o->band_px = -1; }},
+      {"well_plane_mm", [](OutlineOptions* o) { o->well_plane_mm = 0; }},
+      {"well_depth_mm", [](OutlineOptions* o) { o->well_depth_mm = -1; }},
+      {"well_look", [](OutlineOptions* o) { o->well_look = NAN; }},
+      {"trim_off_mm", [](OutlineOptions* o) { o->trim_off_mm = 0; }},
+      {"lies_on_mm", [](OutlineOptions* o) { o->lies_on_mm = -0.01; }},
+      {"lies_on_apart", [](OutlineOptions* o) { o->lies_on_apart = 1.5; }},
+      {"raised_plane_mm", [](OutlineOptions* o) { o->raised_plane_mm = 0; }},
+      {"gutter_apart_px", [](OutlineOptions* o) { o->gutter_apart_px = 0; }},
+      {"gutter_borrow_rows", [](OutlineOptions* o) { o->gutter_borrow_rows = 0; }},
+      {"gutter_meet_px", [](OutlineOptions* o) { o->gutter_meet_px = -1; }},
+      {"surround", [](OutlineOptions* o) { o->surround.tolerance_mm = 0; }},
+      {"cut", [](OutlineOptions* o) { o->cut.thickness_mm = 0; }},
+  };
+  const cv::Mat points(64, 64, CV_32FC3, cv::Scalar(0, 0, 0));
+  const cv::Mat texture(64, 64, CV_8U, cv::Scalar(128));
+  for (const auto& [name, spoil] : bad) {
+    OutlineOptions options;
+    spoil(&options);
+    why.clear();
+    EXPECT_FALSE(options.Check(&why)) << name;
+    const Outline found = FindLeaf(points, texture, options);
+    EXPECT_FALSE(found.status.ok()) << name;
+    EXPECT_NE(found.status.message().find("outline options"), std::string::npos)
+        << name << ": " << found.status.message();
+  }
+}
+
+}  // namespace
+}  // namespace vellum
