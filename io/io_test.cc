@@ -714,6 +714,34 @@ TEST_F(IoTest, TheManifestProvesAScanWholeAndNamesWhatChanged) {
   const Status bad = CheckManifest(dir_.string(), &problems);
   EXPECT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("manifest-sha256.txt: line 1"), std::string::npos) << bad.message();
+  // An empty or blank manifest proves nothing: an error, never "whole and unchanged".
+  for (const std::string& text : {std::string(), std::string("\n\n  \n")}) {
+    write(kManifestName, text);
+    const Status empty = CheckManifest(dir_.string(), &problems);
+    EXPECT_FALSE(empty.ok()) << "manifest '" << text << "'";
+    EXPECT_NE(empty.message().find("lists no file"), std::string::npos) << empty.message();
+  }
+}
+
+// A symbolic link under a scan's folder is reported wherever it lies and whatever it points to
+// (a file, a folder, nothing): the manifest cannot vouch for what it points to.
+TEST_F(IoTest, TheManifestCheckReportsEverySymbolicLink) {
+  fs::create_directories(dir_ / "raw");
+  fs::create_directories(dir_ / "results");
+  std::ofstream(dir_ / "raw" / "scan.yaml") << "format: vellum-scan\n";
+  std::ofstream(dir_ / "results" / "restored.tif") << "tiff";
+  ASSERT_TRUE(WriteManifest(dir_.string(), {"raw", "results"}).ok());
+  fs::create_symlink(dir_ / "raw" / "scan.yaml", dir_ / "results" / "to_file");
+  fs::create_directory_symlink(dir_ / "raw", dir_ / "results" / "to_folder");
+  fs::create_symlink(dir_ / "nowhere", dir_ / "results" / "dangling");
+  std::vector<std::string> problems;
+  ASSERT_TRUE(CheckManifest(dir_.string(), &problems).ok());
+  std::string all;
+  for (const std::string& p : problems) all += p + "\n";
+  for (const char* link : {"results/to_file", "results/to_folder", "results/dangling"}) {
+    EXPECT_NE(all.find(std::string(link) + ": a symbolic link"), std::string::npos) << all;
+  }
+  EXPECT_EQ(problems.size(), 3u) << all;  // Each once; a link to a file is not also "not listed".
 }
 
 // The restored page carries its catalogue identity in an XMP packet that any XMP reader finds

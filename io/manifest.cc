@@ -26,13 +26,28 @@ std::vector<std::string> FilesUnder(const std::string& dir) {
   std::vector<std::string> files;
   std::error_code ec;
   for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    if (!it->is_regular_file()) continue;
+    if (it->is_symlink() || !it->is_regular_file()) continue;  // Links: SymlinksUnder.
     const std::string rel = fs::relative(it->path(), dir).generic_string();
     if (rel == kManifestName || rel == std::string(kManifestName) + ".tmp") continue;
     files.push_back(rel);
   }
   std::sort(files.begin(), files.end());
   return files;
+}
+
+// Every symbolic link under `dir` (relative paths, '/' between folders), whatever it points to
+// (a file, a folder, nothing), sorted.
+std::vector<std::string> SymlinksUnder(const std::string& dir) {
+  std::vector<std::string> links;
+  std::error_code ec;
+  for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->is_symlink()) {
+      // Lexically: fs::relative would follow the link to where it points.
+      links.push_back(it->path().lexically_relative(dir).generic_string());
+    }
+  }
+  std::sort(links.begin(), links.end());
+  return links;
 }
 
 // OpenSSL's SHA-256, fed in pieces.
@@ -125,7 +140,7 @@ Status CheckManifest(const std::string& dir, std::vector<std::string>* problems)
   int number = 0;
   while (std::getline(in, line)) {
     ++number;
-    if (line.empty()) continue;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;  // Blank.
     if (line.size() < 67 || line.compare(64, 2, "  ") != 0 ||
         line.find_first_not_of("0123456789abcdef") < 64) {
       return Status::Error(path + ": line " + std::to_string(number) +
@@ -133,6 +148,8 @@ Status CheckManifest(const std::string& dir, std::vector<std::string>* problems)
     }
     listed[line.substr(66)] = line.substr(0, 64);
   }
+  // A manifest that lists nothing proves nothing (a truncated or emptied one looks like that).
+  if (listed.empty()) return Status::Error(path + ": lists no file (empty or blank)");
   for (const auto& [rel, want] : listed) {
     const std::string file = (fs::path(dir) / rel).string();
     std::error_code ec;
@@ -154,6 +171,15 @@ Status CheckManifest(const std::string& dir, std::vector<std::string>* problems)
     if (!listed.count(rel) && scope.count(TopFolder(rel))) {
       problems->push_back(rel + ": not in the manifest");
     }
+  }
+  // A link is reported wherever it lies: what it points to can change without the manifest
+  // noticing (a scan's folders hold files, never links).
+  for (const std::string& rel : SymlinksUnder(dir)) {
+    std::error_code ec;
+    const fs::path target = fs::read_symlink(fs::path(dir) / rel, ec);
+    problems->push_back(rel + ": a symbolic link" +
+                        (ec ? std::string() : " to " + target.string()) +
+                        ", which the manifest cannot vouch for");
   }
   return Status::Ok();
 }

@@ -27,7 +27,8 @@ Status WriteManifest(const std::string& dir, const std::vector<std::string>& par
 
 // Checks <dir>/manifest-sha256.txt against the files: `problems` gets one line per file that is
 // missing or changed, or that is not listed but lies where the manifest lists files (its
-// subfolders, or `dir` itself). An error when the manifest cannot be read.
+// subfolders, or `dir` itself), and one per symbolic link anywhere under `dir`. An error when
+// the manifest cannot be read, is malformed, or lists no file (empty or blank).
 Status CheckManifest(const std::string& dir, std::vector<std::string>* problems);
 
 }  // namespace vellum
