@@ -16,6 +16,7 @@
 #include "cli/commands.h"
 #include "cli/progress.h"
 #include "core/common/text.h"
+#include "core/outline/outline.h"
 #include "io/calibration_io.h"
 #include "station/chain.h"
 #include "station/contact_sheet.h"
@@ -207,6 +208,13 @@ int RunScan(const std::vector<std::string>& args) {
           "--leaf-hint must be X,Y,W,H as fractions of the camera's view (a box "
           "inside 0..1), got '" +
           hint + "'");
+    }
+    // The same share of the view a hint in camera pixels may cover (LeafHintFits).
+    const double most = OutlineOptions().max_view_share;
+    if (w * h > most) {
+      throw UsageError("--leaf-hint '" + hint + "' covers " + Fixed(100 * w * h, 0) +
+                       "% of the camera's view, more than " + Fixed(100 * most, 0) +
+                       "%: a hint is a box inside the leaf, not around it");
     }
     station::ToLeafHint(cv::Rect2d(x, y, w, h), request.leaf_hint);
   }

@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "core/common/text.h"
+#include "core/outline/outline.h"
 #include "io/image_file.h"
 #include "io/vips.h"
 #include "io/yaml_guard.h"
@@ -445,10 +446,10 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
   if (!s.ok()) return s;
   s = CheckSize((root / kTexture).string(), scan->texture.size(), *scan);
   if (!s.ok()) return s;
-  if ((scan->leaf_hint & cv::Rect(cv::Point(), scan->texture.size())) != scan->leaf_hint) {
-    return Status::Error((root / kScanYaml).string() + ": key 'leaf_hint' runs off the " +
-                         std::to_string(scan->texture.cols) + "x" +
-                         std::to_string(scan->texture.rows) + " camera's view");
+  std::string why;
+  if (!scan->leaf_hint.empty() &&
+      !LeafHintFits(scan->leaf_hint, scan->texture.size(), OutlineOptions().max_view_share, &why)) {
+    return Status::Error((root / kScanYaml).string() + ": key 'leaf_hint': " + why);
   }
   for (ScanLight& light : scan->lights) {
     const std::string path = (root / LightFileName(light.name)).string();

@@ -633,6 +633,18 @@ TEST_F(CliTest, MissingScanDirectory) {
                    "not a directory");
 }
 
+// A leaf hint is checked as a hint from scan.yaml, the bus or the viewer is (LeafHintFits): one
+// over the whole view (which would seed the table as the leaf) or off it is refused, named.
+TEST_F(CliTest, ALeafHintOverTheWholeViewOrOffItIsRefused) {
+  const std::string scan = (root_ / "scan").string();
+  ExpectCleanError(RunVellum(Process(scan, Rig()) + " --leaf-hint 0,0,400,300"),
+                   "leaf hint 0,0,400,300", "covers 100% of the camera's view");
+  ExpectCleanError(RunVellum(Process(scan, Rig()) + " --leaf-hint 500,10,20,20"),
+                   "leaf hint 500,10,20,20", "not a box inside the 400x300 camera's view");
+  ExpectCleanError(RunVellum(Process(scan, Rig()) + " --leaf-hint 0,0,2000000000,2000000000"),
+                   "leaf hint 0,0,2000000000,2000000000", "not a box inside");
+}
+
 // Calibration from board poses rendered by `vellum render --pose` (a 640x480 camera and a
 // 512x384 projector: 0.6 mm per camera pixel), solved by `vellum calibrate solve`: the
 // calibration YAML and its report are written and the focal lengths are the rig's; bad poses

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -177,12 +178,36 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
 
 }  // namespace
 
+bool LeafHintFits(const cv::Rect& hint, cv::Size view, double max_share, std::string* why) {
+  const std::string name = "the leaf hint " + std::to_string(hint.x) + "," +
+                           std::to_string(hint.y) + "," + std::to_string(hint.width) + "," +
+                           std::to_string(hint.height) + " (x,y,width,height, camera pixels)";
+  // The far edges in 64 bits: the numbers may be anyone's.
+  if (hint.x < 0 || hint.y < 0 || hint.width <= 0 || hint.height <= 0 ||
+      int64_t{hint.x} + hint.width > view.width || int64_t{hint.y} + hint.height > view.height) {
+    *why = name + " is not a box inside the " + SizeText(view) + " camera's view";
+    return false;
+  }
+  const double share = static_cast<double>(hint.area()) / std::max(1, view.area());
+  if (share > max_share) {
+    *why = name + " covers " + Fixed(100 * share, 0) + "% of the camera's view: a hint is a box " +
+           "inside the leaf, not around it (draw it over the leaf alone)";
+    return false;
+  }
+  return true;
+}
+
 Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options) {
   using namespace outline;
   Outline out;
   std::string why;
   if (!options.Check(&why)) {
     out.status = Status::Error("outline options: " + why);
+    return out;
+  }
+  if (!options.hint.empty() &&
+      !LeafHintFits(options.hint, points.size(), options.max_view_share, &why)) {
+    out.status = Status::Error(why);
     return out;
   }
   if (points.type() != CV_32FC3 || points.empty()) {

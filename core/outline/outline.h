@@ -132,6 +132,13 @@ struct Outline {
   std::vector<OutlineDoubt> doubts;  // What makes it doubtful (none: found with confidence).
 };
 
+// Whether `hint` (camera pixels) can be a leaf hint in a view of `view`: a box inside the view
+// covering at most `max_share` of it (a hint is a box inside the leaf, not around it: a hint
+// over the whole view seeds the table as the leaf). `why` gets the reason, in a few words that
+// name the hint, when not. Every path a hint comes by (scan.yaml, --leaf-hint, the bus, the
+// viewer) meets this check, in FindLeaf at the latest.
+bool LeafHintFits(const cv::Rect& hint, cv::Size view, double max_share, std::string* why);
+
 // Finds the leaf in an organised point map (CV_32FC3, mm, NaN where invalid) and its texture
 // (the same size).
 Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,

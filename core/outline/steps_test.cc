@@ -344,3 +344,31 @@ TEST(OutlineOptions, CheckRefusesEachThresholdOutOfItsRange) {
 
 }  // namespace
 }  // namespace vellum
+
+namespace vellum {
+namespace {
+
+// A leaf hint is a box inside the view covering at most max_view_share of it; FindLeaf refuses
+// any other, naming it, whatever path it came by.
+TEST(LeafHintFits, ABoxInsideTheLeafFitsAndTheWholeViewOrOffItDoesNot) {
+  const cv::Size view(640, 480);
+  std::string why;
+  EXPECT_TRUE(LeafHintFits(cv::Rect(200, 150, 240, 180), view, 0.85, &why)) << why;
+  EXPECT_FALSE(LeafHintFits(cv::Rect(0, 0, 640, 480), view, 0.85, &why));
+  EXPECT_NE(why.find("covers 100%"), std::string::npos) << why;
+  for (const cv::Rect& off : {cv::Rect(700, 10, 20, 20), cv::Rect(-1, 0, 20, 20),
+                              cv::Rect(630, 0, 20, 20), cv::Rect(0, 0, 2000000000, 2000000000)}) {
+    EXPECT_FALSE(LeafHintFits(off, view, 0.85, &why)) << off;
+    EXPECT_NE(why.find("not a box inside the 640x480"), std::string::npos) << why;
+  }
+  OutlineOptions options;
+  options.hint = cv::Rect(0, 0, 64, 64);
+  const Outline found = FindLeaf(cv::Mat(64, 64, CV_32FC3, cv::Scalar(0, 0, 0)),
+                                 cv::Mat(64, 64, CV_8U, cv::Scalar(128)), options);
+  ASSERT_FALSE(found.status.ok());
+  EXPECT_NE(found.status.message().find("leaf hint 0,0,64,64"), std::string::npos)
+      << found.status.message();
+}
+
+}  // namespace
+}  // namespace vellum
