@@ -1,7 +1,10 @@
 #include "io/image_file.h"
 
+#include <fcntl.h>
 #include <png.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -182,12 +185,34 @@ Status SaveWithVips(const std::string& path, const cv::Mat& image, const Save& s
 
 }  // namespace
 
-Status ReadImage(const std::string& path, cv::Mat* image) {
-  std::FILE* file = std::fopen(path.c_str(), "rb");
-  if (!file) {
-    return Status::Error(path +
-                         (std::filesystem::exists(path) ? ": cannot open" : ": file is missing"));
+Status CheckReadable(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    return Status::Error(path + ": is a folder, not a file");
   }
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd >= 0) {
+    ::close(fd);
+    return Status::Ok();
+  }
+  const int error = errno;
+  switch (error) {
+    case ENOENT:
+      return Status::Error(path + ": file is missing");
+    case EACCES:
+    case EPERM:
+      return Status::Error(path + ": permission denied (this process may not read it; ls -l " +
+                           "shows who may)");
+    default:
+      return Status::Error(path + ": cannot open (" + std::strerror(error) + ")");
+  }
+}
+
+Status ReadImage(const std::string& path, cv::Mat* image) {
+  const Status readable = CheckReadable(path);
+  if (!readable.ok()) return readable;
+  std::FILE* file = std::fopen(path.c_str(), "rb");
+  if (!file) return Status::Error(path + ": cannot open (" + std::strerror(errno) + ")");
   unsigned char signature[8] = {};
   const bool png = std::fread(signature, 1, 8, file) == 8 && png_sig_cmp(signature, 0, 8) == 0;
   if (!png) {

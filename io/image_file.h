@@ -20,6 +20,11 @@ namespace vellum {
 // converted to sRGB, through the file's profile if it has one; floating-point samples are read
 // as float; signed or 32-bit integer samples are refused). Errors name the file.
 Status ReadImage(const std::string& path, cv::Mat* image);
+
+// Whether this process can open `path` to read it; the error says why as the system does (the
+// file is missing, permission is denied, it is a folder, ...), naming the file. Every reader of a
+// scan's files asks it first, so that no refusal is reported as a format problem.
+Status CheckReadable(const std::string& path);
 // Reads an 8-bit image as colour (BGR; gray is widened), for showing or as a texture; an
 // error for another depth.
 Status ReadColourImage(const std::string& path, cv::Mat* image);

@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <sys/wait.h>
 #include <tiffio.h>
 #include <unistd.h>
 
@@ -742,6 +743,47 @@ TEST_F(IoTest, TheManifestCheckReportsEverySymbolicLink) {
     EXPECT_NE(all.find(std::string(link) + ": a symbolic link"), std::string::npos) << all;
   }
   EXPECT_EQ(problems.size(), 3u) << all;  // Each once; a link to a file is not also "not listed".
+}
+
+// A file the process may not read is reported as what it is, not as a bad image: permission
+// denied, a folder, missing. As root (who may read anything), the check runs in a child that
+// has become nobody.
+TEST_F(IoTest, AFileThatCannotBeReadIsReportedAsWhatItIs) {
+  const std::string image = Path("frame_003.png");
+  ASSERT_TRUE(WritePng(image, cv::Mat(8, 8, CV_8U, cv::Scalar(7))).ok());
+  fs::permissions(image, fs::perms::none);
+  fs::permissions(dir_, fs::perms::owner_all | fs::perms::others_exec | fs::perms::group_exec);
+  auto denied = [&] {
+    cv::Mat read;
+    const Status s = ReadImage(image, &read);
+    return !s.ok() &&
+           s.message() == image + ": permission denied (this process may not read it; " +
+                              "ls -l shows who may)" &&
+           !CheckReadable(image).ok();
+  };
+  if (::geteuid() == 0) {
+    const pid_t child = ::fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+      const bool ok = ::setgid(65534) == 0 && ::setuid(65534) == 0 && denied();
+      ::_exit(ok ? 0 : 1);
+    }
+    int status = 0;
+    ASSERT_EQ(::waitpid(child, &status, 0), child);
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
+        << "as nobody: not 'permission denied'";
+  } else {
+    EXPECT_TRUE(denied());
+  }
+  fs::permissions(image, fs::perms::owner_read | fs::perms::owner_write);
+  cv::Mat read;
+  EXPECT_TRUE(ReadImage(image, &read).ok());
+  fs::create_directories(dir_ / "folder.png");
+  Status s = ReadImage(Path("folder.png"), &read);
+  EXPECT_NE(s.message().find("folder.png: is a folder, not a file"), std::string::npos)
+      << s.message();
+  s = ReadImage(Path("gone.png"), &read);
+  EXPECT_NE(s.message().find("gone.png: file is missing"), std::string::npos) << s.message();
 }
 
 // The restored page carries its catalogue identity in an XMP packet that any XMP reader finds

@@ -80,7 +80,8 @@ Status CheckImageHeader(const std::string& path, cv::Size* size, int max_bits = 
 // An image of 8 bits a sample, or of 8 or 16 when `max_bits` is 16 (the texture of a camera
 // that gives more than 8).
 Status ReadImageFile(const std::string& path, cv::Mat* image, int max_bits = 8) {
-  if (!fs::exists(path)) return Status::Error(path + ": file is missing");
+  const Status readable = CheckReadable(path);
+  if (!readable.ok()) return readable;
   cv::Size claimed;
   const Status header = CheckImageHeader(path, &claimed, max_bits);
   if (!header.ok()) return header;
