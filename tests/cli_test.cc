@@ -628,6 +628,15 @@ TEST_F(CliTest, CalibrationOfTheWrongSize) {
                    "1600x1200 camera");
 }
 
+TEST_F(CliTest, CalibrationWithAWildFocalLength) {
+  Calibration rig = QuickRig();
+  rig.camera.matrix(0, 0) = 1e300;
+  const std::string wild = (root_ / "wild_fx.yaml").string();
+  ASSERT_TRUE(WriteCalibration(wild, rig).ok());
+  ExpectCleanError(RunVellum(Process((root_ / "scan").string(), wild)), "wild_fx.yaml",
+                   "camera: fx = 1e+300 px gives a field of view");
+}
+
 TEST_F(CliTest, MissingScanDirectory) {
   ExpectCleanError(RunVellum(Process((root_ / "nowhere").string(), Rig())), "nowhere",
                    "not a directory");

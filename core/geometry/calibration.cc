@@ -48,6 +48,28 @@ bool CameraModel::Check(std::string* why) const {
     *why = "the intrinsic matrix must be [fx s cx; 0 fy cy; 0 0 1] with fx, fy > 0";
     return false;
   }
+  // A plausible lens: a field of view across the image from half a degree (a long telephoto) to
+  // 170 degrees (a fisheye), and pixels at most twice as tall as wide. A wild focal length
+  // (fx = 1e300) fails here, named, rather than as an impossible restored size far downstream.
+  for (int axis = 0; axis < 2; ++axis) {
+    const double f = matrix(axis, axis), across = axis ? size.height : size.width;
+    const double fov_deg = 2 * std::atan(across / (2 * f)) * 180 / M_PI;
+    if (!(fov_deg >= 0.5 && fov_deg <= 170)) {
+      char text[200];
+      std::snprintf(text, sizeof text,
+                    "%s = %g px gives a field of view of %.3g degrees across the image's %.0f px: "
+                    "not a plausible lens (0.5 to 170 degrees)",
+                    axis ? "fy" : "fx", f, fov_deg, across);
+      *why = text;
+      return false;
+    }
+  }
+  if (!(matrix(0, 0) <= 2 * matrix(1, 1) && matrix(1, 1) <= 2 * matrix(0, 0))) {
+    *why =
+        "fx and fy differ more than twofold: not a plausible camera (pixels twice as tall as "
+        "wide)";
+    return false;
+  }
   const cv::Matx33d should_be_identity = rotation * rotation.t() - cv::Matx33d::eye();
   if (cv::norm(should_be_identity) > 1e-6) {
     *why = "the rotation matrix is not orthonormal";

@@ -58,6 +58,18 @@ TEST(Calibration, CheckRefusesAnImplausibleLensAndAProjectorBehindTheTable) {
   rig.projector.translation = -(rig.projector.rotation * centre);
   EXPECT_FALSE(rig.Check(&why));
   EXPECT_NE(why.find("projector does not face the table"), std::string::npos) << why;
+  // A wild focal length, either way, or pixels far from square: named, with the field of view.
+  for (const double fx : {1e300, 1e-3}) {
+    rig = DefaultRig();
+    rig.camera.matrix(0, 0) = fx;
+    EXPECT_FALSE(rig.Check(&why)) << fx;
+    EXPECT_NE(why.find("camera: fx = "), std::string::npos) << why;
+    EXPECT_NE(why.find("field of view"), std::string::npos) << why;
+  }
+  rig = DefaultRig();
+  rig.projector.matrix(1, 1) *= 3;
+  EXPECT_FALSE(rig.Check(&why));
+  EXPECT_NE(why.find("projector: "), std::string::npos) << why;
 }
 
 // Exact correspondences of a known surface triangulate back to it, with and without rows and
