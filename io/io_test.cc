@@ -328,6 +328,34 @@ TEST_F(IoTest, StudioFieldRoundTripsAndABadOneIsNamed) {
   EXPECT_NE(s.message().find("no_lamps.yaml: lamps must be"), std::string::npos) << s.message();
 }
 
+// A texture or light whose header claims another size than the camera's is refused by its
+// header, before a pixel is decoded (a 783 KB PNG can claim 16384 x 16384 and take 818 MB and
+// seconds to decode). The header here claims 16384 x 16384 over 32 x 24 pixels of data: decoding
+// it would fail as "not a readable image", so the size's error shows the header was judged first.
+TEST_F(IoTest, ATextureClaimingAnotherSizeIsRefusedByItsHeaderBeforeDecoding) {
+  const Scan scan = SmallScan();
+  ASSERT_TRUE(WriteScan(Path("huge"), scan).ok());
+  const std::string texture = Path("huge") + "/texture.png";
+  std::string bytes;
+  {
+    std::ifstream in(texture, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  ASSERT_GT(bytes.size(), 24u);
+  ASSERT_EQ(bytes.substr(12, 4), "IHDR");
+  const unsigned char side[4] = {0, 0, 0x40, 0};  // 16384, big-endian.
+  bytes.replace(16, 4, reinterpret_cast<const char*>(side), 4);
+  bytes.replace(20, 4, reinterpret_cast<const char*>(side), 4);
+  std::ofstream(texture, std::ios::binary | std::ios::trunc) << bytes;
+  Scan back;
+  const Status s = ReadScanHeader(Path("huge"), &back);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("texture.png: image is 16384x16384 but camera_size in scan.yaml says "
+                             "32x24"),
+            std::string::npos)
+      << s.message();
+}
+
 // The operator's leaf hint in scan.yaml: kept through a round trip in camera pixels, absent when
 // not given, and a hint that is not a region of the camera's view refused naming the file and
 // the key.

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <opencv2/core.hpp>
 #include <opencv2/core/utility.hpp>
@@ -79,12 +80,19 @@ Status CheckImageHeader(const std::string& path, cv::Size* size, int max_bits = 
 
 // An image of 8 bits a sample, or of 8 or 16 when `max_bits` is 16 (the texture of a camera
 // that gives more than 8).
-Status ReadImageFile(const std::string& path, cv::Mat* image, int max_bits = 8) {
+// `size_fits` (if given) judges the size the file's header claims before a pixel is decoded (a
+// small PNG can claim 16384 x 16384 and take gigabytes to decode).
+Status ReadImageFile(const std::string& path, cv::Mat* image, int max_bits = 8,
+                     const std::function<Status(cv::Size)>& size_fits = nullptr) {
   const Status readable = CheckReadable(path);
   if (!readable.ok()) return readable;
   cv::Size claimed;
   const Status header = CheckImageHeader(path, &claimed, max_bits);
   if (!header.ok()) return header;
+  if (size_fits && !claimed.empty()) {
+    const Status fits = size_fits(claimed);
+    if (!fits.ok()) return fits;
+  }
   cv::Mat img;
   const Status read = ReadImage(path, &img);
   if (!read.ok()) return read;
@@ -443,9 +451,13 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
                           &scan->leaf_hint, &scan->object);
   if (!s.ok()) return s;
   const fs::path root(dir);
-  s = ReadImageFile((root / kTexture).string(), &scan->texture, 16);
+  // Judged by its header first when scan.yaml gives the camera's size.
+  const std::string texture = (root / kTexture).string();
+  s = ReadImageFile(texture, &scan->texture, 16, [&](cv::Size claimed) {
+    return scan->camera_size.area() > 0 ? CheckSize(texture, claimed, *scan) : Status::Ok();
+  });
   if (!s.ok()) return s;
-  s = CheckSize((root / kTexture).string(), scan->texture.size(), *scan);
+  s = CheckSize(texture, scan->texture.size(), *scan);
   if (!s.ok()) return s;
   std::string why;
   if (!scan->leaf_hint.empty() &&
@@ -457,7 +469,8 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
     if (!PathExists(path)) {
       return Status::Error(path + ": file is missing (light '" + light.name + "' of scan.yaml)");
     }
-    s = ReadImageFile(path, &light.image, 16);
+    s = ReadImageFile(path, &light.image, 16,
+                      [&](cv::Size claimed) { return CheckSize(path, claimed, *scan); });
     if (s.ok()) s = CheckSize(path, light.image.size(), *scan);
     if (!s.ok()) return s;
   }
@@ -496,7 +509,11 @@ Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& t
     for (int k = next++; k < n && !stop; k = next++) {
       const std::string path = (root / FrameName(k)).string();
       cv::Mat img;
-      Status s = PathExists(path) ? ReadImageFile(path, &img) : MissingFrame(path, k, header);
+      Status s =
+          PathExists(path)
+              ? ReadImageFile(path, &img, 8,
+                              [&](cv::Size claimed) { return CheckSize(path, claimed, header); })
+              : MissingFrame(path, k, header);
       if (s.ok()) s = CheckSize(path, img.size(), header);
       if (s.ok()) {
         if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
