@@ -9,8 +9,9 @@
 # decoding without inverses or finest bits in patterns_test, the flying-point filter and the
 # whole pipeline in the chain and CLI tests); what they add is the accuracy bars, which the
 # plain build checks. Any report
-# aborts the process that made it, and so fails its test. The load test runs 10 scans here
-# (50 in the plain build).
+# aborts the process that made it, and so fails its test. The station's tests (label station:
+# real daemons on a real bus) run here and only here in CI; the load test runs 10 scans here (50
+# by hand in the plain build: cd build && ctest -L station).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVELLUM_SANITIZE=address,undefined \

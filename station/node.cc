@@ -143,10 +143,23 @@ void NotifySystemd(const std::string& state) {
   close(fd);
 }
 
+namespace {
+
+// Where a process's message counters start: random below 2^48, so that the publishers of a
+// channel (and one restarted) count in ranges of their own.
+int64_t RandomSeqStart() {
+  std::random_device device;
+  const uint64_t bits = (static_cast<uint64_t>(device()) << 32) | device();
+  return static_cast<int64_t>(bits >> 16);
+}
+
+}  // namespace
+
 Node::Node(std::string process, const std::string& url)
     : process_(std::move(process)),
       own_lcm_(std::make_unique<lcm::LCM>(url)),
-      lcm_(own_lcm_.get()) {
+      lcm_(own_lcm_.get()),
+      seq_start_(RandomSeqStart()) {
   if (!lcm_->good()) {
     throw std::runtime_error("cannot open the LCM bus '" + url +
                              "' (for udpm: is there a multicast route? see the README)");
@@ -156,7 +169,8 @@ Node::Node(std::string process, const std::string& url)
   worker_ = std::thread([this] { WorkerLoop(); });
 }
 
-Node::Node(std::string process, lcm::LCM* lcm) : process_(std::move(process)), lcm_(lcm) {
+Node::Node(std::string process, lcm::LCM* lcm)
+    : process_(std::move(process)), lcm_(lcm), seq_start_(RandomSeqStart()) {
   worker_ = std::thread([this] { WorkerLoop(); });
 }
 
@@ -188,16 +202,28 @@ void Node::SubscribeRaw(const std::string& channel,
 }
 
 void Node::CheckSequence(const std::string& channel, int64_t seq) {
+  // Each publisher counts its own messages on a channel, from a random start: a message carries
+  // no publisher's name, so it is matched to the publisher whose last seq lies just below its
+  // own (within kGap); one matching none is a new publisher (another daemon on the channel, a
+  // restarted one, a replayed log), followed from there, nothing lost.
+  constexpr int64_t kGap = 1 << 20;  // More messages than a scan sends on any channel.
+  constexpr size_t kPublishers = 8;
   int64_t lost = 0, last = 0;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    auto it = seq_in_.find(channel);
-    if (it != seq_in_.end() && seq > it->second + 1) {
-      lost = seq - it->second - 1;
-      last = it->second;
+    std::vector<int64_t>& heard = seq_in_[channel];
+    auto it = std::find_if(heard.begin(), heard.end(),
+                           [&](int64_t before) { return seq > before && seq - before <= kGap; });
+    if (it != heard.end()) {
+      if (seq > *it + 1) {
+        lost = seq - *it - 1;
+        last = *it;
+      }
+      heard.erase(it);
+    } else if (heard.size() >= kPublishers) {
+      heard.pop_back();  // The one heard longest ago.
     }
-    // A smaller seq is a restarted publisher (or a replayed log): follow it.
-    seq_in_[channel] = seq;
+    heard.insert(heard.begin(), seq);
     counters_["received " + channel] += 1;
   }
   if (lost > 0) {
@@ -243,7 +269,8 @@ std::string CheckStationId(const std::string& id) {
 
 int64_t Node::NextSeq(const std::string& channel) {
   std::lock_guard<std::mutex> lock(mutex_);
-  return seq_out_[channel]++;
+  auto [it, first] = seq_out_.emplace(channel, seq_start_);
+  return it->second++;
 }
 
 void Node::SetState(const std::string& state, int64_t scan_id, const std::string& detail) {

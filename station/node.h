@@ -247,7 +247,13 @@ class Node {
   // Guards the sequence numbers, the status (state, detail, errors) and the counters below:
   // the LCM thread and the worker both report.
   mutable std::mutex mutex_;
-  std::map<std::string, int64_t> seq_out_, seq_in_;
+  // What this process publishes: each channel's counter, from seq_start_ (random per process,
+  // 2^40 apart on average: two publishers on a channel, or one restarted, never share a range).
+  std::map<std::string, int64_t> seq_out_;
+  int64_t seq_start_ = 0;
+  // What it hears: per channel, the publishers (each the last seq of its run), the most recently
+  // heard first, a few at most (SeqStreams).
+  std::map<std::string, std::vector<int64_t>> seq_in_;
   std::vector<std::string> others_logged_;  // Other stations heard (the first few).
   std::string state_ = "starting", detail_, last_error_;
   int64_t scan_id_ = 0, errors_ = 0, last_error_utime_ = 0, last_error_scan_ = 0;

@@ -552,6 +552,47 @@ TEST(Node, ReportsUndecodableMessagesAndSequenceGapsOnItsStatus) {
   EXPECT_EQ(order, (std::vector<int>{0, 1, 2, 3, 4}));
 }
 
+// Sequence gaps are tracked per publisher: a second publisher on a channel (another daemon, a
+// restarted one, a replayed log), interleaved with the first, loses nothing; a gap in either is
+// counted as what it is. Each process counts from a random start of its own.
+TEST(Node, LostMessagesAreCountedPerPublisherNotPerChannel) {
+  Node node("vellum-unit", "memq://");
+  int received = 0;
+  node.Subscribe<scan_request_t>("SCAN_REQUEST", [&](const scan_request_t&) { ++received; });
+  scan_request_t r{};
+  r.station = kDefaultStation;
+  // The first counts from far away (as a random start puts it), the second from 1.
+  constexpr int64_t kFar = 5'000'000'000;
+  for (int64_t seq : std::vector<int64_t>{kFar, 1, kFar + 1, 2, kFar + 2, 3, 4, kFar + 3}) {
+    r.seq = seq;
+    node.lcm().publish("SCAN_REQUEST", &r);
+  }
+  for (int k = 0; k < 10; ++k) node.lcm().handleTimeout(10);
+  EXPECT_EQ(received, 8);
+  EXPECT_EQ(node.Counter("lost messages"), 0);
+  for (int64_t seq : {int64_t{7}, kFar + 4}) {  // 5 and 6 lost from the second publisher.
+    r.seq = seq;
+    node.lcm().publish("SCAN_REQUEST", &r);
+  }
+  for (int k = 0; k < 10; ++k) node.lcm().handleTimeout(10);
+  EXPECT_EQ(node.Counter("lost messages"), 2);
+  // Two processes' counters start far apart (each heard on its own bus): a chance of 2^-27 that
+  // they start within a scan's messages of each other.
+  int64_t first[2] = {-1, -1};
+  for (int k = 0; k < 2; ++k) {
+    Node publisher(k ? "vellum-b" : "vellum-a", "memq://");
+    publisher.Subscribe<scan_request_t>("SEQ_PROBE",
+                                        [&](const scan_request_t& m) { first[k] = m.seq; });
+    scan_request_t probe{};
+    probe.station = kDefaultStation;
+    publisher.Publish("SEQ_PROBE", &probe);
+    for (int t = 0; t < 10 && first[k] < 0; ++t) publisher.lcm().handleTimeout(10);
+  }
+  ASSERT_GE(first[0], 0);
+  ASSERT_GE(first[1], 0);
+  EXPECT_GT(std::llabs(first[0] - first[1]), int64_t{1} << 21) << first[0] << " " << first[1];
+}
+
 // A product whose sender starts it over before it is whole (a daemon restarted mid-send, the scan
 // sent again) is built from the new send alone: the first send's chunks are dropped with an
 // error, never mixed in. Two textures of one scan that differ in every row show it.
