@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 
 #include "io/manifest.h"
+#include "io/write_whole.h"
 #include "io/yaml_guard.h"
 
 namespace vellum {
@@ -150,19 +151,22 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
 }
 
 Status WriteCalibration(const std::string& path, const Calibration& calibration) {
-  try {
-    cv::FileStorage fs(path, cv::FileStorage::WRITE);
-    if (!fs.isOpened()) return Status::Error(path + ": cannot write the calibration file");
-    WriteDevice(fs, "camera_", calibration.camera);
-    WriteDevice(fs, "projector_", calibration.projector);
-    fs << "working_volume_z"
-       << "[" << calibration.min_z_mm << calibration.max_z_mm << "]";
-    if (std::isfinite(calibration.scale_error_percent))
-      fs << "scale_error_percent" << calibration.scale_error_percent;
-  } catch (const cv::Exception& e) {
-    return Status::Error(path + ": cannot write the calibration file: " + e.what());
-  }
-  return Status::Ok();
+  return WriteWhole(path, [&](const std::string& part) {
+    try {
+      cv::FileStorage fs(part, cv::FileStorage::WRITE);
+      if (!fs.isOpened()) return Status::Error(path + ": cannot write the calibration file");
+      WriteDevice(fs, "camera_", calibration.camera);
+      WriteDevice(fs, "projector_", calibration.projector);
+      fs << "working_volume_z"
+         << "[" << calibration.min_z_mm << calibration.max_z_mm << "]";
+      if (std::isfinite(calibration.scale_error_percent))
+        fs << "scale_error_percent" << calibration.scale_error_percent;
+      fs.release();
+    } catch (const cv::Exception& e) {
+      return Status::Error(path + ": cannot write the calibration file: " + e.what());
+    }
+    return Status::Ok();
+  });
 }
 
 Status ReadFlatField(const std::string& path, FlatField* field) {

@@ -13,6 +13,7 @@
 #include <vips/vips8>
 
 #include "io/vips.h"
+#include "io/write_whole.h"
 
 namespace vellum {
 namespace {
@@ -167,20 +168,22 @@ Status ReadWithVips(const std::string& path, cv::Mat* image) {
   return Status::Ok();
 }
 
-// Writes `image` with `save` (a libvips saver and its options, given the image); errors name
-// the file.
+// Writes `image` with `save` (a libvips saver and its options, given the image and the name to
+// write), whole or not at all (WriteWhole); errors name the file.
 template <typename Save>
 Status SaveWithVips(const std::string& path, const cv::Mat& image, const Save& save) {
   if (image.empty()) return Status::Error(path + ": cannot write an empty image");
   const Status s = StartVips();
   if (!s.ok()) return Status::Error(path + ": cannot write image: " + s.message());
-  try {
-    cv::Mat hold;
-    save(ToVips(image, &hold));
-  } catch (const vips::VError& e) {
-    return Status::Error(path + ": cannot write image: " + e.what());
-  }
-  return Status::Ok();
+  return WriteWhole(path, [&](const std::string& part) {
+    try {
+      cv::Mat hold;
+      save(ToVips(image, &hold), part);
+    } catch (const vips::VError& e) {
+      return Status::Error(path + ": cannot write image: " + e.what());
+    }
+    return Status::Ok();
+  });
 }
 
 }  // namespace
@@ -244,17 +247,17 @@ Status WritePng(const std::string& path, const cv::Mat& image, const PngWriting&
   if (!image.empty() && image.depth() != CV_8U && image.depth() != CV_16U) {
     return Status::Error(path + ": a PNG holds 8- or 16-bit samples");
   }
-  return SaveWithVips(path, image, [&](const vips::VImage& in) {
-    in.pngsave(path.c_str(), vips::VImage::option()
-                                 ->set("compression", how.level)
-                                 ->set("filter", how.filters ? VIPS_FOREIGN_PNG_FILTER_ALL
-                                                             : VIPS_FOREIGN_PNG_FILTER_NONE)
-                                 ->set("strip", true));
+  return SaveWithVips(path, image, [&](const vips::VImage& in, const std::string& to) {
+    in.pngsave(to.c_str(), vips::VImage::option()
+                               ->set("compression", how.level)
+                               ->set("filter", how.filters ? VIPS_FOREIGN_PNG_FILTER_ALL
+                                                           : VIPS_FOREIGN_PNG_FILTER_NONE)
+                               ->set("strip", true));
   });
 }
 
 Status WriteTiff(const std::string& path, const cv::Mat& image, double dpi) {
-  return SaveWithVips(path, image, [&](const vips::VImage& in) {
+  return SaveWithVips(path, image, [&](const vips::VImage& in, const std::string& to) {
     auto options = vips::VImage::option()
                        ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_LZW)
                        ->set("strip", true);
@@ -264,7 +267,7 @@ Status WriteTiff(const std::string& path, const cv::Mat& image, double dpi) {
           ->set("yres", dpi / 25.4)
           ->set("resunit", VIPS_FOREIGN_TIFF_RESUNIT_INCH);
     }
-    in.tiffsave(path.c_str(), options);
+    in.tiffsave(to.c_str(), options);
   });
 }
 

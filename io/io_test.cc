@@ -1,9 +1,11 @@
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <tiffio.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -14,12 +16,14 @@
 #include "core/sim/gantry.h"
 #include "io/calibration_io.h"
 #include "io/image_file.h"
+#include "io/json.h"
 #include "io/manifest.h"
 #include "io/memory.h"
 #include "io/ply.h"
 #include "io/products.h"
 #include "io/ptm.h"
 #include "io/scan_io.h"
+#include "io/write_whole.h"
 #include "io/xmp.h"
 
 namespace vellum {
@@ -812,6 +816,56 @@ TEST_F(IoTest, AFileThatCannotBeReadIsReportedAsWhatItIs) {
       << s.message();
   s = ReadImage(Path("gone.png"), &read);
   EXPECT_NE(s.message().find("gone.png: file is missing"), std::string::npos) << s.message();
+}
+
+// A write cut short (here by a file-size limit, as a full disk would: the write fails part way)
+// leaves nothing that looks like the product: no file, or the earlier whole one unchanged, and no
+// temporary part. The writers of points, sheets, images and text all go through WriteWhole.
+TEST_F(IoTest, AWriteCutShortLeavesNoHalfProduct) {
+  cv::Mat points(400, 400, CV_32FC3, cv::Scalar(1, 2, 3));  // 3.2 MB of PLY.
+  cv::Mat image(800, 800, CV_8UC3);
+  cv::randu(image, 0, 256);  // Noise: LZW cannot bring it under the limit.
+  const std::string old_ply = Path("old.ply");
+  ASSERT_TRUE(WritePointsPly(old_ply, cv::Mat(2, 2, CV_32FC3, cv::Scalar(4, 5, 6))).ok());
+  std::string before;
+  {
+    std::ifstream in(old_ply, std::ios::binary);
+    before.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  // In this process (a forked child would deadlock in libvips' threads): the soft limit lowered
+  // for the writes, then raised back.
+  rlimit saved{};
+  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &saved), 0);
+  const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);  // A write past it fails (EFBIG).
+  rlimit limit = saved;
+  limit.rlim_cur = 64 << 10;
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &limit), 0);
+  const Status ply = WritePointsPly(Path("points.ply"), points);
+  const Status again = WritePointsPly(old_ply, points);
+  const Status tif = WriteTiff(Path("restored.tif"), image);
+  const Status text = WriteTextFile(Path("report.json"), std::string(200 << 10, ' '));
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &saved), 0);
+  std::signal(SIGXFSZ, old_handler);
+  EXPECT_FALSE(ply.ok());
+  EXPECT_EQ(ply.message().find(Path("points.ply") + ": write failed"), 0u) << ply.message();
+  EXPECT_EQ(ply.message().find(".part-"), std::string::npos) << ply.message();
+  EXPECT_FALSE(again.ok());
+  EXPECT_FALSE(tif.ok());
+  EXPECT_FALSE(text.ok());
+  for (const char* name : {"points.ply", "restored.tif", "report.json"}) {
+    EXPECT_FALSE(fs::exists(Path(name))) << name << ": half a product left";
+    EXPECT_FALSE(fs::exists(PartName(Path(name)))) << name << ": its part left";
+  }
+  std::string after;
+  {
+    std::ifstream in(old_ply, std::ios::binary);
+    after.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  EXPECT_EQ(after, before) << "the earlier whole product was overwritten by half of a new one";
+  // Without the limit, each is written whole.
+  EXPECT_TRUE(WritePointsPly(Path("points.ply"), points).ok());
+  EXPECT_TRUE(WriteTiff(Path("restored.tif"), image).ok());
+  EXPECT_FALSE(fs::exists(PartName(Path("points.ply"))));
 }
 
 // The restored page carries its catalogue identity in an XMP packet that any XMP reader finds

@@ -1,7 +1,11 @@
 #include "io/json.h"
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <fstream>
+
+#include "io/write_whole.h"
 
 namespace vellum {
 
@@ -19,11 +23,13 @@ Status WriteJsonFile(const std::string& path, const Json& json) {
 }
 
 Status WriteTextFile(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::trunc);
-  out << text;
-  out.close();
-  if (!out) return Status::Error(path + ": cannot write");
-  return Status::Ok();
+  return WriteWhole(path, [&](const std::string& part) {
+    std::ofstream out(part, std::ios::trunc);
+    out << text;
+    out.close();
+    if (!out) return Status::Error(part + ": cannot write (" + std::strerror(errno) + ")");
+    return Status::Ok();
+  });
 }
 
 }  // namespace vellum

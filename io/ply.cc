@@ -1,9 +1,12 @@
 #include "io/ply.h"
 
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <sstream>
+
+#include "io/write_whole.h"
 
 namespace vellum {
 namespace {
@@ -17,10 +20,21 @@ uint64_t BytesLeft(std::ifstream& f) {
   return here < 0 || end < here ? 0 : static_cast<uint64_t>(end - here);
 }
 
+// The writers proper, to the temporary name WriteWhole gives them.
+Status WritePointsPlyTo(const std::string& path, const cv::Mat& points);
+Status WriteQuadMeshPlyTo(const std::string& path, const std::vector<cv::Vec3f>& vertices,
+                          const std::vector<cv::Vec4i>& quads, const std::string& comment);
+
 }  // namespace
 
 Status WritePointsPly(const std::string& path, const cv::Mat& points) {
   if (points.type() != CV_32FC3) return Status::Error(path + ": point map must be CV_32FC3");
+  return WriteWhole(path, [&](const std::string& part) { return WritePointsPlyTo(part, points); });
+}
+
+namespace {
+
+Status WritePointsPlyTo(const std::string& path, const cv::Mat& points) {
   auto finite = [](const cv::Vec3f& p) {
     return std::isfinite(p[0]) && std::isfinite(p[1]) && std::isfinite(p[2]);
   };
@@ -56,9 +70,12 @@ Status WritePointsPly(const std::string& path, const cv::Mat& points) {
     if (out.size() + static_cast<size_t>(points.cols) > out.capacity()) flush();
   }
   flush();
-  if (!f) return Status::Error(path + ": write failed (disk full?)");
+  f.close();
+  if (!f) return Status::Error(path + ": write failed (" + std::strerror(errno) + ")");
   return Status::Ok();
 }
+
+}  // namespace
 
 Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points) {
   std::ifstream f(path, std::ios::binary);
@@ -110,6 +127,15 @@ Status ReadPointsPly(const std::string& path, std::vector<PlyPoint>* points) {
 
 Status WriteQuadMeshPly(const std::string& path, const std::vector<cv::Vec3f>& vertices,
                         const std::vector<cv::Vec4i>& quads, const std::string& comment) {
+  return WriteWhole(path, [&](const std::string& part) {
+    return WriteQuadMeshPlyTo(part, vertices, quads, comment);
+  });
+}
+
+namespace {
+
+Status WriteQuadMeshPlyTo(const std::string& path, const std::vector<cv::Vec3f>& vertices,
+                          const std::vector<cv::Vec4i>& quads, const std::string& comment) {
   std::ofstream f(path, std::ios::binary);
   if (!f) return Status::Error(path + ": cannot open for writing");
   f << "ply\nformat binary_little_endian 1.0\ncomment " << comment << "\n"
@@ -124,9 +150,12 @@ Status WriteQuadMeshPly(const std::string& path, const std::vector<cv::Vec3f>& v
     f.write(reinterpret_cast<const char*>(&four), 1);
     f.write(reinterpret_cast<const char*>(q.val), 4 * sizeof(int));
   }
-  if (!f) return Status::Error(path + ": write failed (disk full?)");
+  f.close();
+  if (!f) return Status::Error(path + ": write failed (" + std::strerror(errno) + ")");
   return Status::Ok();
 }
+
+}  // namespace
 
 Status ReadQuadMeshPly(const std::string& path, std::vector<cv::Vec3f>* vertices,
                        std::vector<cv::Vec4i>* quads) {

@@ -7,6 +7,8 @@
 #include <sstream>
 #include <vector>
 
+#include "io/write_whole.h"
+
 namespace vellum {
 
 Status WritePtm(const std::string& path, const PtmResult& ptm) {
@@ -60,16 +62,18 @@ Status WritePtm(const std::string& path, const PtmResult& ptm) {
       }
     }
   }
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  const std::string text = header.str();
-  out.write(text.data(), static_cast<std::streamsize>(text.size()));
-  out.write(reinterpret_cast<const char*>(coefficients.data()),
-            static_cast<std::streamsize>(coefficients.size()));
-  out.write(reinterpret_cast<const char*>(colour.data()),
-            static_cast<std::streamsize>(colour.size()));
-  out.close();
-  if (!out) return Status::Error(path + ": cannot write");
-  return Status::Ok();
+  return WriteWhole(path, [&](const std::string& part) {
+    std::ofstream out(part, std::ios::binary | std::ios::trunc);
+    const std::string text = header.str();
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.write(reinterpret_cast<const char*>(coefficients.data()),
+              static_cast<std::streamsize>(coefficients.size()));
+    out.write(reinterpret_cast<const char*>(colour.data()),
+              static_cast<std::streamsize>(colour.size()));
+    out.close();
+    if (!out) return Status::Error(path + ": cannot write");
+    return Status::Ok();
+  });
 }
 
 Status ReadPtm(const std::string& path, PtmResult* ptm) {

@@ -1,0 +1,38 @@
+#include "io/write_whole.h"
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+namespace vellum {
+
+namespace fs = std::filesystem;
+
+std::string PartName(const std::string& path) {
+  const fs::path p(path);
+  return (p.parent_path() / (".part-" + p.filename().string())).string();
+}
+
+Status WriteWhole(const std::string& path,
+                  const std::function<Status(const std::string& temporary)>& write) {
+  const std::string part = PartName(path);
+  Status s = write(part);
+  std::error_code ec;
+  if (s.ok()) {
+    fs::rename(part, path, ec);
+    if (ec) s = Status::Error(path + ": cannot put in place (" + ec.message() + ")");
+  }
+  if (!s.ok()) {
+    fs::remove(part, ec);
+    // The error as the writer gave it, naming the product rather than its temporary name.
+    std::string message = s.message();
+    for (size_t at = message.find(part); at != std::string::npos;
+         at = message.find(part, at + path.size())) {
+      message.replace(at, part.size(), path);
+    }
+    return Status::Error(message);
+  }
+  return Status::Ok();
+}
+
+}  // namespace vellum
