@@ -33,7 +33,7 @@ struct WarningLimits {
   // A hole of the leaf whose surface stands above it, of this share of the leaf's area or
   // more: the leaf itself, likely, on a support taken for it (HighestRaisedHole).
   double min_raised_hole = 0.02;
-  double max_mean_strain = 0.002;     // Mean relative spring-length error after flattening.
+  double max_mean_strain = 0.002;  // Mean relative spring-length error after flattening.
   // Largest relative spring-length error. Paper does not stretch by percents: a spring kept this
   // far off its rest length lies on a crease sharper than the decoder resolves (its fit rounds
   // the ridge over a few pixels, and the page comes out short across it by tenths of a mm), or
