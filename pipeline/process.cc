@@ -93,7 +93,8 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
   const cv::Mat amplitude = options.flat_field.empty() ? cv::Mat() : decoded.amplitude;
   next("triangulate", 0.5);
   const Triangulator triangulator(input.calibration);
-  if (!ran(TriangulateStage(decoded, triangulator, options.triangulate, results, &out.map),
+  if (!ran(TriangulateStage(decoded, triangulator, options.triangulate, options.limits, results,
+                            &out.map),
            false)) {
     return out;
   }

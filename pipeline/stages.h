@@ -51,6 +51,11 @@ struct WarningLimits {
   // An output dpi asked above the page's finest true sampling by more than this share is
   // upsampling: the restored page holds no detail finer than the camera saw.
   double max_upsampling = 0.05;
+  // Share of the pixels the projector lit (white against black) that must give a 3D point: in a
+  // sound scan nearly all do (99.8% on the virtual gantry's leaves); far fewer means the frames
+  // do not belong together (frames of another scan, patterns out of order, a projector or camera
+  // that moved), and the points that did decode are doubtful too.
+  double min_points_of_lit = 0.5;
   // On a spread, the least page surface the gutter keeps from view (UnseenAtGutter's median),
   // mm: above it, the pages' inner margins are not all in the restored pages.
   double max_gutter_unseen_mm = 5.0;
@@ -102,9 +107,10 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
 
 // Triangulate (3.2): the correspondences -> the point map, by `triangulator` (which holds the
 // calibration's rays). Writes points.ply, depth.png, report/valid.png and report/depth.png.
+// Flags (decode_low) a scan whose lit pixels mostly gave no point (limits.min_points_of_lit).
 StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& triangulator,
-                             const TriangulateOptions& options, const std::string& results,
-                             PointMap* map);
+                             const TriangulateOptions& options, const WarningLimits& limits,
+                             const std::string& results, PointMap* map);
 
 // Outline: the leaf (or a spread's two pages) in the point map and the texture
 // (core/outline), seeded at the operator's hint for the scan when the decode stage among

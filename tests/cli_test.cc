@@ -153,6 +153,36 @@ TEST_F(CliTest, UntilPointsStopsAfterThePointCloud) {
             2);
 }
 
+// Frames that do not belong together (here the scan's frames in reverse order, as a pattern
+// list shuffled against them gives) are flagged where the points are written, `--until points`
+// too: decode_low names it, the quality check "points" warns, and the run exits 3.
+TEST_F(CliTest, FramesOutOfOrderAreFlaggedWhereThePointsAreWritten) {
+  const std::string scan = CopyScan("reversed");
+  int frames = 0;
+  while (fs::exists(fs::path(scan) / FrameName(frames))) ++frames;
+  ASSERT_GT(frames, 4);
+  for (int k = 0; k < frames / 2; ++k) {
+    const fs::path a = fs::path(scan) / FrameName(k),
+                   b = fs::path(scan) / FrameName(frames - 1 - k);
+    const fs::path t = fs::path(scan) / "swap.png";
+    fs::rename(a, t);
+    fs::rename(b, a);
+    fs::rename(t, b);
+  }
+  const std::string out = (root_ / "reversed_points").string();
+  const Result r = RunVellum("process --scan " + scan + " --calibration " + Rig() + " --out " +
+                             out + " --until points");
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("warning decode_low: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("quality: warn"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("points: warn: "), std::string::npos) << r.output;
+  // The scan as it was: nearly every lit pixel gives a point, no such warning.
+  const Result clean = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " +
+                                 Rig() + " --out " + out + " --until points");
+  EXPECT_EQ(clean.exit_code, 0) << clean.output;
+  EXPECT_EQ(clean.output.find("decode_low"), std::string::npos) << clean.output;
+}
+
 std::string FileBytes(const fs::path& path) {
   std::ifstream f(path, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());

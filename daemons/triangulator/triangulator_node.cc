@@ -56,7 +56,8 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  stages.push_back(TriangulateStage(decoded, *triangulator_, options_.triangulate, results, &map_));
+  stages.push_back(TriangulateStage(decoded, *triangulator_, options_.triangulate, options_.limits,
+                                    results, &map_));
   if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
   std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, stages);
   node_->PublishChunks(channel::kPointCloud, &chunks);

@@ -9,6 +9,7 @@
 
 #include "core/geometry/triangulate.h"
 #include "pipeline/report.h"
+#include "pipeline/stages.h"
 #include "station/assembler.h"
 #include "station/books.h"
 #include "station/messages.h"
@@ -19,6 +20,7 @@ namespace vellum::station {
 struct TriangulatorNodeOptions {
   std::string data_dir = "scans";  // Station data folder: results go to <data_dir>/scan-<id>.
   TriangulateOptions triangulate;
+  WarningLimits limits;  // What makes its points doubtful (decode_low), as `vellum process` has.
   std::optional<Calibration> fallback_calibration;  // For a scan without CALIBRATION.
 };
 
