@@ -164,24 +164,29 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   r.Number("pixels", "rejected_epipolar", map->rejected_epipolar);
   r.Number("pixels", "rejected_volume", map->rejected_volume);
   r.Number("pixels", "rejected_flying", map->rejected_flying);
+  // Points cannot come without lit pixels: a count of 0 beside points is a count not known (a
+  // decode whose stats did not reach here), not judged.
   const int lit = decoded.stats.lit;
-  const double of_lit = lit > 0 ? static_cast<double>(map->valid) / lit : 0.0;
-  r.Number("pixels", "points_of_lit", of_lit);
-  if (lit == 0) {
+  if (lit == 0 && map->valid == 0) {
+    r.Number("pixels", "points_of_lit", 0);
     r.Warn("decode_low",
            "no pixel was lit by the projector (its white frame no brighter than its black): the "
            "frames are not in the pattern's order, or the projector was off; scan again");
-  } else if (of_lit < limits.min_points_of_lit) {
-    const DecodeStats& d = decoded.stats;
-    auto share = [&](int n) { return Fixed(100.0 * n / lit, 1) + "%"; };
-    r.Warn("decode_low",
-           "only " + share(map->valid) + " of the " + std::to_string(lit) +
-               " pixels the projector lit gave a 3D point (the code unreadable at " +
-               share(d.rejected_bits + d.rejected_modulation + d.rejected_unwrap) +
-               ", off the projector's rays at " + share(map->rejected_epipolar) + ", flying at " +
-               share(map->rejected_flying) +
-               "; a sound scan gives nearly all): frames of another scan, patterns out of "
-               "order, or a camera or projector that moved during the scan; scan again");
+  } else if (lit > 0) {
+    const double of_lit = static_cast<double>(map->valid) / lit;
+    r.Number("pixels", "points_of_lit", of_lit);
+    if (of_lit < limits.min_points_of_lit) {
+      const DecodeStats& d = decoded.stats;
+      auto share = [&](int n) { return Fixed(100.0 * n / lit, 1) + "%"; };
+      r.Warn("decode_low",
+             "only " + share(map->valid) + " of the " + std::to_string(lit) +
+                 " pixels the projector lit gave a 3D point (the code unreadable at " +
+                 share(d.rejected_bits + d.rejected_modulation + d.rejected_unwrap) +
+                 ", off the projector's rays at " + share(map->rejected_epipolar) + ", flying at " +
+                 share(map->rejected_flying) +
+                 "; a sound scan gives nearly all): frames of another scan, patterns out of "
+                 "order, or a camera or projector that moved during the scan; scan again");
+    }
   }
   double z_min = 0, z_max = 0;
   Status s = WritePointProducts(results, map->points, &z_min, &z_max);

@@ -152,7 +152,7 @@ inline const SmallProducts& SmallScanProducts() {
     Decoder decoder;
     p.stages.push_back(DecodeStage(SmallScan(), &decoder, &p.decoded));
     p.stages.push_back(
-        TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, p.results, &p.map));
+        TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, o.limits, p.results, &p.map));
     p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, o.outline, o.limits,
                                     p.stages, p.results, &p.outline));
     p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));

@@ -42,7 +42,12 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   Calibration calibration;
   s = calibrations_.Get(id, &calibration);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  const DecodeResult& decoded = product_.decoded;
+  DecodeResult& decoded = product_.decoded;
+  // The decoder's counts do not cross the bus with the correspondences: the lit pixels, which
+  // the points are judged against (decode_low), come from its stage's report.
+  if (const ReportValue* lit = FindValue(stages, "pixels", "lit")) {
+    decoded.stats.lit = static_cast<int>(lit->number);
+  }
   if (calibration.camera.size != decoded.projector_x.size() ||
       calibration.projector.size != product_.projector) {
     return node_->FailScan(
