@@ -1,16 +1,21 @@
 // Reassembly of a chunked product (CORRESPONDENCE, POINT_CLOUD, FLAT_MESH) on a daemon's
-// worker thread: every chunk is checked and copied in; a product is handed on when whole, and
-// given up with an error naming the missing chunks when the next scan's chunks begin, when its
-// chunks stop coming, or when they start again (a re-send: the product is then built from the
-// new send alone, never from two).
+// worker thread: every chunk is checked and copied in; a product is handed on when whole.
+// When its chunks stop coming before it is whole (the bus lost some: a loaded machine, this
+// daemon paused), the missing ones are asked again on RESEND, every ask_after_s, and the
+// publisher sends them again ("products recovered"). It is given up, with an error naming the
+// missing chunks ("products lost"), when the next scan's chunks begin, when nothing came for
+// timeout_s, or when its chunks start again unasked (a re-send: the product is then built from
+// the new send alone, never from two).
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <string>
 
 #include "station/messages.h"
 #include "station/node.h"
+#include "vellum/resend_request_t.hpp"
 
 namespace vellum::station {
 
@@ -22,37 +27,71 @@ class Assembler {
   // The whole product, with the last chunk (for its header fields); worker thread.
   using DoneFn = std::function<void(int64_t scan_id, Product* product, const Msg& last)>;
 
-  Assembler(Node* node, std::string channel, AddFn add, DoneFn done, double timeout_s = 10)
+  Assembler(Node* node, std::string channel, AddFn add, DoneFn done, double timeout_s = 10,
+            double ask_after_s = 1)
       : node_(node),
         channel_(std::move(channel)),
         add_(std::move(add)),
         done_(std::move(done)),
-        timeout_s_(timeout_s) {
+        timeout_s_(timeout_s),
+        ask_after_s_(ask_after_s) {
     node->Subscribe<Msg>(channel_, [this](const Msg& msg) {
       auto copy = std::make_shared<Msg>(msg);
       node_->Post([this, copy] { OnChunk(*copy); });
     });
   }
 
-  // Call about once a second (from the LCM thread): gives up a product whose chunks stopped.
+  // Call about once a second (from the LCM thread): asks again for the chunks of a product
+  // whose chunks stopped, and gives it up after timeout_s.
   void Tick() {
     node_->Post([this] {
-      if (!chunks_.Stale(timeout_s_)) return;
-      GiveUp("after " + std::to_string(static_cast<int>(timeout_s_)) + " s");
+      if (chunks_.Stale(timeout_s_)) {
+        GiveUp("after " + std::to_string(static_cast<int>(timeout_s_)) + " s");
+      } else if (chunks_.Stale(ask_after_s_) &&
+                 std::chrono::steady_clock::now() - asked_ >
+                     std::chrono::duration<double>(ask_after_s_)) {
+        Ask();
+      }
     });
   }
 
  private:
+  void Ask() {
+    resend_request_t ask{};
+    ask.process = node_->process();
+    ask.channel = channel_;
+    ask.scan_id = chunks_.scan_id();
+    ask.known_seq = known_seq_;
+    ask.chunks = chunks_.MissingIndices();
+    ask.nchunks = static_cast<int32_t>(ask.chunks.size());
+    node_->Publish(channel::kResend, &ask);
+    node_->Count("chunks asked again", ask.nchunks);
+    asked_ = std::chrono::steady_clock::now();
+    ++asks_;
+  }
+
   void GiveUp(const std::string& when) {
+    node_->Count("products lost");
     node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": " + channel_ + " incomplete (" +
-                     chunks_.Missing() + ") " + when + "; dropped",
+                     chunks_.Missing() + ") " + when +
+                     (asks_ > 0 ? ", asked again " + std::to_string(asks_) + " time(s)" : "") +
+                     "; dropped",
                  chunks_.scan_id());
-    chunks_.Reset();
-    product_ = Product{};
+    StartOver();
     node_->SetState("idle");
   }
 
+  void StartOver() {
+    chunks_.Reset();
+    product_ = Product{};
+    asks_ = 0;
+    asked_ = {};
+  }
+
   void OnChunk(const Msg& msg) {
+    if (asks_ > 0 && !chunks_.Complete() && chunks_.Has(msg.scan_id, msg.chunk_index)) {
+      return;  // Asked again and came late as well: the same chunk, already in.
+    }
     if (!chunks_.Complete() && chunks_.Has(msg.scan_id, msg.chunk_index)) {
       // A chunk of the product being built comes again before it is whole: its sender started
       // it over (a daemon restarted mid-send, a scan sent again). What came before is dropped,
@@ -62,8 +101,7 @@ class Assembler {
     }
     if (chunks_.Started() && (chunks_.scan_id() != msg.scan_id || chunks_.Complete())) {
       if (!chunks_.Complete()) GiveUp("when scan " + std::to_string(msg.scan_id) + " began");
-      chunks_.Reset();
-      product_ = Product{};
+      StartOver();
     }
     Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count);
     if (s.ok()) s = add_(msg, &product_);
@@ -72,16 +110,27 @@ class Assembler {
                    msg.scan_id);
       return;
     }
-    if (chunks_.Complete()) done_(msg.scan_id, &product_, msg);
+    if (chunks_.received() == 1) known_seq_ = msg.seq;
+    if (!chunks_.Complete()) return;
+    if (asks_ > 0) {
+      node_->Count("products recovered");
+      node_->Log("scan " + std::to_string(msg.scan_id) + ": " + channel_ +
+                 " whole again after asking " + std::to_string(asks_) + " time(s)");
+    }
+    done_(msg.scan_id, &product_, msg);
   }
 
   Node* node_;
   std::string channel_;
   AddFn add_;
   DoneFn done_;
-  double timeout_s_;
-  ChunkSet chunks_;  // Worker thread only.
-  Product product_;  // Worker thread only.
+  double timeout_s_, ask_after_s_;
+  // Worker thread only:
+  ChunkSet chunks_;
+  Product product_;
+  int64_t known_seq_ = 0;  // The seq of a chunk that came (names the product on RESEND).
+  int asks_ = 0;           // Times the missing chunks were asked again.
+  std::chrono::steady_clock::time_point asked_;
 };
 
 }  // namespace vellum::station

@@ -320,6 +320,14 @@ std::string ChunkSet::Missing() const {
          " missing";
 }
 
+std::vector<int32_t> ChunkSet::MissingIndices() const {
+  std::vector<int32_t> missing;
+  for (int k = 0; k < count_; ++k) {
+    if (!have_[k]) missing.push_back(k);
+  }
+  return missing;
+}
+
 stage_report_t ToMessage(const StageReport& report) {
   stage_report_t m;
   m.stage = report.stage;

@@ -83,6 +83,8 @@ class ChunkSet {
   }
   // "chunks 3, 5 of 12 missing".
   std::string Missing() const;
+  std::vector<int32_t> MissingIndices() const;
+  int received() const { return received_; }
   void Reset() { *this = ChunkSet(); }
 
  private:

@@ -166,11 +166,15 @@ Node::Node(std::string process, const std::string& url)
   }
   std::signal(SIGTERM, OnSignal);
   std::signal(SIGINT, OnSignal);
+  Subscribe<resend_request_t>(channel::kResend,
+                              [this](const resend_request_t& msg) { OnResend(msg); });
   worker_ = std::thread([this] { WorkerLoop(); });
 }
 
 Node::Node(std::string process, lcm::LCM* lcm)
     : process_(std::move(process)), lcm_(lcm), seq_start_(RandomSeqStart()) {
+  Subscribe<resend_request_t>(channel::kResend,
+                              [this](const resend_request_t& msg) { OnResend(msg); });
   worker_ = std::thread([this] { WorkerLoop(); });
 }
 
@@ -201,6 +205,57 @@ void Node::SubscribeRaw(const std::string& channel,
   subscriptions_.push_back(lcm_->subscribe(channel, &RawHandler::Handle, handlers_.back().get()));
 }
 
+void Node::PublishBytes(const std::string& channel, const std::vector<uint8_t>& bytes) {
+  if (lcm_->publish(channel, bytes.data(), static_cast<unsigned int>(bytes.size())) != 0) {
+    Error(channel + ": publish failed");
+  }
+}
+
+void Node::Hold(HeldProduct product) {
+  std::lock_guard<std::mutex> lock(held_mutex_);
+  held_.push_back(std::move(product));
+  // The newest always stays; older ones while they are recent and fit in kHoldBytes.
+  size_t bytes = 0;
+  const auto now = std::chrono::steady_clock::now();
+  for (size_t i = held_.size() - 1; i-- > 0;) {
+    for (const auto& chunk : held_[i].chunks) bytes += chunk.size();
+    if (bytes > kHoldBytes || now - held_[i].sent > std::chrono::duration<double>(kHoldSeconds)) {
+      held_.erase(held_.begin(), held_.begin() + static_cast<std::ptrdiff_t>(i) + 1);
+      break;
+    }
+  }
+}
+
+void Node::OnResend(const resend_request_t& msg) {
+  std::vector<std::vector<uint8_t>> again;
+  {
+    std::lock_guard<std::mutex> lock(held_mutex_);
+    for (const HeldProduct& held : held_) {
+      if (held.channel != msg.channel || held.scan_id != msg.scan_id ||
+          std::find(held.seqs.begin(), held.seqs.end(), msg.known_seq) == held.seqs.end()) {
+        continue;
+      }
+      for (int32_t index : msg.chunks) {
+        if (index >= 0 && static_cast<size_t>(index) < held.chunks.size()) {
+          again.push_back(held.chunks[static_cast<size_t>(index)]);
+        }
+      }
+      break;
+    }
+  }
+  if (again.empty()) return;  // Not ours, or no longer held: the asker gives up in time.
+  Log(Printable(msg.process, 64) + " missed " + std::to_string(again.size()) + " chunk(s) of " +
+      Printable(msg.channel, 64) + " of scan " + std::to_string(msg.scan_id) +
+      "; sending them again");
+  // Paced as the first send (on the LCM thread: a few chunks at most take milliseconds).
+  for (const auto& bytes : again) {
+    const auto start = std::chrono::steady_clock::now();
+    PublishBytes(msg.channel, bytes);
+    std::this_thread::sleep_until(start + std::chrono::duration<double>(bytes.size() / pace_));
+  }
+  Count("chunks sent again", static_cast<int64_t>(again.size()));
+}
+
 void Node::CheckSequence(const std::string& channel, int64_t seq) {
   // Each publisher counts its own messages on a channel, from a random start: a message carries
   // no publisher's name, so it is matched to the publisher whose last seq lies just below its
@@ -212,6 +267,14 @@ void Node::CheckSequence(const std::string& channel, int64_t seq) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
     std::vector<int64_t>& heard = seq_in_[channel];
+    counters_["received " + channel] += 1;
+    if (std::any_of(heard.begin(), heard.end(),
+                    [&](int64_t before) { return seq <= before && before - seq <= kGap; })) {
+      // A message heard before from the same publisher, sent again (RESEND): nothing lost, and
+      // its publisher's count goes on from where it was.
+      counters_["heard again " + channel] += 1;
+      return;
+    }
     auto it = std::find_if(heard.begin(), heard.end(),
                            [&](int64_t before) { return seq > before && seq - before <= kGap; });
     if (it != heard.end()) {
@@ -224,7 +287,6 @@ void Node::CheckSequence(const std::string& channel, int64_t seq) {
       heard.pop_back();  // The one heard longest ago.
     }
     heard.insert(heard.begin(), seq);
-    counters_["received " + channel] += 1;
   }
   if (lost > 0) {
     Count("lost messages", lost);

@@ -24,6 +24,7 @@
 
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
+#include "vellum/resend_request_t.hpp"
 #include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
@@ -50,6 +51,8 @@ inline constexpr char kPointCloud[] = "POINT_CLOUD";
 inline constexpr char kFlatMesh[] = "FLAT_MESH";
 inline constexpr char kRestored[] = "RESTORED";
 inline constexpr char kScanProgress[] = "SCAN_PROGRESS";  // A product handed on.
+// A receiver asks a product's chunks again (resend_request_t): the bus lost them.
+inline constexpr char kResend[] = "RESEND";
 inline constexpr char kPreview[] = "PREVIEW";             // Camera preview, at most 640 px wide.
 // The live preview's centre at the camera's full resolution (320 x 240 at most), for focusing.
 inline constexpr char kPreviewFocus[] = "PREVIEW_FOCUS";
@@ -158,25 +161,37 @@ class Node {
   // one, and msg->utime when it is 0; then publishes.
   template <class Msg>
   void Publish(const std::string& channel, Msg* msg) {
-    if constexpr (kHasStation<Msg>) msg->station = station_;
-    msg->seq = NextSeq(channel);
-    if (msg->utime == 0) msg->utime = NowUtime();
+    Stamp(channel, msg);
     if (lcm_->publish(channel, msg) != 0) Error(channel + ": publish failed");
   }
 
-  // Publishes the chunks of one product paced at about SetPace's rate: a burst of many
-  // megabytes overflows the receivers' socket buffers, and udpm loses a whole message with
-  // any of its fragments.
+  // Publishes the chunks of one product (of scan `scan_id`) paced at about SetPace's rate: a
+  // burst of many megabytes overflows the receivers' socket buffers, and udpm loses a whole
+  // message with any of its fragments. The product is held, as sent, for a while (kHoldSeconds,
+  // kHoldBytes beyond the newest): a receiver that missed chunks asks for them on RESEND, and
+  // they go again byte for byte ("chunks sent again").
   template <class Msg>
   void PublishChunks(const std::string& channel, std::vector<Msg>* chunks) {
+    HeldProduct held;
+    held.channel = channel;
     for (Msg& m : *chunks) {
       const auto start = std::chrono::steady_clock::now();
-      Publish(channel, &m);
+      Stamp(channel, &m);
+      std::vector<uint8_t> bytes(static_cast<size_t>(m.getEncodedSize()));
+      m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+      PublishBytes(channel, bytes);
+      held.scan_id = m.scan_id;
+      held.seqs.push_back(m.seq);
+      held.chunks.push_back(std::move(bytes));
       std::this_thread::sleep_until(start +
-                                    std::chrono::duration<double>(m.getEncodedSize() / pace_));
+                                    std::chrono::duration<double>(held.chunks.back().size() / pace_));
     }
+    Hold(std::move(held));
   }
   void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
+  // How long, and how many bytes beyond the newest product, products are held for RESEND.
+  static constexpr double kHoldSeconds = 60;
+  static constexpr size_t kHoldBytes = size_t{256} << 20;
 
   // Status: the state ("idle", "busy", "scanning", ...), the scan and a line for the operator.
   void SetState(const std::string& state, int64_t scan_id = 0, const std::string& detail = "");
@@ -221,6 +236,24 @@ class Node {
   bool Stopping() const;
 
  private:
+  // A chunked product as it was sent, for RESEND.
+  struct HeldProduct {
+    std::string channel;
+    int64_t scan_id = 0;
+    std::vector<int64_t> seqs;                 // Each chunk's seq, in chunk order.
+    std::vector<std::vector<uint8_t>> chunks;  // Each chunk's encoded message.
+    std::chrono::steady_clock::time_point sent = std::chrono::steady_clock::now();
+  };
+  template <class Msg>
+  void Stamp(const std::string& channel, Msg* msg) {
+    if constexpr (kHasStation<Msg>) msg->station = station_;
+    msg->seq = NextSeq(channel);
+    if (msg->utime == 0) msg->utime = NowUtime();
+  }
+  void PublishBytes(const std::string& channel, const std::vector<uint8_t>& bytes);
+  void Hold(HeldProduct product);
+  // LCM thread: sends again the chunks a RESEND asks for, if this process holds the product.
+  void OnResend(const resend_request_t& msg);
   struct RawHandler {
     std::function<void(const lcm::ReceiveBuffer*)> f;
     void Handle(const lcm::ReceiveBuffer* buffer, const std::string&) { f(buffer); }
@@ -269,6 +302,8 @@ class Node {
   std::atomic<bool> abandoned_{false};
   bool exit_when_hung_ = false;
   std::atomic<size_t> pending_{0};
+  std::mutex held_mutex_;  // Guards held_ (the worker holds, the LCM thread sends again).
+  std::deque<HeldProduct> held_;  // Oldest first.
   bool work_done_ = false;
   std::thread worker_;
 };
