@@ -9,13 +9,16 @@
 #pragma once
 
 #include <chrono>
+#include <algorithm>
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "station/messages.h"
 #include "station/node.h"
 #include "vellum/resend_request_t.hpp"
+#include "vellum/scan_progress_t.hpp"
 
 namespace vellum::station {
 
@@ -41,10 +44,23 @@ class Assembler {
     });
   }
 
+  // Also awaits every product its sender announces on SCAN_PROGRESS as `product` (the
+  // channel's own name, or one sent after it): one of which not a chunk came (the bus lost them
+  // all) is asked again whole, and given up after timeout_s.
+  void AwaitAnnounced(const std::string& product) {
+    node_->Subscribe<scan_progress_t>(channel::kScanProgress,
+                                      [this, product](const scan_progress_t& msg) {
+                                        if (msg.product != product || msg.scan_id <= 0) return;
+                                        const int64_t id = msg.scan_id;
+                                        node_->Post([this, id] { Announced(id); });
+                                      });
+  }
+
   // Call about once a second (from the LCM thread): asks again for the chunks of a product
   // whose chunks stopped, and gives it up after timeout_s.
   void Tick() {
     node_->Post([this] {
+      AskAwaited();
       if (chunks_.Stale(timeout_s_)) {
         GiveUp("after " + std::to_string(static_cast<int>(timeout_s_)) + " s");
       } else if (chunks_.Stale(ask_after_s_) &&
@@ -56,6 +72,49 @@ class Assembler {
   }
 
  private:
+  using Clock = std::chrono::steady_clock;
+  // A product announced by its sender of which no chunk came.
+  struct Awaited {
+    int64_t scan_id = 0;
+    Clock::time_point since, asked;
+    int asks = 0;
+  };
+
+  void Announced(int64_t scan_id) {
+    if ((chunks_.Started() && chunks_.scan_id() == scan_id) ||
+        std::find(seen_.begin(), seen_.end(), scan_id) != seen_.end()) {
+      return;  // It came, or is coming.
+    }
+    awaited_.push_back({scan_id, Clock::now(), Clock::now(), 0});
+  }
+
+  void AskAwaited() {
+    const auto now = Clock::now();
+    for (auto it = awaited_.begin(); it != awaited_.end();) {
+      if (now - it->since > std::chrono::duration<double>(timeout_s_)) {
+        node_->Count("products lost");
+        node_->Error("scan " + std::to_string(it->scan_id) + ": " + channel_ +
+                         " announced by its sender and never came, asked again " +
+                         std::to_string(it->asks) + " time(s); dropped",
+                     it->scan_id);
+        it = awaited_.erase(it);
+        continue;
+      }
+      if (now - it->asked > std::chrono::duration<double>(ask_after_s_)) {
+        resend_request_t ask{};
+        ask.process = node_->process();
+        ask.channel = channel_;
+        ask.scan_id = it->scan_id;
+        ask.known_seq = 0;  // All of it.
+        node_->Publish(channel::kResend, &ask);
+        node_->Count("products asked again");
+        it->asked = now;
+        ++it->asks;
+      }
+      ++it;
+    }
+  }
+
   void Ask() {
     resend_request_t ask{};
     ask.process = node_->process();
@@ -81,6 +140,21 @@ class Assembler {
     node_->SetState("idle");
   }
 
+  // The first chunk of a product: named for RESEND, no longer awaited.
+  void Began(const Msg& msg) {
+    known_seq_ = msg.seq;
+    if (std::find(seen_.begin(), seen_.end(), msg.scan_id) == seen_.end()) {
+      seen_.push_back(msg.scan_id);
+      if (seen_.size() > 16) seen_.erase(seen_.begin());
+    }
+    for (auto it = awaited_.begin(); it != awaited_.end(); ++it) {
+      if (it->scan_id != msg.scan_id) continue;
+      asks_ = it->asks;  // It came because it was asked.
+      awaited_.erase(it);
+      break;
+    }
+  }
+
   void StartOver() {
     chunks_.Reset();
     product_ = Product{};
@@ -104,13 +178,13 @@ class Assembler {
       StartOver();
     }
     Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count);
+    if (s.ok() && chunks_.received() == 1) Began(msg);
     if (s.ok()) s = add_(msg, &product_);
     if (!s.ok()) {
       node_->Error("scan " + std::to_string(msg.scan_id) + ": " + channel_ + ": " + s.message(),
                    msg.scan_id);
       return;
     }
-    if (chunks_.received() == 1) known_seq_ = msg.seq;
     if (!chunks_.Complete()) return;
     if (asks_ > 0) {
       node_->Count("products recovered");
@@ -130,7 +204,9 @@ class Assembler {
   Product product_;
   int64_t known_seq_ = 0;  // The seq of a chunk that came (names the product on RESEND).
   int asks_ = 0;           // Times the missing chunks were asked again.
-  std::chrono::steady_clock::time_point asked_;
+  Clock::time_point asked_;
+  std::vector<Awaited> awaited_;  // Announced, not a chunk yet.
+  std::vector<int64_t> seen_;     // The last scans of which a chunk came, oldest first.
 };
 
 }  // namespace vellum::station

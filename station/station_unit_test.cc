@@ -683,6 +683,49 @@ TEST(Assembler, ChunksTheBusLostAreAskedAgainAndTheProductIsRecovered) {
   EXPECT_EQ(receiver.Counter("lost messages"), 1);
 }
 
+// A product of which no chunk came (the bus lost it all) is known by its sender's announcement
+// on SCAN_PROGRESS: it is asked again whole and comes, as sent.
+TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
+  lcm::LCM bus("memq://");
+  Node sender("vellum-sender", &bus);
+  sender.SetPace(1e12);
+  cv::Mat texture(600, 800, CV_8UC3);
+  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  std::vector<texture_t> chunks = TextureMessages(12, texture);
+  sender.PublishChunks("TEXTURE", &chunks);  // No one listens: lost whole.
+  for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
+
+  Node receiver("vellum-unit", &bus);
+  std::mutex mutex;
+  std::vector<cv::Mat> products;
+  Assembler<texture_t, cv::Mat> assembler(
+      &receiver, "TEXTURE",
+      [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
+      [&](int64_t, cv::Mat* image, const texture_t&) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        products.push_back(image->clone());
+      },
+      /*timeout_s=*/30, /*ask_after_s=*/0.05);
+  assembler.AwaitAnnounced("TEXTURE");
+  AnnounceHandedOn(&sender, 12, "TEXTURE");
+  auto whole = [&] {
+    const std::lock_guard<std::mutex> lock(mutex);
+    return !products.empty();
+  };
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (!whole() && std::chrono::steady_clock::now() < deadline) {
+    bus.handleTimeout(10);
+    assembler.Tick();
+  }
+  receiver.Drain();
+  const std::lock_guard<std::mutex> lock(mutex);
+  ASSERT_EQ(products.size(), 1u) << "not recovered within 30 s";
+  EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
+  EXPECT_GE(receiver.Counter("products asked again"), 1);
+  EXPECT_EQ(receiver.Counter("products recovered"), 1);
+  EXPECT_EQ(sender.Counter("chunks sent again"), static_cast<int64_t>(chunks.size()));
+}
+
 // Issue 14: a hung job on the worker (a stage that never returns) is reported as stuck and
 // systemd's watchdog is no longer fed, so systemd restarts the daemon; it is fed again once the
 // job ends. A stop while a job hangs returns after the stop grace instead of waiting forever.

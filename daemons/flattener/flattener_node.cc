@@ -20,7 +20,9 @@ FlattenerNode::FlattenerNode(Node* node, const FlattenerNodeOptions& options)
           [this](int64_t id, cv::Mat* points, const point_cloud_t& last) {
             points_ = *points;
             Process(id, last);
-          }) {}
+          }) {
+  assembler_.AwaitAnnounced(channel::kPointCloud);
+}
 
 void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   node_->SetState("busy", id, "finding the leaf");

@@ -30,7 +30,9 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
           [this](int64_t id, Sheet* sheet, const mesh_t& last) {
             std::swap(sheet_, *sheet);
             Process(id, last);
-          }) {}
+          }) {
+  sheets_.AwaitAnnounced(channel::kFlatMesh);
+}
 
 void RestorerNode::Process(int64_t id, const mesh_t& last) {
   const SheetPage& sheet_page = sheet_.page;

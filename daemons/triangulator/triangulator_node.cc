@@ -32,7 +32,9 @@ TriangulatorNode::TriangulatorNode(Node* node, const TriangulatorNodeOptions& op
           [this](int64_t id, Correspondence* c, const correspondence_t& last) {
             std::swap(product_, *c);
             Process(id, last);
-          }) {}
+          }) {
+  assembler_.AwaitAnnounced(channel::kCorrespondence);
+}
 
 void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   node_->SetState("busy", id, "triangulating");
