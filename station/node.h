@@ -105,9 +105,9 @@ inline constexpr bool kHasStation = HasStation<Msg>::value;
 // The status channel of a process: "vellum-camera" -> "STATUS_CAMERA".
 std::string StatusChannel(const std::string& process);
 
-// The default bus: multicast on this host only (ttl=0), with a 4 MB receive buffer (the kernel
+// The default bus: multicast on this host only (ttl=0), with a 16 MB receive buffer (the kernel
 // caps it at net.core.rmem_max: systemd/60-vellum.conf raises that).
-inline constexpr char kDefaultUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304";
+inline constexpr char kDefaultUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216";
 
 class Node {
  public:
