@@ -92,7 +92,7 @@ class Assembler {
     const auto now = Clock::now();
     for (auto it = awaited_.begin(); it != awaited_.end();) {
       if (now - it->since > std::chrono::duration<double>(timeout_s_)) {
-        node_->Count("products lost");
+        node_->Count(counter::kProductsLost);
         node_->Error("scan " + std::to_string(it->scan_id) + ": " + channel_ +
                          " announced by its sender and never came, asked again " +
                          std::to_string(it->asks) + " time(s); dropped",
@@ -129,8 +129,9 @@ class Assembler {
     ++asks_;
   }
 
-  void GiveUp(const std::string& when) {
-    node_->Count("products lost");
+  // `lost`: the bus lost it (not a send started over).
+  void GiveUp(const std::string& when, bool lost = true) {
+    if (lost) node_->Count(counter::kProductsLost);
     node_->Error("scan " + std::to_string(chunks_.scan_id()) + ": " + channel_ + " incomplete (" +
                      chunks_.Missing() + ") " + when +
                      (asks_ > 0 ? ", asked again " + std::to_string(asks_) + " time(s)" : "") +
@@ -171,7 +172,8 @@ class Assembler {
       // it over (a daemon restarted mid-send, a scan sent again). What came before is dropped,
       // so a product is never made of two sends' chunks.
       GiveUp("when it was sent again (chunk " + std::to_string(msg.chunk_index) +
-             " came twice); starting over with the new send");
+                 " came twice); starting over with the new send",
+             /*lost=*/false);
     }
     if (chunks_.Started() && (chunks_.scan_id() != msg.scan_id || chunks_.Complete())) {
       if (!chunks_.Complete()) GiveUp("when scan " + std::to_string(msg.scan_id) + " began");

@@ -59,6 +59,13 @@ inline constexpr char kPreviewFocus[] = "PREVIEW_FOCUS";
 inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper case
 }  // namespace channel
 
+// Status counters that another process acts on.
+namespace counter {
+// A product the bus lost that could not be had again (Assembler): the supervisor makes the
+// scan again from disk.
+inline constexpr char kProductsLost[] = "products lost";
+}  // namespace counter
+
 // Decodes an LCM message from untrusted bytes. lcm-gen 1.3.1's decoders throw
 // std::length_error for a string whose length field is 0 (found by fuzz_messages); that, like
 // any other malformed input, is reported as "does not decode" instead of ending the process.

@@ -133,9 +133,26 @@ void Supervisor::OnStatus(const status_t& msg) {
     SendAgain([](int64_t) { return true; },
               "the chain was not whole (the station stopped, or a daemon had not started)");
   }
+  int64_t products_lost = 0;
+  for (int k = 0; k < msg.ncounters && k < static_cast<int>(msg.counter_names.size()) &&
+                  k < static_cast<int>(msg.counter_values.size());
+       ++k) {
+    if (msg.counter_names[k] == counter::kProductsLost) products_lost = msg.counter_values[k];
+  }
+  const bool lost_on_bus = seen.error_utime != -1 && products_lost > seen.products_lost;
+  seen.products_lost = products_lost;
   if (msg.last_error_utime > seen.error_utime && msg.last_error_scan_id > 0 &&
       seen.error_utime != -1) {
-    // Failed downstream, with a status the operator sees; marked so on disk, if it is ours.
+    const int64_t id = msg.last_error_scan_id;
+    // Failed downstream, with a status the operator sees; marked so on disk, if it is ours. A
+    // product the bus lost is made again from the scan's captures on disk instead (parked
+    // after kMaxAttempts like any other).
+    if (lost_on_bus && reached_.count(id) > 0) {
+      seen.error_utime = msg.last_error_utime;
+      SendAgain([id](int64_t pending) { return pending == id; },
+                msg.process + " lost its input on the bus (" + msg.last_error + ")");
+      return;
+    }
     if (PathExists(ScanFolder::For(data_, msg.last_error_scan_id).raw())) {
       Failed(msg.last_error_scan_id, msg.process + ": " + msg.last_error);
     } else {

@@ -6,7 +6,9 @@
 //  - SCAN_PROGRESS: how far down the chain each scan has come (the last daemon that handed it
 //    on, station/chain.h);
 //  - the processing daemons' STATUS heartbeats: a new pid is a restart; an error a daemon
-//    reports about a scan ends that scan (the operator sees the error);
+//    reports about a scan ends that scan (the operator sees the error), unless the daemon lost
+//    the scan's product on the bus (its "products lost" counter rose with the error): that scan
+//    is sent again from disk, as for a restart;
 //  - RESTORED: the scan is done.
 // It keeps, on disk, the ledger of scans recorded and not yet restored: <data>/scan-<id>/pending,
 // holding how many times the scan was sent down the chain. It outlives every process.
@@ -67,6 +69,7 @@ class Supervisor {
   struct Daemon {
     int32_t pid = 0;
     int64_t error_utime = -1;  // -1: no status yet (its old errors are not news).
+    int64_t products_lost = 0;  // Its "products lost" counter (the bus lost one, asked in vain).
   };
 
   void OnStatus(const status_t& msg);

@@ -407,6 +407,46 @@ TEST_F(DecoderNodeTest, AScanThatLosesItsDaemonTwiceIsParked) {
   EXPECT_EQ(sent(42), 2);
 }
 
+// A daemon that lost a scan's product on the bus (asked again in vain: its "products lost"
+// counter rises with the error) does not fail the scan: it is made again from its captures on
+// disk. Another error about a scan fails it, as before.
+TEST_F(DecoderNodeTest, AScanWhoseProductTheBusLostIsSentAgainAndOtherErrorsFailIt) {
+  Node node("vellum-decoder", &bus_.lcm());
+  DecoderNode decoder(&node, options_);
+  auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
+  auto sent = [&](int64_t id) { return Sent(*correspondence, id); };
+  auto status = [&](int32_t pid, int64_t error_scan, int64_t error_utime, int64_t lost) {
+    status_t m{};
+    m.process = "vellum-flattener";
+    m.pid = pid;
+    m.state = "idle";
+    m.counter_names = {counter::kProductsLost};
+    m.counter_values = {lost};
+    m.ncounters = 1;
+    m.last_error_scan_id = error_scan;
+    m.last_error_utime = error_utime;
+    m.last_error = error_scan ? "scan " + std::to_string(error_scan) + ": an error" : "";
+    bus_.probe().Publish(StatusChannel("vellum-flattener"), &m);
+  };
+  Heartbeat("vellum-triangulator", 100);
+  status(200, 0, 0, 0);
+  Heartbeat("vellum-restorer", 300);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("processing daemons heard") == 3; }));
+  PublishScan(43);
+  ASSERT_TRUE(bus_.RunUntil([&] { return sent(43) == 1; }));
+  status(200, 43, 1000, 1);  // POINT_CLOUD of scan 43 lost on the bus.
+  ASSERT_TRUE(bus_.RunUntil([&] { return sent(43) == 2; }));
+  EXPECT_EQ(node.Counter("scans sent again"), 1);
+  EXPECT_EQ(PendingAttempts(ScanFolder::For(data_, 43)), 2);
+  EXPECT_FALSE(fs::exists(ScanFolder::For(data_, 43).failed()));
+  PublishScan(44);
+  ASSERT_TRUE(bus_.RunUntil([&] { return sent(44) == 1; }));
+  status(200, 44, 2000, 1);  // Another error (no leaf found, say): scan 44 fails.
+  ASSERT_TRUE(bus_.RunUntil([&] { return fs::exists(ScanFolder::For(data_, 44).failed()); }));
+  EXPECT_EQ(sent(44), 1);
+  EXPECT_EQ(node.Counter("scans sent again"), 1);
+}
+
 // Every byte of every file under `dir`, by relative path.
 std::map<std::string, std::string> Snapshot(const std::string& dir) {
   std::map<std::string, std::string> files;
