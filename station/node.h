@@ -26,6 +26,7 @@
 #include "vellum/capture_t.hpp"
 #include "vellum/resend_request_t.hpp"
 #include "vellum/scan_started_t.hpp"
+#include "vellum/status_t.hpp"
 
 namespace vellum::station {
 
@@ -64,7 +65,13 @@ namespace counter {
 // A product the bus lost that could not be had again (Assembler): the supervisor makes the
 // scan again from disk.
 inline constexpr char kProductsLost[] = "products lost";
+// Scans this process failed (counted before the error that names the scan goes out): the
+// projector stops a scan the decoder failed.
+inline constexpr char kScansFailed[] = "scans failed";
 }  // namespace counter
+
+// A counter of a status message (0 when it has none).
+int64_t StatusCounter(const status_t& msg, const std::string& name);
 
 // Decodes an LCM message from untrusted bytes. lcm-gen 1.3.1's decoders throw
 // std::length_error for a string whose length field is 0 (found by fuzz_messages); that, like

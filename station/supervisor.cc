@@ -133,12 +133,7 @@ void Supervisor::OnStatus(const status_t& msg) {
     SendAgain([](int64_t) { return true; },
               "the chain was not whole (the station stopped, or a daemon had not started)");
   }
-  int64_t products_lost = 0;
-  for (int k = 0; k < msg.ncounters && k < static_cast<int>(msg.counter_names.size()) &&
-                  k < static_cast<int>(msg.counter_values.size());
-       ++k) {
-    if (msg.counter_names[k] == counter::kProductsLost) products_lost = msg.counter_values[k];
-  }
+  const int64_t products_lost = StatusCounter(msg, counter::kProductsLost);
   const bool lost_on_bus = seen.error_utime != -1 && products_lost > seen.products_lost;
   seen.products_lost = products_lost;
   if (msg.last_error_utime > seen.error_utime && msg.last_error_scan_id > 0 &&
@@ -197,7 +192,7 @@ void Supervisor::Park(int64_t id, const std::string& why) {
   Finished(id);
   const Status marked = MarkFailed(folder, "parked: " + why);
   node_->Count("scans parked");
-  node_->Count("scans failed");  // Before the error goes out with the count.
+  node_->Count(counter::kScansFailed);  // Before the error goes out with the count.
   node_->Error(
       "scan " + std::to_string(id) + " failed and is parked: " + why +
           "; it is not sent again; its captures are kept in " + folder.raw() +

@@ -167,7 +167,7 @@ void DecoderNode::Fail(int64_t id, const std::string& why) {
   gate_.Close(id);  // Nothing more of it is recorded.
   const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
   const Status marked = MarkFailed(folder, why);
-  node_->Count("scans failed");  // Before the error goes out with the count.
+  node_->Count(counter::kScansFailed);  // Before the error goes out with the count.
   node_->Error(
       "scan " + std::to_string(id) + " failed: " + why +
           (marked.ok() ? "" : " (and it could not be marked failed: " + marked.message() + ")"),

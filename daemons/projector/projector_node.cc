@@ -25,6 +25,8 @@ ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
   node->Subscribe<calibration_t>(channel::kCalibration,
                                  [this](const calibration_t& m) { OnCalibration(m); });
   node->Subscribe<light_t>(channel::kLightOn, [this](const light_t& m) { OnLightOn(m); });
+  node->Subscribe<status_t>(StatusChannel("vellum-decoder"),
+                            [this](const status_t& m) { OnDecoderStatus(m); });
   std::string lights;
   for (const ScanLight& l : options_.lights) lights += (lights.empty() ? "" : ", ") + l.name;
   node->Log("projector " + SizeText(projector_->size()) + ", " +
@@ -188,9 +190,24 @@ void ProjectorNode::ShowPattern(int index) {
   node_->SetState("scanning", scan_id_, "showing " + What(index));
 }
 
+void ProjectorNode::OnDecoderStatus(const status_t& m) {
+  const int64_t failed = StatusCounter(m, counter::kScansFailed);
+  const bool rose = decoder_failed_ >= 0 && failed > decoder_failed_;
+  decoder_failed_ = failed;  // A restarted decoder counts from 0 again.
+  if (!rose || scan_id_ == 0 || m.last_error_scan_id != scan_id_) return;
+  node_->Count("scans stopped");
+  node_->Log("scan " + std::to_string(scan_id_) + " stopped at " + What(index_) +
+             ": the decoder failed it (" + Printable(m.last_error, 200) + ")");
+  End();
+}
+
 void ProjectorNode::Fail(const std::string& why) {
-  node_->Count("scans failed");  // Before the error goes out with the count.
+  node_->Count(counter::kScansFailed);  // Before the error goes out with the count.
   node_->Error("scan " + std::to_string(scan_id_) + " failed: " + why, scan_id_);
+  End();
+}
+
+void ProjectorNode::End() {
   projector_->Show(black_);
   if (!options_.lights.empty()) RequestLight(-1);
   awaiting_light_ = false;

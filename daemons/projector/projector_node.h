@@ -5,8 +5,10 @@
 // that does not come fails the scan with a clear status. Then, for each extra light of the station
 // (issue 17), with the projector black: LIGHT_REQUEST(k) to vellum-lights, and on its LIGHT_ON(k)
 // (or the operator's, from the viewer) PATTERN_SHOWN(pattern_count + k) for the camera; after the
-// last, or when the scan fails, LIGHT_REQUEST(-1) turns them all off. A CALIBRATION with scan_id 0
-// replaces the station's calibration from the next scan on.
+// last, or when the scan fails, LIGHT_REQUEST(-1) turns them all off. A scan the decoder fails
+// (its status: "scans failed" rose, the error names the scan) is stopped at once: the projector
+// goes black and takes the next request. A CALIBRATION with scan_id 0 replaces the station's
+// calibration from the next scan on.
 #pragma once
 
 #include <chrono>
@@ -23,6 +25,7 @@
 #include "vellum/capture_t.hpp"
 #include "vellum/light_t.hpp"
 #include "vellum/scan_request_t.hpp"
+#include "vellum/status_t.hpp"
 
 namespace vellum::station {
 
@@ -56,10 +59,12 @@ class ProjectorNode {
   void OnCapture(const capture_t& m);
   void OnCalibration(const calibration_t& m);
   void OnLightOn(const light_t& m);
+  void OnDecoderStatus(const status_t& m);
   void ShowPattern(int index);
   void RequestLight(int k);  // k -1: all off.
   int Patterns() const { return static_cast<int>(sequence_.patterns.size()); }
   void Fail(const std::string& why);
+  void End();  // Black, lights off, idle: ready for the next request.
 
   Node* node_;
   std::unique_ptr<Projector> projector_;
@@ -72,6 +77,7 @@ class ProjectorNode {
   int index_ = -1;       // What is on screen: -1 the texture, k pattern k, Patterns() + k light k.
   bool awaiting_light_ = false;  // LIGHT_REQUEST sent, LIGHT_ON not yet come.
   std::chrono::steady_clock::time_point shown_at_, started_;
+  int64_t decoder_failed_ = -1;  // The decoder's "scans failed" (-1: no status yet).
 };
 
 }  // namespace vellum::station

@@ -16,6 +16,7 @@
 #include "vellum/light_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_started_t.hpp"
+#include "vellum/status_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -139,6 +140,49 @@ TEST_F(ProjectorNodeTest, BadRequestsAndAMissingCaptureAreReportedAndTheNextScan
   Request(7);
   EXPECT_TRUE(bus_.RunUntil([&] { return node.Counter("scans captured") == 1; }));
   EXPECT_EQ(node.Counter("scans failed"), 1);
+}
+
+// A scan the decoder fails while it is being captured (its status: "scans failed" rose with an
+// error naming the scan) is stopped at once: black on screen, no more patterns, and the next
+// request is taken. An error of the decoder about another scan, or with no failure counted,
+// does not stop it.
+TEST_F(ProjectorNodeTest, AScanTheDecoderFailsStopsAtOnceAndTheNextRequestIsTaken) {
+  Node node("vellum-projector", &bus_.lcm());
+  auto projector = std::make_unique<WatchedProjector>(screen_);
+  WatchedProjector* screen = projector.get();
+  ProjectorNode conductor(&node, std::move(projector), options_);
+  bus_.AddTick([&] { conductor.Tick(); });
+  auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
+  auto decoder = [&](int64_t failed, int64_t error_scan) {
+    status_t m{};
+    m.process = "vellum-decoder";
+    m.pid = 1;
+    m.state = "busy";
+    m.counter_names = {counter::kScansFailed};
+    m.counter_values = {failed};
+    m.ncounters = 1;
+    m.last_error_scan_id = error_scan;
+    m.last_error = "scan " + std::to_string(error_scan) + " failed: recording failed: disk full";
+    bus_.probe().Publish(StatusChannel("vellum-decoder"), &m);
+  };
+  decoder(0, 0);
+  Request(31);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !shown->empty(); }));
+  decoder(0, 31);  // An error about the scan, not a failure: it goes on.
+  decoder(1, 30);  // A failure of another scan: it goes on.
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("received STATUS_DECODER") == 3; }));
+  EXPECT_EQ(conductor.scan_id(), 31);
+  decoder(2, 31);  // The decoder failed scan 31.
+  ASSERT_TRUE(bus_.RunUntil([&] { return conductor.scan_id() == 0; }));
+  EXPECT_EQ(node.Counter("scans stopped"), 1);
+  EXPECT_EQ(node.Counter(counter::kScansFailed), 0) << "the decoder's failure, not the projector's";
+  EXPECT_EQ(cv::countNonZero(screen->shown.back()), 0) << "not black after the stop";
+  const size_t patterns_then = shown->size();
+  size_t answered = patterns_then;  // The stopped scan's last pattern is never answered.
+  bus_.AddTick([&] { AnswerEveryPattern(shown, &answered); });
+  Request(32);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("scans captured") == 1; }));
+  for (size_t k = patterns_then; k < shown->size(); ++k) EXPECT_EQ((*shown)[k].scan_id, 32);
 }
 
 // Issue 14: a capture of another session (a stale one, another projector's) does not advance
