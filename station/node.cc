@@ -222,16 +222,28 @@ void Node::PublishBytes(const std::string& channel, const std::vector<uint8_t>& 
 void Node::Hold(HeldProduct product) {
   std::lock_guard<std::mutex> lock(held_mutex_);
   held_.push_back(std::move(product));
-  // The newest always stays; older ones while they are recent and fit in kHoldBytes.
-  size_t bytes = 0;
+  // The newest always stays; older ones while they are of their channel's kHoldScans newest
+  // scans, recent, and fit in kHoldBytes.
   const auto now = std::chrono::steady_clock::now();
-  for (size_t i = held_.size() - 1; i-- > 0;) {
-    for (const auto& chunk : held_[i].chunks) bytes += chunk.size();
-    if (bytes > kHoldBytes || now - held_[i].sent > std::chrono::duration<double>(kHoldSeconds)) {
-      held_.erase(held_.begin(), held_.begin() + static_cast<std::ptrdiff_t>(i) + 1);
-      break;
-    }
+  std::map<std::string, std::vector<int64_t>> scans;  // Per channel, newest first.
+  std::vector<uint8_t> keep(held_.size(), 0);
+  size_t bytes = 0;
+  for (size_t i = held_.size(); i-- > 0;) {
+    const HeldProduct& h = held_[i];
+    std::vector<int64_t>& ids = scans[h.channel];
+    if (std::find(ids.begin(), ids.end(), h.scan_id) == ids.end()) ids.push_back(h.scan_id);
+    size_t size = 0;
+    for (const auto& chunk : h.chunks) size += chunk.size();
+    keep[i] = i + 1 == held_.size() ||
+              (ids.size() <= static_cast<size_t>(kHoldScans) && bytes + size <= kHoldBytes &&
+               now - h.sent <= std::chrono::duration<double>(kHoldSeconds));
+    if (keep[i]) bytes += size;
   }
+  std::deque<HeldProduct> kept;
+  for (size_t i = 0; i < held_.size(); ++i) {
+    if (keep[i]) kept.push_back(std::move(held_[i]));
+  }
+  held_.swap(kept);
 }
 
 void Node::OnResend(const resend_request_t& msg) {

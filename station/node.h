@@ -181,9 +181,9 @@ class Node {
 
   // Publishes the chunks of one product (of scan `scan_id`) paced at about SetPace's rate: a
   // burst of many megabytes overflows the receivers' socket buffers, and udpm loses a whole
-  // message with any of its fragments. The product is held, as sent, for a while (kHoldSeconds,
-  // kHoldBytes beyond the newest): a receiver that missed chunks asks for them on RESEND, and
-  // they go again byte for byte ("chunks sent again").
+  // message with any of its fragments. The product is held, as sent, for a while (kHoldScans,
+  // kHoldSeconds, kHoldBytes): a receiver that missed chunks asks for them on RESEND, and they
+  // go again byte for byte ("chunks sent again").
   template <class Msg>
   void PublishChunks(const std::string& channel, std::vector<Msg>* chunks) {
     HeldProduct held;
@@ -203,7 +203,9 @@ class Node {
     Hold(std::move(held));
   }
   void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
-  // How long, and how many bytes beyond the newest product, products are held for RESEND.
+  // What is held for RESEND: the products of each channel's newest kHoldScans scans, sent in
+  // the last kHoldSeconds, at most kHoldBytes beyond the newest product.
+  static constexpr int kHoldScans = 2;
   static constexpr double kHoldSeconds = 60;
   static constexpr size_t kHoldBytes = size_t{256} << 20;
 
