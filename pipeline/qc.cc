@@ -165,7 +165,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
   check("sampling", {"dpi_above_sampling"}, {}, false, sampling);
   // Whatever the run wrote (`--until points` too): the point cloud's own soundness.
   if (report.Find("pixels", "points_of_lit")) {
-    check("points", {"decode_low"}, {}, false,
+    check("points", {"decode_low", "frame_contradicts"}, {}, false,
           Percent(report.Number("pixels", "points_of_lit")) +
               " of the pixels the projector lit gave a 3D point");
   }

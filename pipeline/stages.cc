@@ -91,7 +91,48 @@ std::string PageDir(const std::string& results, const std::string& page) {
   return page.empty() ? results : (fs::path(results) / "pages" / page).string();
 }
 
-StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded,
+namespace {
+
+// The scan's redundancy: each Gray frame and its inverse add up to the whole light. A pair far
+// off the scan's usual names its frames (frame_contradicts).
+void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
+                     const WarningLimits& limits, StageReport* r) {
+  if (pairs.empty()) return;
+  std::vector<double> shares;
+  for (const FramePairCheck& p : pairs) shares.push_back(p.Share());
+  std::vector<double> sorted = shares;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double usual = sorted[sorted.size() / 2];
+  r->Number("frames", "pairs_judged", static_cast<double>(pairs.size()));
+  r->Number("frames", "pair_disagreement_median", usual);
+  r->Number("frames", "pair_disagreement_max", *std::max_element(shares.begin(), shares.end()));
+  const double bar = std::max(limits.max_pair_disagreement, limits.pair_over_usual * usual);
+  std::string named;
+  int count = 0;
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    if (shares[k] <= bar) continue;
+    const FramePairCheck& p = pairs[k];
+    if (count++ < 4) {
+      named += std::string(named.empty() ? "" : "; ") + "frames " + std::to_string(p.pattern) +
+               " and " + std::to_string(p.inverse) + " ('" +
+               Describe(scan.sequence.patterns[p.pattern]) + "' and its inverse) at " +
+               Fixed(100.0 * shares[k], 1) + "%";
+    }
+  }
+  if (count == 0) return;
+  r->Number("frames", "pairs_contradicting", count);
+  r->Warn("frame_contradicts",
+          std::to_string(count) + " Gray frame pair(s) do not add up to the scan's light at " +
+              "many of the lit pixels (" + named + (count > 4 ? "; ..." : "") +
+              "; the scan's usual pair: " + Fixed(100.0 * usual, 1) +
+              "%): a frame of another scan or leaf, a pattern shown in another's place, or a "
+              "frame taken before the projector changed; scan again");
+}
+
+}  // namespace
+
+StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits& limits,
+                        DecodeResult* decoded,
                         const std::string& frames_dir) {
   Stage stage("decode");
   StageReport& r = stage.report();
@@ -140,6 +181,7 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decode
   r.Number("pixels", "rejected_unwrap", d.rejected_unwrap);
   r.Number("pixels", "fit_fallbacks", d.fit_fallbacks);
   r.Number("sizes", "gray_stripe_px", d.gray_stripe_px);
+  JudgeFramePairs(scan, d.pairs, limits, &r);
   return stage.Finish(Status::Ok());
 }
 

@@ -56,6 +56,12 @@ struct WarningLimits {
   // do not belong together (frames of another scan, patterns out of order, a projector or camera
   // that moved), and the points that did decode are doubtful too.
   double min_points_of_lit = 0.5;
+  // Share of the lit pixels at which a Gray frame and its inverse may fail to add up to the
+  // scan's whole light (FramePairCheck), above both this and pair_over_usual times the scan's
+  // own median pair: a frame of another scan or leaf, a pattern in another's place, or one
+  // taken before the projector changed (frame_contradicts, naming the frames).
+  double max_pair_disagreement = 0.02;
+  double pair_over_usual = 4.0;
   // On a spread, the least page surface the gutter keeps from view (UnseenAtGutter's median),
   // mm: above it, the pages' inner margins are not all in the restored pages.
   double max_gutter_unseen_mm = 5.0;
@@ -102,7 +108,8 @@ std::string PageDir(const std::string& results, const std::string& page);
 // read, so they are never all in memory; with no folder either, they are those already added
 // to the decoder (Decoder::Begin and Add, as a camera gave them), and it finishes. Writes
 // nothing.
-StageReport DecodeStage(const Scan& scan, Decoder* decoder, DecodeResult* decoded,
+StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits& limits,
+                        DecodeResult* decoded,
                         const std::string& frames_dir = "");
 
 // Triangulate (3.2): the correspondences -> the point map, by `triangulator` (which holds the

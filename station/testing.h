@@ -150,7 +150,7 @@ inline const SmallProducts& SmallScanProducts() {
     const Calibration rig = QuickRig();
     const PipelineOptions o;
     Decoder decoder;
-    p.stages.push_back(DecodeStage(SmallScan(), &decoder, &p.decoded));
+    p.stages.push_back(DecodeStage(SmallScan(), &decoder, o.limits, &p.decoded));
     p.stages.push_back(
         TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, o.limits, p.results, &p.map));
     p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, o.outline, o.limits,

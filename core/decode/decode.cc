@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <mutex>
+#include <tuple>
 #include <opencv2/core/utility.hpp>
 
 #include "core/common/check.h"
@@ -151,6 +153,29 @@ __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const ui
   }
 }
 
+// Counts, in one row, the pixels lit enough to judge and those where a Gray pattern and its
+// inverse do not add up to the whole light: |(p - black) + (q - black) - (direct + global)|
+// above 35% of the direct light and 6 noise sigmas (pixels clipped in either frame skipped).
+__attribute__((noinline)) void PairDisagreement(const uint8_t* __restrict p,
+                                                const uint8_t* __restrict q,
+                                                const uint8_t* __restrict black,
+                                                const int16_t* __restrict direct,
+                                                const int16_t* __restrict global,
+                                                int16_t min_direct, int16_t floor_dn, int width,
+                                                int* lit, int* disagree) {
+  int n = 0, off = 0;
+  for (int x = 0; x < width; ++x) {
+    const int d = direct[x];
+    const int judged = (d >= min_direct) & (p[x] < 255) & (q[x] < 255);
+    const int r = p[x] + q[x] - 2 * black[x] - d - global[x];
+    const int tol = std::max<int>(floor_dn, (d * 35) / 100);
+    n += judged;
+    off += judged & ((r > tol) | (r < -tol));
+  }
+  *lit += n;
+  *disagree += off;
+}
+
 // Adds one phase-shifted frame's row to the sums c += v cos(delta_k), s += v sin(delta_k).
 __attribute__((noinline)) void AccumulatePhase(const uint8_t* __restrict f, int32_t ck, int32_t sk,
                                                int32_t* __restrict c, int32_t* __restrict s,
@@ -249,6 +274,7 @@ struct Decoder::Stream {
   cv::Mat code[2], uncertain[2];   // CV_16U: reflected Gray code so far; uncertain-bit votes.
   cv::Mat cos_sum[2], sin_sum[2];  // CV_32S: phase sums so far, fixed point.
   cv::Mat direct, global;          // CV_16S: the light estimate, once light_ready.
+  std::vector<FramePairCheck> pairs;  // Each inverse-paired bit's, as it is taken up.
   bool light_ready = false;
   Status status = Status::Error("decode not begun");
 
@@ -273,6 +299,7 @@ Decoder::~Decoder() = default;
 Status Decoder::Begin(const PatternSequence& sequence, cv::Size camera_size) {
   Stream& st = *stream_;
   st.held.clear();
+  st.pairs.clear();
   st.count = 0;
   st.light_ready = false;
   std::string why;
@@ -399,10 +426,14 @@ void Decoder::Digest() {
   const int width = st.size.width;
   const int16_t margin = static_cast<int16_t>(std::ceil(options_.uncertain_bit_dn));
   const int16_t min_direct = static_cast<int16_t>(std::ceil(options_.min_contrast_dn));
+  const int16_t floor_dn = static_cast<int16_t>(std::ceil(6.0 * options_.noise_dn));
+  std::mutex pair_mutex;
+  std::vector<std::pair<int64_t, int64_t>> pair_counts(bits.size());
   // One pass over the rows takes up every frame that can be: with a whole scan at hand, that
   // is all of them, row by row in cache.
   cv::parallel_for_(cv::Range(0, st.size.height), [&](const cv::Range& range) {
     std::vector<uint8_t> lmax(width), lmin(width), made(width);
+    std::vector<std::pair<int, int>> counts(bits.size(), {0, 0});
     for (int y = range.start; y < range.end; ++y) {
       const uint8_t* black = st.held[st.black].ptr<uint8_t>(y);
       int16_t* direct = st.direct.ptr<int16_t>(y);
@@ -419,12 +450,15 @@ void Decoder::Digest() {
         }
         LightFromExtremes(lmax.data(), lmin.data(), black, direct, global, width);
       }
-      for (const BitJob& job : bits) {
+      for (size_t j = 0; j < bits.size(); ++j) {
+        const BitJob& job = bits[j];
         const AxisPlan& plan = st.axes[job.axis];
         const uint8_t* p = st.held[plan.pattern[job.bit]].ptr<uint8_t>(y);
         const uint8_t* q = nullptr;
         if (plan.inverse[job.bit] >= 0) {
           q = st.held[plan.inverse[job.bit]].ptr<uint8_t>(y);
+          PairDisagreement(p, q, black, direct, global, min_direct, floor_dn, width,
+                           &counts[j].first, &counts[j].second);
         } else {
           // No inverse pattern: the one it would have given, white + black - pattern, so the
           // bit is judged against the middle of the white and black frames.
@@ -446,7 +480,24 @@ void Decoder::Digest() {
                         st.sin_sum[job.axis].ptr<int32_t>(y), width);
       }
     }
+    const std::lock_guard<std::mutex> lock(pair_mutex);
+    for (size_t j = 0; j < bits.size(); ++j) {
+      pair_counts[j].first += counts[j].first;
+      pair_counts[j].second += counts[j].second;
+    }
   });
+  for (size_t j = 0; j < bits.size(); ++j) {
+    const AxisPlan& plan = st.axes[bits[j].axis];
+    if (plan.inverse[bits[j].bit] < 0) continue;
+    FramePairCheck check;
+    check.axis = bits[j].axis;
+    check.bit = bits[j].bit;
+    check.pattern = plan.pattern[bits[j].bit];
+    check.inverse = plan.inverse[bits[j].bit];
+    check.lit = pair_counts[j].first;
+    check.disagree = pair_counts[j].second;
+    st.pairs.push_back(check);
+  }
   // Frames taken up are let go (white and black are kept to the end).
   st.light_ready = light;
   auto let_go = [&](int index) {
@@ -870,6 +921,10 @@ void Decoder::Finish(DecodeResult* result) {
   stats.rejected_modulation = bad_mod;
   stats.rejected_unwrap = bad_unwrap;
   stats.fit_fallbacks = fallbacks;
+  stats.pairs = st.pairs;
+  std::sort(stats.pairs.begin(), stats.pairs.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.axis, a.bit) < std::tie(b.axis, b.bit);
+  });
   result->status = Status::Ok();
 }
 

@@ -32,6 +32,20 @@ struct DecodeOptions {
   bool Check(std::string* why) const;
 };
 
+// How far a Gray bit's frame and its inverse's agree: lit by the pair, each lit pixel sees the
+// scan's whole light once (pattern + inverse = direct + global, above black, whatever the
+// stripe's blur). A frame of another scan or leaf, a pattern shown in another's place, or one
+// taken before the projector changed breaks that at many pixels.
+struct FramePairCheck {
+  int axis = 0;           // 0 columns, 1 rows.
+  int bit = 0;            // Gray bit (0 finest).
+  int pattern = -1;       // Frame indices.
+  int inverse = -1;
+  int64_t lit = 0;        // Pixels lit enough to judge (direct light >= min_contrast_dn).
+  int64_t disagree = 0;   // Of those, where pattern + inverse is off the whole light.
+  double Share() const { return lit > 0 ? static_cast<double>(disagree) / lit : 0.0; }
+};
+
 struct DecodeStats {
   int pixels = 0;               // Camera pixels decoded.
   int lit = 0;                  // Pixels with enough white/black contrast (projector reaches them).
@@ -47,6 +61,7 @@ struct DecodeStats {
   // Where the Gray code alone sets the coordinates (no phase patterns), they step by the stripe:
   // this is that step, projector pixels (0 with phase patterns).
   int step_px = 0;
+  std::vector<FramePairCheck> pairs;  // Each inverse-paired Gray bit's agreement.
 };
 
 struct DecodeResult {

@@ -187,6 +187,55 @@ TEST(Decode, StrongGlobalLightIsRejectedNotMisread) {
   EXPECT_EQ(r.stats.rejected_bits, region.area());
 }
 
+// Each Gray frame and its inverse add up to the scan's whole light (FramePairCheck): in a sound
+// scan at almost every lit pixel, whatever the bit; a frame of another pattern in one's place
+// breaks that at about half the lit pixels (two Gray bit planes differ at half the pixels), in
+// its own pair only.
+TEST(Decode, AFrameOfAnotherPatternIsToldByItsPairNotAddingUp) {
+  PatternOptions o;
+  o.projector_size = cv::Size(640, 480);
+  const PatternSequence seq = MakePatternSequence(o);
+  cv::RNG rng(7);
+  std::vector<cv::Mat> frames;
+  for (const cv::Mat& ideal : IdealFrames(seq)) {
+    cv::Mat noise(ideal.size(), CV_32F), f;
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.5);  // DecodeOptions::noise_dn.
+    ideal.convertTo(f, CV_32F, 0.7, 20.0);       // Black at 20 DN, white at 198: none clipped.
+    cv::Mat(f + noise).convertTo(f, CV_8U);
+    frames.push_back(f);
+  }
+  const int pattern = seq.Find(PatternKind::kGray, Axis::kRow, 6, false);
+  const int inverse = seq.Find(PatternKind::kGray, Axis::kRow, 6, true);
+  ASSERT_GE(pattern, 0);
+  ASSERT_GE(inverse, 0);
+  auto worst_other = [&](const DecodeStats& stats, double* share) {
+    double worst = 0;
+    for (const FramePairCheck& p : stats.pairs) {
+      EXPECT_GT(p.lit, 640 * 480 / 2);
+      if (p.pattern == pattern) {
+        EXPECT_EQ(p.inverse, inverse);
+        *share = p.Share();
+      } else {
+        worst = std::max(worst, p.Share());
+      }
+    }
+    return worst;
+  };
+  const DecodeResult sound = Decode(seq, frames);
+  ASSERT_TRUE(sound.status.ok()) << sound.status.message();
+  // Every inverse-paired bit of both axes (10 column bits, 9 row bits).
+  EXPECT_EQ(sound.stats.pairs.size(), 19u);
+  double share = -1;
+  // 6 sigmas of the sum's noise: a sound pair disagrees at a fraction of a percent.
+  EXPECT_LT(worst_other(sound.stats, &share), 0.01);
+  EXPECT_LT(share, 0.01);
+  frames[pattern] = frames[seq.Find(PatternKind::kGray, Axis::kRow, 5, false)].clone();
+  const DecodeResult swapped = Decode(seq, frames);
+  ASSERT_TRUE(swapped.status.ok()) << swapped.status.message();
+  EXPECT_LT(worst_other(swapped.stats, &share), 0.01);
+  EXPECT_GT(share, 0.4);
+}
+
 TEST(Decode, RejectsWrongFrameCountAndMixedSizes) {
   const PatternSequence seq = MakePatternSequence(PatternOptions{{64, 32}});
   std::vector<cv::Mat> frames = IdealFrames(seq);

@@ -317,7 +317,7 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
   stream_begun_ = false;
   node_->Count(streamed ? "scans decoded as captured" : "scans decoded from their folder");
   const StageReport report =
-      DecodeStage(scan, &decoder_, &decoded_,
+      DecodeStage(scan, &decoder_, options_.limits, &decoded_,
                   streamed ? std::string() : ScanFolder::For(options_.data_dir, id).raw());
   if (!report.status.ok()) {
     supervisor_.Failed(id, "decoding failed: " + report.status.message());  // Not sent again.
