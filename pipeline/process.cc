@@ -87,7 +87,8 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     // The decoder's running sums and codes (some 40 bytes a camera pixel) go when it is done,
     // before the point map is made; the decoded maps go once it is.
     Decoder decoder(options.decode);
-    if (!ran(DecodeStage(input.scan, &decoder, options.limits, &decoded, input.scan_dir), true)) return out;
+    if (!ran(DecodeStage(input.scan, &decoder, options.limits, &decoded, input.scan_dir), true))
+      return out;
   }
   // The light the projector gave each pixel (white less black), for the albedo.
   const cv::Mat amplitude = options.flat_field.empty() ? cv::Mat() : decoded.amplitude;

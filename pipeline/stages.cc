@@ -132,8 +132,7 @@ void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
 }  // namespace
 
 StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits& limits,
-                        DecodeResult* decoded,
-                        const std::string& frames_dir) {
+                        DecodeResult* decoded, const std::string& frames_dir) {
   Stage stage("decode");
   StageReport& r = stage.report();
   const DecodeOptions& o = decoder->options();

@@ -109,8 +109,7 @@ std::string PageDir(const std::string& results, const std::string& page);
 // to the decoder (Decoder::Begin and Add, as a camera gave them), and it finishes. Writes
 // nothing.
 StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits& limits,
-                        DecodeResult* decoded,
-                        const std::string& frames_dir = "");
+                        DecodeResult* decoded, const std::string& frames_dir = "");
 
 // Triangulate (3.2): the correspondences -> the point map, by `triangulator` (which holds the
 // calibration's rays). Writes points.ply, depth.png, report/valid.png and report/depth.png.

@@ -8,8 +8,8 @@
 // the new send alone, never from two).
 #pragma once
 
-#include <chrono>
 #include <algorithm>
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <string>
@@ -63,9 +63,8 @@ class Assembler {
       AskAwaited();
       if (chunks_.Stale(timeout_s_)) {
         GiveUp("after " + std::to_string(static_cast<int>(timeout_s_)) + " s");
-      } else if (chunks_.Stale(ask_after_s_) &&
-                 std::chrono::steady_clock::now() - asked_ >
-                     std::chrono::duration<double>(ask_after_s_)) {
+      } else if (chunks_.Stale(ask_after_s_) && std::chrono::steady_clock::now() - asked_ >
+                                                    std::chrono::duration<double>(ask_after_s_)) {
         Ask();
       }
     });

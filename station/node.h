@@ -54,7 +54,7 @@ inline constexpr char kRestored[] = "RESTORED";
 inline constexpr char kScanProgress[] = "SCAN_PROGRESS";  // A product handed on.
 // A receiver asks a product's chunks again (resend_request_t): the bus lost them.
 inline constexpr char kResend[] = "RESEND";
-inline constexpr char kPreview[] = "PREVIEW";             // Camera preview, at most 640 px wide.
+inline constexpr char kPreview[] = "PREVIEW";  // Camera preview, at most 640 px wide.
 // The live preview's centre at the camera's full resolution (320 x 240 at most), for focusing.
 inline constexpr char kPreviewFocus[] = "PREVIEW_FOCUS";
 inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper case
@@ -197,8 +197,8 @@ class Node {
       held.scan_id = m.scan_id;
       held.seqs.push_back(m.seq);
       held.chunks.push_back(std::move(bytes));
-      std::this_thread::sleep_until(start +
-                                    std::chrono::duration<double>(held.chunks.back().size() / pace_));
+      std::this_thread::sleep_until(
+          start + std::chrono::duration<double>(held.chunks.back().size() / pace_));
     }
     Hold(std::move(held));
   }
@@ -318,7 +318,7 @@ class Node {
   std::atomic<bool> abandoned_{false};
   bool exit_when_hung_ = false;
   std::atomic<size_t> pending_{0};
-  std::mutex held_mutex_;  // Guards held_ (the worker holds, the LCM thread sends again).
+  std::mutex held_mutex_;         // Guards held_ (the worker holds, the LCM thread sends again).
   std::deque<HeldProduct> held_;  // Oldest first.
   bool work_done_ = false;
   std::thread worker_;

@@ -653,8 +653,7 @@ TEST(Assembler, ChunksTheBusLostAreAskedAgainAndTheProductIsRecovered) {
   std::mutex mutex;
   std::vector<cv::Mat> products;
   Assembler<texture_t, cv::Mat> assembler(
-      &receiver, "TEXTURE",
-      [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
+      &receiver, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
       [&](int64_t, cv::Mat* image, const texture_t&) {
         const std::lock_guard<std::mutex> lock(mutex);
         products.push_back(image->clone());
@@ -699,8 +698,7 @@ TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
   std::mutex mutex;
   std::vector<cv::Mat> products;
   Assembler<texture_t, cv::Mat> assembler(
-      &receiver, "TEXTURE",
-      [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
+      &receiver, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
       [&](int64_t, cv::Mat* image, const texture_t&) {
         const std::lock_guard<std::mutex> lock(mutex);
         products.push_back(image->clone());

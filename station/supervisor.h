@@ -68,7 +68,7 @@ class Supervisor {
  private:
   struct Daemon {
     int32_t pid = 0;
-    int64_t error_utime = -1;  // -1: no status yet (its old errors are not news).
+    int64_t error_utime = -1;   // -1: no status yet (its old errors are not news).
     int64_t products_lost = 0;  // Its "products lost" counter (the bus lost one, asked in vain).
   };
 

@@ -198,10 +198,10 @@ TEST_F(CliTest, AFrameThatContradictsTheOthersIsNamed) {
   const int finer = header.sequence.Find(PatternKind::kGray, Axis::kRow, 6, false);
   ASSERT_GE(coarse, 0);
   ASSERT_GE(finer, 0);
-  const std::string named = "frames " + std::to_string(coarse) + " and " +
-                            std::to_string(header.sequence.Find(PatternKind::kGray, Axis::kRow,
-                                                                7, true)) +
-                            " ('gray row bit 7' and its inverse)";
+  const std::string named =
+      "frames " + std::to_string(coarse) + " and " +
+      std::to_string(header.sequence.Find(PatternKind::kGray, Axis::kRow, 7, true)) +
+      " ('gray row bit 7' and its inverse)";
   struct {
     const char* name;
     fs::path from;
@@ -210,20 +210,19 @@ TEST_F(CliTest, AFrameThatContradictsTheOthersIsNamed) {
   for (const auto& c : cases) {
     SCOPED_TRACE(c.name);
     const std::string scan = CopyScan(c.name);
-    fs::copy_file(c.from, fs::path(scan) / FrameName(coarse),
-                  fs::copy_options::overwrite_existing);
-    const Result r = RunVellum("process --scan " + scan + " --calibration " + Rig() + " --out " +
-                               (root_ / (std::string(c.name) + "_out")).string() +
-                               " --until points");
+    fs::copy_file(c.from, fs::path(scan) / FrameName(coarse), fs::copy_options::overwrite_existing);
+    const Result r =
+        RunVellum("process --scan " + scan + " --calibration " + Rig() + " --out " +
+                  (root_ / (std::string(c.name) + "_out")).string() + " --until points");
     EXPECT_EQ(r.exit_code, 3) << r.output;
     EXPECT_NE(r.output.find("warning frame_contradicts: 1 Gray frame pair"), std::string::npos)
         << r.output;
     EXPECT_NE(r.output.find(named), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("points: warn: "), std::string::npos) << r.output;
   }
-  const Result clean = RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " +
-                                 Rig() + " --out " + (root_ / "clean_out").string() +
-                                 " --until points");
+  const Result clean =
+      RunVellum("process --scan " + (root_ / "scan").string() + " --calibration " + Rig() +
+                " --out " + (root_ / "clean_out").string() + " --until points");
   EXPECT_EQ(clean.exit_code, 0) << clean.output;
   EXPECT_EQ(clean.output.find("frame_contradicts"), std::string::npos) << clean.output;
 }

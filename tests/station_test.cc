@@ -1491,16 +1491,15 @@ TEST_F(StationTest, ProcessingDaemonKilledHoldingAScanIsRestartedAndTheScanIsRes
 TEST_F(StationTest, APausedReceiverOnALoadedMachineAsksAgainForWhatTheBusLost) {
   std::vector<std::unique_ptr<Process>> busy;
   for (int k = 0; k < 2; ++k) {
-    busy.push_back(std::make_unique<Process>(
-        std::vector<std::string>{"/bin/sh", "-c", "while :; do :; done"},
-        dir_ + "/busy" + std::to_string(k) + ".log"));
+    busy.push_back(
+        std::make_unique<Process>(std::vector<std::string>{"/bin/sh", "-c", "while :; do :; done"},
+                                  dir_ + "/busy" + std::to_string(k) + ".log"));
   }
   StartProcessing();
   WaitForHeartbeats(kProcessingStatus);
   StatusBoard board(*lcm_, kProcessingStatus);
-  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] {
-    return board.Counter("STATUS_DECODER", "processing daemons heard") == 3;
-  }));
+  ASSERT_TRUE(HandleUntil(
+      *lcm_, 60, [&] { return board.Counter("STATUS_DECODER", "processing daemons heard") == 3; }));
   Process* flattener = nullptr;
   for (auto& p : processes_) {
     if (p->name().find("vellum-flattener") != std::string::npos) flattener = p.get();

@@ -6,8 +6,8 @@
 #include <cstdint>
 #include <limits>
 #include <mutex>
-#include <tuple>
 #include <opencv2/core/utility.hpp>
+#include <tuple>
 
 #include "core/common/check.h"
 #include "core/common/text.h"
@@ -156,13 +156,10 @@ __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const ui
 // Counts, in one row, the pixels lit enough to judge and those where a Gray pattern and its
 // inverse do not add up to the whole light: |(p - black) + (q - black) - (direct + global)|
 // above 35% of the direct light and 6 noise sigmas (pixels clipped in either frame skipped).
-__attribute__((noinline)) void PairDisagreement(const uint8_t* __restrict p,
-                                                const uint8_t* __restrict q,
-                                                const uint8_t* __restrict black,
-                                                const int16_t* __restrict direct,
-                                                const int16_t* __restrict global,
-                                                int16_t min_direct, int16_t floor_dn, int width,
-                                                int* lit, int* disagree) {
+__attribute__((noinline)) void PairDisagreement(
+    const uint8_t* __restrict p, const uint8_t* __restrict q, const uint8_t* __restrict black,
+    const int16_t* __restrict direct, const int16_t* __restrict global, int16_t min_direct,
+    int16_t floor_dn, int width, int* lit, int* disagree) {
   int n = 0, off = 0;
   for (int x = 0; x < width; ++x) {
     const int d = direct[x];
@@ -271,9 +268,9 @@ struct Decoder::Stream {
   std::vector<uint8_t> received;  // By frame index.
   std::vector<uint8_t> phase_done[2], bit_done[2];  // By step, by bit.
   int count = 0;                                    // Frames received.
-  cv::Mat code[2], uncertain[2];   // CV_16U: reflected Gray code so far; uncertain-bit votes.
-  cv::Mat cos_sum[2], sin_sum[2];  // CV_32S: phase sums so far, fixed point.
-  cv::Mat direct, global;          // CV_16S: the light estimate, once light_ready.
+  cv::Mat code[2], uncertain[2];      // CV_16U: reflected Gray code so far; uncertain-bit votes.
+  cv::Mat cos_sum[2], sin_sum[2];     // CV_32S: phase sums so far, fixed point.
+  cv::Mat direct, global;             // CV_16S: the light estimate, once light_ready.
   std::vector<FramePairCheck> pairs;  // Each inverse-paired bit's, as it is taken up.
   bool light_ready = false;
   Status status = Status::Error("decode not begun");

@@ -37,12 +37,12 @@ struct DecodeOptions {
 // stripe's blur). A frame of another scan or leaf, a pattern shown in another's place, or one
 // taken before the projector changed breaks that at many pixels.
 struct FramePairCheck {
-  int axis = 0;           // 0 columns, 1 rows.
-  int bit = 0;            // Gray bit (0 finest).
-  int pattern = -1;       // Frame indices.
+  int axis = 0;      // 0 columns, 1 rows.
+  int bit = 0;       // Gray bit (0 finest).
+  int pattern = -1;  // Frame indices.
   int inverse = -1;
-  int64_t lit = 0;        // Pixels lit enough to judge (direct light >= min_contrast_dn).
-  int64_t disagree = 0;   // Of those, where pattern + inverse is off the whole light.
+  int64_t lit = 0;       // Pixels lit enough to judge (direct light >= min_contrast_dn).
+  int64_t disagree = 0;  // Of those, where pattern + inverse is off the whole light.
   double Share() const { return lit > 0 ? static_cast<double>(disagree) / lit : 0.0; }
 };
 

@@ -14,8 +14,8 @@
 #include <string>
 
 #include "core/decode/decode.h"
-#include "pipeline/stages.h"
 #include "core/patterns/scan.h"
+#include "pipeline/stages.h"
 #include "station/node.h"
 #include "station/scan_gate.h"
 #include "station/scan_store.h"
@@ -30,7 +30,8 @@ namespace vellum::station {
 struct DecoderNodeOptions {
   std::string data_dir = "scans";  // Station data folder: <data_dir>/scan-<id>/raw, /results.
   DecodeOptions decode;
-  WarningLimits limits;  // What makes its decode doubtful (frame_contradicts), as `vellum process` has.
+  WarningLimits
+      limits;  // What makes its decode doubtful (frame_contradicts), as `vellum process` has.
   double scan_timeout_s = 30;  // An incomplete scan with no capture for this long is given up.
 };
 
