@@ -438,6 +438,18 @@ Status CheckSize(const std::string& path, cv::Size size, const Scan& scan) {
                        " says " + SizeText(expected));
 }
 
+// An image of the scan at `path` (its texture, a light's, a frame) of the camera's size: judged by
+// its header before a pixel is decoded when the size is known (scan.yaml's camera_size, or the
+// texture read before it), and once decoded.
+Status ReadScanImage(const std::string& path, const Scan& scan, int max_bits, cv::Mat* image) {
+  const bool known = ExpectedSize(scan).area() > 0;
+  Status s = ReadImageFile(path, image, max_bits, [&](cv::Size claimed) {
+    return known ? CheckSize(path, claimed, scan) : Status::Ok();
+  });
+  if (s.ok()) s = CheckSize(path, image->size(), scan);
+  return s;
+}
+
 Status MissingFrame(const std::string& path, int k, const Scan& scan) {
   return Status::Error(path + ": file is missing (frame " + std::to_string(k) + " of " +
                        std::to_string(scan.sequence.patterns.size()) + ", pattern '" +
@@ -452,12 +464,8 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
   if (!s.ok()) return s;
   const fs::path root(dir);
   // Judged by its header first when scan.yaml gives the camera's size.
-  const std::string texture = (root / kTexture).string();
-  s = ReadImageFile(texture, &scan->texture, 16, [&](cv::Size claimed) {
-    return scan->camera_size.area() > 0 ? CheckSize(texture, claimed, *scan) : Status::Ok();
-  });
-  if (!s.ok()) return s;
-  s = CheckSize(texture, scan->texture.size(), *scan);
+  scan->texture.release();
+  s = ReadScanImage((root / kTexture).string(), *scan, 16, &scan->texture);
   if (!s.ok()) return s;
   std::string why;
   if (!scan->leaf_hint.empty() &&
@@ -469,9 +477,7 @@ Status ReadScanHeader(const std::string& dir, Scan* scan) {
     if (!PathExists(path)) {
       return Status::Error(path + ": file is missing (light '" + light.name + "' of scan.yaml)");
     }
-    s = ReadImageFile(path, &light.image, 16,
-                      [&](cv::Size claimed) { return CheckSize(path, claimed, *scan); });
-    if (s.ok()) s = CheckSize(path, light.image.size(), *scan);
+    s = ReadScanImage(path, *scan, 16, &light.image);
     if (!s.ok()) return s;
   }
   scan->frames.clear();
@@ -510,11 +516,7 @@ Status ReadFrames(const std::string& dir, const Scan& header, const FrameSink& t
       const std::string path = (root / FrameName(k)).string();
       cv::Mat img;
       Status s =
-          PathExists(path)
-              ? ReadImageFile(path, &img, 8,
-                              [&](cv::Size claimed) { return CheckSize(path, claimed, header); })
-              : MissingFrame(path, k, header);
-      if (s.ok()) s = CheckSize(path, img.size(), header);
+          PathExists(path) ? ReadScanImage(path, header, 8, &img) : MissingFrame(path, k, header);
       if (s.ok()) {
         if (img.channels() == 3) cv::cvtColor(img, img, cv::COLOR_BGR2GRAY);
         const std::lock_guard<std::mutex> lock(take_mutex);
