@@ -634,6 +634,39 @@ TEST(Assembler, AProductSentAgainMidwayIsBuiltFromTheNewSendAlone) {
       << statuses.back().last_error;
 }
 
+// A daemon receiving TEXTURE on `bus` (asking again after 50 ms, giving up after 30 s), and
+// the products it made whole.
+struct TextureReceiver {
+  explicit TextureReceiver(lcm::LCM* bus)
+      : node("vellum-unit", bus),
+        assembler(
+            &node, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
+            [this](int64_t, cv::Mat* image, const texture_t&) {
+              const std::lock_guard<std::mutex> lock(mutex);
+              products.push_back(image->clone());
+            },
+            /*timeout_s=*/30, /*ask_after_s=*/0.05) {}
+  // Handles the bus and ticks until a product is whole (30 s at most); the products.
+  std::vector<cv::Mat> TickUntilWhole(lcm::LCM* bus) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (Products().empty() && std::chrono::steady_clock::now() < deadline) {
+      bus->handleTimeout(10);
+      assembler.Tick();
+    }
+    node.Drain();
+    return Products();
+  }
+  std::vector<cv::Mat> Products() {
+    const std::lock_guard<std::mutex> lock(mutex);
+    return products;
+  }
+
+  Node node;
+  std::mutex mutex;
+  std::vector<cv::Mat> products;  // Guarded by mutex (the worker adds).
+  Assembler<texture_t, cv::Mat> assembler;
+};
+
 // Chunks the bus lost (a loaded machine, a receiver paused) are asked again on RESEND and sent
 // again byte for byte by the publisher that holds them: the product is whole and the same, the
 // loss and the recovery are counted. The receiver starts listening after the send and is then
@@ -649,37 +682,18 @@ TEST(Assembler, ChunksTheBusLostAreAskedAgainAndTheProductIsRecovered) {
   sender.PublishChunks("TEXTURE", &chunks);  // No one listens yet: every chunk is lost.
   for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
 
-  Node receiver("vellum-unit", &bus);
-  std::mutex mutex;
-  std::vector<cv::Mat> products;
-  Assembler<texture_t, cv::Mat> assembler(
-      &receiver, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
-      [&](int64_t, cv::Mat* image, const texture_t&) {
-        const std::lock_guard<std::mutex> lock(mutex);
-        products.push_back(image->clone());
-      },
-      /*timeout_s=*/30, /*ask_after_s=*/0.05);
+  TextureReceiver r(&bus);
   bus.publish("TEXTURE", &chunks[0]);  // Two chunks came through, as sent (their seq too).
   bus.publish("TEXTURE", &chunks[2]);
-  auto whole = [&] {
-    const std::lock_guard<std::mutex> lock(mutex);
-    return !products.empty();
-  };
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (!whole() && std::chrono::steady_clock::now() < deadline) {
-    bus.handleTimeout(10);
-    assembler.Tick();
-  }
-  receiver.Drain();
-  const std::lock_guard<std::mutex> lock(mutex);
+  const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
   ASSERT_EQ(products.size(), 1u) << "not recovered within 30 s";
   EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
-  EXPECT_EQ(receiver.Counter("products recovered"), 1);
-  EXPECT_EQ(receiver.Counter("products lost"), 0);
-  EXPECT_GE(receiver.Counter("chunks asked again"), static_cast<int64_t>(chunks.size()) - 2);
+  EXPECT_EQ(r.node.Counter("products recovered"), 1);
+  EXPECT_EQ(r.node.Counter("products lost"), 0);
+  EXPECT_GE(r.node.Counter("chunks asked again"), static_cast<int64_t>(chunks.size()) - 2);
   EXPECT_GE(sender.Counter("chunks sent again"), static_cast<int64_t>(chunks.size()) - 2);
   // The gap between the two chunks that came is a loss; the chunks sent again are not.
-  EXPECT_EQ(receiver.Counter("lost messages"), 1);
+  EXPECT_EQ(r.node.Counter("lost messages"), 1);
 }
 
 // A product of which no chunk came (the bus lost it all) is known by its sender's announcement
@@ -694,33 +708,14 @@ TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
   sender.PublishChunks("TEXTURE", &chunks);  // No one listens: lost whole.
   for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
 
-  Node receiver("vellum-unit", &bus);
-  std::mutex mutex;
-  std::vector<cv::Mat> products;
-  Assembler<texture_t, cv::Mat> assembler(
-      &receiver, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
-      [&](int64_t, cv::Mat* image, const texture_t&) {
-        const std::lock_guard<std::mutex> lock(mutex);
-        products.push_back(image->clone());
-      },
-      /*timeout_s=*/30, /*ask_after_s=*/0.05);
-  assembler.AwaitAnnounced("TEXTURE");
+  TextureReceiver r(&bus);
+  r.assembler.AwaitAnnounced("TEXTURE");
   AnnounceHandedOn(&sender, 12, "TEXTURE");
-  auto whole = [&] {
-    const std::lock_guard<std::mutex> lock(mutex);
-    return !products.empty();
-  };
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-  while (!whole() && std::chrono::steady_clock::now() < deadline) {
-    bus.handleTimeout(10);
-    assembler.Tick();
-  }
-  receiver.Drain();
-  const std::lock_guard<std::mutex> lock(mutex);
+  const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
   ASSERT_EQ(products.size(), 1u) << "not recovered within 30 s";
   EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
-  EXPECT_GE(receiver.Counter("products asked again"), 1);
-  EXPECT_EQ(receiver.Counter("products recovered"), 1);
+  EXPECT_GE(r.node.Counter("products asked again"), 1);
+  EXPECT_EQ(r.node.Counter("products recovered"), 1);
   EXPECT_EQ(sender.Counter("chunks sent again"), static_cast<int64_t>(chunks.size()));
 }
 
