@@ -12,6 +12,7 @@
 #include "core/shading/albedo.h"
 #include "flags/options.h"
 #include "io/calibration_io.h"
+#include "io/json.h"
 #include "io/scan_io.h"
 
 namespace vellum {
@@ -86,11 +87,7 @@ int RunCalibrateSolve(const std::vector<std::string>& args) {
     return 1;
   }
   Status s = WriteCalibration(out, solution.calibration);
-  if (s.ok()) {
-    std::ofstream f(out + ".report.txt");
-    f << report;
-    if (!f) s = Status::Error(out + ".report.txt: cannot write");
-  }
+  if (s.ok()) s = WriteTextFile(out + ".report.txt", report);
   if (!s.ok()) {
     std::fprintf(stderr, "vellum calibrate solve: %s\n", s.message().c_str());
     return 1;

@@ -210,11 +210,10 @@ int RunScan(const std::vector<std::string>& args) {
           hint + "'");
     }
     // The same share of the view a hint in camera pixels may cover (LeafHintFits).
-    const double most = OutlineOptions().max_view_share;
-    if (w * h > most) {
-      throw UsageError("--leaf-hint '" + hint + "' covers " + Fixed(100 * w * h, 0) +
-                       "% of the camera's view, more than " + Fixed(100 * most, 0) +
-                       "%: a hint is a box inside the leaf, not around it");
+    std::string why;
+    if (!LeafHintShareFits(w * h, OutlineOptions().max_view_share, "--leaf-hint '" + hint + "'",
+                           &why)) {
+      throw UsageError(why);
     }
     station::ToLeafHint(cv::Rect2d(x, y, w, h), request.leaf_hint);
   }

@@ -1,6 +1,8 @@
 #include "io/iiif.h"
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
@@ -8,6 +10,7 @@
 
 #include "core/patterns/scan.h"
 #include "io/vips.h"
+#include "io/write_whole.h"
 
 namespace vellum {
 namespace fs = std::filesystem;
@@ -85,18 +88,36 @@ Status PathUnderRoot(const std::string& root, const std::string& file, std::stri
 Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid) {
   Status s = StartVips();
   if (!s.ok()) return s;
+  // Made in memory and written by us: libvips 8.14's pyramid writer, failing to write (a full
+  // disk), crashes the process as it cleans up (libvips issue 3411's path); a buffer cannot
+  // fail so, and the file's write failure is an error like any other.
+  std::string bytes;
   try {
     vips::VImage image = vips::VImage::new_from_file(tif.c_str());
-    image.tiffsave(pyramid.c_str(), vips::VImage::option()
-                                        ->set("tile", true)
-                                        ->set("pyramid", true)
-                                        ->set("tile_width", 256)
-                                        ->set("tile_height", 256)
-                                        ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_LZW));
+    VipsBlob* blob =
+        image.tiffsave_buffer(vips::VImage::option()
+                                  ->set("tile", true)
+                                  ->set("pyramid", true)
+                                  ->set("tile_width", 256)
+                                  ->set("tile_height", 256)
+                                  ->set("compression", VIPS_FOREIGN_TIFF_COMPRESSION_LZW));
+    size_t size = 0;
+    const void* data = vips_blob_get(blob, &size);
+    bytes.assign(static_cast<const char*>(data), size);
+    vips_area_unref(VIPS_AREA(blob));
   } catch (const vips::VError& e) {
-    return Status::Error(pyramid + ": cannot write the pyramidal TIFF: " + e.what());
+    return Status::Error(pyramid + ": cannot write the pyramidal TIFF: " + VipsErrorText(e.what()));
   }
-  return Status::Ok();
+  return WriteWhole(pyramid, [&](const std::string& part) {
+    std::ofstream out(part, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    out.close();
+    if (!out) {
+      return Status::Error(part + ": cannot write the pyramidal TIFF (" + std::strerror(errno) +
+                           ")");
+    }
+    return Status::Ok();
+  });
 }
 
 Status ReadIiifCanvases(const std::string& results, const std::string& root,

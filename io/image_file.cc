@@ -180,7 +180,7 @@ Status SaveWithVips(const std::string& path, const cv::Mat& image, const Save& s
       cv::Mat hold;
       save(ToVips(image, &hold), part);
     } catch (const vips::VError& e) {
-      return Status::Error(path + ": cannot write image: " + e.what());
+      return Status::Error(path + ": cannot write image: " + VipsErrorText(e.what()));
     }
     return Status::Ok();
   });

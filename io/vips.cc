@@ -6,6 +6,18 @@
 
 namespace vellum {
 
+std::string VipsErrorText(const char* what) {
+  std::string text;
+  for (const char* c = what; *c != '\0'; ++c) {
+    if (*c != '\n') {
+      text += *c;
+    } else if (c[1] != '\0') {
+      text += "; ";
+    }
+  }
+  return text;
+}
+
 Status StartVips() {
   static std::once_flag once;
   static bool ok = false;

@@ -10,6 +10,10 @@ namespace vellum {
 // Starts libvips on first use; an error says why it cannot start.
 Status StartVips();
 
+// A libvips error (VError::what(): one line per failing call, as "file: write error\nunix
+// error: No space left on device\n") as one line, its parts joined by "; ".
+std::string VipsErrorText(const char* what);
+
 // Ok when `path` is an image in a format vellum reads through libvips: PNG, TIFF, JPEG, JPEG 2000
 // or WebP. Other formats libvips knows (OpenEXR, FITS, PDF, SVG, ImageMagick's, ...) are refused
 // naming the loader: no page a station keeps comes in them, and their loaders are not hardened

@@ -35,4 +35,25 @@ Status WriteWhole(const std::string& path,
   return Status::Ok();
 }
 
+Status ReplaceFolder(const std::string& part, const std::string& folder) {
+  const fs::path target(folder);
+  const fs::path old = target.parent_path() / (".old-" + target.filename().string());
+  std::error_code ec;
+  fs::remove_all(old, ec);  // A killed run's.
+  const bool had = fs::exists(target, ec);
+  if (had) {
+    fs::rename(target, old, ec);
+    if (ec)
+      return Status::Error(folder + ": cannot move the earlier one aside (" + ec.message() + ")");
+  }
+  fs::rename(part, target, ec);
+  if (ec) {
+    const std::string why = ec.message();
+    if (had) fs::rename(old, target, ec);
+    return Status::Error(folder + ": cannot put in place (" + why + ")");
+  }
+  if (had) fs::remove_all(old, ec);
+  return Status::Ok();
+}
+
 }  // namespace vellum

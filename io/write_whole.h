@@ -18,4 +18,10 @@ Status WriteWhole(const std::string& path,
 // The temporary name WriteWhole gives `path`.
 std::string PartName(const std::string& path);
 
+// Puts the folder `part` (written whole beside `folder`, under PartName(folder)) in the place of
+// `folder`: renamed into place when `folder` is absent; else `folder` is moved aside (hidden,
+// ".old-<name>"), `part` renamed in, and the old one removed. On a failure `folder` is left as
+// it was; the caller removes `part`.
+Status ReplaceFolder(const std::string& part, const std::string& folder);
+
 }  // namespace vellum

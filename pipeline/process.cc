@@ -1,10 +1,15 @@
 #include "pipeline/process.h"
 
+#include <filesystem>
+
 #include "core/common/text.h"
 #include "io/calibration_io.h"
 #include "io/scan_io.h"
+#include "io/write_whole.h"
 
 namespace vellum {
+
+namespace fs = std::filesystem;
 
 Status ReadProcessInput(const std::string& scan_dir, const std::string& calibration_path,
                         ProcessInput* input) {
@@ -28,8 +33,11 @@ Status ReadProcessInput(const std::string& scan_dir, const std::string& calibrat
   return Status::Ok();
 }
 
-ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& options,
-                          const std::string& results, const PipelineProgress& progress) {
+namespace {
+
+// The stages, into `results`.
+ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& options,
+                        const std::string& results, const PipelineProgress& progress) {
   ProcessResult out;
   ProcessReport& report = out.report;
   report.scan = input.scan_dir;
@@ -168,6 +176,50 @@ ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& opti
     return out;
   next("report", 0.97);
   out.status = WriteReports(results, input.scan_dir, &report);
+  return out;
+}
+
+// `results` without a trailing separator (its name is what the part's is made from).
+std::string FolderName(const std::string& results) {
+  fs::path p = fs::path(results).lexically_normal();
+  if (p.filename().empty() && p.has_parent_path()) p = p.parent_path();
+  return p.string();
+}
+
+}  // namespace
+
+Status CheckResultsFolder(const std::string& results) {
+  std::error_code ec;
+  const fs::path dir(FolderName(results));
+  if (!fs::exists(dir, ec)) return Status::Ok();
+  if (!fs::is_directory(dir, ec)) return Status::Error(results + ": is a file, not a folder");
+  if (fs::is_empty(dir, ec) || fs::exists(dir / "report.json", ec)) return Status::Ok();
+  return Status::Error(results + ": holds files but no report.json, so it is not an earlier " +
+                       "run's results, and a run replaces its results folder whole: give a new " +
+                       "or an empty folder");
+}
+
+ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& options,
+                          const std::string& results, const PipelineProgress& progress) {
+  ProcessResult out;
+  out.status = CheckResultsFolder(results);
+  if (!out.status.ok()) return out;
+  const std::string folder = FolderName(results);
+  const std::string part = PartName(folder);
+  std::error_code ec;
+  fs::remove_all(part, ec);  // A killed run's.
+  out = RunStages(input, options, part, progress);
+  if (out.status.ok()) out.status = ReplaceFolder(part, folder);
+  if (!out.status.ok()) {
+    fs::remove_all(part, ec);
+    // Errors name the results folder, not its temporary name.
+    std::string message = out.status.message();
+    for (size_t at = message.find(part); at != std::string::npos;
+         at = message.find(part, at + results.size())) {
+      message.replace(at, part.size(), results);
+    }
+    out.status = Status::Error(message);
+  }
   return out;
 }
 

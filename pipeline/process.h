@@ -49,9 +49,16 @@ struct ProcessResult {
 using PipelineProgress = std::function<void(const std::string& stage, double done)>;
 
 // Runs decode, triangulate and outline, then mesh, flatten and restore for each page, into
-// `results` (created), then writes report.html and report.json. Errors name the scan directory,
-// or the file that failed.
+// `results`, then writes report.html and report.json. Errors name the scan directory, or the
+// file that failed. The results are written whole or not at all: the run writes into a hidden
+// folder beside `results` (PartName) that takes its place only when every stage succeeded, so a
+// failed run (an error, a full disk) leaves `results` as it was and a killed one only the hidden
+// part, which the next run removes. `results` may be new, empty or an earlier run's results
+// (it holds report.json): anything else is refused (CheckResultsFolder) before any work.
 ProcessResult RunPipeline(const ProcessInput& input, const PipelineOptions& options,
                           const std::string& results, const PipelineProgress& progress = nullptr);
+
+// Ok when a run may write `results`: absent, an empty folder, or an earlier run's results.
+Status CheckResultsFolder(const std::string& results);
 
 }  // namespace vellum

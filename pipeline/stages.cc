@@ -93,7 +93,7 @@ std::string PageDir(const std::string& results, const std::string& page) {
 
 namespace {
 
-// The scan's redundancy: each Gray frame and its inverse add up to the whole light. A pair far
+// The scan's redundancy: each Gray frame and its inverse add up to white + black. A pair far
 // off the scan's usual names its frames (frame_contradicts).
 void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
                      const WarningLimits& limits, StageReport* r) {
@@ -107,26 +107,42 @@ void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
   r->Number("frames", "pair_disagreement_median", usual);
   r->Number("frames", "pair_disagreement_max", *std::max_element(shares.begin(), shares.end()));
   const double bar = std::max(limits.max_pair_disagreement, limits.pair_over_usual * usual);
-  std::string named;
-  int count = 0;
+  std::string named, left_out;
+  int count = 0, mended = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {
-    if (shares[k] <= bar) continue;
     const FramePairCheck& p = pairs[k];
+    if (p.left_out >= 0) {
+      left_out += (left_out.empty() ? "" : ",") + std::to_string(p.left_out);
+    }
+    if (shares[k] <= bar) continue;
+    mended += p.left_out >= 0;
     if (count++ < 4) {
       named += std::string(named.empty() ? "" : "; ") + "frames " + std::to_string(p.pattern) +
                " and " + std::to_string(p.inverse) + " ('" +
                Describe(scan.sequence.patterns[p.pattern]) + "' and its inverse) at " +
                Fixed(100.0 * shares[k], 1) + "%";
+      if (p.left_out >= 0) {
+        const int kept = p.left_out == p.pattern ? p.inverse : p.pattern;
+        named += ", frame " + std::to_string(p.left_out) +
+                 (p.shows_pair ? " showing its pair's pattern" : " off the scan's light") +
+                 " left out, the bit decoded from frame " + std::to_string(kept) + " alone";
+      }
     }
   }
+  if (!left_out.empty()) r->Text("frames", "left_out", left_out);
   if (count == 0) return;
   r->Number("frames", "pairs_contradicting", count);
+  r->Number("frames", "pairs_mended", mended);
   r->Warn("frame_contradicts",
-          std::to_string(count) + " Gray frame pair(s) do not add up to the scan's light at " +
+          std::to_string(count) +
+              " Gray frame pair(s) do not add up to the white and black frames at " +
               "many of the lit pixels (" + named + (count > 4 ? "; ..." : "") +
-              "; the scan's usual pair: " + Fixed(100.0 * usual, 1) +
+              "; the scan's usual pair: " + Fixed(100.0 * usual, 2) +
               "%): a frame of another scan or leaf, a pattern shown in another's place, or a "
-              "frame taken before the projector changed; scan again");
+              "frame taken before the projector changed; " +
+              (mended == count ? "decoded without it, but the captures hold a wrong frame: "
+                                 "scan again for the archive"
+                               : "scan again"));
 }
 
 }  // namespace

@@ -57,7 +57,7 @@ struct WarningLimits {
   // that moved), and the points that did decode are doubtful too.
   double min_points_of_lit = 0.5;
   // Share of the lit pixels at which a Gray frame and its inverse may fail to add up to the
-  // scan's whole light (FramePairCheck), above both this and pair_over_usual times the scan's
+  // white and black frames (FramePairCheck), above both this and pair_over_usual times the scan's
   // own median pair: a frame of another scan or leaf, a pattern in another's place, or one
   // taken before the projector changed (frame_contradicts, naming the frames).
   double max_pair_disagreement = 0.02;

@@ -127,7 +127,10 @@ __attribute__((noinline)) void LightFromExtremes(const uint8_t* __restrict lmax,
 // Classifies one Gray bit of a row into code (at bit `shift`) and counts uncertain votes. Bit
 // classification of Xu & Aliaga: where direct light dominates, pattern vs inverse (with a
 // noise margin); where global light dominates, only a pattern clearly below the direct level
-// with its inverse above the global level (or the reverse) decides.
+// with its inverse above the global level (or the reverse) decides. kUndo takes back what the
+// same call without it gave (the bit cleared, its votes subtracted), so a bit can be classified
+// again from other frames.
+template <bool kUndo>
 __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const uint8_t* __restrict q,
                                            const uint8_t* __restrict black,
                                            const int16_t* __restrict direct,
@@ -136,6 +139,7 @@ __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const ui
                                            uint16_t* __restrict code,
                                            uint16_t* __restrict uncertain, int width) {
   const int16_t neg_margin = static_cast<int16_t>(-margin);
+  const uint16_t keep = static_cast<uint16_t>(~(1u << shift));
   for (int x = 0; x < width; ++x) {
     const int16_t pv = static_cast<int16_t>(p[x] - black[x]);
     const int16_t qv = static_cast<int16_t>(q[x] - black[x]);
@@ -148,29 +152,56 @@ __attribute__((noinline)) void ClassifyBit(const uint8_t* __restrict p, const ui
     const uint16_t near = (d < margin) & (d > neg_margin);
     const uint16_t unsure = static_cast<uint16_t>((direct[x] < min_direct) | (direct_wins & near) |
                                                   ((1 - direct_wins) & (1 - (one | zero))));
-    code[x] = static_cast<uint16_t>(code[x] | (bit << shift));
-    uncertain[x] = static_cast<uint16_t>(uncertain[x] + unsure * votes);
+    if constexpr (kUndo) {
+      code[x] = static_cast<uint16_t>(code[x] & keep);
+      uncertain[x] = static_cast<uint16_t>(uncertain[x] - unsure * votes);
+    } else {
+      code[x] = static_cast<uint16_t>(code[x] | (bit << shift));
+      uncertain[x] = static_cast<uint16_t>(uncertain[x] + unsure * votes);
+    }
   }
 }
 
 // Counts, in one row, the pixels lit enough to judge and those where a Gray pattern and its
-// inverse do not add up to the whole light: |(p - black) + (q - black) - (direct + global)|
-// above 35% of the direct light and 6 noise sigmas (pixels clipped in either frame skipped).
+// inverse do not add up to the white and black frames: |p + q - white - black| above 35% of the
+// direct light and 6 noise sigmas (pixels clipped in any of the three skipped). Of those, when
+// `off_pattern` is given, counts where each frame lies off both levels the scan's light allows
+// a lit pixel (above black: global / 2 unlit, direct + global / 2 lit; off: farther than 20% of
+// the direct light and 6 noise sigmas from both), and where the two frames show the same value.
+template <bool kBlame>
 __attribute__((noinline)) void PairDisagreement(
     const uint8_t* __restrict p, const uint8_t* __restrict q, const uint8_t* __restrict black,
-    const int16_t* __restrict direct, const int16_t* __restrict global, int16_t min_direct,
-    int16_t floor_dn, int width, int* lit, int* disagree) {
-  int n = 0, off = 0;
+    const uint8_t* __restrict white, const int16_t* __restrict direct,
+    const int16_t* __restrict global, int16_t min_direct, int16_t floor_dn, int width, int64_t* lit,
+    int64_t* disagree, int64_t* off_pattern = nullptr, int64_t* off_inverse = nullptr,
+    int64_t* alike = nullptr) {
+  int n = 0, off = 0, np = 0, nq = 0, same = 0;
   for (int x = 0; x < width; ++x) {
     const int d = direct[x];
-    const int judged = (d >= min_direct) & (p[x] < 255) & (q[x] < 255);
-    const int r = p[x] + q[x] - 2 * black[x] - d - global[x];
+    const int judged = (d >= min_direct) & (p[x] < 255) & (q[x] < 255) & (white[x] < 255);
+    const int r = p[x] + q[x] - white[x] - black[x];
     const int tol = std::max<int>(floor_dn, (d * 35) / 100);
+    const int wrong = judged & ((r > tol) | (r < -tol));
     n += judged;
-    off += judged & ((r > tol) | (r < -tol));
+    off += wrong;
+    if constexpr (kBlame) {
+      const int pv = p[x] - black[x], qv = q[x] - black[x];
+      const int lo = global[x] / 2, hi = d + global[x] / 2;
+      const int near = std::max<int>(floor_dn, d / 5);
+      const int p_off = (std::abs(pv - lo) > near) & (std::abs(pv - hi) > near);
+      const int q_off = (std::abs(qv - lo) > near) & (std::abs(qv - hi) > near);
+      np += wrong & p_off;
+      nq += wrong & q_off;
+      same += wrong & (std::abs(pv - qv) <= near);
+    }
   }
   *lit += n;
   *disagree += off;
+  if constexpr (kBlame) {
+    *off_pattern += np;
+    *off_inverse += nq;
+    *alike += same;
+  }
 }
 
 // Adds one phase-shifted frame's row to the sums c += v cos(delta_k), s += v sin(delta_k).
@@ -285,7 +316,8 @@ struct Decoder::Stream {
   }
   // Gray bit b of an axis can be classified (its light estimate aside).
   bool BitInputsIn(const AxisPlan& plan, int b) const {
-    return Has(plan.pattern[b]) && (plan.inverse[b] >= 0 ? Has(plan.inverse[b]) : Has(white));
+    // White too: a pair is checked against it (FramePairCheck), a lone pattern judged by it.
+    return Has(plan.pattern[b]) && Has(white) && (plan.inverse[b] < 0 || Has(plan.inverse[b]));
   }
 };
 
@@ -397,6 +429,83 @@ size_t Decoder::HeldFrameBytes() const {
   return bytes;
 }
 
+void Decoder::Mend(FramePairCheck* check, int16_t margin, int16_t min_direct, int16_t floor_dn) {
+  Stream& st = *stream_;
+  const int width = st.size.width;
+  const cv::Mat& pattern = st.held[check->pattern];
+  const cv::Mat& inverse = st.held[check->inverse];
+  FramePairCheck looked = *check;
+  looked.lit = looked.disagree = 0;
+  std::mutex mutex;
+  cv::parallel_for_(cv::Range(0, st.size.height), [&](const cv::Range& range) {
+    FramePairCheck part;
+    for (int y = range.start; y < range.end; ++y) {
+      PairDisagreement<true>(pattern.ptr<uint8_t>(y), inverse.ptr<uint8_t>(y),
+                             st.held[st.black].ptr<uint8_t>(y), st.held[st.white].ptr<uint8_t>(y),
+                             st.direct.ptr<int16_t>(y), st.global.ptr<int16_t>(y), min_direct,
+                             floor_dn, width, &part.lit, &part.disagree, &part.off_pattern,
+                             &part.off_inverse, &part.alike);
+    }
+    const std::lock_guard<std::mutex> lock(mutex);
+    looked.lit += part.lit;
+    looked.disagree += part.disagree;
+    looked.off_pattern += part.off_pattern;
+    looked.off_inverse += part.off_inverse;
+    looked.alike += part.alike;
+  });
+  *check = looked;
+  // A frame of the light estimate's (the finest bits) has shaped the direct and global light
+  // every bit is judged by: leaving it out of one bit would not mend the others. Named only.
+  for (int k : st.high_frequency) {
+    if (k == check->pattern || k == check->inverse) return;
+  }
+  // The frame to leave out: the one off the light's levels at a good part of the disagreeing
+  // pixels and at several times the other's; else, the two alike at nearly all of them, the
+  // later shown (the sequence is shown in its order). Otherwise the redundancy does not tell.
+  const int64_t n = check->disagree;
+  if (check->off_pattern > n / 4 && check->off_pattern > 3 * check->off_inverse) {
+    check->left_out = check->pattern;
+  } else if (check->off_inverse > n / 4 && check->off_inverse > 3 * check->off_pattern) {
+    check->left_out = check->inverse;
+  } else if (check->Share() > 0.75 && check->alike > n * 9 / 10) {
+    // The two alike wherever lit (another pattern differs from the right one at half the
+    // pixels at most): one frame shows its pair's pattern.
+    check->left_out = std::max(check->pattern, check->inverse);
+    check->shows_pair = true;
+  }
+  if (check->left_out < 0) return;
+  // The bit again, from the frame kept alone, as a code without inverses is decoded: against
+  // white + black - kept, the frame its pair would have been. (Everywhere, not only where the
+  // two disagree: where a wrong frame passes for its pair's complement at a dim pixel, the pair
+  // is less sure than the frame alone, and the decode rejected 15 times the pixels.)
+  const AxisPlan& plan = st.axes[check->axis];
+  const int b = check->bit;
+  const bool keep_pattern = check->left_out == check->inverse;
+  const uint16_t votes = b >= kFirstVotingBit ? 1 : 0;
+  cv::parallel_for_(cv::Range(0, st.size.height), [&](const cv::Range& range) {
+    std::vector<uint8_t> made(width);
+    for (int y = range.start; y < range.end; ++y) {
+      const uint8_t* p = pattern.ptr<uint8_t>(y);
+      const uint8_t* q = inverse.ptr<uint8_t>(y);
+      const uint8_t* black = st.held[st.black].ptr<uint8_t>(y);
+      const int16_t* direct = st.direct.ptr<int16_t>(y);
+      const int16_t* global = st.global.ptr<int16_t>(y);
+      uint16_t* code = st.code[check->axis].ptr<uint16_t>(y);
+      uint16_t* uncertain = st.uncertain[check->axis].ptr<uint16_t>(y);
+      ClassifyBit<true>(p, q, black, direct, global, margin, min_direct, votes, b - plan.first_bit,
+                        code, uncertain, width);
+      const uint8_t* kept = keep_pattern ? p : q;
+      const uint8_t* white = st.held[st.white].ptr<uint8_t>(y);
+      for (int x = 0; x < width; ++x) {
+        made[x] = static_cast<uint8_t>(std::clamp(white[x] + black[x] - kept[x], 0, 255));
+      }
+      ClassifyBit<false>(keep_pattern ? p : made.data(), keep_pattern ? made.data() : q, black,
+                         direct, global, margin, min_direct, votes, b - plan.first_bit, code,
+                         uncertain, width);
+    }
+  });
+}
+
 void Decoder::Digest() {
   Stream& st = *stream_;
   if (!st.status.ok()) return;
@@ -430,7 +539,7 @@ void Decoder::Digest() {
   // is all of them, row by row in cache.
   cv::parallel_for_(cv::Range(0, st.size.height), [&](const cv::Range& range) {
     std::vector<uint8_t> lmax(width), lmin(width), made(width);
-    std::vector<std::pair<int, int>> counts(bits.size(), {0, 0});
+    std::vector<std::pair<int64_t, int64_t>> counts(bits.size(), {0, 0});
     for (int y = range.start; y < range.end; ++y) {
       const uint8_t* black = st.held[st.black].ptr<uint8_t>(y);
       int16_t* direct = st.direct.ptr<int16_t>(y);
@@ -452,23 +561,23 @@ void Decoder::Digest() {
         const AxisPlan& plan = st.axes[job.axis];
         const uint8_t* p = st.held[plan.pattern[job.bit]].ptr<uint8_t>(y);
         const uint8_t* q = nullptr;
+        const uint8_t* white = st.held[st.white].ptr<uint8_t>(y);
         if (plan.inverse[job.bit] >= 0) {
           q = st.held[plan.inverse[job.bit]].ptr<uint8_t>(y);
-          PairDisagreement(p, q, black, direct, global, min_direct, floor_dn, width,
-                           &counts[j].first, &counts[j].second);
+          PairDisagreement<false>(p, q, black, white, direct, global, min_direct, floor_dn, width,
+                                  &counts[j].first, &counts[j].second);
         } else {
           // No inverse pattern: the one it would have given, white + black - pattern, so the
           // bit is judged against the middle of the white and black frames.
-          const uint8_t* white = st.held[st.white].ptr<uint8_t>(y);
           for (int x = 0; x < width; ++x) {
             made[x] = static_cast<uint8_t>(std::clamp(white[x] + black[x] - p[x], 0, 255));
           }
           q = made.data();
         }
-        ClassifyBit(p, q, black, direct, global, margin, min_direct,
-                    job.bit >= kFirstVotingBit ? 1 : 0, job.bit - plan.first_bit,
-                    st.code[job.axis].ptr<uint16_t>(y), st.uncertain[job.axis].ptr<uint16_t>(y),
-                    width);
+        ClassifyBit<false>(p, q, black, direct, global, margin, min_direct,
+                           job.bit >= kFirstVotingBit ? 1 : 0, job.bit - plan.first_bit,
+                           st.code[job.axis].ptr<uint16_t>(y),
+                           st.uncertain[job.axis].ptr<uint16_t>(y), width);
       }
       for (const PhaseJob& job : phases) {
         const AxisPlan& plan = st.axes[job.axis];
@@ -493,6 +602,9 @@ void Decoder::Digest() {
     check.inverse = plan.inverse[bits[j].bit];
     check.lit = pair_counts[j].first;
     check.disagree = pair_counts[j].second;
+    if (check.Share() > options_.suspect_pair_share) {
+      Mend(&check, margin, min_direct, floor_dn);
+    }
     st.pairs.push_back(check);
   }
   // Frames taken up are let go (white and black are kept to the end).
@@ -526,6 +638,10 @@ bool DecodeOptions::Check(std::string* why) const {
   }
   if (smooth_passes < 1 || noise_dn <= 0 || outlier_sigmas <= 0) {
     *why = "smooth_passes must be >= 1, noise_dn and outlier_sigmas > 0";
+    return false;
+  }
+  if (!(suspect_pair_share > 0 && suspect_pair_share <= 1)) {
+    *why = "suspect_pair_share must lie in (0, 1]";
     return false;
   }
   return true;

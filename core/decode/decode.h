@@ -28,21 +28,40 @@ struct DecodeOptions {
   int smooth_radius_px = 3;        // Local fit window radius, camera pixels, 0..8; 0 = no fit.
   int smooth_passes = 2;           // Robust (Tukey) reweighting passes of the local fit.
   double outlier_sigmas = 4.685;   // Tukey cut-off, in units of a pixel's expected noise.
+  // A Gray frame pair disagreeing (FramePairCheck) at more of its lit pixels than this is looked
+  // into: where one frame of the two is told as the one that does not fit, the bit is decoded
+  // from the other alone (a sound pair disagrees at 0.02% of its lit pixels on the virtual
+  // gantry; a frame of another leaf at 8%, of another pattern at half). 1: never.
+  double suspect_pair_share = 0.05;
 
   bool Check(std::string* why) const;
 };
 
-// How far a Gray bit's frame and its inverse's agree: lit by the pair, each lit pixel sees the
-// scan's whole light once (pattern + inverse = direct + global, above black, whatever the
-// stripe's blur). A frame of another scan or leaf, a pattern shown in another's place, or one
-// taken before the projector changed breaks that at many pixels.
+// How far a Gray bit's frame and its inverse's agree: the two together light every pixel once,
+// as the white frame does, so light being additive, pattern + inverse = white + black at every
+// pixel, whatever the stripe's blur or the light scattered. A frame of another scan or leaf, a
+// pattern shown in another's place, or one taken before the projector changed breaks that at many
+// pixels.
+//
+// Which frame of a pair that disagrees is wrong, where the scan's redundancy tells: at the
+// pixels where they disagree, a frame of another leaf lies off the two levels this scan's light
+// allows (unlit, lit) where the right frame lies on them; a frame taken before the projector
+// changed shows its pair's pattern (the two alike), and it is the later one shown. A frame of
+// another pattern lies on the levels like the right one: that pair is named, not mended, as is
+// one of the finest bits, whose frames gave the light every bit is judged by.
 struct FramePairCheck {
   int axis = 0;      // 0 columns, 1 rows.
   int bit = 0;       // Gray bit (0 finest).
   int pattern = -1;  // Frame indices.
   int inverse = -1;
   int64_t lit = 0;       // Pixels lit enough to judge (direct light >= min_contrast_dn).
-  int64_t disagree = 0;  // Of those, where pattern + inverse is off the whole light.
+  int64_t disagree = 0;  // Of those, where pattern + inverse is off white + black.
+  // Looked into when the pair disagreed at more than DecodeOptions::suspect_pair_share:
+  int64_t off_pattern = 0;  // Of the disagreeing pixels, where the pattern's frame lies off
+  int64_t off_inverse = 0;  // both levels of the scan's light; where the inverse's does;
+  int64_t alike = 0;        // where the two frames show the same value.
+  int left_out = -1;        // The frame the bit was decoded without (-1: decoded from both),
+  bool shows_pair = false;  // as it shows its pair's pattern (else: it lies off the light).
   double Share() const { return lit > 0 ? static_cast<double>(disagree) / lit : 0.0; }
 };
 
@@ -114,6 +133,9 @@ class Decoder {
   struct Stream;
   Status Store(int index, const cv::Mat& frame);  // Checks and keeps a frame.
   void Digest();  // Takes up every frame whose inputs are in, in one pass over the rows.
+  // Finds which frame of a disagreeing pair does not fit the scan's light and, where one is
+  // told, classifies the bit again without it (check->left_out). Before the frames are let go.
+  void Mend(FramePairCheck* check, int16_t margin, int16_t min_direct, int16_t floor_dn);
 
   DecodeOptions options_;
   std::unique_ptr<Stream> stream_;

@@ -187,7 +187,7 @@ TEST(Decode, StrongGlobalLightIsRejectedNotMisread) {
   EXPECT_EQ(r.stats.rejected_bits, region.area());
 }
 
-// Each Gray frame and its inverse add up to the scan's whole light (FramePairCheck): in a sound
+// Each Gray frame and its inverse add up to the white and black frames (FramePairCheck): in a sound
 // scan at almost every lit pixel, whatever the bit; a frame of another pattern in one's place
 // breaks that at about half the lit pixels (two Gray bit planes differ at half the pixels), in
 // its own pair only.
@@ -234,6 +234,84 @@ TEST(Decode, AFrameOfAnotherPatternIsToldByItsPairNotAddingUp) {
   ASSERT_TRUE(swapped.status.ok()) << swapped.status.message();
   EXPECT_LT(worst_other(swapped.stats, &share), 0.01);
   EXPECT_GT(share, 0.4);
+  // A frame of another pattern lies on the scan's two levels as the right one would: the
+  // redundancy does not tell which of the pair is wrong, and nothing is left out.
+  for (const FramePairCheck& p : swapped.stats.pairs) EXPECT_EQ(p.left_out, -1);
+}
+
+// Where the redundancy tells which frame of a pair is wrong, the bit is decoded from the other
+// alone and the decode is the sound scan's: a frame of another leaf (here the pattern seen
+// shifted and at 60% of this leaf's light: values off both of this scan's levels wherever its
+// stripes or its light differ), and an inverse taken before the projector changed (it shows its
+// pair's pattern, and is the later shown).
+TEST(Decode, AFrameTheRedundancyTellsIsLeftOutAndTheBitDecodedWithoutIt) {
+  PatternOptions o;
+  o.projector_size = cv::Size(640, 480);
+  const PatternSequence seq = MakePatternSequence(o);
+  cv::RNG rng(11);
+  auto camera = [&](const cv::Mat& ideal, double gain) {
+    cv::Mat noise(ideal.size(), CV_32F), f;
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.5);
+    ideal.convertTo(f, CV_32F, 0.7 * gain, 20.0);
+    cv::Mat(f + noise).convertTo(f, CV_8U);
+    return f;
+  };
+  const std::vector<cv::Mat> ideal = IdealFrames(seq);
+  std::vector<cv::Mat> frames;
+  for (const cv::Mat& m : ideal) frames.push_back(camera(m, 1.0));
+  const DecodeResult sound = Decode(seq, frames);
+  ASSERT_TRUE(sound.status.ok()) << sound.status.message();
+  for (const FramePairCheck& p : sound.stats.pairs) EXPECT_EQ(p.left_out, -1);
+  const int pattern = seq.Find(PatternKind::kGray, Axis::kRow, 6, false);
+  const int inverse = seq.Find(PatternKind::kGray, Axis::kRow, 6, true);
+  ASSERT_GT(inverse, pattern);
+  // The share of lit pixels whose projector row moved by more than a hundredth of a pixel.
+  auto moved = [&](const DecodeResult& r) {
+    int lit = 0, off = 0;
+    for (int y = 0; y < 480; ++y) {
+      for (int x = 0; x < 640; ++x) {
+        const float a = sound.projector_y.at<float>(y, x), b = r.projector_y.at<float>(y, x);
+        if (!(a == a)) continue;
+        ++lit;
+        off += !(std::fabs(a - b) <= 0.01f);
+      }
+    }
+    return static_cast<double>(off) / lit;
+  };
+  struct Case {
+    const char* name;
+    int frame;
+    cv::Mat by;
+    int left_out;
+    bool shows_pair;
+  };
+  cv::Mat shifted;
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 0, 0, 1, 13);
+  cv::warpAffine(ideal[pattern], shifted, shift, ideal[pattern].size(), cv::INTER_LINEAR,
+                 cv::BORDER_REPLICATE);
+  const Case cases[] = {{"another leaf", pattern, camera(shifted, 0.6), pattern, false},
+                        {"before the change", inverse, camera(ideal[pattern], 1.0), inverse, true}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    std::vector<cv::Mat> broken = frames;
+    broken[c.frame] = c.by;
+    const DecodeResult r = Decode(seq, broken);
+    ASSERT_TRUE(r.status.ok()) << r.status.message();
+    for (const FramePairCheck& p : r.stats.pairs) {
+      if (p.pattern != pattern) {
+        EXPECT_EQ(p.left_out, -1) << p.pattern;
+        continue;
+      }
+      EXPECT_GT(p.Share(), 0.05);
+      EXPECT_EQ(p.left_out, c.left_out);
+      EXPECT_EQ(p.shows_pair, c.shows_pair);
+    }
+    EXPECT_LT(moved(r), 1e-4);
+    // The same decode with mending off (the bar above any share): many rows wrong or lost.
+    DecodeOptions never;
+    never.suspect_pair_share = 1.0;
+    EXPECT_GT(moved(Decode(seq, broken, never)), 0.01);
+  }
 }
 
 TEST(Decode, RejectsWrongFrameCountAndMixedSizes) {

@@ -188,13 +188,16 @@ bool LeafHintFits(const cv::Rect& hint, cv::Size view, double max_share, std::st
     *why = name + " is not a box inside the " + SizeText(view) + " camera's view";
     return false;
   }
-  const double share = static_cast<double>(hint.area()) / std::max(1, view.area());
-  if (share > max_share) {
-    *why = name + " covers " + Fixed(100 * share, 0) + "% of the camera's view: a hint is a box " +
-           "inside the leaf, not around it (draw it over the leaf alone)";
-    return false;
-  }
-  return true;
+  return LeafHintShareFits(static_cast<double>(hint.area()) / std::max(1, view.area()), max_share,
+                           name, why);
+}
+
+bool LeafHintShareFits(double share, double max_share, const std::string& name, std::string* why) {
+  if (share <= max_share) return true;
+  *why = name + " covers " + Fixed(100 * share, 0) + "% of the camera's view, more than " +
+         Fixed(100 * max_share, 0) + "%: a hint is a box inside the leaf, not around it (draw " +
+         "it over the leaf alone)";
+  return false;
 }
 
 Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options) {

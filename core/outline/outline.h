@@ -138,6 +138,9 @@ struct Outline {
 // name the hint, when not. Every path a hint comes by (scan.yaml, --leaf-hint, the bus, the
 // viewer) meets this check, in FindLeaf at the latest.
 bool LeafHintFits(const cv::Rect& hint, cv::Size view, double max_share, std::string* why);
+// Its rule on the share alone, for a hint given as fractions of a view not yet known (`vellum
+// scan --leaf-hint`): `share` of the view, the hint as `name` in the reason.
+bool LeafHintShareFits(double share, double max_share, const std::string& name, std::string* why);
 
 // Finds the leaf in an organised point map (CV_32FC3, mm, NaN where invalid) and its texture
 // (the same size).
