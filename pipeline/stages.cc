@@ -106,7 +106,8 @@ void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
   r->Number("frames", "pairs_judged", static_cast<double>(pairs.size()));
   r->Number("frames", "pair_disagreement_median", usual);
   r->Number("frames", "pair_disagreement_max", *std::max_element(shares.begin(), shares.end()));
-  const double bar = std::max(limits.max_pair_disagreement, limits.pair_over_usual * usual);
+  const double bar = std::max(limits.max_pair_disagreement,
+                              std::min(limits.pair_over_usual * usual, limits.pair_always_named));
   std::string named, left_out;
   int count = 0, mended = 0;
   for (size_t k = 0; k < pairs.size(); ++k) {

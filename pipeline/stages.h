@@ -62,6 +62,9 @@ struct WarningLimits {
   // taken before the projector changed (frame_contradicts, naming the frames).
   double max_pair_disagreement = 0.02;
   double pair_over_usual = 4.0;
+  // Above this share a pair is named whatever the scan's usual: when every pair is off (frames
+  // of two scans mixed in one folder), the usual is no yardstick (sound pairs: 0.02%).
+  double pair_always_named = 0.05;
   // On a spread, the least page surface the gutter keeps from view (UnseenAtGutter's median),
   // mm: above it, the pages' inner margins are not all in the restored pages.
   double max_gutter_unseen_mm = 5.0;

@@ -100,12 +100,7 @@ class Assembler {
         continue;
       }
       if (now - it->asked > std::chrono::duration<double>(ask_after_s_)) {
-        resend_request_t ask{};
-        ask.process = node_->process();
-        ask.channel = channel_;
-        ask.scan_id = it->scan_id;
-        ask.known_seq = 0;  // All of it.
-        node_->Publish(channel::kResend, &ask);
+        Request(it->scan_id, 0, {});  // All of it.
         node_->Count("products asked again");
         it->asked = now;
         ++it->asks;
@@ -114,16 +109,23 @@ class Assembler {
     }
   }
 
-  void Ask() {
+  // Asks this channel's publisher for a scan's product again: the chunks listed, of the product
+  // holding the chunk with seq `known_seq`, or (known_seq 0) the whole product.
+  void Request(int64_t scan_id, int64_t known_seq, std::vector<int32_t> chunks) {
     resend_request_t ask{};
     ask.process = node_->process();
     ask.channel = channel_;
-    ask.scan_id = chunks_.scan_id();
-    ask.known_seq = known_seq_;
-    ask.chunks = chunks_.MissingIndices();
+    ask.scan_id = scan_id;
+    ask.known_seq = known_seq;
+    ask.chunks = std::move(chunks);
     ask.nchunks = static_cast<int32_t>(ask.chunks.size());
     node_->Publish(channel::kResend, &ask);
-    node_->Count("chunks asked again", ask.nchunks);
+  }
+
+  void Ask() {
+    std::vector<int32_t> missing = chunks_.MissingIndices();
+    node_->Count("chunks asked again", static_cast<int64_t>(missing.size()));
+    Request(chunks_.scan_id(), known_seq_, std::move(missing));
     asked_ = std::chrono::steady_clock::now();
     ++asks_;
   }

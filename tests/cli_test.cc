@@ -286,6 +286,18 @@ TEST_F(CliTest, AFrameThatContradictsTheOthersIsNamedAndLeftOutWhereTheScanTells
       EXPECT_NE(r.output.find("; scan again"), std::string::npos) << r.output;
     }
   }
+  // Frames of two scans mixed in one folder (every other frame the other leaf's): every pair is
+  // off, so none is far off the scan's usual; each is named all the same (over 5%).
+  const std::string mixed = CopyScan("two_scans_mixed");
+  for (int k = 3; k < static_cast<int>(header.sequence.patterns.size()); k += 2) {
+    fs::copy_file(fs::path(other) / FrameName(k), fs::path(mixed) / FrameName(k),
+                  fs::copy_options::overwrite_existing);
+  }
+  const Result r = RunVellum("process --scan " + mixed + " --calibration " + Rig() + " --out " +
+                             (root_ / "two_scans_mixed_out").string() + " --until points");
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("warning frame_contradicts: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("points: warn: "), std::string::npos) << r.output;
 }
 
 std::string FileBytes(const fs::path& path) {
