@@ -1,4 +1,4 @@
-// Issue 17: what the albedo adds to the restore stage, on a 1600 x 1200 scan (default rig, a
+// What the albedo adds to the restore stage, on a 1600 x 1200 scan (default rig, a
 // plain curled leaf under the projector's real fall-off), beside the plain restoration in the
 // same run: the baseline restores the texture through the flattened sheet (with the leaf's mask
 // and the sampling map, as the pipeline's restore stage does); the albedo adds the normals, the

@@ -1,4 +1,4 @@
-// Issue 16: recording keeps up with a 24 MP camera. One structured-light frame of 6000 x 4000
+// Recording keeps up with a 24 MP camera. One structured-light frame of 6000 x 4000
 // (8-bit gray: fringes over a page, with the virtual gantry's camera noise of 1.5 DN, which is
 // what makes real frames hard to compress) written to the scan's archive the ways a recorder
 // could: appended raw to the capture log (what the station's LCM log does), as PNG at OpenCV's

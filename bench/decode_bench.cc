@@ -1,5 +1,5 @@
 // Decode + triangulation of one scan (a curled checkerboard page; the default 1600x1200 rig, or
-// any rig file: config/hires_rig.yaml is issue 16's 24 MP camera), beside OpenCV's
+// any rig file: config/hires_rig.yaml is the 24 MP camera), beside OpenCV's
 // cv::structured_light::GrayCodePattern decoding the same page from its own Gray-code frames
 // (same virtual gantry, same noise). The ratios are printed at the end of the run.
 //

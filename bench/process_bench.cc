@@ -1,4 +1,4 @@
-// Issue 16: `vellum process` end to end on the default 1600 x 1200 scan (58 frames, a curled
+// `vellum process` end to end on the default 1600 x 1200 scan (58 frames, a curled
 // leaf rendered by the virtual gantry and written as a scan directory of PNGs before the clock
 // runs), beside reading the scan alone (ReadScan: scan.yaml, texture and frames, PNG decoding in
 // parallel). The issue asks the whole within 1.5 times the reading. `vellum process` decodes
@@ -9,7 +9,7 @@
 // The `vellum process` command itself is run too, as a child process, for its wall time and peak
 // resident memory (wait4's ru_maxrss), beside the bytes of the scan's frames alone (what a
 // decoder that holds every frame needs before any work). With --rig=config/hires_rig.yaml the
-// scan is issue 16's 24 MP one (bar: peak under 2.5 GB).
+// scan is the 24 MP one (bar: peak under 2.5 GB).
 //
 //   ./build/bench/process_bench [--rig=FILE] [--benchmark_filter=...]
 #include <benchmark/benchmark.h>

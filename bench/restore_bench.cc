@@ -1,4 +1,4 @@
-// Issue 16: restoring a 24 MP texture to a 400 ppi page. The rig is config/hires_rig.yaml's
+// Restoring a 24 MP texture to a 400 ppi page. The rig is config/hires_rig.yaml's
 // (6000 x 4000 camera, 0.0635 mm per pixel on the table); the page a 190 x 240 mm leaf curled
 // (the virtual gantry's curl), its sheet 90 x 90 nodes placed on the true surface and its flat
 // positions the true page coordinates, so the benchmark times the restoration alone. The peer is

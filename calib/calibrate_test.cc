@@ -266,7 +266,7 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
   EXPECT_NE(no_table.status.message().find("table pose is not usable"), std::string::npos);
 }
 
-// Issue 14: poses that would make a wrong calibration are not used silently. A board size given
+// Poses that would make a wrong calibration are not used silently. A board size given
 // transposed is detected and corrected. The same pose
 // given twice is refused (one folder given four times leaves one pose: no solve); a pose whose
 // projector corners are 2.3 px off is dropped by the outlier rule, so the solve equals the

@@ -24,7 +24,7 @@ int RunCalibrateSolve(const std::vector<std::string>& args) {
       "Calibrates the camera, the (virtual, unmirrored) projector and the table from\n"
       "board poses, each DIR one pose's scan directory (from `vellum calibrate capture`,\n"
       "or rendered or recorded by any tool in that form). Writes the calibration YAML\n"
-      "of DESIGN.md to --out and a report (per-pose and overall reprojection errors,\n"
+      "of docs/formats.md to --out and a report (per-pose and overall reprojection errors,\n"
       "corners used, warnings above 0.5 px, a leave-one-pose-out check) beside it as\n"
       "FILE.report.txt. A pose that cannot be used is named with the reason, and the\n"
       "others are used; the same pose given twice is refused; an outlier pose (errors\n"

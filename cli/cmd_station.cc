@@ -368,12 +368,13 @@ int RunCalibrateCapture(const std::vector<std::string>& args) {
   specs.push_back({"out", "DIR", "where to write the pose's scan directory", ""});
   specs.push_back({"label", "TEXT", "a note for the scan", "calibration board"});
   specs.push_back({"timeout", "S", "give up after this long", "120"});
-  Flags flags("vellum calibrate capture",
-              "Records one calibration board pose through the station: asks for a scan and\n"
-              "writes its captures (texture and pattern frames, from the bus) as a scan\n"
-              "directory of DESIGN.md in --out, for `vellum calibrate solve`. Hold the board\n"
-              "still in the projector's light; one pose must lie flat on the table.",
-              specs);
+  Flags flags(
+      "vellum calibrate capture",
+      "Records one calibration board pose through the station: asks for a scan and\n"
+      "writes its captures (texture and pattern frames, from the bus) as a scan\n"
+      "directory of docs/formats.md in --out, for `vellum calibrate solve`. Hold the board\n"
+      "still in the projector's light; one pose must lie flat on the table.",
+      specs);
   if (!flags.Parse(args)) return 0;
   const std::string out = flags.Require("out");
   const double timeout = flags.GetDouble("timeout", 1, 86400);

@@ -3,7 +3,7 @@
 # include crosses a layer the wrong way. The build runs it before compiling anything
 # (target check_layers) and ctest runs it on a tree with a wrong-way include (layers_test).
 #
-# The table is the layering of README.md's "Layout"; a folder may always include itself.
+# The table is the layering of docs/architecture.md's "Layout"; a folder may always include itself.
 # "vellum" is the generated message types of lcmtypes/.
 set(allowed_core "core")
 set(allowed_calib "core")

@@ -40,7 +40,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       PatternSequence sequence;
       cv::Size camera;
       ScanIdentity identity;
-      std::vector<ScanLight> lights;  // The extra lights' list (issue 17) too.
+      std::vector<ScanLight> lights;  // The extra lights' list too.
       (void)ReadScanYaml(dir.string(), &sequence, &camera, &identity, &lights);
       break;
     }

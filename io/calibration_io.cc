@@ -121,7 +121,8 @@ Status ReadCalibration(const std::string& path, Calibration* calibration) {
     return Status::Error(path + ": not a valid OpenCV YAML/XML calibration file");
   }
   if (!fs.root().isMap()) {
-    return Status::Error(path + ": not a calibration (expected a map of keys, see DESIGN.md)");
+    return Status::Error(path +
+                         ": not a calibration (expected a map of keys, see docs/formats.md)");
   }
   *calibration = Calibration();  // What the file leaves out takes its default.
   Status s = Status::Ok();

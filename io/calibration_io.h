@@ -1,4 +1,4 @@
-// Calibration YAML (cv::FileStorage) with the keys of DESIGN.md: camera_size, camera_matrix,
+// Calibration YAML (cv::FileStorage) with the keys of docs/formats.md: camera_size, camera_matrix,
 // camera_distortion, camera_rotation, camera_translation and the same with projector_.
 #pragma once
 

@@ -213,9 +213,9 @@ TEST_F(IoTest, ScanRoundTrip) {
   }
 }
 
-// Issue 17: a scan's extra lights (scan.yaml `lights`, light_<name>.png) round trip, a 16-bit
+// A scan's extra lights (scan.yaml `lights`, light_<name>.png) round trip, a 16-bit
 // light stays 16-bit, and a bad entry or a missing file is an error naming the light.
-// Issue 17: the station's lights file (what vellum-projector and vellum-lights read): the
+// The station's lights file (what vellum-projector and vellum-lights read): the
 // shipped example reads, with its channels; a bad one is refused with the file and the problem.
 TEST_F(IoTest, TheStationsLightsFileReadsAndABadOneIsNamed) {
   StationLights lights;
@@ -304,7 +304,7 @@ TEST_F(IoTest, ScanLightsRoundTripAndBadOnesAreNamed) {
       << s.message();
 }
 
-// Issue 17: the studio lamps' field round trips (gray and colour), and a file without lamps is
+// The studio lamps' field round trips (gray and colour), and a file without lamps is
 // an error naming the file and the key.
 TEST_F(IoTest, StudioFieldRoundTripsAndABadOneIsNamed) {
   for (int channels : {1, 3}) {
@@ -397,7 +397,7 @@ TEST_F(IoTest, ScanLeafHintRoundTripsAndABadOneIsRefused) {
   }
 }
 
-// Issue 15: the catalogue identity in scan.yaml (DESIGN.md, "Identity"), kept through a round
+// The catalogue identity in scan.yaml (docs/formats.md, "Identity"), kept through a round
 // trip, read as hand-written (a folio as a number), and made safe: control characters removed,
 // a field cut to 200 bytes, an unknown side dropped.
 TEST_F(IoTest, ScanIdentityRoundTripsAndIsSanitised) {

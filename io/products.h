@@ -1,4 +1,4 @@
-// What processing a scan writes (DESIGN.md, `vellum process`): points.ply and depth.png,
+// What processing a scan writes (docs/formats.md, `vellum process`): points.ply and depth.png,
 // mesh.ply and flat.ply, restored.tif and restored.json. One writer for each, called by the
 // pipeline's stages (pipeline/stages.h) for `vellum process` and the daemons alike.
 #pragma once

@@ -1,4 +1,4 @@
-// Scan directories (DESIGN.md): scan.yaml (projector size, camera size, pattern sequence),
+// Scan directories (docs/formats.md): scan.yaml (projector size, camera size, pattern sequence),
 // texture.png, frame_000.png, ... with frame k taken while pattern k was shown.
 #pragma once
 
@@ -35,7 +35,7 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
                      const std::vector<ScanLight>& lights = {},
                      const cv::Rect& leaf_hint = cv::Rect(), ObjectKind object = ObjectKind::kAuto);
 
-// A station's extra lights (issue 17), as vellum-projector and vellum-lights read them from one
+// A station's extra lights, as vellum-projector and vellum-lights read them from one
 // YAML file: `lights`, a sequence of {name, direction: [x, y, z], channel} (direction optional, as
 // in scan.yaml; channel: the light's switch on a relay board, 0 to 255, optional), and
 // `studio_channel` (optional): the studio lamps' switch, off while an extra light is on.

@@ -1,5 +1,5 @@
 // `vellum process` as one call: a scan directory and its calibration through every stage of
-// pipeline/stages.h, into a results folder (DESIGN.md's products, report.json, report.html).
+// pipeline/stages.h, into a results folder (docs/formats.md's products, report.json, report.html).
 #pragma once
 
 #include <functional>

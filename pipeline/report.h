@@ -22,8 +22,8 @@ struct ReportValue {
   double number = 0;  // Otherwise.
 };
 
-// Something that makes the result doubtful (DESIGN.md's `warnings`): a code a program can test
-// and a sentence for the operator.
+// Something that makes the result doubtful (docs/formats.md's `warnings`): a code a program can
+// test and a sentence for the operator.
 struct Warning {
   // page_cut_off, outline_uncertain, valid_low, exposure_clipped, strain_high, fold_over,
   // size_unexpected, dpi_above_sampling

@@ -165,7 +165,7 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
                          const std::string& results, const std::string& page,
                          RestoreResult* restored);
 
-// Albedo (issue 17): the page's reflectance from the projector's light (core/shading/albedo.h:
+// Albedo: the page's reflectance from the projector's light (core/shading/albedo.h:
 // `amplitude` is the decoder's, `points` the point map), restored through the page's own warp
 // (RestoreMore of `restored`: the same triangles, samples and crop): restored_albedo.tif in the
 // page's folder, 16-bit gray, linear (65535 = albedo 1), 0 where the model does not hold (marked:
@@ -175,7 +175,7 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
                         const RestoreResult& restored, const std::vector<StageReport>& earlier,
                         const std::string& results, const std::string& page, RestoreResult* albedo);
 
-// Reflectance from the studio light (issue 17): the texture's shading by the studio lamps taken
+// Reflectance from the studio light: the texture's shading by the studio lamps taken
 // out by the page's measured shape (core/shading/albedo.h, CorrectTexture, with `studio_field`),
 // restored as AlbedoStage restores the albedo: restored_reflectance.tif in the page's folder,
 // 16-bit, one channel per texture channel, linear (65535 = reflectance 1), 0 where marked (not
@@ -186,7 +186,7 @@ StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
                              const std::vector<StageReport>& earlier, const std::string& results,
                              const std::string& page, RestoreResult* reflectance);
 
-// Lights (issue 17): the scan's extra images (`lights`, Scan::lights) restored through the page's
+// Lights: the scan's extra images (`lights`, Scan::lights) restored through the page's
 // own warp (RestoreMore of `restored`), so they register to it and to
 // each other pixel for pixel: lights/<name>.tif in the page's folder (as captured, with the
 // camera's ICC profile `camera_icc`). With three or more lights of known direction, the page's

@@ -11,7 +11,7 @@ packages=(
   libcgal-dev libsuitesparse-dev nlohmann-json3-dev libexiv2-dev exiv2 libtiff-dev libssl-dev liblcms2-dev clang-format
   libvips-dev libpng-dev iipimage-server lighttpd libimage-exiftool-perl curl
   default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux nftables
-  chromium xvfb xdotool clang libclang-rt-14-dev
+  chromium xvfb xdotool clang libclang-rt-14-dev python3
 )
 missing=()
 for p in "${packages[@]}"; do

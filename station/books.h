@@ -1,8 +1,8 @@
 // What a processing daemon needs of a scan besides its product: the calibration (CALIBRATION,
 // from the projector at the start of the scan) and the texture (TEXTURE, from the decoder as
 // it sends the scan down the chain). A daemon that restarted after they went by takes them
-// from the scan's raw folder on disk, where the decoder recorded them (README, "What lives
-// where").
+// from the scan's raw folder on disk, where the decoder recorded them (docs/station.md,
+// "The supervisor, and what lives where").
 #pragma once
 
 #include <cstdint>

@@ -1,4 +1,4 @@
-// The station's processes (DESIGN.md): the gantry that captures a scan, and the processing
+// The station's processes (docs/station.md): the gantry that captures a scan, and the processing
 // chain that turns it into the restored page, in order, each link taking the product of the
 // one before and handing on its own. Tools and the supervisor name the daemons from here.
 #pragma once

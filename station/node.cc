@@ -161,8 +161,9 @@ Node::Node(std::string process, const std::string& url)
       lcm_(own_lcm_.get()),
       seq_start_(RandomSeqStart()) {
   if (!lcm_->good()) {
-    throw std::runtime_error("cannot open the LCM bus '" + url +
-                             "' (for udpm: is there a multicast route? see the README)");
+    throw std::runtime_error(
+        "cannot open the LCM bus '" + url +
+        "' (for udpm: is there a multicast route? see docs/operator.md, Troubleshooting)");
   }
   std::signal(SIGTERM, OnSignal);
   std::signal(SIGINT, OnSignal);

@@ -33,7 +33,7 @@ namespace vellum::station {
 // Microseconds since the epoch (the utime of every message).
 int64_t NowUtime();
 
-// The channel names of DESIGN.md's process graph.
+// The channel names of the process graph (docs/station.md).
 namespace channel {
 inline constexpr char kScanRequest[] = "SCAN_REQUEST";
 inline constexpr char kScanStarted[] = "SCAN_STARTED";  // From the projector: a scan is on.
@@ -85,7 +85,7 @@ bool SafeDecode(const void* data, int64_t size, Msg* msg) {
     return false;
   }
 }
-// The recorded messages whose type grew (issue 17: extra lights): a CAPTURE or SCAN_STARTED of
+// The recorded messages whose type grew (extra lights): a CAPTURE or SCAN_STARTED of
 // a log recorded before decodes through its earlier type (capture_v1_t, scan_started_v1_t), as a
 // scan without extra lights, so every scan's log stays readable and playable; a SCAN_STARTED
 // recorded before the leaf hint (scan_started_v2_t), as a scan without a hint; one recorded before
@@ -97,7 +97,7 @@ bool SafeDecode(const void* data, int64_t size, scan_started_t* msg);
 bool SafeDecode(const void* data, int64_t size, calibration_t* msg);
 
 // The station id when none is configured. Stations that share a network (and a multicast
-// group) need ids of their own (README, "Several gantries in one room").
+// group) need ids of their own (docs/station.md, "Several gantries in one room").
 inline constexpr char kDefaultStation[] = "vellum";
 
 // A station id: 1 to 64 of letters, digits, '-', '_' and '.'. Empty when valid, else why not.

@@ -1,4 +1,4 @@
-// Which messages the decoder records (issue 14, scan identity): only those of the scan its own
+// Which messages the decoder records (scan identity): only those of the scan its own
 // station's projector started (SCAN_STARTED, with that scan's session), each pattern once, and
 // never anything of a scan that is over. A finished scan's folder is never reopened; captures
 // of unknown, finished or other sessions' scans are refused before they touch the disk, so a

@@ -338,7 +338,7 @@ void CaptureLog::Close() {
   scan_id_ = 0;
 }
 
-// The capture's file in the scan directory (DESIGN.md), and its writer: the texture and the
+// The capture's file in the scan directory (docs/formats.md), and its writer: the texture and the
 // lights' images as they came, a pattern's frame within the camera's frame interval
 // (WriteFrameImage).
 static std::string ImageName(const capture_t& c) {

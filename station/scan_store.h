@@ -1,6 +1,6 @@
 // A scan's captures on their way to disk: the set of CAPTURE messages of one scan (checked
 // for consistency, with the missing ones named), and the scan's folder (raw captures as an LCM
-// log and as the scan directory of DESIGN.md, written as they arrive, before any processing).
+// log and as the scan directory of docs/formats.md, written as they arrive, before any processing).
 #pragma once
 
 #include <cstdint>

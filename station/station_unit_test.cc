@@ -436,7 +436,7 @@ TEST(ScanStore, AppendingAfterATornEventKeepsEveryWholeEventReadable) {
 }
 
 // A scan's folder may carry a readable slug after its id; the id alone finds it, and the ledger
-// reads it (issue 15).
+// reads it.
 TEST(ScanStore, ANamedScanFolderIsFoundByItsIdAlone) {
   const fs::path dir = fs::temp_directory_path() / ("vellum_named_" + std::to_string(getpid()));
   fs::remove_all(dir);
@@ -719,7 +719,7 @@ TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
   EXPECT_EQ(sender.Counter("chunks sent again"), static_cast<int64_t>(chunks.size()));
 }
 
-// Issue 14: a hung job on the worker (a stage that never returns) is reported as stuck and
+// A hung job on the worker (a stage that never returns) is reported as stuck and
 // systemd's watchdog is no longer fed, so systemd restarts the daemon; it is fed again once the
 // job ends. A stop while a job hangs returns after the stop grace instead of waiting forever.
 TEST(Node, AHungJobStarvesTheWatchdogAndAStopDoesNotWaitForItForever) {

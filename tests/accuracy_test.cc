@@ -210,7 +210,7 @@ INSTANTIATE_TEST_SUITE_P(NotPowersOfTwo, ProjectorSize,
                                   std::to_string(info.param.height);
                          });
 
-// Flying points (issue 13): the mixed pixels at a curled leaf's silhouette and edges, a ripple's
+// Flying points: the mixed pixels at a curled leaf's silhouette and edges, a ripple's
 // far sides and a book's gutter: points in mid-air, more than 1 mm from every true surface near
 // their pixel. Rejected; the page keeps 99% of its points, its median error is unchanged (within
 // 2%: the rejected points are not the page's good ones) and its RMS stays within the bar.

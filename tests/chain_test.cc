@@ -119,7 +119,7 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
       << ", triangulator: " << triangulator_node.Counter("scans triangulated")
       << ", flattener: " << flattener_node.Counter("scans flattened");
   const ScanFolder folder = ScanFolder::For(data, 3);
-  // The scan's manifest, in its folder: every file of raw/ and results/, whole (issue 16).
+  // The scan's manifest, in its folder: every file of raw/ and results/, whole.
   std::vector<std::string> problems;
   const Status manifest = CheckManifest(folder.root, &problems);
   EXPECT_TRUE(manifest.ok()) << manifest.message();

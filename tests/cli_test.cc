@@ -384,7 +384,7 @@ TEST_F(CliTest, ProcessWritesTheSheetAndARestoredPageAtItsDpi) {
   EXPECT_EQ(cv::imread(out + "_cam/restored.tif", cv::IMREAD_UNCHANGED).size(), cv::Size(400, 300));
 }
 
-// Issue 13: a leaf laid turned on the table is restored upright. It is turned 12 degrees about
+// A leaf laid turned on the table is restored upright. It is turned 12 degrees about
 // the vertical; the restoration turns it back (restored.json's rotation_deg), so that its
 // edges run along the image's rows and columns and its width and height are the right way
 // round, flat or curled. On the small rig (0.625 mm per pixel; the quick rig's 1 mm leaves a
@@ -513,7 +513,7 @@ void WriteCameraProfile(const fs::path& file, bool rgb, const char* name) {
   cmsFreeToneCurve(gamma);
 }
 
-// Issue 16: the camera's own ICC profile (--camera-icc) goes as is into the production and the
+// The camera's own ICC profile (--camera-icc) goes as is into the production and the
 // archival master in place of sRGB, and is named in report.json; exiftool (a reader vellum did
 // not write) reads its name. A profile for colour images on a gray camera's scan, and a file
 // that is not a profile, are refused before any work, naming the file.
@@ -549,7 +549,7 @@ TEST_F(CliTest, TheCamerasIccProfileGoesIntoBothMasters) {
   EXPECT_NE(junk.output.find("junk.icc: not an ICC profile"), std::string::npos) << junk.output;
 }
 
-// Issue 16: a camera that gives more than 8 bits (the virtual gantry's texture at 16) gives
+// A camera that gives more than 8 bits (the virtual gantry's texture at 16) gives
 // 16-bit masters: restored.tif and archival.tif at 16 bits a sample (as exiftool reads them),
 // the report's bit depth 16 (FADGI's 4-star figure). The structured-light frames are the same
 // 8-bit frames, so the geometry is the same as the 8-bit scan's: the 16-bit restored page,
@@ -595,7 +595,7 @@ TEST_F(CliTest, ASixteenBitTextureGivesSixteenBitMasters) {
       << r.output;
 }
 
-// Issue 17: the albedo as a user gets it. A white target (albedo 0.85) lying on the table is
+// The albedo as a user gets it. A white target (albedo 0.85) lying on the table is
 // scanned and measured (`vellum calibrate flatfield`); a plain white curled leaf of the same
 // paper processed with the flat field gets restored_albedo.tif beside restored.tif: 16-bit,
 // the same size, its mean the paper's 0.85 within 2% (the projector's light falls off with
@@ -638,7 +638,7 @@ TEST_F(CliTest, AFlatFieldGivesEachPageItsAlbedo) {
       << r.output;
 }
 
-// Issue 17: a scan with raking lights and UV (vellum render --raking 3 --uv true) gives each light
+// A scan with raking lights and UV (vellum render --raking 3 --uv true) gives each light
 // restored beside the page, of its size, with its dpi (as exiftool reads it), and the normals;
 // vellum import puts the lights in the log (their captures after the patterns), and vellum
 // export gives them back as they were.
@@ -693,7 +693,7 @@ TEST_F(CliTest, ExtraLightsAreRestoredBesideThePage) {
   }
 }
 
-// Issue 17: the studio lamps' field from a white target's texture (vellum calibrate studio), then
+// The studio lamps' field from a white target's texture (vellum calibrate studio), then
 // a curled plain leaf lit by the same lamps: restored_reflectance.tif is its albedo, even where
 // its texture is shaded; a bad lamp is refused naming the flag.
 TEST_F(CliTest, AStudioFieldTakesTheLampsShadingOutOfTheTexture) {

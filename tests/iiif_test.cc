@@ -1,4 +1,4 @@
-// Library masters served as a library serves them (issue 16): the demo's recorded scan processed
+// Library masters served as a library serves them: the demo's recorded scan processed
 // by `vellum process`, its manifests written by `vellum iiif`, and the pages served by a real
 // IIPImage (iipsrv, FastCGI) behind a real lighttpd (scripts/serve-iiif.sh), started by the test
 // in its own network namespace (ctest runs it inside scripts/netns-run.sh). Through the IIIF

@@ -115,8 +115,8 @@ class Leaves : public ::testing::TestWithParam<Scene> {};
 
 TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
   const Scene& scene = GetParam();
-  // Restored at the rig's sampling of the table (102 dpi), where issue 13's bars in pixels were
-  // set; the default, the page's finest true sampling (issue 16), is 1-3% finer on raised
+  // Restored at the rig's sampling of the table (102 dpi), where the bars in pixels were
+  // set; the default, the page's finest true sampling, is 1-3% finer on raised
   // leaves, and the pixel figures with it (the ripple's 0.038 mm is 0.150 px at 102 dpi and
   // 0.154 px at 103). The bars in mm do not depend on it.
   PipelineOptions options;
@@ -356,7 +356,7 @@ TEST(Doubtful, ALeafOfAnotherSizeThanExpectedIsFlagged) {
   EXPECT_TRUE(WarningCodes(right).empty()) << ::testing::PrintToString(WarningCodes(right));
 }
 
-// Issue 16: asking 600 dpi of the default rig (which samples the table at about 102 ppi) writes
+// Asking 600 dpi of the default rig (which samples the table at about 102 ppi) writes
 // the page at 600 dpi, with a warning that names the true figure (the page's finest true
 // sampling, as report.json states it), and the sampling check warns. Left to its default, the
 // same scan is written at that true figure and nothing is flagged.
@@ -498,7 +498,7 @@ TEST(Demo, TheRestoredMaskIsTheLeafAndNotTheTableBeyondItsCurl) {
   EXPECT_EQ(off, 0) << "restored mask pixels off the leaf";
 }
 
-// Issue 16's library master: a curled leaf from the 24 MP camera (config/hires_rig.yaml: the
+// The library master: a curled leaf from the 24 MP camera (config/hires_rig.yaml: the
 // default rig's projector and geometry, 0.0635 mm per camera pixel on the table, 400 ppi),
 // restored at 400 ppi through the whole pipeline.
 //
@@ -605,7 +605,7 @@ TEST(Masters, ACurledLeafFromThe24MpCameraAt400PpiMeetsTheBars) {
   EXPECT_GE(exact_at_390, 0.95);
 }
 
-// Issue 17: reflectance, not shading. The gantry's light as real lights give it: the projector's
+// Reflectance, not shading. The gantry's light as real lights give it: the projector's
 // falls with the square of the distance and towards its image's corners, and two studio lamps
 // shade the texture (a slope facing away from them is darker). The projector's flat field is
 // measured on a white target (albedo 0.85) lying on the table, as `vellum calibrate flatfield`
@@ -690,7 +690,7 @@ TEST(Shading, TheRestoredAlbedoOfAPlainLeafIsEvenWhereItsTextureIsShaded) {
   }
 }
 
-// Issue 17: several lights through one warp. A curled checkerboard leaf captured under three
+// Several lights through one warp. A curled checkerboard leaf captured under three
 // raking lights (30 degrees up, from three sides) and its UV fluorescence, in the pose of its
 // scan: each restored light's corners against the restored texture's, all found the same way.
 //
@@ -757,7 +757,7 @@ TEST(Lights, RakingAndUvLightsRegisterToTheTextureWithinATenthOfAPixel) {
   }
 }
 
-// Issue 17: photometric normals. A plain curled leaf with an embossed line across it (a Gaussian
+// Photometric normals. A plain curled leaf with an embossed line across it (a Gaussian
 // ridge 0.2 mm high, sigma 0.5 mm, at t = 120 mm: across the flat part and up the curl) under
 // four raking lights at 30 degrees. On the restored page, in the page's own frame, each column's
 // ridge is where the normal's up component turns from its highest to its lowest; it must lie
@@ -769,7 +769,7 @@ TEST(Lights, RakingAndUvLightsRegisterToTheTextureWithinATenthOfAPixel) {
 // extremes are 4 pixels apart and found to a pixel, 0.25 mm. The page frame comes from the sheet
 // (a 0.02 mm fit of the page, smoothed over a cell), so away from the ridge the normal reads
 // within a few degrees of straight out.
-// Issue 17's RTI file: eight lamps in two rings (four at 30 degrees, four at 60, turned 45
+// The RTI file: eight lamps in two rings (four at 30 degrees, four at 60, turned 45
 // degrees) over a curled plain leaf give a PTM of the flat page (lights.ptm). Written and read
 // back (8-bit coefficients), it relights the page as each lamp lit it: evaluated at each lamp's
 // direction in the page's own frame, it gives that lamp's restored image over the leaf's pixels

@@ -48,17 +48,17 @@ TEST(Report, OpensInHeadlessChromiumWithEveryPictureLoaded) {
   std::smatch m;
   ASSERT_TRUE(std::regex_search(out, m, std::regex("data-images=\"(\\d+)/(\\d+)\""))) << out;
   EXPECT_EQ(m[1], m[2]) << "only " << m[1] << " of " << m[2] << " pictures loaded";
-  // The six of before, the leaf's outline (issue 13), the whole restored page (issue 15) and
-  // the true sampling map (issue 16).
+  // The six of before, the leaf's outline, the whole restored page and
+  // the true sampling map.
   EXPECT_EQ(m[2], "9");
   // Nothing in it reaches for the network.
   std::ifstream in(html);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_EQ(text.find("http://"), std::string::npos);
-  // Issue 15: the quality verdict first, the whole restored page linking to its TIFF, with the
+  // The quality verdict first, the whole restored page linking to its TIFF, with the
   // leaf's size and the scale bar's length; the report's date.
   EXPECT_NE(text.find("<div class=\"qc qc-pass\"><h2>Quality: pass</h2>"), std::string::npos);
-  // Issue 16: the FADGI figures vellum can vouch for, each with its star level.
+  // The FADGI figures vellum can vouch for, each with its star level.
   EXPECT_TRUE(std::regex_search(
       text, std::regex("<tr><th>sampling</th><td>[0-9]+ ppi at 95% of the page \\(median "
                        "[0-9]+\\)</td><td>(below 1-star|[1-4]-star)</td>")))

@@ -234,7 +234,7 @@ double Percentile(std::vector<double> v, double q) {
   return v[k];
 }
 
-// The sampling map against the truth (issue 16: a true sampling map). On a flat page it is the
+// The sampling map against the truth (a true sampling map). On a flat page it is the
 // camera's sampling of the table; on a curl it falls where the page slopes away from the camera
 // (a slope of angle a keeps cos a of it). The map's median and 95th percentile agree with the
 // truth's within 2%: the sheet's triangles are 4 x 5 mm, over which the curl's slope changes by

@@ -380,7 +380,7 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
 
 TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) { RunFullScan(kRig, 54); }
 
-// Issue 17: a station with extra lights (three raking lamps and a UV lamp, switched by
+// A station with extra lights (three raking lamps and a UV lamp, switched by
 // vellum-lights' sim backend): after the patterns the projector asks for each light and the
 // camera takes its frame; the scan's folder holds them (light_<name>.png, named in scan.yaml
 // with their directions), and the restorer restores each through the page's own warp, with the
@@ -468,8 +468,8 @@ TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
   EXPECT_NE(player.Output().find("restored: "), std::string::npos) << player.Output();
   const restored_t& r = restored[0];
   EXPECT_EQ(r.view, "orthographic");
-  // The demo's leaf as a library would judge it (issue 15): at least 300 ppi, the camera's own
-  // true sampling at its finest on the curled leaf (issue 16: 326 ppi; the rig samples the table
+  // The demo's leaf as a library would judge it: at least 300 ppi, the camera's own
+  // true sampling at its finest on the curled leaf (326 ppi; the rig samples the table
   // at 343), a clean verdict, its identity in the folder name.
   EXPECT_GE(r.dpi, 300);
   EXPECT_EQ(r.qc, "pass");
@@ -503,7 +503,7 @@ TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
       << out;
 }
 
-// Issue 14: two gantries on one network, on the same multicast group and port, told apart by
+// Two gantries on one network, on the same multicast group and port, told apart by
 // their station ids. Both scans run at once under the same scan id; each station restores its
 // own page (a curl on one, a fold on the other), equal to `vellum process` of its own
 // recording, and counts the other station's traffic instead of using it.
@@ -569,7 +569,7 @@ TEST_F(StationTest, TwoGantriesOnOneBusEachRestoreTheirOwnPage) {
               cv::norm(restored[0], restored[1], cv::NORM_L1) > 0);
 }
 
-// Issue 14: a scan played again after it was restored (a stale replay of its captures), a
+// A scan played again after it was restored (a stale replay of its captures), a
 // flood of captures for scans never started, and a second decoder on the same data folder:
 // the archive stays byte for byte as it was, no folder is made, the second decoder refuses.
 TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
@@ -650,7 +650,7 @@ TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
       << second.Output();
 }
 
-// Issue 14: poisoned input. A scan whose scan.yaml claims a projector 2^31 pixels wide, left
+// Poisoned input. A scan whose scan.yaml claims a projector 2^31 pixels wide, left
 // pending from before a restart, and a CAPTURE claiming a projector 2^30 pixels wide: each ends
 // in a clear error within 5 s (the issue's bar; before, both hung the decoder for good). The
 // poisoned pending scan is parked, the scan of the poisoned capture fails at once (each marked
@@ -746,7 +746,7 @@ TEST_F(StationTest, PoisonedAndMidScanMessagesFailClearlyOrAreRefusedAndNothingI
   EXPECT_EQ(after.Counter("STATUS_DECODER", "scans failed"), 0);
   EXPECT_TRUE(after.Error("STATUS_DECODER", "scan 600").empty());
 
-  // Bad messages in the midst of a scan (issue 14), each after the scan's third capture. Each
+  // Bad messages in the midst of a scan, each after the scan's third capture. Each
   // scan is the recorded one imported under a new id, its log rewritten with the bad message
   // `bad_message` makes from that capture (its channel and bytes).
   using Injected = std::pair<std::string, std::vector<uint8_t>>;
@@ -867,7 +867,7 @@ void SendUnicast(int port, const std::string& channel, const Msg& msg) {
   close(fd);
 }
 
-// Issue 14: LCM's udpm takes any datagram that reaches the bus port. Without the station's
+// LCM's udpm takes any datagram that reaches the bus port. Without the station's
 // firewall rules a unicast SCAN_REQUEST starts a scan; with systemd/vellum-bus.nft loaded (in
 // this test's own network namespace) the same datagram is dropped and counted, while the bus's
 // multicast traffic still flows.
@@ -1081,7 +1081,7 @@ TEST_F(StationTest, ViewerShowsTheRestoredPageAfterAScan) {
   EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();  // Before its X server goes.
 }
 
-// Issue 15: an operator at the viewer (a real X server, keys typed with xdotool) enters a
+// An operator at the viewer (a real X server, keys typed with xdotool) enters a
 // folio's identity once in the form, and scans folios 1r, 1v and 2r; then takes the last two
 // advances back (u, u) and retakes 1v. Each scan's folder is named after its folio, its
 // report.json carries the identity; the retake of 1v is the folder at the top, and the first
@@ -1183,7 +1183,7 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
   EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();  // Before its X server goes.
 }
 
-// Issue 15: a leaf that runs off the camera's view (its centre 60 mm up: its top edge 30 mm past
+// A leaf that runs off the camera's view (its centre 60 mm up: its top edge 30 mm past
 // the default rig's view) is restored, and fails quality control on "leaf in view": in
 // report.json, on RESTORED, in `vellum scan`'s output and exit status, and as a red badge over
 // the restored page in the viewer (read from the X screen).
@@ -1225,7 +1225,7 @@ TEST_F(StationTest, ALeafPartlyOutOfViewFailsQualityControlInTheReportAndTheView
   EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
 }
 
-// Issue 15: the camera stops in the middle of a scan. The viewer (on a real X server) turns its
+// The camera stops in the middle of a scan. The viewer (on a real X server) turns its
 // header red with the failure within the projector's capture timeout, checked on the screen;
 // the scan's folder is marked failed, with the reason.
 TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFailed) {

@@ -1,5 +1,5 @@
-// What the operator says lies on the table (DESIGN.md, "What the object is"): a single leaf, an
-// open book (two pages meeting at a gutter), or "auto" (vellum decides, and splits a spread only
+// What the operator says lies on the table (docs/formats.md, "What the object is"): a single leaf,
+// an open book (two pages meeting at a gutter), or "auto" (vellum decides, and splits a spread only
 // on strong evidence). In scan.yaml as `object: leaf | book | auto`.
 #pragma once
 

@@ -10,7 +10,7 @@
 namespace vellum {
 namespace {
 
-// Issue 15: the scan's folder is named after what is scanned, safely on any file system.
+// The scan's folder is named after what is scanned, safely on any file system.
 TEST(ScanIdentity, SlugIsReadableAndSafe) {
   ScanIdentity id;
   EXPECT_EQ(IdentitySlug(id), "");

@@ -1,5 +1,6 @@
 // One structured-light scan as captured: the pattern sequence shown, the texture under studio
-// light, and the camera frame taken under each pattern (DESIGN.md's scan directory, in memory).
+// light, and the camera frame taken under each pattern (docs/formats.md's scan directory, in
+// memory).
 #pragma once
 
 #include <opencv2/core.hpp>
@@ -11,7 +12,7 @@
 
 namespace vellum {
 
-// What the scanned object is, for the catalogue (DESIGN.md, "Identity"); every field may be
+// What the scanned object is, for the catalogue (docs/formats.md, "Identity"); every field may be
 // empty. In scan.yaml as shelfmark, folio, side, operator, note and label.
 struct ScanIdentity {
   std::string shelfmark;  // Shelfmark or call number ("MS 12").
@@ -77,7 +78,7 @@ inline constexpr size_t kMaxSlug = 64;
 // '_', at most kMaxSlug bytes; "" when nothing is left ("MS 12", "3", "recto" -> "MS-12_3_recto").
 std::string IdentitySlug(const ScanIdentity& identity);
 
-// An extra image of the page in the scan's pose under another light (issue 17): raking light
+// An extra image of the page in the scan's pose under another light: raking light
 // from one side, UV fluorescence, infrared, or the operator's own. Restored through the same
 // sheet as the texture, so all register to each other.
 struct ScanLight {

@@ -1,4 +1,4 @@
-// Reflectance, not shading (issue 17): the page's albedo per camera pixel from the projector's
+// Reflectance, not shading: the page's albedo per camera pixel from the projector's
 // own light, which vellum knows as a calibrated light source.
 //
 // The model: a Lambertian page lit by the projector alone. What the camera sees under the
@@ -82,7 +82,7 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
                             const Calibration& calibration, const FlatField& flat_field,
                             const AlbedoOptions& options = AlbedoOptions());
 
-// The studio lights' own flat field (issue 17): the texture is lit by the studio's lamps, not the
+// The studio lights' own flat field: the texture is lit by the studio's lamps, not the
 // projector, so its shading is corrected from the same shape where the lamps are described.
 // The model: a Lambertian page lit by point lamps of equal strength at known places (world mm),
 // each giving cos(i) / d^2, summed as E(x, n) and taken relative to a surface at the world's

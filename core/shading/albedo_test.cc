@@ -1,4 +1,4 @@
-// Reflectance from the projector's light (issue 17) on the virtual gantry, with the projector's
+// Reflectance from the projector's light on the virtual gantry, with the projector's
 // fall-off (inverse square, vignetting 0.3 at the image's corners) and two studio lamps that
 // shade the texture as real ones do. The flat field is measured once on a white target lying
 // on the table; each page's albedo is then compared with the truth the gantry put on it.
@@ -184,7 +184,7 @@ TEST(Albedo, CheckerboardSquaresHaveTheirTrueAlbedo) {
   }
 }
 
-// The studio lamps' shading taken out of the texture (issue 17): the studio field from the
+// The studio lamps' shading taken out of the texture: the studio field from the
 // texture of a white target (albedo 0.85) on the table under the same two lamps, then a plain
 // curled and a folded leaf's texture corrected by their measured shape. Over 8 x 8 blocks (the
 // light's unevenness without the camera's pixel noise, 1.5 DN on ~190) the corrected texture is

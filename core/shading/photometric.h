@@ -1,4 +1,4 @@
-// Photometric normals (issue 17; Woodham 1980): with three or more images of the page in one
+// Photometric normals (Woodham 1980): with three or more images of the page in one
 // pose, each under one distant light of known direction, the surface's normal at each camera
 // pixel is what explains the levels it saw. Seen on the flattened page, in the page's own frame,
 // they show fine relief (ruling, prickings, erased and embossed lines) that the structured light

@@ -1,4 +1,4 @@
-// Photometric normals (issue 17) on the virtual gantry: four raking lights at 30 degrees over a
+// Photometric normals on the virtual gantry: four raking lights at 30 degrees over a
 // curled leaf with an embossed line, against the normals the gantry lit it with.
 #include "core/shading/photometric.h"
 

@@ -38,7 +38,7 @@ struct LightOptions {
   // its full scale at 65535; the noise in the same DN of an 8-bit full scale). The structured
   // light frames are 8-bit either way.
   int texture_bits = 8;
-  // The projector's light as a real one gives it (issue 17), off by default: its irradiance
+  // The projector's light as a real one gives it, off by default: its irradiance
   // falls with the square of the distance from its centre (relative to the distance to the
   // world's origin on the table) and towards the edges of its image (1 - vignetting r^2, r = 1
   // at the image's corner).
@@ -50,7 +50,7 @@ struct LightOptions {
   std::vector<cv::Vec3d> studio_lamps;
 };
 
-// A light of the station other than the texture's studio lights (issue 17), each giving one
+// A light of the station other than the texture's studio lights, each giving one
 // extra image of the page in the scan's pose: a distant light from one direction (raking light
 // from a side), or the page's UV fluorescence. The page's normal includes its relief
 // (PageOptions::ridge_height_mm). Not modelled: the shadow one part of the page casts on

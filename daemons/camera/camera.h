@@ -19,7 +19,7 @@ struct FrameRequest {
   int pattern_index = -1;   // -1: the texture (projector black, studio light).
   PatternSpec pattern;      // What the projector shows.
   cv::Size projector;       // The projector's image size.
-  // Under an extra light (issue 17; projector black, the studio light off): its name and
+  // Under an extra light (projector black, the studio light off): its name and
   // direction (no image). Empty name: none.
   ScanLight light;
 };

@@ -1,5 +1,5 @@
 // vellum-decoder's node: records each scan's captures to disk as they arrive (the scan's raw
-// folder: captures.lcmlog and the scan directory of DESIGN.md): only the scans this station's
+// folder: captures.lcmlog and the scan directory of docs/formats.md): only the scans this station's
 // projector started, each pattern once, never a scan that is over (station/scan_gate.h). A scan
 // given up is marked so on disk (raw/failed.txt, with the reason). Once a scan is complete it
 // sends it down the chain: TEXTURE, then the decoded CORRESPONDENCE (in row chunks) with the

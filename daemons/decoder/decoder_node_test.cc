@@ -228,7 +228,7 @@ TEST_F(DecoderNodeTest, AnIncompleteScanIsGivenUpNamingWhatIsMissingAndTheNextIs
   EXPECT_EQ(progress->back().scan_id, 32);
 }
 
-// Issue 17: a scan with extra lights. While its projector waits for a light (LIGHT_REQUEST: an
+// A scan with extra lights. While its projector waits for a light (LIGHT_REQUEST: an
 // operator may take minutes) the scan is not given up for its silence; the lights' captures
 // complete it, recorded as light_<name>.png and named in scan.yaml. After the lights are turned
 // off (LIGHT_REQUEST -1) with a light's capture still missing, the timeout runs again.
@@ -457,7 +457,7 @@ std::map<std::string, std::string> Snapshot(const std::string& dir) {
   return files;
 }
 
-// Issue 14, scan identity: a capture is recorded only for a scan this station's projector
+// Scan identity: a capture is recorded only for a scan this station's projector
 // started, with its session; a finished scan is never reopened; unknown scans leave no folder.
 TEST_F(DecoderNodeTest, RecordsOnlyTheScansItsProjectorStartedAndNeverReopensOne) {
   Node node("vellum-decoder", &bus_.lcm());
@@ -548,7 +548,7 @@ TEST_F(DecoderNodeTest, ACaptureTwiceOrOfAnotherSessionIsNeverASilentChoice) {
   }
 }
 
-// Issue 14: a CALIBRATION arriving in the middle of a scan never applies to it; the scan's
+// A CALIBRATION arriving in the middle of a scan never applies to it; the scan's
 // raw/calibration.yaml is the one it started with.
 TEST_F(DecoderNodeTest, ACalibrationMidScanIsRefusedAndTheScanKeepsItsOwn) {
   Node node("vellum-decoder", &bus_.lcm());

@@ -12,7 +12,7 @@ int main(int argc, char** argv) {
   return DaemonMain(
       argc, argv, "vellum-decoder",
       "Records every scan's CAPTURE messages to <data>/scan-<id>[-<slug>]/raw (the slug from\n"
-      "the scan's identity; captures.lcmlog, the scan directory of DESIGN.md,\n"
+      "the scan's identity; captures.lcmlog, the scan directory of docs/formats.md,\n"
       "calibration.yaml) as they arrive, then sends the complete scan down the chain: TEXTURE\n"
       "and the decoded CORRESPONDENCE (in row chunks). A retake of a folio moves the earlier\n"
       "attempt into <data>/retaken/. Supervises the chain: a scan a processing daemon died\n"

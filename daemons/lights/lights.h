@@ -1,4 +1,4 @@
-// What the lights daemon needs of the station's extra lights (issue 17): switch one on and every
+// What the lights daemon needs of the station's extra lights: switch one on and every
 // other off, or all off. A relay board on a serial line (relay_lights.h), the virtual gantry's
 // lights (sim: the sim camera renders the light the frame names) and the operator's hands
 // (manual: prompted in the viewer) implement it; the node sees only this interface.

@@ -1,4 +1,4 @@
-// vellum-lights' node: the station's extra lights (issue 17). On LIGHT_REQUEST(k) from the
+// vellum-lights' node: the station's extra lights. On LIGHT_REQUEST(k) from the
 // projector (of this station, a scan with its session, k naming the station's light k) it
 // switches light k on and every other off (and the studio lamps off), waits the lamp's settle
 // time and publishes LIGHT_ON(k); with the manual backend it publishes LIGHT_PROMPT(k) instead,

@@ -2,8 +2,8 @@
 // and publishes SCAN_STARTED and the station's CALIBRATION, then for the texture and each pattern
 // k: shows it (projector black for the texture), waits the settle time, publishes PATTERN_SHOWN(k)
 // and waits for the camera's CAPTURE(k) (of this station and session) before the next. A capture
-// that does not come fails the scan with a clear status. Then, for each extra light of the station
-// (issue 17), with the projector black: LIGHT_REQUEST(k) to vellum-lights, and on its LIGHT_ON(k)
+// that does not come fails the scan with a clear status. Then, for each extra light of the station,
+// with the projector black: LIGHT_REQUEST(k) to vellum-lights, and on its LIGHT_ON(k)
 // (or the operator's, from the viewer) PATTERN_SHOWN(pattern_count + k) for the camera; after the
 // last, or when the scan fails, LIGHT_REQUEST(-1) turns them all off. A scan the decoder fails
 // (its status: "scans failed" rose, the error names the scan) is stopped at once: the projector

@@ -185,7 +185,7 @@ TEST_F(ProjectorNodeTest, AScanTheDecoderFailsStopsAtOnceAndTheNextRequestIsTake
   for (size_t k = patterns_then; k < shown->size(); ++k) EXPECT_EQ((*shown)[k].scan_id, 32);
 }
 
-// Issue 14: a capture of another session (a stale one, another projector's) does not advance
+// A capture of another session (a stale one, another projector's) does not advance
 // the scan; a station calibration (scan_id 0) published mid-scan applies from the next scan.
 TEST_F(ProjectorNodeTest, OnlyItsSessionsCapturesAdvanceItAndANewCalibrationWaitsForTheNextScan) {
   Node node("vellum-projector", &bus_.lcm());
@@ -221,7 +221,7 @@ TEST_F(ProjectorNodeTest, OnlyItsSessionsCapturesAdvanceItAndANewCalibrationWait
   EXPECT_EQ(sources, (std::vector<std::string>{"small rig", "recalibrated"}));
 }
 
-// Issue 17: after its patterns the scan takes a frame under each extra light: LIGHT_REQUEST(k),
+// After its patterns the scan takes a frame under each extra light: LIGHT_REQUEST(k),
 // and on LIGHT_ON(k) (this scan's session, the light's name) PATTERN_SHOWN(pattern_count + k)
 // naming the light, the projector black; LIGHT_REQUEST(-1) at the end. A LIGHT_ON that does not
 // come fails the scan with a message naming the light, and turns the lights off.

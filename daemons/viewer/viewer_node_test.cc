@@ -139,7 +139,7 @@ void PushText(const std::string& text) {
   ASSERT_EQ(SDL_PushEvent(&e), 1) << SDL_GetError();
 }
 
-// Issue 15: the operator types the folio's identity once in the viewer's form; each scan asked
+// The operator types the folio's identity once in the viewer's form; each scan asked
 // for carries it and advances the folio (recto, verso, the next recto); u takes the last
 // advance back, so the next scan retakes that folio.
 TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
@@ -186,7 +186,7 @@ TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
   EXPECT_EQ(requests->back().identity.side, "verso");
 }
 
-// Issue 15: a failed scan looks failed: the header turns red and the daemon's whole message is
+// A failed scan looks failed: the header turns red and the daemon's whole message is
 // kept (not cut at 70 characters); the next scan clears it. A result's quality verdict shows in
 // its colour above the restored page.
 TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour) {
@@ -255,7 +255,7 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
       10));
 }
 
-// Issue 15: the preview shows what clips in red, with a histogram; and "NO SIGNAL" once the
+// The preview shows what clips in red, with a histogram; and "NO SIGNAL" once the
 // camera falls silent.
 // The leaf being placed is outlined on the live preview, green while it is in view; once it
 // runs off the view the outline and a warning turn red; a surround as bright as the leaf gets
@@ -389,7 +389,7 @@ TEST_F(ViewerNodeTest, AnUndecodablePreviewIsReportedAndTheViewerGoesOn) {
   EXPECT_TRUE(bus_.RunUntil([&] { return viewer.results() == 2; }));
 }
 
-// Issue 17: lights switched by hand. vellum-lights' LIGHT_PROMPT shows as a blue box with its
+// Lights switched by hand. vellum-lights' LIGHT_PROMPT shows as a blue box with its
 // words; L answers LIGHT_ON for the scan (its session, the light, "operator"), and the box goes.
 TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
   Node node("vellum-viewer", &bus_.lcm());
