@@ -25,8 +25,8 @@ struct ReportValue {
 // Something that makes the result doubtful (docs/formats.md's `warnings`): a code a program can
 // test and a sentence for the operator.
 struct Warning {
-  // page_cut_off, outline_uncertain, valid_low, exposure_clipped, strain_high, fold_over,
-  // size_unexpected, dpi_above_sampling
+  // page_cut_off, outline_uncertain, valid_low, edge_unmeasured, exposure_clipped, strain_high,
+  // fold_over, size_unexpected, dpi_above_sampling, ... (docs/operator.md's quality checks)
   std::string code;
   std::string message;
 };

@@ -286,6 +286,7 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
   const int leaf = cv::countNonZero(outline->mask);
   r.Number("outline", "leaf_pixels", leaf);
   r.Number("outline", "holes", outline->holes);
+  r.Number("outline", "unseen_beside_share", outline->unseen_share);
   r.Number("outline", "pages", static_cast<double>(outline->pages.size()));
   r.Number("outline", "touches_border", outline->touches_border ? 1 : 0);
   // How much of the leaf was measured, and how much of its texture is clipped.

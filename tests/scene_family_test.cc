@@ -23,7 +23,7 @@
 // VELLUM_FAMILY_FIRST (default 1). With 200 or more (ctest -L family_full, by hand), the run must
 // also meet at least 90% of its scans and raise false alarms on at most 5% of those it meets.
 // VELLUM_FAMILY_TABLE=FILE writes the counts as a Markdown table; VELLUM_FAMILY_DUMP=DIR keeps
-// each missed scan's results and a picture of its outline against the truth.
+// each missed or flagged scan's results and a picture of its outline against the truth.
 #include "core/sim/scene_family.h"
 
 #include <gtest/gtest.h>
@@ -89,10 +89,12 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   const char* dump = std::getenv("VELLUM_FAMILY_DUMP");
   const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
   auto finish = [&] {
-    if (dump && !o.met) {
+    if (dump && (!o.met || o.flagged)) {  // Misses and false alarms.
       const std::string dir = std::string(dump) + "/" + std::to_string(s.seed);
       fs::create_directories(dir);
-      fs::copy(out, dir, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+      // A failed run leaves no results folder (they are written whole or not at all).
+      if (fs::exists(out))
+        fs::copy(out, dir, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
       if (!result.outline.mask.empty()) {
         DumpOutline(dir + "/outline_vs_truth.png", input.scan.texture, result.outline.mask,
                     scan.gantry->truth().on_page);
@@ -121,6 +123,7 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
                   result.report.Text("sheet", "grid", page).c_str());
     o.figures += figures;
   }
+  o.figures += "; unseen beside " + std::to_string(result.outline.unseen_share);
   const GroundTruth& truth = scan.gantry->truth();
   const std::vector<Page>& pages = scan.gantry->pages();
   std::ostringstream missed;

@@ -1,6 +1,7 @@
 #include "core/decode/decode.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -303,6 +304,10 @@ struct Decoder::Stream {
   cv::Mat cos_sum[2], sin_sum[2];     // CV_32S: phase sums so far, fixed point.
   cv::Mat direct, global;             // CV_16S: the light estimate, once light_ready.
   std::vector<FramePairCheck> pairs;  // Each inverse-paired bit's, as it is taken up.
+  // How far a pair may stray from white + black before it disagrees, at the dimmest pixels, DN:
+  // six times the noise the options expect (three standard deviations of a sum of four frames),
+  // or three of the spread this scan's own pairs show where the camera is noisier (PairFloor).
+  int16_t pair_floor_dn = 0;
   bool light_ready = false;
   Status status = Status::Error("decode not begun");
 
@@ -331,6 +336,7 @@ Status Decoder::Begin(const PatternSequence& sequence, cv::Size camera_size) {
   st.pairs.clear();
   st.count = 0;
   st.light_ready = false;
+  st.pair_floor_dn = 0;
   std::string why;
   if (!options_.Check(&why)) return st.status = Status::Error("decode options: " + why);
   if (!sequence.Check(&why)) return st.status = Status::Error("pattern sequence: " + why);
@@ -506,6 +512,45 @@ void Decoder::Mend(FramePairCheck* check, int16_t margin, int16_t min_direct, in
   });
 }
 
+int16_t Decoder::PairFloor(int16_t min_direct) const {
+  const Stream& st = *stream_;
+  const int16_t expected = static_cast<int16_t>(std::ceil(6.0 * options_.noise_dn));
+  if (st.high_frequency.size() < 2 || st.high_frequency[0] == st.white) return expected;
+  // Each finest pair's median |pattern + inverse - white - black| over the lit pixels of every
+  // eighth row (a sound pair's is the noise of four frames: 0.67 of its standard deviation); the
+  // least of them, so one wrong frame among them does not raise it.
+  double least = std::numeric_limits<double>::infinity();
+  std::array<int, 512> counts;  // |p + q - w - b| lies in [0, 510].
+  for (size_t k = 0; k + 1 < st.high_frequency.size(); k += 2) {
+    const cv::Mat& pattern = st.held[st.high_frequency[k]];
+    const cv::Mat& inverse = st.held[st.high_frequency[k + 1]];
+    if (pattern.empty() || inverse.empty()) continue;
+    counts.fill(0);
+    int n = 0;
+    for (int y = 0; y < st.size.height; y += 8) {
+      const uint8_t* p = pattern.ptr<uint8_t>(y);
+      const uint8_t* q = inverse.ptr<uint8_t>(y);
+      const uint8_t* w = st.held[st.white].ptr<uint8_t>(y);
+      const uint8_t* b = st.held[st.black].ptr<uint8_t>(y);
+      for (int x = 0; x < st.size.width; ++x) {
+        if (w[x] - b[x] < min_direct || p[x] == 255 || q[x] == 255 || w[x] == 255) continue;
+        ++counts[std::abs(p[x] + q[x] - w[x] - b[x])];
+        ++n;
+      }
+    }
+    if (n < 1000) continue;
+    // The median, read within its bin (value m stands for [m - 0.5, m + 0.5)).
+    int m = 0, below = 0;
+    while (2 * (below + counts[m]) < n) below += counts[m++];
+    const double median = std::max(0.0, m - 0.5 + (0.5 * n - below) / std::max(1, counts[m]));
+    least = std::min(least, median);
+  }
+  if (!std::isfinite(least)) return expected;
+  // Three standard deviations of the sum, as six times noise_dn is for the noise expected.
+  const double sigma = 1.4826 * least;
+  return static_cast<int16_t>(std::max<double>(expected, std::ceil(3 * sigma)));
+}
+
 void Decoder::Digest() {
   Stream& st = *stream_;
   if (!st.status.ok()) return;
@@ -532,7 +577,10 @@ void Decoder::Digest() {
   const int width = st.size.width;
   const int16_t margin = static_cast<int16_t>(std::ceil(options_.uncertain_bit_dn));
   const int16_t min_direct = static_cast<int16_t>(std::ceil(options_.min_contrast_dn));
-  const int16_t floor_dn = static_cast<int16_t>(std::ceil(6.0 * options_.noise_dn));
+  if (st.pair_floor_dn == 0 && light && st.Has(st.white)) {
+    st.pair_floor_dn = PairFloor(min_direct);
+  }
+  const int16_t floor_dn = st.pair_floor_dn;
   std::mutex pair_mutex;
   std::vector<std::pair<int64_t, int64_t>> pair_counts(bits.size());
   // One pass over the rows takes up every frame that can be: with a whole scan at hand, that

@@ -136,6 +136,9 @@ class Decoder {
   // Finds which frame of a disagreeing pair does not fit the scan's light and, where one is
   // told, classifies the bit again without it (check->left_out). Before the frames are let go.
   void Mend(FramePairCheck* check, int16_t margin, int16_t min_direct, int16_t floor_dn);
+  // The pair check's tolerance at the dimmest pixels for this scan (Stream::pair_floor_dn), from
+  // the finest pairs held with the white and black frames.
+  int16_t PairFloor(int16_t min_direct) const;
 
   DecodeOptions options_;
   std::unique_ptr<Stream> stream_;

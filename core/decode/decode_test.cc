@@ -239,6 +239,38 @@ TEST(Decode, AFrameOfAnotherPatternIsToldByItsPairNotAddingUp) {
   for (const FramePairCheck& p : swapped.stats.pairs) EXPECT_EQ(p.left_out, -1);
 }
 
+// A camera noisier than the options say (3.5 DN where noise_dn is 1.5) on a dim scene (white
+// 41 DN over black): the pair check takes its tolerance from the scan's own finest pairs, so a
+// sound pair is not called wrong at a fifth of its pixels (the sum of four frames spreads by 7
+// DN, over the 9 DN that 1.5 DN would allow), and a frame of another pattern is still told.
+TEST(Decode, ThePairCheckFollowsTheCamerasOwnNoise) {
+  PatternOptions o;
+  o.projector_size = cv::Size(640, 480);
+  const PatternSequence seq = MakePatternSequence(o);
+  cv::RNG rng(11);
+  std::vector<cv::Mat> frames;
+  for (const cv::Mat& ideal : IdealFrames(seq)) {
+    cv::Mat noise(ideal.size(), CV_32F), f;
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, 3.5);
+    ideal.convertTo(f, CV_32F, 0.16, 12.0);  // Black at 12 DN, white at 53.
+    cv::Mat(f + noise).convertTo(f, CV_8U);
+    frames.push_back(f);
+  }
+  const DecodeResult sound = Decode(seq, frames);
+  ASSERT_TRUE(sound.status.ok()) << sound.status.message();
+  ASSERT_FALSE(sound.stats.pairs.empty());
+  for (const FramePairCheck& p : sound.stats.pairs) {
+    EXPECT_LT(p.Share(), 0.005) << "bit " << p.bit << " of axis " << p.axis;
+  }
+  const int pattern = seq.Find(PatternKind::kGray, Axis::kColumn, 7, false);
+  frames[pattern] = frames[seq.Find(PatternKind::kGray, Axis::kColumn, 6, false)].clone();
+  const DecodeResult swapped = Decode(seq, frames);
+  ASSERT_TRUE(swapped.status.ok()) << swapped.status.message();
+  for (const FramePairCheck& p : swapped.stats.pairs) {
+    if (p.pattern == pattern) EXPECT_GT(p.Share(), 0.3);
+  }
+}
+
 // Where the redundancy tells which frame of a pair is wrong, the bit is decoded from the other
 // alone and the decode is the sound scan's: a frame of another leaf (here the pattern seen
 // shifted and at 60% of this leaf's light: values off both of this scan's levels wherever its

@@ -1,6 +1,7 @@
 // FillHoles (steps.h).
 #include <Eigen/Dense>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -11,8 +12,13 @@ namespace vellum::outline {
 namespace {
 
 // Whether the heights `inside` a hole lie on the surface the leaf makes `around` it (a quadric
-// fitted to the leaf around it, so a curled leaf's bend does not pass for a step): their median
-// distance from it is under `step`. `slack_px` forgives each point what the surface's slope there
+// fitted to the leaf around it, so a curled leaf's bend does not pass for a step). What is judged
+// is their offset from it, the median of their signed distances: each point's noise averages out
+// over the points (the median's spread is about 1.25 sigma / sqrt(n)), a step under the leaf
+// does not. `step` is the rim threshold for one point (StepThreshold: some four times its noise,
+// more over dark ink); the offset must stay under step * max(1/4, 2 / sqrt(n)), so over dark
+// ink, where one point's threshold is several times the leaf's thickness, what shows through a
+// hole is still told from the leaf. `slack_px` forgives each point what the surface's slope there
 // gives over that many pixels (on a wall turned nearly edge-on to the camera a height changes by
 // half a millimetre per pixel, and a fit extrapolated across a gap is not better than a pixel).
 bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Point3f>& inside,
@@ -63,10 +69,11 @@ bool OnSurface(const std::vector<cv::Point3f>& around, const std::vector<cv::Poi
     // The quadric's slope there, mm per pixel (row[1] and row[2] are the scaled x and y).
     const double gx = (quadric(1) + 2 * quadric(3) * row[1] + quadric(4) * row[2]) / scale,
                  gy = (quadric(2) + quadric(4) * row[1] + 2 * quadric(5) * row[2]) / scale;
-    const double slack = slack_px * std::hypot(gx, gy);
-    off.push_back(static_cast<float>(std::max(0.0, std::fabs(p.z - fit) - slack)));
+    const double slack = slack_px * std::hypot(gx, gy), d = p.z - fit;
+    off.push_back(static_cast<float>(d > 0 ? std::max(0.0, d - slack) : std::min(0.0, d + slack)));
   }
-  return Median(&off) < step;
+  const double n = static_cast<double>(off.size());
+  return std::fabs(Median(&off)) < step * std::max(0.25, 2 / std::sqrt(n));
 }
 
 // Heights beside the leaf (a hole's, or a surface's that may join the leaf) against the leaf's
@@ -119,17 +126,87 @@ class TileComparison {
 
 }  // namespace
 
+cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
+                      const cv::Rect& box, const std::vector<Plane>& planes, const Look& leaf,
+                      double plane_mm, double look) {
+  cv::Mat out(box.size(), CV_8U, cv::Scalar(0));
+  if (planes.empty() || leaf.empty()) return out;
+  cv::Mat smooth;
+  cv::blur(colour, smooth, {3, 3});
+  // The plane a point lies on (within plane_mm), or -1.
+  auto on_plane = [&](const cv::Vec3f& p) {
+    if (std::isnan(p[2])) return -1;
+    for (size_t k = 0; k < planes.size(); ++k) {
+      if (std::fabs(p[2] - planes[k].At(p[0], p[1])) <= plane_mm) return static_cast<int>(k);
+    }
+    return -1;
+  };
+  // Each plane's own look, from every fourth pixel of the view on it and off the leaf (away from
+  // its rim): a frame's face and the table in its window look apart. And the range of its
+  // brightness (its 2nd to 98th percentile): a mark on the page may be likelier under the
+  // plane's look than the leaf's and still be darker or lighter than anything on the plane.
+  cv::Mat away;
+  cv::dilate(leaf_mask, away, cv::Mat::ones(9, 9, CV_8U));
+  std::vector<Look> looks(planes.size());
+  std::vector<std::array<int, 256>> levels(planes.size());
+  for (auto& l : levels) l.fill(0);
+  auto level = [](const cv::Vec3b& c) { return (c[0] + 2 * c[1] + c[2]) / 4; };
+  for (int v = 0; v < points.rows; v += 4) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    const cv::Vec3b* c = smooth.ptr<cv::Vec3b>(v);
+    const uint8_t* near = away.ptr<uint8_t>(v);
+    for (int u = 0; u < points.cols; u += 4) {
+      const int k = near[u] ? -1 : on_plane(p[u]);
+      if (k < 0) continue;
+      looks[k].Add(Look::Bin(c[u]), 1);
+      ++levels[k][level(c[u])];
+    }
+  }
+  std::vector<std::pair<int, int>> range(planes.size(), {256, -1});
+  for (size_t k = 0; k < planes.size(); ++k) {
+    if (looks[k].empty()) continue;
+    looks[k].Finish();
+    int total = 0;
+    for (int n : levels[k]) total += n;
+    int seen = 0;
+    for (int g = 0; g < 256; ++g) {
+      seen += levels[k][g];
+      if (range[k].first > 255 && 50 * seen >= total) range[k].first = g;
+      if (range[k].second < 0 && 50 * seen >= 49 * total) range[k].second = g;
+    }
+  }
+  cv::parallel_for_(cv::Range(0, box.height), [&](const cv::Range& rows) {
+    for (int v = rows.start; v < rows.end; ++v) {
+      const cv::Vec3f* p = points.ptr<cv::Vec3f>(box.y + v) + box.x;
+      const cv::Vec3b* c = smooth.ptr<cv::Vec3b>(box.y + v) + box.x;
+      uint8_t* o = out.ptr<uint8_t>(v);
+      for (int u = 0; u < box.width; ++u) {
+        const int k = on_plane(p[u]);
+        if (k < 0 || looks[k].empty()) continue;
+        const int bin = Look::Bin(c[u]), g = level(c[u]);
+        if (g >= range[k].first && g <= range[k].second &&
+            looks[k].Log(bin) - leaf.Log(bin) >= look) {
+          o[u] = 255;
+        }
+      }
+    }
+  });
+  return out;
+}
+
 // Fills the holes of `leaf` that show no other surface, and returns how many it keeps. A hole
 // with heights is kept when they differ from the leaf's around it (another surface shows
 // through), filled when they do not (an island the rim test cut out). The two are compared
 // piece by piece along the hole's edge (32 px tiles: the leaf within 12 px outside the edge, a
 // quadric, against the hole 3 to 10 px inside it, past the decoder's blur of the step), so a
 // hole across a ripple is judged by the surface beside each part of it; the hole is kept when
-// most pieces stand off. A hole without heights (the projector's light did not reach it: a
-// shadow on the leaf, or what lies under a raised leaf) is kept when it looks unlike the leaf
-// around it in the texture (by more than 3% of the paper's brightness), filled otherwise.
+// most pieces stand off; or, when they do not, when most of the hole shows the surround by its
+// heights and its look together (a leaf flush with what it lies on). A hole without heights (the
+// projector's light did not reach it: a shadow on the leaf, or what lies under a raised leaf) is
+// kept when it looks unlike the leaf around it in the texture (by more than 3% of the paper's
+// brightness), filled otherwise.
 int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
-              cv::Mat* leaf) {
+              cv::Mat* leaf, const cv::Mat& surround_shows) {
   cv::Mat outside = ~*leaf, labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(outside, labels, stats, centroids, 4, CV_32S);
   const cv::Rect all(0, 0, z.cols, z.rows);
@@ -184,6 +261,9 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
       if (valid >= area / 2) {
         const auto [judged, off] = tiles.Judge(/*slack_px=*/0);
         island = 2 * off <= judged;
+        if (island && !surround_shows.empty()) {
+          island = 2 * cv::countNonZero(surround_shows(near) & hole) < area;
+        }
       } else {
         island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;
       }

@@ -48,6 +48,14 @@ bool OutlineOptions::Check(std::string* why) const {
     *why = "gutter_apart_px and gutter_borrow_rows must be >= 1, gutter_meet_px >= 0";
     return false;
   }
+  if (unseen_reach_px < 1 || !(unseen_look >= 0) ||
+      !(max_unseen_share >= 0 && max_unseen_share <= 1) ||
+      !(max_lost_share >= 0 && max_lost_share <= 1)) {
+    *why =
+        "unseen_reach_px must be >= 1, unseen_look >= 0, max_unseen_share and max_lost_share in "
+        "[0, 1]";
+    return false;
+  }
   return surround.Check(why) && cut.Check(why);
 }
 
@@ -141,6 +149,80 @@ cv::Mat LargestWithin(const cv::Mat& found, Outline* out) {
   return best ? labels == best : cv::Mat(found.size(), CV_8U, cv::Scalar(0));
 }
 
+// The share of what lies just outside `found` (blocks) that is as high as `plane` (within
+// `tolerance_mm`): of the measured blocks two and three blocks out (the one beside the outline
+// mixes both sides). A leaf on a support wider than itself has the support's top beside it along
+// much of its outline; a support or a box taken for the leaf has the table, far below, all round.
+double ShareOutsideAtPlane(const outline::Blocks& blocks, const cv::Mat& found,
+                           const outline::Plane& plane, double tolerance_mm) {
+  cv::Mat near, far;
+  cv::dilate(found, near, cv::Mat::ones(3, 3, CV_8U));
+  cv::dilate(found, far, cv::Mat::ones(7, 7, CV_8U));
+  const cv::Mat band = far & ~near;
+  int measured = 0, level = 0;
+  for (int by = 0; by < band.rows; ++by) {
+    for (int bx = 0; bx < band.cols; ++bx) {
+      const float z = blocks.z.at<float>(by, bx);
+      if (!band.at<uint8_t>(by, bx) || std::isnan(z)) continue;
+      ++measured;
+      level += std::fabs(plane.At(blocks.x.at<float>(by, bx), blocks.y.at<float>(by, bx)) - z) <=
+               tolerance_mm;
+    }
+  }
+  return measured ? static_cast<double>(level) / measured : 0.0;
+}
+
+// The share of `cut`'s pixels more than `inset` pixels inside its outline that `leaf`, its holes
+// filled, leaves out.
+double LostInside(const cv::Mat& cut, const cv::Mat& leaf, int inset) {
+  cv::Mat deep;
+  cv::erode(cut, deep, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * inset + 1, 2 * inset + 1}),
+            cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  const int total = cv::countNonZero(deep);
+  if (total == 0) return 0;
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(leaf.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  cv::Mat filled = cv::Mat::zeros(leaf.size(), CV_8U);
+  cv::drawContours(filled, contours, -1, cv::Scalar(255), cv::FILLED);
+  return static_cast<double>(cv::countNonZero(deep & ~filled)) / total;
+}
+
+// Whether `inner` (blocks) stands off what lies around it inside `outer` at its rim, as a leaf on
+// a support does by its thickness: at half or more of its rim blocks that can be judged, the
+// block one inside stands at least `least_mm` above the surface outside extrapolated to it (from
+// the blocks two and three out, past the rim's mixed block and the one beside it), along a row
+// or a column. A part of the leaf itself (a curl rising off its flat part) continues the
+// surface outside it.
+bool StandsOffAtRim(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
+                    double least_mm) {
+  const cv::Rect grid(0, 0, inner.cols, inner.rows);
+  auto at = [&](cv::Point p, const cv::Mat& m) {
+    return grid.contains(p) && m.at<uint8_t>(p) != 0;
+  };
+  auto z = [&](cv::Point p) { return blocks.z.at<float>(p); };
+  int judged = 0, standing = 0;
+  const cv::Point directions[4] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+  for (int by = 0; by < inner.rows; ++by) {
+    for (int bx = 0; bx < inner.cols; ++bx) {
+      const cv::Point b(bx, by);
+      if (!at(b, inner)) continue;
+      for (const cv::Point& d : directions) {
+        const cv::Point in = b - d, o1 = b + 2 * d, o2 = b + 3 * d;
+        if (at(b + d, inner) || !at(in, inner) || at(o1, inner) || at(o2, inner) ||
+            !at(o1, outer) || !at(o2, outer)) {
+          continue;
+        }
+        const float zi = z(in), z1 = z(o1), z2 = z(o2);
+        if (std::isnan(zi) || std::isnan(z1) || std::isnan(z2)) continue;
+        ++judged;
+        standing += zi - (z1 + 3 * (z1 - z2)) >= least_mm;
+        break;
+      }
+    }
+  }
+  return judged == 0 || 2 * standing >= judged;
+}
+
 // Whether `inner` (blocks) is a leaf lying on `outer` (a support or a frame around it, whose
 // plane `above` is measured from): of at least `min_blocks` and at most 90% of it, its outline
 // inside `outer` (four fifths of it at least two blocks in from outer's) and set apart there
@@ -173,7 +255,8 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
     }
   }
   if (off.size() * 2 < static_cast<size_t>(area)) return false;  // Mostly unmeasured.
-  return outline::Median(&off) >= std::max(options.lies_on_mm, 3 * outline::Median(&noise));
+  const double least = std::max(options.lies_on_mm, 3 * outline::Median(&noise));
+  return outline::Median(&off) >= least && StandsOffAtRim(blocks, outer, inner, least);
 }
 
 }  // namespace
@@ -257,10 +340,14 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     if (!LiesOn(blocks, cut, inner, above_more, min_blocks, options)) {
       // What was found lies on a plane well above the table, and nothing on it stands off it: a
-      // support or a box, maybe, with the leaf flush on it or elsewhere.
+      // support or a box, maybe, with the leaf flush on it or elsewhere. Unless a quarter of what
+      // lies just outside it is as high: then it is a leaf on a support wider than itself.
       double lowest = 1e9;
       for (const Plane& known : planes) lowest = std::min(lowest, known.c);
-      if (plane.c - lowest > options.raised_plane_mm) raised_mm = plane.c - lowest;
+      if (plane.c - lowest > options.raised_plane_mm &&
+          ShareOutsideAtPlane(blocks, cut, plane, options.raised_plane_mm) < 0.25) {
+        raised_mm = plane.c - lowest;
+      }
       break;
     }
     cut = inner;
@@ -291,12 +378,42 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat box_leaf = leaf(holes_box);
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
-  out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf);
+  const cv::Mat surround_shows =
+      SurroundShows(points, cues.colour, leaf, holes_box, planes, found.look_leaf,
+                    options.well_plane_mm, options.well_look);
+  out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf,
+                        surround_shows);
   // The rim's mixed pixels out, once the holes are settled (their rims are the leaf's too).
   TrimRim(cues.z, options.trim_off_mm, &leaf);
+  // Of the cut's pixels outside the leaf, those without a height may be leaf unmeasured; those
+  // with one the refinement left out are the surround (a burnt edge's bays, a hole).
   out.measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
-                       std::max(1, cv::countNonZero(leaf | full_cut));
+                       std::max(1, cv::countNonZero(leaf | (full_cut & ~measured)));
   out.confidence = RimConfidence(leaf, cues);
+  // What the cut found well inside its outline (beyond the block and band the refinement may move
+  // it by) and the outline at the pixel left out, its holes aside: part of the leaf lost.
+  const double lost = LostInside(full_cut, leaf, block + options.band_px);
+  if (lost > options.max_lost_share) {
+    out.doubts.push_back(
+        {"outline_uncertain",
+         "the outline brought to the pixel leaves out " + Fixed(100 * lost, 0) +
+             "% of the leaf the cut found well inside its outline: part of the leaf is not "
+             "restored; check the outline in the report, or draw a leaf hint in the viewer "
+             "(--leaf-hint) and scan again"});
+  }
+  const int leaf_px = std::max(1, cv::countNonZero(leaf));
+  out.unseen_share = static_cast<double>(UnseenBeside(leaf, measured, cues.colour, found.look_leaf,
+                                                      found.look_surround, options.unseen_reach_px,
+                                                      options.unseen_look)) /
+                     leaf_px;
+  if (out.unseen_share > options.max_unseen_share) {
+    out.doubts.push_back(
+        {"edge_unmeasured",
+         "beside the outline, " + Fixed(100 * out.unseen_share, 1) +
+             "% more of the leaf (by its look) has no 3D point: an edge curled up edge-on to the "
+             "projector, or a slope facing away from it; it is left out of the restored page: "
+             "lay that edge flatter or turn the leaf towards the projector and scan again"});
+  }
   out.touches_border = TouchesBorder(leaf, options.border_px);
   // Plausibility: a leaf lies inside the view; what fills most of it, or reaches two or more of
   // its sides, is more likely the table or a support.

@@ -87,6 +87,15 @@ struct OutlineOptions {
   double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
   cv::Rect hint;                 // Camera pixels inside the leaf (empty: the centre of the view).
   int border_px = 2;             // A leaf within this of the image border runs off the view.
+  // The leaf seen but not measured beside its outline (UnseenBeside: within unseen_reach_px of
+  // it, at least unseen_look nats more like the leaf than the surround): over max_unseen_share
+  // of the leaf's area is flagged (edge_unmeasured), as it is missing from the restored page.
+  int unseen_reach_px = 64;
+  double unseen_look = 1.0;
+  double max_unseen_share = 0.01;
+  // The outline at the pixel leaving out more than this share of what the cut found well inside
+  // its outline (its holes aside) is doubtful (outline_uncertain).
+  double max_lost_share = 0.1;
   // Spreads (SplitAtGutter).
   bool find_spread = true;  // Look for two pages meeting at a gutter.
   // What the operator says lies there: a leaf is never split, a book always looked for as two
@@ -127,6 +136,9 @@ struct Outline {
   // Share of the leaf found (by any cue) that has a 3D point: what has none where it reaches the
   // leaf's outline (a shadow, a side seen edge-on) is not in `mask`, and holes filled are.
   double measured_share = 0;
+  // Of the leaf's area, the share more of it seen beside the outline without a 3D point (a
+  // curled edge turned edge-on to the projector): not in `mask`, not restored.
+  double unseen_share = 0;
   int holes = 0;                     // Holes in the leaf that show what is under it.
   cv::Vec4f gutter{0, 0, 0, 0};      // A spread's gutter line in the image: (vx, vy, x0, y0).
   std::vector<OutlineDoubt> doubts;  // What makes it doubtful (none: found with confidence).

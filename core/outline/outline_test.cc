@@ -201,5 +201,50 @@ TEST(RaisedHole, TheLeafOnASupportTakenForTheLeafIsARaisedHole) {
   EXPECT_GE(raised.rise_mm, 0.2);
 }
 
+// What was found lies on a plane well above the table with nothing standing on it: a support
+// taken for the leaf (the leaf flush on it and looking like it), flagged; or the leaf itself on
+// a support wider than it (its top beside the leaf all round), not flagged.
+TEST(RaisedPlane, ASupportTakenForTheLeafIsDoubtedALeafOnAWiderSupportIsNot) {
+  PageOptions page;
+  page.shape = PageShape::kFlat;
+  page.size_mm = {120.0, 160.0};
+  SceneOptions scene;
+  scene.support = true;
+  scene.support_height_mm = 12.0;
+  TextureOptions texture;
+  texture.kind = TextureKind::kText;
+  auto doubted = [](const Outline& found) {
+    for (const OutlineDoubt& d : found.doubts) {
+      if (d.code == "leaf_ambiguous") return true;
+    }
+    return false;
+  };
+  {
+    // On a dark board wider than the leaf, 0.2 mm thick: the leaf is found, and not doubted.
+    scene.support_albedo = 0.3;
+    const SimulatedScan scan = SimulateScan(DefaultRig(), page, texture, scene, 5);
+    const PointMap map =
+        Triangulator(scan.gantry->rig()).Triangulate(Decode(scan.sequence, scan.frames));
+    const Outline found = FindLeaf(map.points, scan.texture);
+    ASSERT_TRUE(found.status.ok()) << found.status.message();
+    EXPECT_GE(MaskIoU(found.mask, scan.gantry->truth().on_page), 0.98);
+    EXPECT_FALSE(doubted(found));
+  }
+  {
+    // Flush on a board as light as the paper, 6 mm wider all round: the board is what is found.
+    page.thickness_mm = 0.0;
+    scene.support_albedo = 0.8;
+    texture.paper_albedo = 0.8;
+    scene.support_mm = cv::Rect2d(-66.0, -86.0, 132.0, 172.0);
+    const SimulatedScan scan = SimulateScan(DefaultRig(), page, texture, scene, 5);
+    const PointMap map =
+        Triangulator(scan.gantry->rig()).Triangulate(Decode(scan.sequence, scan.frames));
+    const Outline found = FindLeaf(map.points, scan.texture);
+    ASSERT_TRUE(found.status.ok()) << found.status.message();
+    EXPECT_LT(MaskIoU(found.mask, scan.gantry->truth().on_page), 0.9);
+    EXPECT_TRUE(doubted(found));
+  }
+}
+
 }  // namespace
 }  // namespace vellum

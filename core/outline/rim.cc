@@ -219,4 +219,47 @@ int SidesTouched(const cv::Mat& mask, int border) {
   return touched;
 }
 
+int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
+                 const Look& leaf_look, const Look& surround_look, int reach_px, double min_look) {
+  if (leaf_look.empty() || surround_look.empty() || reach_px < 1) return 0;
+  const cv::Rect view(0, 0, leaf.cols, leaf.rows);
+  const cv::Rect box = (cv::boundingRect(leaf) + cv::Size(2 * reach_px, 2 * reach_px) -
+                        cv::Point(reach_px, reach_px)) &
+                       view;
+  if (box.empty()) return 0;
+  const cv::Mat in_leaf = leaf(box);
+  cv::Mat near, candidates, touching, labels;
+  cv::dilate(in_leaf, near,
+             cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * reach_px + 1, 2 * reach_px + 1}));
+  candidates = near & ~in_leaf & ~measured(box);
+  // Joined to the leaf: the parts of the candidates that reach within two pixels of it (its rim
+  // was trimmed of mixed pixels).
+  cv::dilate(in_leaf, touching, cv::Mat::ones(5, 5, CV_8U));
+  const int count = cv::connectedComponents(candidates, labels, 8, CV_32S);
+  std::vector<uint8_t> joined(count, 0);
+  for (int v = 0; v < box.height; ++v) {
+    const int* l = labels.ptr<int>(v);
+    const uint8_t* t = touching.ptr<uint8_t>(v);
+    for (int u = 0; u < box.width; ++u) {
+      if (l[u] && t[u]) joined[l[u]] = 1;
+    }
+  }
+  // Counted four pixels or more from the leaf: nearer, a pixel mixes the leaf's rim with what
+  // lies beside it (the camera's blur), and looks like neither.
+  cv::Mat smooth, apart;
+  cv::blur(colour(box), smooth, {3, 3});
+  cv::distanceTransform(~in_leaf, apart, cv::DIST_L2, 3);
+  int unseen = 0;
+  for (int v = 0; v < box.height; ++v) {
+    const int* l = labels.ptr<int>(v);
+    const cv::Vec3b* c = smooth.ptr<cv::Vec3b>(v);
+    for (int u = 0; u < box.width; ++u) {
+      if (!l[u] || !joined[l[u]] || apart.at<float>(v, u) < 4) continue;
+      const int bin = Look::Bin(c[u]);
+      unseen += leaf_look.Log(bin) - surround_look.Log(bin) >= min_look;
+    }
+  }
+  return unseen;
+}
+
 }  // namespace vellum::outline

@@ -187,10 +187,30 @@ void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf);
 // ---- FillHoles ----
 // Fills the holes of `leaf` that show no other surface (heights on the leaf's surface around
 // them, or, without heights, looking like the leaf), and returns how many it keeps.
+// `surround_shows` (if not empty): where the surround shows by both cues (SurroundShows); a hole
+// whose heights lie on the leaf's surface is kept all the same when it mostly shows the surround
+// there (a leaf flush with what it lies on: the heights cannot tell its holes, the look can).
 int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
-              cv::Mat* leaf);
+              cv::Mat* leaf, const cv::Mat& surround_shows = cv::Mat());
+// Where a pixel of `box` shows the surround by both cues (255, of box's size): its point within
+// `plane_mm` of one of `planes`, and its colour (over 3 x 3 pixels) at least `look` nats more like
+// that plane's own look than the leaf's and within the range of the plane's brightness (2nd to
+// 98th percentile). Each plane's look is learned from the view's pixels on it away from
+// `leaf_mask` (a frame's face and the table in its window look apart). `points`, `colour` and
+// `leaf_mask` are the whole view's.
+cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
+                      const cv::Rect& box, const std::vector<Plane>& planes, const Look& leaf,
+                      double plane_mm, double look);
 
 // ---- the outline's figures ----
+// The leaf the camera saw but the scan did not measure beside its outline: pixels without a
+// height, within `reach_px` of the leaf and joined to it, that look like the leaf (by `leaf` and
+// `surround`, the cut's looks, over the texture smoothed across 5 x 5 pixels: at least
+// `min_look` nats more like the leaf). A curled edge turned nearly edge-on to the projector, a
+// slope facing away from it: seen, but no 3D point to restore it from. A projector's shadow on
+// the table looks like the table and is not counted. Returns the pixels counted.
+int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
+                 const Look& leaf_look, const Look& surround_look, int reach_px, double min_look);
 // Share of the leaf's rim pixels set apart from what is beside them: on a rim or a texture edge,
 // beside pixels without a height, or at the image border.
 double RimConfidence(const cv::Mat& leaf, const Cues& cues);

@@ -236,6 +236,114 @@ TEST(FillHoles, KeepsAHoleShowingWhatIsUnderAndFillsOneThatShowsNothing) {
   EXPECT_EQ(leaf.at<uint8_t>(cv::Point(lost)), 255);
 }
 
+// Over dark ink one point's rim threshold is several times a leaf's thickness (the decoder's
+// noise goes as 1 / brightness), yet the hole's many points show their offset: a burnt hole over
+// a dark square showing the table 0.2 mm below is kept, a patch of the same ink whose heights lie
+// on the leaf (cut out by its look) is filled, both under the same noise (0.06 mm per point).
+TEST(FillHoles, OverDarkInkAHolesOffsetShowsThroughItsPointsNoise) {
+  const cv::Size size(200, 200);
+  const cv::Point2f real(60, 100), island(140, 100);
+  auto in = [](int u, int v, cv::Point2f c) { return std::hypot(u - c.x, v - c.y) < 15; };
+  cv::Mat z(size, CV_32F), noise(size, CV_32F);
+  cv::RNG rng(7);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, 0.06);
+  cv::Mat gray(size, CV_8U, cv::Scalar(230));
+  gray(cv::Rect(30, 70, 140, 60)).setTo(20);  // The dark squares both lie in.
+  cv::Mat leaf(size, CV_8U, cv::Scalar(255));
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      const bool hole = in(u, v, real);
+      z.at<float>(v, u) = (hole ? 0.0f : 0.2f) + noise.at<float>(v, u);
+      if (hole || in(u, v, island)) leaf.at<uint8_t>(v, u) = 0;
+    }
+  }
+  const OutlineOptions options;
+  const cv::Mat threshold = StepThreshold(gray, 230, options.step_mm, options.scale_px, true);
+  ASSERT_GT(threshold.at<float>(cv::Point(real)), 0.4f);  // Over the ink: twice the step and more.
+  EXPECT_EQ(FillHoles(z, gray, threshold, 230, &leaf), 1);
+  EXPECT_EQ(leaf.at<uint8_t>(cv::Point(real)), 0);
+  EXPECT_EQ(leaf.at<uint8_t>(cv::Point(island)), 255);
+}
+
+// A leaf flush with the table (no thickness to see): a hole and a mark on the page both lie on
+// the table's plane, and the heights cannot tell them. The look does: a hole showing the table
+// (its look and brightness) is kept; a patch of the page's own ink, cut out, is filled.
+TEST(FillHoles, OnAFlushLeafTheLookTellsAHoleFromTheInk) {
+  const cv::Size size(240, 200);
+  const cv::Point2f hole(70, 100), mark(170, 100);
+  auto in = [](int u, int v, cv::Point2f c) { return std::hypot(u - c.x, v - c.y) < 15; };
+  const cv::Rect page(30, 30, 180, 140);
+  cv::Mat points(size, CV_32FC3), colour(size, CV_8UC3, cv::Scalar(100, 100, 100));
+  cv::Mat z(size, CV_32F, cv::Scalar(0)), leaf(size, CV_8U, cv::Scalar(0));
+  cv::RNG rng(3);
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      const float h = static_cast<float>(rng.gaussian(0.02));
+      points.at<cv::Vec3f>(v, u) = cv::Vec3f(0.25f * u, 0.25f * v, h);
+      z.at<float>(v, u) = h;
+      if (!page.contains({u, v})) continue;
+      // Paper with lines of ink (gray 40) every 10 rows: the leaf's look has both.
+      const uint8_t g = (v % 10 < 3 || in(u, v, mark)) ? 40 : 200;
+      colour.at<cv::Vec3b>(v, u) = cv::Vec3b(g, g, g);
+      if (in(u, v, hole)) colour.at<cv::Vec3b>(v, u) = cv::Vec3b(100, 100, 100);
+      leaf.at<uint8_t>(v, u) = in(u, v, hole) || in(u, v, mark) ? 0 : 255;
+    }
+  }
+  Look leaf_look;
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      if (leaf.at<uint8_t>(v, u)) leaf_look.Add(Look::Bin(colour.at<cv::Vec3b>(v, u)), 1);
+    }
+  }
+  leaf_look.Finish();
+  cv::Mat gray;
+  cv::cvtColor(colour, gray, cv::COLOR_BGR2GRAY);
+  const OutlineOptions options;
+  const cv::Mat threshold = StepThreshold(gray, 200, options.step_mm, options.scale_px, true);
+  const cv::Rect all(0, 0, size.width, size.height);
+  const cv::Mat shows = SurroundShows(points, colour, leaf, all, {Plane()}, leaf_look,
+                                      options.well_plane_mm, options.well_look);
+  cv::Mat without = leaf.clone();
+  FillHoles(z, gray, threshold, 200, &without);
+  EXPECT_EQ(without.at<uint8_t>(cv::Point(hole)), 255);  // The heights alone fill both.
+  EXPECT_EQ(FillHoles(z, gray, threshold, 200, &leaf, shows), 1);
+  EXPECT_EQ(leaf.at<uint8_t>(cv::Point(hole)), 0);
+  EXPECT_EQ(leaf.at<uint8_t>(cv::Point(mark)), 255);
+}
+
+// Beside a leaf (bright, on a dark table), a strip the camera saw but the scan did not measure
+// (a curled edge turned from the projector): counted when it looks like the leaf, four pixels
+// or more from it; a strip without heights that looks like the table (a projector's shadow) is
+// not, nor is one that does not reach the leaf.
+TEST(UnseenBeside, CountsWhatLooksLikeTheLeafBesideItWithoutHeights) {
+  const cv::Size size(200, 200);
+  cv::Mat colour(size, CV_8UC3, cv::Scalar(40, 40, 40));
+  cv::Mat leaf(size, CV_8U, cv::Scalar(0)), measured(size, CV_8U, cv::Scalar(255));
+  leaf(cv::Rect(60, 40, 80, 120)).setTo(255);
+  colour(cv::Rect(60, 40, 80, 120)).setTo(cv::Scalar(210, 210, 210));
+  const cv::Rect wall(40, 40, 20, 120), shadow(140, 40, 16, 120), apart(10, 40, 10, 120);
+  colour(wall).setTo(cv::Scalar(200, 200, 200));
+  measured(wall).setTo(0);
+  measured(shadow).setTo(0);
+  measured(apart).setTo(0);
+  colour(apart).setTo(cv::Scalar(200, 200, 200));
+  Look leaf_look, surround_look;
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      if (!measured.at<uint8_t>(v, u)) continue;
+      (leaf.at<uint8_t>(v, u) ? leaf_look : surround_look)
+          .Add(Look::Bin(colour.at<cv::Vec3b>(v, u)), 1);
+    }
+  }
+  leaf_look.Finish();
+  surround_look.Finish();
+  const int counted = UnseenBeside(leaf, measured, colour, leaf_look, surround_look, 64, 1.0);
+  // The wall's 20 columns less the 3 nearest the leaf (the rim's mixed pixels), and a pixel of
+  // blur around its far side and ends; nothing of the shadow or the strip apart.
+  EXPECT_GE(counted, 14 * 120);
+  EXPECT_LE(counted, 17 * 120);
+}
+
 // An open book's gutter: pages rising 30 degrees into a valley down the middle. With a gap
 // between the pages (the table shows in it) they are parted: two sheets. Meeting in the valley
 // they are found as a gutter but not parted (one creased leaf would look the same), unless they
