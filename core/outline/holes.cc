@@ -131,8 +131,6 @@ cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Ma
                       double plane_mm, double look) {
   cv::Mat out(box.size(), CV_8U, cv::Scalar(0));
   if (planes.empty() || leaf.empty()) return out;
-  cv::Mat smooth;
-  cv::blur(colour, smooth, {3, 3});
   // The plane a point lies on (within plane_mm), or -1.
   auto on_plane = [&](const cv::Vec3f& p) {
     if (std::isnan(p[2])) return -1;
@@ -153,13 +151,13 @@ cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Ma
   auto level = [](const cv::Vec3b& c) { return (c[0] + 2 * c[1] + c[2]) / 4; };
   for (int v = 0; v < points.rows; v += 4) {
     const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    const cv::Vec3b* c = smooth.ptr<cv::Vec3b>(v);
     const uint8_t* near = away.ptr<uint8_t>(v);
     for (int u = 0; u < points.cols; u += 4) {
       const int k = near[u] ? -1 : on_plane(p[u]);
       if (k < 0) continue;
-      looks[k].Add(Look::Bin(c[u]), 1);
-      ++levels[k][level(c[u])];
+      const cv::Vec3b c = Mean3x3(colour, u, v);
+      looks[k].Add(Look::Bin(c), 1);
+      ++levels[k][level(c)];
     }
   }
   std::vector<std::pair<int, int>> range(planes.size(), {256, -1});
@@ -178,12 +176,14 @@ cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Ma
   cv::parallel_for_(cv::Range(0, box.height), [&](const cv::Range& rows) {
     for (int v = rows.start; v < rows.end; ++v) {
       const cv::Vec3f* p = points.ptr<cv::Vec3f>(box.y + v) + box.x;
-      const cv::Vec3b* c = smooth.ptr<cv::Vec3b>(box.y + v) + box.x;
+      const uint8_t* on_leaf = leaf_mask.ptr<uint8_t>(box.y + v) + box.x;
       uint8_t* o = out.ptr<uint8_t>(v);
       for (int u = 0; u < box.width; ++u) {
+        if (on_leaf[u]) continue;  // Holes are what the leaf leaves out.
         const int k = on_plane(p[u]);
         if (k < 0 || looks[k].empty()) continue;
-        const int bin = Look::Bin(c[u]), g = level(c[u]);
+        const cv::Vec3b c = Mean3x3(colour, box.x + u, box.y + v);
+        const int bin = Look::Bin(c), g = level(c);
         if (g >= range[k].first && g <= range[k].second &&
             looks[k].Log(bin) - leaf.Log(bin) >= look) {
           o[u] = 255;

@@ -172,17 +172,21 @@ double ShareOutsideAtPlane(const outline::Blocks& blocks, const cv::Mat& found,
   return measured ? static_cast<double>(level) / measured : 0.0;
 }
 
-// The share of `cut`'s pixels more than `inset` pixels inside its outline that `leaf`, its holes
-// filled, leaves out.
+// The share of `cut`'s pixels more than `inset` pixels inside its outline (along rows and
+// columns) that `leaf`, its holes filled, leaves out.
 double LostInside(const cv::Mat& cut, const cv::Mat& leaf, int inset) {
+  // Within the cut's box, framed by a pixel off it as the view's edge is; a square's inset
+  // (erosion by a rectangle is separable: two passes of a running minimum).
+  const cv::Rect box = cv::boundingRect(cut);
+  if (box.empty()) return 0;
   cv::Mat deep;
-  cv::erode(cut, deep, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * inset + 1, 2 * inset + 1}),
-            cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::erode(cut(box), deep, cv::Mat::ones(2 * inset + 1, 2 * inset + 1, CV_8U), cv::Point(-1, -1),
+            1, cv::BORDER_CONSTANT, cv::Scalar(0));
   const int total = cv::countNonZero(deep);
   if (total == 0) return 0;
   std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(leaf.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
-  cv::Mat filled = cv::Mat::zeros(leaf.size(), CV_8U);
+  cv::findContours(leaf(box).clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  cv::Mat filled = cv::Mat::zeros(box.size(), CV_8U);
   cv::drawContours(filled, contours, -1, cv::Scalar(255), cv::FILLED);
   return static_cast<double>(cv::countNonZero(deep & ~filled)) / total;
 }

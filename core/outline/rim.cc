@@ -228,35 +228,47 @@ int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& co
                        view;
   if (box.empty()) return 0;
   const cv::Mat in_leaf = leaf(box);
-  cv::Mat near, candidates, touching, labels;
-  cv::dilate(in_leaf, near,
-             cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * reach_px + 1, 2 * reach_px + 1}));
-  candidates = near & ~in_leaf & ~measured(box);
-  // Joined to the leaf: the parts of the candidates that reach within two pixels of it (its rim
-  // was trimmed of mixed pixels).
-  cv::dilate(in_leaf, touching, cv::Mat::ones(5, 5, CV_8U));
-  const int count = cv::connectedComponents(candidates, labels, 8, CV_32S);
-  std::vector<uint8_t> joined(count, 0);
+  // Each pixel's distance from the leaf (city-block, in 8 bits: one linear pass).
+  cv::Mat apart;
+  cv::distanceTransform(~in_leaf, apart, cv::DIST_L1, 3, CV_8U);
+  const cv::Mat in_view = colour(box), heights = measured(box);
+  // The candidates joined to the leaf: from those within two pixels of it (its rim was trimmed of
+  // mixed pixels), through the pixels without a height within reach, 8-connected. Counted four
+  // pixels or more from it: nearer, a pixel mixes the leaf's rim with what lies beside it (the
+  // camera's blur), and looks like neither.
+  auto candidate = [&](int u, int v) {
+    return apart.at<uint8_t>(v, u) > 0 && apart.at<uint8_t>(v, u) <= reach_px &&
+           !heights.at<uint8_t>(v, u);
+  };
+  cv::Mat seen(box.size(), CV_8U, cv::Scalar(0));
+  std::vector<cv::Point> queue;
   for (int v = 0; v < box.height; ++v) {
-    const int* l = labels.ptr<int>(v);
-    const uint8_t* t = touching.ptr<uint8_t>(v);
+    const uint8_t* d = apart.ptr<uint8_t>(v);
     for (int u = 0; u < box.width; ++u) {
-      if (l[u] && t[u]) joined[l[u]] = 1;
+      if (d[u] > 0 && d[u] <= 2 && candidate(u, v)) {
+        seen.at<uint8_t>(v, u) = 1;
+        queue.emplace_back(u, v);
+      }
     }
   }
-  // Counted four pixels or more from the leaf: nearer, a pixel mixes the leaf's rim with what
-  // lies beside it (the camera's blur), and looks like neither.
-  cv::Mat smooth, apart;
-  cv::blur(colour(box), smooth, {3, 3});
-  cv::distanceTransform(~in_leaf, apart, cv::DIST_L2, 3);
   int unseen = 0;
-  for (int v = 0; v < box.height; ++v) {
-    const int* l = labels.ptr<int>(v);
-    const cv::Vec3b* c = smooth.ptr<cv::Vec3b>(v);
-    for (int u = 0; u < box.width; ++u) {
-      if (!l[u] || !joined[l[u]] || apart.at<float>(v, u) < 4) continue;
-      const int bin = Look::Bin(c[u]);
+  while (!queue.empty()) {
+    const cv::Point p = queue.back();
+    queue.pop_back();
+    if (apart.at<uint8_t>(p) > 3) {
+      const int bin = Look::Bin(Mean3x3(in_view, p.x, p.y));
       unseen += leaf_look.Log(bin) - surround_look.Log(bin) >= min_look;
+    }
+    for (int dv = -1; dv <= 1; ++dv) {
+      for (int du = -1; du <= 1; ++du) {
+        const int u = p.x + du, v = p.y + dv;
+        if (u < 0 || v < 0 || u >= box.width || v >= box.height || seen.at<uint8_t>(v, u) ||
+            !candidate(u, v)) {
+          continue;
+        }
+        seen.at<uint8_t>(v, u) = 1;
+        queue.emplace_back(u, v);
+      }
     }
   }
   return unseen;

@@ -139,6 +139,21 @@ class Look {
   double total_ = 0;
 };
 
+// The mean colour of the 3 x 3 pixels around (u, v) of a CV_8UC3 image (fewer at its edges): a
+// pixel's look with the noise of one pixel averaged, where a whole blurred image is not needed.
+inline cv::Vec3b Mean3x3(const cv::Mat& colour, int u, int v) {
+  cv::Vec3i sum(0, 0, 0);
+  int n = 0;
+  for (int y = std::max(0, v - 1); y <= std::min(colour.rows - 1, v + 1); ++y) {
+    const cv::Vec3b* row = colour.ptr<cv::Vec3b>(y);
+    for (int x = std::max(0, u - 1); x <= std::min(colour.cols - 1, u + 1); ++x) {
+      sum += cv::Vec3i(row[x]);
+      ++n;
+    }
+  }
+  return cv::Vec3b(sum[0] / n, sum[1] / n, sum[2] / n);
+}
+
 // A cut: leaf (255) against surround (0) over the blocks, and the looks it learned.
 struct Cut {
   cv::Mat leaf;
@@ -204,9 +219,10 @@ cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Ma
 
 // ---- the outline's figures ----
 // The leaf the camera saw but the scan did not measure beside its outline: pixels without a
-// height, within `reach_px` of the leaf and joined to it, that look like the leaf (by `leaf` and
-// `surround`, the cut's looks, over the texture smoothed across 5 x 5 pixels: at least
-// `min_look` nats more like the leaf). A curled edge turned nearly edge-on to the projector, a
+// height, within `reach_px` of the leaf (city-block distance) and joined to it, four pixels or
+// more from it (nearer, the rim's mixed pixels), that look like the leaf (by `leaf` and
+// `surround`, the cut's looks, over the texture's 3 x 3 mean: at least `min_look` nats more like
+// the leaf). A curled edge turned nearly edge-on to the projector, a
 // slope facing away from it: seen, but no 3D point to restore it from. A projector's shadow on
 // the table looks like the table and is not counted. Returns the pixels counted.
 int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
