@@ -126,72 +126,70 @@ class TileComparison {
 
 }  // namespace
 
-cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
-                      const cv::Rect& box, const std::vector<Plane>& planes, const Look& leaf,
-                      double plane_mm, double look) {
-  cv::Mat out(box.size(), CV_8U, cv::Scalar(0));
-  if (planes.empty() || leaf.empty()) return out;
-  // The plane a point lies on (within plane_mm), or -1.
-  auto on_plane = [&](const cv::Vec3f& p) {
-    if (std::isnan(p[2])) return -1;
-    for (size_t k = 0; k < planes.size(); ++k) {
-      if (std::fabs(p[2] - planes[k].At(p[0], p[1])) <= plane_mm) return static_cast<int>(k);
-    }
-    return -1;
-  };
-  // Each plane's own look, from every fourth pixel of the view on it and off the leaf (away from
-  // its rim): a frame's face and the table in its window look apart. And the range of its
-  // brightness (its 2nd to 98th percentile): a mark on the page may be likelier under the
-  // plane's look than the leaf's and still be darker or lighter than anything on the plane.
-  cv::Mat away;
-  cv::dilate(leaf_mask, away, cv::Mat::ones(9, 9, CV_8U));
-  std::vector<Look> looks(planes.size());
+SurroundLook::SurroundLook(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
+                           const std::vector<Plane>& planes, const Look& leaf, double plane_mm,
+                           double look)
+    : points_(points),
+      colour_(colour),
+      planes_(planes),
+      leaf_(leaf),
+      plane_mm_(plane_mm),
+      look_(look),
+      looks_(planes.size()),
+      range_(planes.size(), {256, -1}) {
+  if (leaf.empty()) return;
+  // Each plane's own look, from every fourth pixel of the view on it and off the leaf (four
+  // pixels clear of it: away from its rim), and the range of its brightness (2nd to 98th
+  // percentile).
   std::vector<std::array<int, 256>> levels(planes.size());
   for (auto& l : levels) l.fill(0);
-  auto level = [](const cv::Vec3b& c) { return (c[0] + 2 * c[1] + c[2]) / 4; };
+  const cv::Rect view(0, 0, points.cols, points.rows);
+  auto clear = [&](int u, int v) {
+    for (const cv::Point d :
+         {cv::Point(0, 0), cv::Point(4, 0), cv::Point(-4, 0), cv::Point(0, 4), cv::Point(0, -4)}) {
+      const cv::Point q(u + d.x, v + d.y);
+      if (view.contains(q) && leaf_mask.at<uint8_t>(q)) return false;
+    }
+    return true;
+  };
   for (int v = 0; v < points.rows; v += 4) {
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    const uint8_t* near = away.ptr<uint8_t>(v);
     for (int u = 0; u < points.cols; u += 4) {
-      const int k = near[u] ? -1 : on_plane(p[u]);
-      if (k < 0) continue;
+      const int k = OnPlane(points.at<cv::Vec3f>(v, u));
+      if (k < 0 || !clear(u, v)) continue;
       const cv::Vec3b c = Mean3x3(colour, u, v);
-      looks[k].Add(Look::Bin(c), 1);
-      ++levels[k][level(c)];
+      looks_[k].Add(Look::Bin(c), 1);
+      ++levels[k][Level(c)];
     }
   }
-  std::vector<std::pair<int, int>> range(planes.size(), {256, -1});
   for (size_t k = 0; k < planes.size(); ++k) {
-    if (looks[k].empty()) continue;
-    looks[k].Finish();
+    if (looks_[k].empty()) continue;
+    looks_[k].Finish();
     int total = 0;
     for (int n : levels[k]) total += n;
     int seen = 0;
     for (int g = 0; g < 256; ++g) {
       seen += levels[k][g];
-      if (range[k].first > 255 && 50 * seen >= total) range[k].first = g;
-      if (range[k].second < 0 && 50 * seen >= 49 * total) range[k].second = g;
+      if (range_[k].first > 255 && 50 * seen >= total) range_[k].first = g;
+      if (range_[k].second < 0 && 50 * seen >= 49 * total) range_[k].second = g;
     }
   }
-  cv::parallel_for_(cv::Range(0, box.height), [&](const cv::Range& rows) {
-    for (int v = rows.start; v < rows.end; ++v) {
-      const cv::Vec3f* p = points.ptr<cv::Vec3f>(box.y + v) + box.x;
-      const uint8_t* on_leaf = leaf_mask.ptr<uint8_t>(box.y + v) + box.x;
-      uint8_t* o = out.ptr<uint8_t>(v);
-      for (int u = 0; u < box.width; ++u) {
-        if (on_leaf[u]) continue;  // Holes are what the leaf leaves out.
-        const int k = on_plane(p[u]);
-        if (k < 0 || looks[k].empty()) continue;
-        const cv::Vec3b c = Mean3x3(colour, box.x + u, box.y + v);
-        const int bin = Look::Bin(c), g = level(c);
-        if (g >= range[k].first && g <= range[k].second &&
-            looks[k].Log(bin) - leaf.Log(bin) >= look) {
-          o[u] = 255;
-        }
-      }
-    }
-  });
-  return out;
+}
+
+int SurroundLook::OnPlane(const cv::Vec3f& p) const {
+  if (std::isnan(p[2])) return -1;
+  for (size_t k = 0; k < planes_.size(); ++k) {
+    if (std::fabs(p[2] - planes_[k].At(p[0], p[1])) <= plane_mm_) return static_cast<int>(k);
+  }
+  return -1;
+}
+
+bool SurroundLook::Shows(int u, int v) const {
+  const int k = OnPlane(points_.at<cv::Vec3f>(v, u));
+  if (k < 0 || looks_[k].empty()) return false;
+  const cv::Vec3b c = Mean3x3(colour_, u, v);
+  const int bin = Look::Bin(c), g = Level(c);
+  return g >= range_[k].first && g <= range_[k].second &&
+         looks_[k].Log(bin) - leaf_.Log(bin) >= look_;
 }
 
 // Fills the holes of `leaf` that show no other surface, and returns how many it keeps. A hole
@@ -206,7 +204,7 @@ cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Ma
 // kept when it looks unlike the leaf around it in the texture (by more than 3% of the paper's
 // brightness), filled otherwise.
 int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
-              cv::Mat* leaf, const cv::Mat& surround_shows) {
+              cv::Mat* leaf, const SurroundLook* surround, cv::Point offset) {
   cv::Mat outside = ~*leaf, labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(outside, labels, stats, centroids, 4, CV_32S);
   const cv::Rect all(0, 0, z.cols, z.rows);
@@ -261,8 +259,15 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
       if (valid >= area / 2) {
         const auto [judged, off] = tiles.Judge(/*slack_px=*/0);
         island = 2 * off <= judged;
-        if (island && !surround_shows.empty()) {
-          island = 2 * cv::countNonZero(surround_shows(near) & hole) < area;
+        if (island && surround) {
+          int shows = 0;
+          for (int v = 0; v < near.height; ++v) {
+            const uint8_t* in_hole = hole.ptr<uint8_t>(v);
+            for (int u = 0; u < near.width; ++u) {
+              shows += in_hole[u] && surround->Shows(near.x + u + offset.x, near.y + v + offset.y);
+            }
+          }
+          island = 2 * shows < area;
         }
       } else {
         island = std::fabs(Median(&look_in) - Median(&look_around)) <= 0.03 * bright;

@@ -382,11 +382,10 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat box_leaf = leaf(holes_box);
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
-  const cv::Mat surround_shows =
-      SurroundShows(points, cues.colour, leaf, holes_box, planes, found.look_leaf,
-                    options.well_plane_mm, options.well_look);
+  const SurroundLook surround(points, cues.colour, leaf, planes, found.look_leaf,
+                              options.well_plane_mm, options.well_look);
   out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf,
-                        surround_shows);
+                        &surround, holes_box.tl());
   // The rim's mixed pixels out, once the holes are settled (their rims are the leaf's too).
   TrimRim(cues.z, options.trim_off_mm, &leaf);
   // Of the cut's pixels outside the leaf, those without a height may be leaf unmeasured; those

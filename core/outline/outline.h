@@ -90,7 +90,7 @@ struct OutlineOptions {
   // The leaf seen but not measured beside its outline (UnseenBeside: within unseen_reach_px of
   // it, at least unseen_look nats more like the leaf than the surround): over max_unseen_share
   // of the leaf's area is flagged (edge_unmeasured), as it is missing from the restored page.
-  int unseen_reach_px = 64;
+  int unseen_reach_px = 40;
   double unseen_look = 1.0;
   double max_unseen_share = 0.01;
   // The outline at the pixel leaving out more than this share of what the cut found well inside

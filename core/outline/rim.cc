@@ -1,5 +1,6 @@
 // Flood, RefineRim and the outline's figures (steps.h).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
@@ -251,13 +252,17 @@ int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& co
       }
     }
   }
+  // The look's evidence by colour bin, once.
+  std::array<uint8_t, Look::kBins> leafish;
+  for (int b = 0; b < Look::kBins; ++b) {
+    leafish[b] = leaf_look.Log(b) - surround_look.Log(b) >= min_look;
+  }
   int unseen = 0;
   while (!queue.empty()) {
     const cv::Point p = queue.back();
     queue.pop_back();
     if (apart.at<uint8_t>(p) > 3) {
-      const int bin = Look::Bin(Mean3x3(in_view, p.x, p.y));
-      unseen += leaf_look.Log(bin) - surround_look.Log(bin) >= min_look;
+      unseen += leafish[Look::Bin(Mean3x3(in_view, p.x, p.y))];
     }
     for (int dv = -1; dv <= 1; ++dv) {
       for (int du = -1; du <= 1; ++du) {

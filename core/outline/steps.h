@@ -202,20 +202,34 @@ void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf);
 // ---- FillHoles ----
 // Fills the holes of `leaf` that show no other surface (heights on the leaf's surface around
 // them, or, without heights, looking like the leaf), and returns how many it keeps.
-// `surround_shows` (if not empty): where the surround shows by both cues (SurroundShows); a hole
-// whose heights lie on the leaf's surface is kept all the same when it mostly shows the surround
-// there (a leaf flush with what it lies on: the heights cannot tell its holes, the look can).
+// Whether a pixel shows the surround by both cues: its point within `plane_mm` of one of
+// `planes`, and its colour (its 3 x 3 mean) at least `look` nats more like that plane's own look
+// than the leaf's and within the range of the plane's brightness (2nd to 98th percentile). Each
+// plane's look is learned, when made, from every fourth pixel of the view on it clear of
+// `leaf_mask` (a frame's face and the table in its window look apart); a pixel is judged when
+// asked. `points`, `colour` and `leaf_mask` are the whole view's.
+class SurroundLook {
+ public:
+  SurroundLook(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
+               const std::vector<Plane>& planes, const Look& leaf, double plane_mm, double look);
+  bool Shows(int u, int v) const;  // View pixels.
+
+ private:
+  int OnPlane(const cv::Vec3f& p) const;  // The plane a point lies on, or -1.
+  static int Level(const cv::Vec3b& c) { return (c[0] + 2 * c[1] + c[2]) / 4; }
+  cv::Mat points_, colour_;
+  std::vector<Plane> planes_;
+  Look leaf_;
+  double plane_mm_, look_;
+  std::vector<Look> looks_;
+  std::vector<std::pair<int, int>> range_;
+};
+// `surround` (if given): a hole whose heights lie on the leaf's surface is kept all the same when
+// most of it shows the surround (a leaf flush with what it lies on: the heights cannot tell its
+// holes, the look can); `offset` is where `z`'s pixel (0, 0) lies in the view.
 int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
-              cv::Mat* leaf, const cv::Mat& surround_shows = cv::Mat());
-// Where a pixel of `box` shows the surround by both cues (255, of box's size): its point within
-// `plane_mm` of one of `planes`, and its colour (over 3 x 3 pixels) at least `look` nats more like
-// that plane's own look than the leaf's and within the range of the plane's brightness (2nd to
-// 98th percentile). Each plane's look is learned from the view's pixels on it away from
-// `leaf_mask` (a frame's face and the table in its window look apart). `points`, `colour` and
-// `leaf_mask` are the whole view's.
-cv::Mat SurroundShows(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
-                      const cv::Rect& box, const std::vector<Plane>& planes, const Look& leaf,
-                      double plane_mm, double look);
+              cv::Mat* leaf, const SurroundLook* surround = nullptr,
+              cv::Point offset = cv::Point(0, 0));
 
 // ---- the outline's figures ----
 // The leaf the camera saw but the scan did not measure beside its outline: pixels without a

@@ -300,13 +300,12 @@ TEST(FillHoles, OnAFlushLeafTheLookTellsAHoleFromTheInk) {
   cv::cvtColor(colour, gray, cv::COLOR_BGR2GRAY);
   const OutlineOptions options;
   const cv::Mat threshold = StepThreshold(gray, 200, options.step_mm, options.scale_px, true);
-  const cv::Rect all(0, 0, size.width, size.height);
-  const cv::Mat shows = SurroundShows(points, colour, leaf, all, {Plane()}, leaf_look,
-                                      options.well_plane_mm, options.well_look);
+  const SurroundLook surround(points, colour, leaf, {Plane()}, leaf_look, options.well_plane_mm,
+                              options.well_look);
   cv::Mat without = leaf.clone();
   FillHoles(z, gray, threshold, 200, &without);
   EXPECT_EQ(without.at<uint8_t>(cv::Point(hole)), 255);  // The heights alone fill both.
-  EXPECT_EQ(FillHoles(z, gray, threshold, 200, &leaf, shows), 1);
+  EXPECT_EQ(FillHoles(z, gray, threshold, 200, &leaf, &surround), 1);
   EXPECT_EQ(leaf.at<uint8_t>(cv::Point(hole)), 0);
   EXPECT_EQ(leaf.at<uint8_t>(cv::Point(mark)), 255);
 }
