@@ -172,6 +172,15 @@ double ShareOutsideAtPlane(const outline::Blocks& blocks, const cv::Mat& found,
   return measured ? static_cast<double>(level) / measured : 0.0;
 }
 
+// `mask` with its holes filled: what its outer outlines enclose.
+cv::Mat Filled(const cv::Mat& mask) {
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  cv::Mat filled = cv::Mat::zeros(mask.size(), CV_8U);
+  cv::drawContours(filled, contours, -1, cv::Scalar(255), cv::FILLED);
+  return filled;
+}
+
 // The share of `cut`'s pixels more than `inset` pixels inside its outline (along rows and
 // columns) that `leaf`, its holes filled, leaves out.
 double LostInside(const cv::Mat& cut, const cv::Mat& leaf, int inset) {
@@ -184,11 +193,7 @@ double LostInside(const cv::Mat& cut, const cv::Mat& leaf, int inset) {
             1, cv::BORDER_CONSTANT, cv::Scalar(0));
   const int total = cv::countNonZero(deep);
   if (total == 0) return 0;
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(leaf(box).clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
-  cv::Mat filled = cv::Mat::zeros(box.size(), CV_8U);
-  cv::drawContours(filled, contours, -1, cv::Scalar(255), cv::FILLED);
-  return static_cast<double>(cv::countNonZero(deep & ~filled)) / total;
+  return static_cast<double>(cv::countNonZero(deep & ~Filled(leaf(box)))) / total;
 }
 
 // Whether `inner` (blocks) stands off what lies around it inside `outer` at its rim, as a leaf on
@@ -382,7 +387,8 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat box_leaf = leaf(holes_box);
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
-  const SurroundLook surround(points, cues.colour, leaf, planes, found.look_leaf,
+  // The surround's looks learned outside the leaf's outline: not from the holes to be judged.
+  const SurroundLook surround(points, cues.colour, Filled(leaf), planes, found.look_leaf,
                               options.well_plane_mm, options.well_look);
   out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf,
                         &surround, holes_box.tl());

@@ -206,8 +206,9 @@ void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf);
 // `planes`, and its colour (its 3 x 3 mean) at least `look` nats more like that plane's own look
 // than the leaf's and within the range of the plane's brightness (2nd to 98th percentile). Each
 // plane's look is learned, when made, from every fourth pixel of the view on it clear of
-// `leaf_mask` (a frame's face and the table in its window look apart); a pixel is judged when
-// asked. `points`, `colour` and `leaf_mask` are the whole view's.
+// `leaf_mask` (the leaf with its holes: not what is to be judged; a frame's face and the table in
+// its window look apart); a pixel is judged when asked. `points`, `colour` and `leaf_mask` are the
+// whole view's.
 class SurroundLook {
  public:
   SurroundLook(const cv::Mat& points, const cv::Mat& colour, const cv::Mat& leaf_mask,
