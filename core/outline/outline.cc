@@ -50,10 +50,11 @@ bool OutlineOptions::Check(std::string* why) const {
   }
   if (unseen_reach_px < 1 || !(unseen_look >= 0) ||
       !(max_unseen_share >= 0 && max_unseen_share <= 1) ||
-      !(max_lost_share >= 0 && max_lost_share <= 1)) {
+      !(max_lost_share >= 0 && max_lost_share <= 1) ||
+      !(wider_support_share >= 0 && wider_support_share <= 1)) {
     *why =
-        "unseen_reach_px must be >= 1, unseen_look >= 0, max_unseen_share and max_lost_share in "
-        "[0, 1]";
+        "unseen_reach_px must be >= 1, unseen_look >= 0, max_unseen_share, max_lost_share and "
+        "wider_support_share in [0, 1]";
     return false;
   }
   return surround.Check(why) && cut.Check(why);
@@ -349,12 +350,13 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     if (!LiesOn(blocks, cut, inner, above_more, min_blocks, options)) {
       // What was found lies on a plane well above the table, and nothing on it stands off it: a
-      // support or a box, maybe, with the leaf flush on it or elsewhere. Unless a quarter of what
+      // support or a box, maybe, with the leaf flush on it or elsewhere. Unless enough of what
       // lies just outside it is as high: then it is a leaf on a support wider than itself.
       double lowest = 1e9;
       for (const Plane& known : planes) lowest = std::min(lowest, known.c);
       if (plane.c - lowest > options.raised_plane_mm &&
-          ShareOutsideAtPlane(blocks, cut, plane, options.raised_plane_mm) < 0.25) {
+          ShareOutsideAtPlane(blocks, cut, plane, options.raised_plane_mm) <
+              options.wider_support_share) {
         raised_mm = plane.c - lowest;
       }
       break;

@@ -82,6 +82,9 @@ struct OutlineOptions {
   double lies_on_mm = 0.03;
   double lies_on_apart = 0.7;
   double raised_plane_mm = 1.0;
+  // ... unless at least this share of what lies just outside it is as high (within
+  // raised_plane_mm): then it is a leaf on a support wider than itself.
+  double wider_support_share = 0.25;
   // The leaf.
   double min_area = 0.02;        // A leaf covers at least this share of the image.
   double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
