@@ -496,13 +496,18 @@ bool FlattenOptions::Check(std::string* why) const {
 }
 
 void MeasureStrain(const Mesh& mesh, const std::vector<cv::Point2d>& flat, FlattenResult* result) {
+  // Over the leaf's own springs: a skirt node is the surface extrapolated past the leaf's edge
+  // (beside a crease that runs off the edge its springs cannot all be kept), not the leaf.
   double sum = 0, worst = 0;
+  int count = 0;
   for (const Spring& s : mesh.springs) {
+    if (mesh.kind[s.a] == NodeKind::kSkirt || mesh.kind[s.b] == NodeKind::kSkirt) continue;
     const double e = std::fabs(cv::norm(flat[s.a] - flat[s.b]) / s.rest_mm - 1.0);
     sum += e;
     worst = std::max(worst, e);
+    ++count;
   }
-  result->mean_strain = mesh.springs.empty() ? 0 : sum / mesh.springs.size();
+  result->mean_strain = count ? sum / count : 0;
   result->max_strain = worst;
   // A fold flips a quad's orientation relative to how the camera saw it. Cells with two or
   // more skirt nodes lie mostly past the page's data, extrapolated: beyond a steep edge (a curl's

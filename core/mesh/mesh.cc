@@ -11,6 +11,26 @@ namespace {
 
 enum class Fit { kOk, kHole, kEdge };
 
+// How far a fit's value can be trusted: its standard error, and whether points surround it (a
+// quadratic; at the leaf's edge a plane over the points on one side).
+struct FitQuality {
+  double sigma_mm = 0;
+  bool surrounded = false;
+  Eigen::Matrix<double, 6, 3> coef = Eigen::Matrix<double, 6, 3>::Zero();  // x, y, z polynomials.
+  int hu = 1, hv = 1;  // The window's half-sizes, px: the polynomials' units of offset.
+
+  // The fitted surface at an offset (du, dv) px from where the fit was made.
+  cv::Vec3d At(double du, double dv) const {
+    const double u = du / hu, v = dv / hv;
+    const double m[6] = {1, u, v, u * u, u * v, v * v};
+    cv::Vec3d x(0, 0, 0);
+    for (int i = 0; i < 6; ++i) {
+      for (int c = 0; c < 3; ++c) x[c] += m[i] * coef(i, c);
+    }
+    return x;
+  }
+};
+
 // The fit's six monomials du^a dv^b: 1, du, dv, du^2, du dv, dv^2 (du, dv: the pixel offset from
 // the node in window half-sizes).
 constexpr int kPowerU[6] = {0, 1, 0, 2, 1, 0};
@@ -66,7 +86,7 @@ bool Polyfit(const NormalSums& sums, int terms, Eigen::Matrix<double, 6, 3>* coe
 // of its points, and the row's sums enter the normal equations with its powers of dv (14
 // products a point instead of 39; a window holds a few hundred points).
 Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
-            int min_points, cv::Vec3d* out) {
+            int min_points, cv::Vec3d* out, FitQuality* quality = nullptr) {
   const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
   const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
   const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
@@ -165,21 +185,50 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
   // The second fit: the first's sums less the points dropped (few: the sums stay well scaled);
   // none dropped, the first fit stands.
   int kept = count;
+  double kept_r2 = 0;
   size_t i = 0;
   for (int v = v0; v <= v1; ++v) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
     const uint8_t* m = mask.ptr<uint8_t>(v);
     for (int u = u0; u <= u1; ++u) {
       if (!usable(row[u], m[u])) continue;
-      if (residual[i++] > cut) {
+      if (residual[i] > cut) {
         sums.Add(offset_u(u), offset_v(v), row[u], -1);
         --kept;
+      } else {
+        kept_r2 += residual[i];
       }
+      ++i;
     }
   }
   if (kept < min_points || (kept < count && !Polyfit(sums, terms, &c))) return Fit::kHole;
   *out = cv::Vec3d(c(0, 0), c(0, 1), c(0, 2));  // The polynomials at the node (du = dv = 0).
+  // The fitted value's standard error: the points' scatter about the fit, over the number of
+  // points per coefficient.
+  if (quality) {
+    quality->sigma_mm = std::sqrt(kept_r2 / std::max(1, kept - terms) * terms / kept);
+    quality->surrounded = terms == 6;
+    quality->coef = c;
+    quality->hu = hu;
+    quality->hv = hv;
+  }
   return Fit::kOk;
+}
+
+// The surface at a pixel, where a node's window is too wide for it (a crease): the points within
+// 3 px fitted (a quadratic where they surround it), robust to the stray decode.
+constexpr int kSurfaceWindow = 3;  // px
+constexpr int kSurfaceMinPoints = 12;
+// A bend is told from noise at five standard errors of that fit.
+constexpr double kSurfaceSigmas = 5;
+
+// How far `m` stands off the line through `a` and `b` (not off their midpoint: where the surface
+// is straight, the point seen halfway between their pixels lies on the line, but off the middle
+// wherever perspective foreshortens it).
+double OffLine(const cv::Vec3d& a, const cv::Vec3d& b, const cv::Vec3d& m) {
+  const cv::Vec3d d = b - a, r = m - a;
+  const double len2 = d.dot(d);
+  return len2 > 0 ? cv::norm(r - (r.dot(d) / len2) * d) : cv::norm(r);
 }
 
 }  // namespace
@@ -191,6 +240,10 @@ bool MeshOptions::Check(std::string* why) const {
   }
   if (min_points < 3 || !(fit_window > 0) || skirt_rings < 0 || skirt_rings > 5) {
     *why = "min_points must be >= 3, fit_window > 0, skirt_rings in [0, 5]";
+    return false;
+  }
+  if (!(straight_mm > 0) || !(min_bend_deg >= 0 && min_bend_deg < 45)) {
+    *why = "straight_mm must be > 0, min_bend_deg in [0, 45)";
     return false;
   }
   return true;
@@ -303,6 +356,30 @@ void ConnectSheet(bool bend_springs, const std::function<cv::Point2d(const cv::V
   mesh.status = Status::Ok();
 }
 
+double LengthAlongSurface(const cv::Mat& points, const cv::Mat& mask, const cv::Vec3d& a,
+                          cv::Point2d pa, const cv::Vec3d& b, cv::Point2d pb, double straight_mm,
+                          int depth) {
+  // Halving stops at pieces of two pixels (the points' own resolution: a crease rounded over a
+  // millimetre is straight at that scale) and after eight halvings whatever the piece.
+  constexpr double kShortest = 2.0;  // px
+  constexpr int kDeepest = 8;
+  const double chord = cv::norm(b - a);
+  if (depth >= kDeepest || cv::norm(pb - pa) <= kShortest) return chord;
+  const cv::Point2d pm = 0.5 * (pa + pb);
+  if (!(pm.x >= 0 && pm.y >= 0 && pm.x <= points.cols - 1 && pm.y <= points.rows - 1)) return chord;
+  cv::Vec3d m;
+  FitQuality q;
+  // Straight unless the middle, with points all round it (not at the leaf's edge, where the rim
+  // and what lies beyond crowd a small window), stands off the chord by more than its own noise
+  // could: noise taken for a bend would add length wherever the points are poor (dark ink).
+  if (FitNode(points, mask, pm, kSurfaceWindow, kSurfaceWindow, kSurfaceMinPoints, &m, &q) !=
+          Fit::kOk ||
+      !q.surrounded || OffLine(a, b, m) < std::max(straight_mm, kSurfaceSigmas * q.sigma_mm))
+    return chord;
+  return LengthAlongSurface(points, mask, a, pa, m, pm, straight_mm, depth + 1) +
+         LengthAlongSurface(points, mask, m, pm, b, pb, straight_mm, depth + 1);
+}
+
 double WarpError(const Mesh& mesh) {
   // Along a grid line the nodes are evenly spaced in the camera image, while the flattened page
   // (lengths on the surface) spaces them by the 3D distance between them: where that changes
@@ -344,6 +421,68 @@ cv::Size GridForError(const Mesh& mesh, double max_error_px, int max_nodes) {
   return {finer(mesh.cols), finer(mesh.rows)};
 }
 
+namespace {
+
+// The rest length of each spring between two measured nodes, along the leaf's surface where it
+// bends between them. Whether it does is judged on the nodes' own fits (hundreds of points each,
+// blind to the point map's small faults: the stripes' bias at the edges of ink), carried to the
+// spring's middle and compared with the chord; only a spring that bends is measured along the
+// surface, from the surface at its nodes' pixels (a node's fit cuts a crease's corner).
+void MeasureAlongSurface(const cv::Mat& points, const cv::Mat& mask,
+                         const std::vector<cv::Point2d>& grid_px,
+                         const std::vector<FitQuality>& fits, double straight_mm,
+                         double min_bend_deg, Mesh* out) {
+  const double min_bend = std::tan(min_bend_deg * CV_PI / 180);
+  Mesh& mesh = *out;
+  const int n = static_cast<int>(mesh.kind.size());
+  auto measured = [&](int k) { return mesh.kind[k] == NodeKind::kMeasured; };
+  auto fitted_at = [&](int k, cv::Point2d p) {
+    return fits[k].At(p.x - grid_px[k].x, p.y - grid_px[k].y);
+  };
+  std::vector<int> bent;
+  std::vector<uint8_t> needed(n, 0);
+  for (size_t k = 0; k < mesh.springs.size(); ++k) {
+    const Spring& s = mesh.springs[k];
+    if (!measured(s.a) || !measured(s.b)) continue;
+    const cv::Point2d middle = 0.5 * (grid_px[s.a] + grid_px[s.b]);
+    const cv::Vec3d surface = 0.5 * (fitted_at(s.a, middle) + fitted_at(s.b, middle));
+    const double noise = std::hypot(fits[s.a].sigma_mm, fits[s.b].sigma_mm);
+    const double chord = cv::norm(mesh.point[s.b] - mesh.point[s.a]);
+    if (OffLine(mesh.point[s.a], mesh.point[s.b], surface) <
+        std::max({straight_mm, kSurfaceSigmas * noise, 0.5 * chord * min_bend}))
+      continue;
+    bent.push_back(static_cast<int>(k));
+    needed[s.a] = needed[s.b] = 1;
+  }
+  if (bent.empty()) return;
+  // The surface at each bent spring's nodes' pixels, where it stands off the node's fit by more
+  // than its own noise could.
+  std::vector<cv::Vec3d> surface(mesh.point);
+  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
+    for (int k = r.start; k < r.end; ++k) {
+      if (!needed[k]) continue;
+      cv::Vec3d here;
+      FitQuality q;
+      if (FitNode(points, mask, mesh.pixel[k], kSurfaceWindow, kSurfaceWindow, kSurfaceMinPoints,
+                  &here, &q) == Fit::kOk &&
+          q.surrounded &&
+          cv::norm(here - mesh.point[k]) > std::max(straight_mm, kSurfaceSigmas * q.sigma_mm)) {
+        surface[k] = here;
+      }
+    }
+  });
+  cv::parallel_for_(cv::Range(0, static_cast<int>(bent.size())), [&](const cv::Range& r) {
+    for (int k = r.start; k < r.end; ++k) {
+      Spring& s = mesh.springs[bent[k]];
+      s.rest_mm =
+          std::max(s.rest_mm, LengthAlongSurface(points, mask, surface[s.a], mesh.pixel[s.a],
+                                                 surface[s.b], mesh.pixel[s.b], straight_mm));
+    }
+  });
+}
+
+}  // namespace
+
 Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
                const std::function<cv::Point2d(const cv::Vec3d&)>& project) {
   Mesh mesh;
@@ -376,6 +515,7 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
   const int hv = std::max(6, static_cast<int>(std::lround(options.fit_window * step_v)));
   std::vector<cv::Point2d> grid_px(n);
   std::vector<uint8_t> on_page(n, 0);
+  std::vector<FitQuality> fits(options.rest_along_surface ? n : 0);
   for (int j = 0; j < h; ++j) {
     for (int i = 0; i < g; ++i) {
       const cv::Point2d p(box.x + i * step_u, box.y + j * step_v);
@@ -387,7 +527,8 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     for (int k = range.start; k < range.end; ++k) {
       if (!on_page[k]) continue;
       cv::Vec3d x;
-      const Fit fit = FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x);
+      const Fit fit = FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x,
+                              options.rest_along_surface ? &fits[k] : nullptr);
       if (fit == Fit::kOk) {
         mesh.point[k] = x;
         mesh.kind[k] = NodeKind::kMeasured;
@@ -503,6 +644,10 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     }
   }
   ConnectSheet(options.bend_springs, project, &mesh);
+  if (mesh.status.ok() && options.rest_along_surface) {
+    MeasureAlongSurface(points, page_mask, grid_px, fits, options.straight_mm, options.min_bend_deg,
+                        &mesh);
+  }
   return mesh;
 }
 

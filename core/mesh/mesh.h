@@ -18,6 +18,17 @@ struct MeshOptions {
   double fit_window = 0.6;    // Node fit window half-size, in grid cells (>= 2 px).
   int skirt_rings = 1;        // Rings of extrapolated nodes around the page (covers its edge).
   bool bend_springs = false;  // Also springs two nodes apart (bending resistance).
+  // A spring's rest length is the leaf's length between its nodes measured along the surface
+  // (the point map between them, halved until each piece is straight), not the chord: a crease
+  // between two nodes shortens the chord by up to a fifth of a cell, and the page with it. A
+  // spring is measured so when the nodes' own fits put the surface at its middle off its chord
+  // by more than a bend of `min_bend_deg` either side would (fainter bends cost under 0.1% of
+  // the chord; the point map's small faults, such as a depth bias on dark ink, are not bends);
+  // a piece counts as straight when its middle lies within `straight_mm` of its chord, or
+  // within five standard errors of the fit that placed it.
+  bool rest_along_surface = true;
+  double straight_mm = 0.03;  // > 0.
+  double min_bend_deg = 3;    // In [0, 45).
 
   bool Check(std::string* why) const;
 };
@@ -70,6 +81,13 @@ double WarpError(const Mesh& mesh);
 // error falls as the square of the node spacing. Never coarser than the mesh's grid; at most
 // `max_nodes` each way.
 cv::Size GridForError(const Mesh& mesh, double max_error_px, int max_nodes = 400);
+
+// The length along the measured surface between two nodes (3D `a`, `b` seen at pixels `pa`, `pb`)
+// of a sheet over `points` and `mask`: the chord where the surface between them is straight,
+// else the sum over halves (to pieces of two pixels). The chord where the points give out.
+double LengthAlongSurface(const cv::Mat& points, const cv::Mat& mask, const cv::Vec3d& a,
+                          cv::Point2d pa, const cv::Vec3d& b, cv::Point2d pb, double straight_mm,
+                          int depth = 0);
 
 // The sheet's topology from its nodes: given cols, rows, kind and point, sets pixel (the
 // projection of each active node), the node counts, the springs (rest lengths from the 3D
