@@ -1,6 +1,6 @@
 // The flattening sheet (Brown & Seales 2004, sections 3.5-3.6 and 4: a 45 x 45 grid of
 // particles sampled from the measured surface, structural and shear springs per quad, rest
-// lengths from the measured 3D distances).
+// lengths from the measured 3D distances; here measured along the surface where it bends).
 #pragma once
 
 #include <functional>
