@@ -201,15 +201,18 @@ bool SurroundLook::Shows(int u, int v) const {
 // most pieces stand off; or, when they do not, when most of the hole shows the surround by its
 // heights and its look together (a leaf flush with what it lies on). A hole without heights (the
 // projector's light did not reach it: a shadow on the leaf, or what lies under a raised leaf) is
-// kept when it looks unlike the leaf around it in the texture (by more than 3% of the paper's
-// brightness), filled otherwise.
+// kept when it looks unlike the leaf along its edge in the texture (within 3 px of it, by more
+// than 3% of the paper's brightness), filled otherwise: ink too dark to decode, inside a dark
+// square, looks like the decoded ink around it, not like the paper a wider ring would mix in.
 int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, double bright,
               cv::Mat* leaf, const SurroundLook* surround, cv::Point offset) {
   cv::Mat outside = ~*leaf, labels, stats, centroids;
   const int n = cv::connectedComponentsWithStats(outside, labels, stats, centroids, 4, CV_32S);
   const cv::Rect all(0, 0, z.cols, z.rows);
-  constexpr int kRing = 12, kTile = 32, kNear = 3, kFar = 10;
+  constexpr int kRing = 12, kTile = 32, kNear = 3, kFar = 10, kEdge = 3;
   const cv::Mat disc = cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * kRing + 1, 2 * kRing + 1});
+  const cv::Mat edge_disc =
+      cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * kEdge + 1, 2 * kEdge + 1});
   std::vector<uint8_t> fill(n, 0), kept_label(n, 0);
   // Each hole judged on its own, the holes shared among the threads.
   cv::parallel_for_(cv::Range(1, std::max(n, 1)), [&](const cv::Range& range) {
@@ -224,9 +227,11 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
       }
       const cv::Rect near = (box + cv::Size(2 * kRing, 2 * kRing) - cv::Point(kRing, kRing)) & all;
       const cv::Mat hole = labels(near) == l;
-      cv::Mat ring, depth;
+      cv::Mat ring, edge, depth;
       cv::dilate(hole, ring, disc);
       ring &= (*leaf)(near);
+      cv::dilate(hole, edge, edge_disc);
+      edge &= (*leaf)(near);
       cv::distanceTransform(hole, depth, cv::DIST_L2, 3);
       double deepest = 0;
       cv::minMaxLoc(depth, nullptr, &deepest);
@@ -238,12 +243,17 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
       for (int v = 0; v < near.height; ++v) {
         const uint8_t* in_hole = hole.ptr<uint8_t>(v);
         const uint8_t* in_ring = ring.ptr<uint8_t>(v);
+        const uint8_t* in_edge = edge.ptr<uint8_t>(v);
         const float* d = depth.ptr<float>(v);
         for (int u = 0; u < near.width; ++u) {
           if (!in_hole[u] && !in_ring[u]) continue;
           const int uu = u + near.x, vv = v + near.y;
           const float h = z.at<float>(vv, uu);
-          (in_hole[u] ? look_in : look_around).push_back(gray.at<uint8_t>(vv, uu));
+          if (in_hole[u]) {
+            look_in.push_back(gray.at<uint8_t>(vv, uu));
+          } else if (in_edge[u]) {
+            look_around.push_back(gray.at<uint8_t>(vv, uu));
+          }
           if (!Valid(h)) continue;
           if (in_hole[u]) {
             ++valid;

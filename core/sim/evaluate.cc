@@ -73,10 +73,14 @@ FlatErrorStats CompareFlat(const GroundTruth& truth, const Mesh& mesh,
     const cv::Point px(cvRound(mesh.pixel[k].x), cvRound(mesh.pixel[k].y));
     if (!cv::Rect(0, 0, truth.page.cols, truth.page.rows).contains(px)) continue;
     if (!truth.on_page.at<uint8_t>(px)) continue;
-    // The truth at the node's own (sub-pixel) position: bilinear in the page coordinates.
+    // The truth at the node's own (sub-pixel) position: bilinear in the page coordinates, where
+    // the four pixels around it see this page (beside another page, at a gutter with no gap,
+    // the coordinates are that page's: a blend of the two is no truth).
     const cv::Point2d p = mesh.pixel[k];
     const int u0 = std::min(static_cast<int>(p.x), truth.page.cols - 2);
     const int v0 = std::min(static_cast<int>(p.y), truth.page.rows - 2);
+    const cv::Rect around(u0, v0, 2, 2);
+    if (cv::countNonZero(truth.on_page(around)) < 4) continue;
     const double fu = p.x - u0, fv = p.y - v0;
     const cv::Vec2f st2 = (1 - fv) * ((1 - fu) * truth.page.at<cv::Vec2f>(v0, u0) +
                                       fu * truth.page.at<cv::Vec2f>(v0, u0 + 1)) +
