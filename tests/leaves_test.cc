@@ -131,8 +131,7 @@ TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
     const cv::Size2d page_mm = pages[k].options().size_mm;
     SCOPED_TRACE(page.name.empty() ? std::string("the leaf") : page.name);
     // The sheet against the true flat page.
-    GroundTruth mine = truth;
-    mine.on_page = truth.page_index == static_cast<int>(k + 1);
+    const GroundTruth mine = OnePage(truth, static_cast<int>(k + 1));
     const FlatErrorStats flat = CompareFlat(mine, page.mesh, page.flat.flat);
     // Experiment I.
     const Rigid2D to_true = FlatToTrue(mine, page);

@@ -133,8 +133,7 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   for (size_t k = 0; k < std::min(pages.size(), result.pages.size()); ++k) {
     const PageResult& page = result.pages[k];
     const std::string name = page.name.empty() ? "" : page.name + " page: ";
-    GroundTruth mine = truth;
-    mine.on_page = truth.page_index == static_cast<int>(k + 1);
+    const GroundTruth mine = OnePage(truth, static_cast<int>(k + 1));
     const double iou =
         k < result.outline.pages.size() ? MaskIoU(result.outline.pages[k], mine.on_page) : 0.0;
     o.iou = std::min(o.iou, iou);

@@ -70,7 +70,19 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
                     (near[side] == kNoData || near[side] - row[lowest] >= options.gutter_crease_mm);
     }
     if (!valley_here) continue;
-    valley.emplace_back(static_cast<float>(lowest), static_cast<float>(v));
+    // Where the pages part, the lowest point is the foot of either page's wall, a gap's width
+    // from the other: the valley runs down the gap's middle.
+    float valley_u = static_cast<float>(lowest);
+    for (int d = 1; d <= near_px && lowest - d >= first && lowest + d <= last; ++d) {
+      const int u = !in[lowest - d] ? lowest - d : (!in[lowest + d] ? lowest + d : -1);
+      if (u < 0) continue;
+      int a = u, b = u;
+      while (a > first && !in[a - 1]) --a;
+      while (b < last && !in[b + 1]) ++b;
+      if (b - a <= 2 * near_px) valley_u = 0.5f * (a + b);
+      break;
+    }
+    valley.emplace_back(valley_u, static_cast<float>(v));
     bool levels = true;
     for (int side = 0; side < 2; ++side) {
       levels = levels && beyond[side] != kNoData &&

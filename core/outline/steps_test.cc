@@ -363,6 +363,13 @@ TEST(SplitAtGutter, FindsAValleyAndWhatSaysItIsABooksGutter) {
   } cases[] = {
       {"gap", [&](int u, int) { return std::fabs(u - middle) * slope; }, 8, true, true, false},
       {"meeting", [&](int u, int) { return std::fabs(u - middle) * slope; }, 0, true, false, false},
+      // A gap of 4 mm whose walls' feet stand level to 0.05 mm, one higher in a row and the other
+      // in the next: the rows' lowest points fall on either wall, and the valley runs between.
+      {"wide gap",
+       [&](int u, int v) {
+         return std::fabs(u - middle) * slope + (((v / 4) % 2 == 0) == (u > middle) ? 0.05 : 0.0);
+       },
+       16, true, true, false},
       {"bound",  // Rising 62 degrees out of the gutter, level 15 mm above it by 30 mm out.
        [&](int u, int) { return 15 * (1 - std::exp(-std::fabs(u - middle) * kPixelMm / 8)); }, 0,
        true, false, true},

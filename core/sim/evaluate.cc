@@ -62,6 +62,14 @@ PointErrorStats ComparePoints(const GroundTruth& truth, const cv::Mat& points) {
   return st;
 }
 
+GroundTruth OnePage(const GroundTruth& truth, int index) {
+  GroundTruth one = truth;
+  // A new mask: the comparison assigned to the copy's header would be written into the buffer
+  // the copy shares with `truth`.
+  one.on_page = cv::Mat(truth.page_index == index);
+  return one;
+}
+
 FlatErrorStats CompareFlat(const GroundTruth& truth, const Mesh& mesh,
                            const std::vector<cv::Point2d>& flat) {
   FlatErrorStats st;

@@ -33,6 +33,10 @@ struct FlatErrorStats {
   bool mirrored = false;          // A reflection fits better than the rigid motion.
 };
 
+// The truth of one of the gantry's pages (`index` as in page_index: 1 for the first): its own
+// on_page mask, new (the truth's other fields shared).
+GroundTruth OnePage(const GroundTruth& truth, int index);
+
 // Compares a flattened sheet with the true flat page: each page node's true page coordinate
 // is the truth at its camera pixel; geodesic lengths on a developable page are flat lengths.
 FlatErrorStats CompareFlat(const GroundTruth& truth, const Mesh& mesh,
