@@ -92,6 +92,13 @@ struct Plane {
 // The surround's planes, from the samples: the outermost measured blocks of each row and column
 // of the grid (within its outer quarter), by RANSAC (deterministic), one plane after another.
 std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& options);
+// The planes fitted again over everything of the surround in view: the solidly measured blocks
+// two or more from `leaf` (blocks), each on the plane it lies nearest and within tolerance of.
+// Fitted to the view's outermost blocks alone, a plane can tilt by hundredths of a millimetre
+// across the view, which the cut reads as a leaf's thickness. A plane keeps its fit where fewer
+// blocks than before lie on it.
+void RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
+                   std::vector<Plane>* planes);
 // Each block's signed height above the nearest of `planes` (mm, NaN where unmeasured; the
 // block's height where there are no planes).
 cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes);

@@ -138,6 +138,33 @@ TEST(FitSurround, FindsTheTableAndASupportReachingTheViewsEdge) {
   EXPECT_NEAR(s.above.at<float>(20 / b, 200 / b), 0.0f, 0.01f);
 }
 
+// Fitted again over all the surround in view, a plane tilted by its first fit (0.3 mm per metre:
+// 0.06 mm across a 200 mm support, which the cut reads as a thin leaf) comes level, and the leaf
+// 0.2 mm above it, with the blocks beside it, stays out of the fit.
+TEST(RefitSurround, LevelsAPlaneOverAllTheSurroundLeftOfTheLeaf) {
+  const cv::Size size(400, 300);
+  auto inside = [](int u, int v) { return u >= 150 && u < 250 && v >= 100 && v < 200; };
+  const cv::Mat points = Points(
+      size, [&](int u, int v) { return 5.0 + (inside(u, v) ? 0.2 : 0.0); }, 0.005);
+  const Scene s = Prepare(points, cv::Mat(size, CV_8U, cv::Scalar(120)));
+  const cv::Mat leaf = BlocksWhere(s.blocks, inside);
+  Plane tilted;
+  tilted.b = 3e-4;
+  tilted.c = 5.0 - 3e-4 * 37.5;  // Right at the view's middle row (37.5 mm).
+  tilted.inliers = 10;
+  std::vector<Plane> planes{tilted};
+  RefitSurround(s.blocks, leaf, OutlineOptions().surround, &planes);
+  ASSERT_EQ(planes.size(), 1u);
+  EXPECT_LT(std::hypot(planes[0].a, planes[0].b), 2e-5);
+  EXPECT_NEAR(planes[0].c, 5.0, 0.003);
+  EXPECT_GT(planes[0].inliers, 10);
+  // A plane with fewer blocks on it than it had keeps its fit.
+  std::vector<Plane> many{tilted};
+  many[0].inliers = 1000000;
+  RefitSurround(s.blocks, leaf, OutlineOptions().surround, &many);
+  EXPECT_EQ(many[0].b, tilted.b);
+}
+
 // One energy over every cue: a leaf is found by its height off the table where it looks like the
 // table (0.1 mm, ten times the table's noise), by its look where it lies flush (0 mm: a bright
 // leaf on a dark table), and not at all where neither sets it apart (flush and looking alike: the

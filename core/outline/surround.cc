@@ -262,6 +262,42 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
   return planes;
 }
 
+void RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
+                   std::vector<Plane>* planes) {
+  if (planes->empty()) return;
+  cv::Mat solid = blocks.valid >= 0.9f, near_leaf;
+  cv::erode(solid, solid, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+            cv::Scalar(0));
+  cv::dilate(leaf, near_leaf, cv::Mat::ones(5, 5, CV_8U));
+  const double max_slope = std::tan(options.max_tilt_deg * M_PI / 180);
+  std::vector<std::vector<cv::Vec3f>> on(planes->size());
+  for (int by = 0; by < blocks.grid.height; ++by) {
+    for (int bx = 0; bx < blocks.grid.width; ++bx) {
+      if (!solid.at<uint8_t>(by, bx) || near_leaf.at<uint8_t>(by, bx)) continue;
+      const cv::Vec3f p(blocks.x.at<float>(by, bx), blocks.y.at<float>(by, bx),
+                        blocks.z.at<float>(by, bx));
+      const float n = blocks.noise.at<float>(by, bx);
+      const double tolerance = std::max<double>(options.tolerance_mm, std::isnan(n) ? 0 : 3 * n);
+      int nearest = -1;
+      double off = tolerance;
+      for (size_t k = 0; k < planes->size(); ++k) {
+        const double d = std::fabs(p[2] - (*planes)[k].At(p[0], p[1]));
+        if (d <= off) off = d, nearest = static_cast<int>(k);
+      }
+      if (nearest >= 0) on[nearest].push_back(p);
+    }
+  }
+  for (size_t k = 0; k < planes->size(); ++k) {
+    Plane plane;
+    if (static_cast<int>(on[k].size()) < (*planes)[k].inliers || !FitPlane(on[k], &plane) ||
+        std::hypot(plane.a, plane.b) > max_slope) {
+      continue;
+    }
+    plane.inliers = static_cast<int>(on[k].size());
+    (*planes)[k] = plane;
+  }
+}
+
 bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vector<Plane>& planes,
                        const SurroundOptions& options, Plane* plane, cv::Mat* ring) {
   // The blocks within three of the outline, inside.
