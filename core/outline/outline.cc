@@ -233,15 +233,11 @@ bool StandsOffAtRim(const outline::Blocks& blocks, const cv::Mat& outer, const c
   return judged == 0 || 2 * standing >= judged;
 }
 
-// Whether `inner` (blocks) is a leaf lying on `outer` (a support or a frame around it, whose
-// plane `above` is measured from): of at least `min_blocks` and at most 90% of it, its outline
-// inside `outer` (four fifths of it at least two blocks in from outer's) and set apart there
-// (options.lies_on_apart of it by a rim, a texture edge or unmeasured blocks), and standing off
-// that plane (its median height off it at least options.lies_on_mm and three times the blocks'
-// noise). A region of a flat leaf's own texture (its dark squares, a miniature) lies on the
-// leaf's plane.
-bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
-            const cv::Mat& above, int min_blocks, const OutlineOptions& options) {
+// Whether `inner` (blocks), of at least `min_blocks` and at most 90% of `outer`, has its outline
+// inside outer's (four fifths of it at least two blocks in) and set apart there
+// (options.lies_on_apart of it by a rim, a texture edge or unmeasured blocks).
+bool SetApartInside(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
+                    int min_blocks, const OutlineOptions& options) {
   const int area = cv::countNonZero(inner);
   if (area < std::max(1, min_blocks) || area > 0.9 * cv::countNonZero(outer)) return false;
   cv::Mat eroded, deep, apart;
@@ -251,10 +247,19 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
             cv::Scalar(0));
   cv::dilate((blocks.rim > 0.5f) | (blocks.edge > 1.0f) | (blocks.valid < 0.5f), apart, cv::Mat());
   const int total = cv::countNonZero(rim);
-  if (total == 0 || cv::countNonZero(rim & deep) < 0.8 * total ||
-      cv::countNonZero(rim & apart) < options.lies_on_apart * total) {
-    return false;
-  }
+  return total > 0 && cv::countNonZero(rim & deep) >= 0.8 * total &&
+         cv::countNonZero(rim & apart) >= options.lies_on_apart * total;
+}
+
+// Whether `inner` (blocks) is a leaf lying on `outer` (a support or a frame around it, whose
+// plane `above` is measured from): set apart inside it (SetApartInside), and standing off that
+// plane (its median height off it at least options.lies_on_mm and three times the blocks'
+// noise). A region of a flat leaf's own texture (its dark squares, a miniature) lies on the
+// leaf's plane.
+bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
+            const cv::Mat& above, int min_blocks, const OutlineOptions& options) {
+  if (!SetApartInside(blocks, outer, inner, min_blocks, options)) return false;
+  const int area = cv::countNonZero(inner);
   std::vector<float> off, noise;
   for (int by = 0; by < inner.rows; ++by) {
     for (int bx = 0; bx < inner.cols; ++bx) {
@@ -267,6 +272,27 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
   if (off.size() * 2 < static_cast<size_t>(area)) return false;  // Mostly unmeasured.
   const double least = std::max(options.lies_on_mm, 3 * outline::Median(&noise));
   return outline::Median(&off) >= least && StandsOffAtRim(blocks, outer, inner, least);
+}
+
+// Whether `inner` (blocks) is a leaf in a window of `outer` (a frame, or a support beside it):
+// set apart inside it (SetApartInside) and lying below `plane`, outer's plane along its outline,
+// on what shows through the window (its median height under the plane at least
+// options.lies_on_mm and three times the blocks' noise: a paper frame stands 0.3 mm high).
+bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
+              const outline::Plane& plane, int min_blocks, const OutlineOptions& options) {
+  if (!SetApartInside(blocks, outer, inner, min_blocks, options)) return false;
+  std::vector<float> below, noise;
+  for (int by = 0; by < inner.rows; ++by) {
+    for (int bx = 0; bx < inner.cols; ++bx) {
+      const float z = blocks.z.at<float>(by, bx), n = blocks.noise.at<float>(by, bx);
+      if (!inner.at<uint8_t>(by, bx) || std::isnan(z)) continue;
+      if (!std::isnan(n)) noise.push_back(n);
+      below.push_back(
+          static_cast<float>(plane.At(blocks.x.at<float>(by, bx), blocks.y.at<float>(by, bx)) - z));
+    }
+  }
+  if (below.size() * 2 < static_cast<size_t>(cv::countNonZero(inner))) return false;
+  return outline::Median(&below) >= std::max(options.lies_on_mm, 3 * outline::Median(&noise));
 }
 
 }  // namespace
@@ -327,10 +353,13 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat above = AboveSurround(blocks, planes);
   const cv::Mat seed = SeedBlocks(blocks, size, options.hint);
   Cut found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
-  // The planes again over all the surround the cut left, and the leaf cut against them.
+  // The planes again over all the surround the cut left, and the leaf cut against them, each
+  // plane with its own look.
   RefitSurround(blocks, found.leaf, options.surround, &planes);
-  above = AboveSurround(blocks, planes);
-  found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
+  cv::Mat nearest_plane;
+  above = AboveSurround(blocks, planes, &nearest_plane);
+  found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut,
+                  nearest_plane);
   cv::Mat cut = AtSeed(found.leaf, seed);
   const double area_min = options.min_area * size.area();
   const int min_blocks = static_cast<int>(area_min / (block * block));
@@ -339,8 +368,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     // run off the view, flagged when another almost as large was found too.
     cut = LargestWithin(found.leaf, &out);
   }
-  // What was found may be a support or a frame with the leaf on it: cut again inside it, against
-  // the plane along its outline (twice: a leaf in a frame on a support).
+  // What was found may be a support or a frame with the leaf on it, or a frame with the leaf in
+  // its window, on the table below it: cut again inside it, against the plane along its outline
+  // (twice: a leaf in a frame on a support).
   double raised_mm = 0;  // What was found lies this high above the table, nothing standing on it.
   for (int level = 0; level < 2 && cv::countNonZero(cut) > 0; ++level) {
     Plane plane;
@@ -352,7 +382,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, cut, options.cut);
     cv::Mat inner = AtSeed(inner_cut.leaf, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
-    if (!LiesOn(blocks, cut, inner, above_more, min_blocks, options)) {
+    const bool lies_on = LiesOn(blocks, cut, inner, above_more, min_blocks, options);
+    const bool in_window = !lies_on && InWindow(blocks, cut, inner, plane, min_blocks, options);
+    if (!lies_on && !in_window) {
       // What was found lies on a plane well above the table, and nothing on it stands off it: a
       // support or a box, maybe, with the leaf flush on it or elsewhere. Unless enough of what
       // lies just outside it is as high: then it is a leaf on a support wider than itself.
@@ -368,6 +400,12 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     cut = inner;
     planes = more;
     above = above_more;
+    if (in_window) {
+      // Beside a leaf in a window lies what shows through it (the table): its look with the
+      // frame's.
+      inner_cut.look_surround.Add(found.look_surround);
+      inner_cut.look_surround.Finish();
+    }
     found = inner_cut;
   }
   if (cv::countNonZero(cut) * block * block < area_min) {
