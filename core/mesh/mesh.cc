@@ -479,6 +479,16 @@ void MeasureAlongSurface(const cv::Mat& points, const cv::Mat& mask,
                                                  surface[s.b], mesh.pixel[s.b], straight_mm));
     }
   });
+  // The other springs at a node that took the surface at its pixel measure from there too: lengths
+  // from two places for one node would pull the flattened sheet two ways.
+  std::vector<uint8_t> is_bent(mesh.springs.size(), 0);
+  for (int k : bent) is_bent[k] = 1;
+  for (size_t k = 0; k < mesh.springs.size(); ++k) {
+    Spring& s = mesh.springs[k];
+    if (is_bent[k] || !measured(s.a) || !measured(s.b)) continue;
+    if (surface[s.a] == mesh.point[s.a] && surface[s.b] == mesh.point[s.b]) continue;
+    s.rest_mm = cv::norm(surface[s.b] - surface[s.a]);
+  }
 }
 
 }  // namespace
