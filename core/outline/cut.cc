@@ -46,8 +46,7 @@ cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above) {
 }
 
 Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
-            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options,
-            const cv::Mat& nearest_plane) {
+            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options) {
   const cv::Size g = blocks.grid;
   const int n = g.area();
   // The heights' costs, which do not change from round to round: (to call it leaf, to call it
@@ -104,52 +103,26 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
   Look& look_leaf = cut.look_leaf;
   Look& look_surround = cut.look_surround;
   std::vector<uint8_t> leafy(n, 0), surroundish(n, 0), barred(n, 0), strange(n, 0);
-  // The surround's look on each plane, where there is more than one; a plane's block judged by the
-  // pooled look where its own has no samples.
-  std::vector<int> plane_of(n, kNoPlane);
-  int planes = 0;
-  if (!nearest_plane.empty()) {
-    for (int i = 0; i < n; ++i) {
-      plane_of[i] = nearest_plane.at<uint8_t>(i / g.width, i % g.width);
-      if (plane_of[i] != kNoPlane) planes = std::max(planes, plane_of[i] + 1);
-    }
-  }
-  std::vector<Look> look_on(planes > 1 ? planes : 0);
-  auto learn_surround = [&] {
-    look_surround = Look();
-    for (Look& l : look_on) l = Look();
-    for (int i = 0; i < n; ++i) {
-      if (!surroundish[i]) continue;
-      look_surround.Add(bins[i], 1);
-      if (plane_of[i] < static_cast<int>(look_on.size())) look_on[plane_of[i]].Add(bins[i], 1);
-    }
-    look_surround.Finish();
-    for (Look& l : look_on) l.Finish();
-  };
-  auto surround_log = [&](int i) {
-    const int p = plane_of[i];
-    return p < static_cast<int>(look_on.size()) && !look_on[p].empty() ? look_on[p].Log(bins[i])
-                                                                       : look_surround.Log(bins[i]);
-  };
   for (int i = 0; i < n; ++i) {
     const int by = i / g.width, bx = i % g.width;
     barred[i] = !allowed.empty() && !allowed.at<uint8_t>(by, bx);
     surroundish[i] = !barred[i] && surround.at<uint8_t>(by, bx) != 0;
+    if (surroundish[i]) look_surround.Add(bins[i], 1);
   }
-  learn_surround();
+  look_surround.Finish();
   // Unlike the surround: less likely under its look than all but a twentieth of its own samples
   // (a leaf reaching into the view's outer tenth puts some of its look there).
   auto unlike_surround = [&] {
     std::vector<double> typical;
     for (int i = 0; i < n; ++i) {
-      if (surroundish[i]) typical.push_back(surround_log(i));
+      if (surroundish[i]) typical.push_back(look_surround.Log(bins[i]));
     }
     double least = -1e300;
     if (!typical.empty()) {
       std::nth_element(typical.begin(), typical.begin() + typical.size() / 20, typical.end());
       least = typical[typical.size() / 20];
     }
-    for (int i = 0; i < n; ++i) strange[i] = typical.empty() || surround_log(i) < least;
+    for (int i = 0; i < n; ++i) strange[i] = typical.empty() || look_surround.Log(bins[i]) < least;
   };
   unlike_surround();
   for (int i = 0; i < n; ++i) {
@@ -160,11 +133,13 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
   }
   for (int round = 0; round <= options.rounds; ++round) {
     look_leaf = Look();
+    look_surround = Look();
     for (int i = 0; i < n; ++i) {
       if (leafy[i]) look_leaf.Add(bins[i], 1);
+      if (surroundish[i]) look_surround.Add(bins[i], 1);
     }
     look_leaf.Finish();
-    learn_surround();
+    look_surround.Finish();
     const bool looks = !look_leaf.empty() && !look_surround.empty();
     cv::detail::GCGraph<float> graph(n, 2 * n);
     for (int by = 0; by < g.height; ++by) {
@@ -172,7 +147,7 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
         const int i = by * g.width + bx;
         double to_leaf = height_leaf[i], to_surround = height_surround[i];
         if (looks) {
-          const double ratio = std::clamp(look_leaf.Log(bins[i]) - surround_log(i),
+          const double ratio = std::clamp(look_leaf.Log(bins[i]) - look_surround.Log(bins[i]),
                                           -options.max_look, options.max_look);
           (ratio > 0 ? to_surround : to_leaf) += options.look_weight * std::fabs(ratio);
         }

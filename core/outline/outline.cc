@@ -353,13 +353,10 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat above = AboveSurround(blocks, planes);
   const cv::Mat seed = SeedBlocks(blocks, size, options.hint);
   Cut found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
-  // The planes again over all the surround the cut left, and the leaf cut against them, each
-  // plane with its own look.
+  // The planes again over all the surround the cut left, and the leaf cut against them.
   RefitSurround(blocks, found.leaf, options.surround, &planes);
-  cv::Mat nearest_plane;
-  above = AboveSurround(blocks, planes, &nearest_plane);
-  found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut,
-                  nearest_plane);
+  above = AboveSurround(blocks, planes);
+  found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
   cv::Mat cut = AtSeed(found.leaf, seed);
   const double area_min = options.min_area * size.area();
   const int min_blocks = static_cast<int>(area_min / (block * block));

@@ -22,10 +22,7 @@ struct Scene {
   bool support, frame, spread;
   OutlineKind outline;
   TextureKind texture = TextureKind::kText;
-  double ink_albedo = 0.08;                          // Iron-gall ink browns to about 0.3.
-  double thickness_mm = PageOptions().thickness_mm;  // The leaf's rim above its base.
-  double frame_thickness_mm = SceneOptions().frame_thickness_mm;
-  double frame_margin_mm = SceneOptions().frame_window_margin_mm;  // Window around the leaf.
+  double ink_albedo = 0.08;  // Iron-gall ink browns to about 0.3.
 };
 
 struct Found {
@@ -40,17 +37,10 @@ Found FindIn(const Scene& scene) {
   PageOptions page;
   page.shape = scene.shape;
   page.outline = scene.outline;
-  page.thickness_mm = scene.thickness_mm;
   if (scene.spread) page.size_mm = {170.0, 230.0};
   SceneOptions s;
   s.support = scene.support;
   s.frame = scene.frame;
-  s.frame_thickness_mm = scene.frame_thickness_mm;
-  s.frame_window_margin_mm = scene.frame_margin_mm;
-  if (scene.frame_margin_mm > 0) {  // The default frame's outer extent, grown with its window.
-    s.frame_mm -= cv::Point2d(scene.frame_margin_mm, scene.frame_margin_mm);
-    s.frame_mm += cv::Size2d(2 * scene.frame_margin_mm, 2 * scene.frame_margin_mm);
-  }
   s.spread = scene.spread;
   TextureOptions texture;
   texture.kind = scene.texture;
@@ -135,11 +125,6 @@ INSTANTIATE_TEST_SUITE_P(
               OutlineKind::kRectangle, TextureKind::kCheckerboard},
         Scene{"checkerboard, paper frame", PageShape::kCurl, false, true, false,
               OutlineKind::kRectangle, TextureKind::kCheckerboard},
-        // Flush with the table (0 mm) in the 8 mm wider window of a frame 0.3 mm thick: the
-        // frame stands off the table and the leaf does not; the leaf lies in the window, below
-        // the frame, set apart from the table there by its look.
-        Scene{"flush curl in a frame's window", PageShape::kCurl, false, true, false,
-              OutlineKind::kRectangle, TextureKind::kText, 0.08, 0.0, 0.3, 8.0},
         Scene{"brown checkerboard, burnt, on support", PageShape::kCurl, true, false, false,
               OutlineKind::kBurnt, TextureKind::kCheckerboard, 0.3},
         // A blank leaf rolled into a trough is one leaf: its lowest line is no gutter (it rises

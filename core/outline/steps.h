@@ -100,11 +100,8 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
 void RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
                    std::vector<Plane>* planes);
 // Each block's signed height above the nearest of `planes` (mm, NaN where unmeasured; the
-// block's height where there are no planes); `nearest_plane` (if given, CV_8U): that plane's
-// index, kNoPlane where unmeasured or there are none.
-constexpr uint8_t kNoPlane = 255;
-cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes,
-                      cv::Mat* nearest_plane = nullptr);
+// block's height where there are no planes).
+cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes);
 
 // ---- CutLeaf ----
 // A look: a histogram of colours over 32 brightness levels and 4 x 4 hues (red and blue each
@@ -177,13 +174,9 @@ struct Cut {
 // Leaf (255) against surround (0) over the blocks, from `above` (AboveSurround), the blocks'
 // look, and `seed` (blocks where the leaf is expected: its look is learned there first, with the
 // blocks well off the surround). The surround's first look is learned from `surround` (blocks);
-// only blocks of `allowed` (all, when empty) may be leaf. With `nearest_plane` (AboveSurround's,
-// when given), the surround has a look of its own on each plane, and a block is judged against
-// the look of the plane it lies nearest: a leaf flush with a dark table inside a bright frame
-// looks like the frame, but not like the table it lies on.
+// only blocks of `allowed` (all, when empty) may be leaf.
 Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
-            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options,
-            const cv::Mat& nearest_plane = cv::Mat());
+            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options);
 // The blocks a first cut learns the surround's look from: those on it (within twice their
 // noise) in the grid's outer tenth, and those on its border without a height.
 cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above);

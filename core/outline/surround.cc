@@ -338,10 +338,8 @@ bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vec
   return true;
 }
 
-cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes,
-                      cv::Mat* nearest_plane) {
+cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes) {
   cv::Mat above(blocks.grid, CV_32F);
-  if (nearest_plane) *nearest_plane = cv::Mat(blocks.grid, CV_8U, cv::Scalar(kNoPlane));
   for (int by = 0; by < blocks.grid.height; ++by) {
     for (int bx = 0; bx < blocks.grid.width; ++bx) {
       const float x = blocks.x.at<float>(by, bx), y = blocks.y.at<float>(by, bx),
@@ -351,13 +349,9 @@ cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes,
         continue;
       }
       double nearest = z;
-      for (size_t k = 0; k < planes.size(); ++k) {
-        const double d = z - planes[k].At(x, y);
-        if (k == 0 || std::fabs(d) < std::fabs(nearest)) {
-          nearest = d;
-          if (nearest_plane && k < kNoPlane)
-            nearest_plane->at<uint8_t>(by, bx) = static_cast<uint8_t>(k);
-        }
+      for (const Plane& p : planes) {
+        const double d = z - p.At(x, y);
+        if (&p == &planes.front() || std::fabs(d) < std::fabs(nearest)) nearest = d;
       }
       above.at<float>(by, bx) = static_cast<float>(nearest);
     }
