@@ -38,7 +38,7 @@ struct WarningLimits {
   // far off its rest length lies on a crease sharper than the decoder resolves (its fit rounds
   // the ridge over a few pixels, and the page comes out short across it by tenths of a mm), or
   // on more than the leaf. In the scene family (200 scenes, rest lengths along the surface),
-  // three creased leaves that met 0.08 mm RMS kept 2.7-4.2%, every other scan that met it under
+  // three creased leaves that met 0.08 mm RMS kept 2.7-4.3%, every other scan that met it under
   // 2.5%.
   double max_strain = 0.025;
   cv::Size2d expected_leaf_mm{0, 0};  // The leaf's size as the operator expects it (0: none).

@@ -353,10 +353,12 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   cv::Mat above = AboveSurround(blocks, planes);
   const cv::Mat seed = SeedBlocks(blocks, size, options.hint);
   Cut found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
-  // The planes again over all the surround the cut left, and the leaf cut against them.
-  RefitSurround(blocks, found.leaf, options.surround, &planes);
-  above = AboveSurround(blocks, planes);
-  found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
+  // The planes again over all the surround the cut left, and the leaf cut again against them
+  // where they moved by more than the surround strays from its plane.
+  if (RefitSurround(blocks, found.leaf, options.surround, &planes) > options.cut.plane_mm) {
+    above = AboveSurround(blocks, planes);
+    found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
+  }
   cv::Mat cut = AtSeed(found.leaf, seed);
   const double area_min = options.min_area * size.area();
   const int min_blocks = static_cast<int>(area_min / (block * block));

@@ -96,9 +96,10 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
 // two or more from `leaf` (blocks), each on the plane it lies nearest and within tolerance of.
 // Fitted to the view's outermost blocks alone, a plane can tilt by hundredths of a millimetre
 // across the view, which the cut reads as a leaf's thickness. A plane keeps its fit where fewer
-// blocks than before lie on it.
-void RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
-                   std::vector<Plane>* planes);
+// blocks than before lie on it. Returns how far the planes moved (mm, the most at any of the
+// blocks on them).
+double RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
+                     std::vector<Plane>* planes);
 // Each block's signed height above the nearest of `planes` (mm, NaN where unmeasured; the
 // block's height where there are no planes).
 cv::Mat AboveSurround(const Blocks& blocks, const std::vector<Plane>& planes);

@@ -262,9 +262,9 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
   return planes;
 }
 
-void RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
-                   std::vector<Plane>* planes) {
-  if (planes->empty()) return;
+double RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
+                     std::vector<Plane>* planes) {
+  if (planes->empty()) return 0;
   cv::Mat solid = blocks.valid >= 0.9f, near_leaf;
   cv::erode(solid, solid, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
             cv::Scalar(0));
@@ -287,15 +287,19 @@ void RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOpti
       if (nearest >= 0) on[nearest].push_back(p);
     }
   }
+  double moved = 0;
   for (size_t k = 0; k < planes->size(); ++k) {
     Plane plane;
     if (static_cast<int>(on[k].size()) < (*planes)[k].inliers || !FitPlane(on[k], &plane) ||
         std::hypot(plane.a, plane.b) > max_slope) {
       continue;
     }
+    for (const cv::Vec3f& p : on[k])
+      moved = std::max(moved, std::fabs(plane.At(p[0], p[1]) - (*planes)[k].At(p[0], p[1])));
     plane.inliers = static_cast<int>(on[k].size());
     (*planes)[k] = plane;
   }
+  return moved;
 }
 
 bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vector<Plane>& planes,
