@@ -6,7 +6,9 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -102,13 +104,32 @@ inline int64_t PublishScan(Node& probe, const Scan& scan, int64_t id, int skip =
   return session;
 }
 
-// A fresh folder for one test's files, named after the test: <tmp>/vellum_<what>_<pid>_<test>.
+// The temporary folders a test process made, removed when it exits (kept, to look into, when
+// VELLUM_KEEP_TEST_DIRS is set).
+inline void RemoveAtExit(const std::string& dir) {
+  struct Folders {
+    std::vector<std::string> paths;
+    ~Folders() {
+      if (std::getenv("VELLUM_KEEP_TEST_DIRS")) return;
+      std::error_code ignored;
+      for (const std::string& p : paths) std::filesystem::remove_all(p, ignored);
+    }
+  };
+  static Folders folders;
+  folders.paths.push_back(dir);
+}
+
+// A fresh folder for one test's files, named after the test: <tmp>/vellum_<what>_<pid>_<test>,
+// removed when the process exits.
 inline std::string TestDir(const std::string& what) {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::string name = info ? info->name() : "x";
+  std::replace(name.begin(), name.end(), '/', '_');  // A parameterised test's "Name/param".
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() /
-      ("vellum_" + what + "_" + std::to_string(::getpid()) + "_" + (info ? info->name() : "x"));
+      ("vellum_" + what + "_" + std::to_string(::getpid()) + "_" + name);
   std::filesystem::remove_all(dir);
+  RemoveAtExit(dir.string());
   return dir.string();
 }
 
@@ -147,6 +168,7 @@ inline const SmallProducts& SmallScanProducts() {
                  ("vellum_small_products_" + std::to_string(::getpid())))
                     .string();
     std::filesystem::create_directories(p.results);
+    RemoveAtExit(p.results);
     const Calibration rig = QuickRig();
     const PipelineOptions o;
     Decoder decoder;
