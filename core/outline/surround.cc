@@ -112,6 +112,21 @@ Blocks MakeBlocks(const Cues& cues, const cv::Mat& points, int size) {
 
 namespace {
 
+// The solidly measured blocks: each and the blocks within two of it all measured (the edge of
+// the projector's light or of a shadow biases the decoder's heights there).
+cv::Mat SolidBlocks(const Blocks& blocks) {
+  cv::Mat solid = blocks.valid >= 0.9f;
+  cv::erode(solid, solid, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+            cv::Scalar(0));
+  return solid;
+}
+
+// How far off a plane a sample of this noise may lie and be on it: the option's tolerance, or
+// three times the noise where that is more.
+double OnPlaneTolerance(const SurroundOptions& options, float noise) {
+  return std::max<double>(options.tolerance_mm, 3 * noise);
+}
+
 // Least-squares plane z = a x + b y + c through `points` (x, y, z).
 bool FitPlane(const std::vector<cv::Vec3f>& points, Plane* plane) {
   if (points.size() < 3) return false;
@@ -141,7 +156,7 @@ bool RansacPlane(const std::vector<cv::Vec3f>& samples, const std::vector<float>
                  cv::RNG* rng, Plane* plane, std::vector<int>* inliers) {
   if (candidates.size() < std::max<size_t>(3, least)) return false;
   const double max_slope = std::tan(options.max_tilt_deg * M_PI / 180);
-  auto tolerance = [&](int k) { return std::max<double>(options.tolerance_mm, 3 * noise[k]); };
+  auto tolerance = [&](int k) { return OnPlaneTolerance(options, noise[k]); };
   auto collect = [&](const Plane& p, std::vector<int>* in) {
     in->clear();
     for (int m : candidates) {
@@ -198,11 +213,8 @@ bool RansacPlane(const std::vector<cv::Vec3f>& samples, const std::vector<float>
 std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& options) {
   const cv::Size g = blocks.grid;
   // The samples: the outermost solidly measured block of each row and column from each side,
-  // within the grid's outer quarter. Solid: it and the blocks within two of it all measured (the
-  // edge of the projector's light or of a shadow biases the decoder's heights there).
-  cv::Mat solid = blocks.valid >= 0.9f;
-  cv::erode(solid, solid, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
-            cv::Scalar(0));
+  // within the grid's outer quarter (SolidBlocks).
+  const cv::Mat solid = SolidBlocks(blocks);
   cv::Mat taken(g, CV_8U, cv::Scalar(0));
   auto measured = [&](int bx, int by) { return solid.at<uint8_t>(by, bx) != 0; };
   for (int by = 0; by < g.height; ++by) {
@@ -265,9 +277,8 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
 double RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOptions& options,
                      std::vector<Plane>* planes) {
   if (planes->empty()) return 0;
-  cv::Mat solid = blocks.valid >= 0.9f, near_leaf;
-  cv::erode(solid, solid, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
-            cv::Scalar(0));
+  const cv::Mat solid = SolidBlocks(blocks);
+  cv::Mat near_leaf;
   cv::dilate(leaf, near_leaf, cv::Mat::ones(5, 5, CV_8U));
   const double max_slope = std::tan(options.max_tilt_deg * M_PI / 180);
   std::vector<std::vector<cv::Vec3f>> on(planes->size());
@@ -277,7 +288,7 @@ double RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOp
       const cv::Vec3f p(blocks.x.at<float>(by, bx), blocks.y.at<float>(by, bx),
                         blocks.z.at<float>(by, bx));
       const float n = blocks.noise.at<float>(by, bx);
-      const double tolerance = std::max<double>(options.tolerance_mm, std::isnan(n) ? 0 : 3 * n);
+      const double tolerance = OnPlaneTolerance(options, std::isnan(n) ? 0.0f : n);
       int nearest = -1;
       double off = tolerance;
       for (size_t k = 0; k < planes->size(); ++k) {
