@@ -178,12 +178,16 @@ GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline) {
   GutterGap gap;
   if (outline.pages.size() != 2 || points.type() != CV_32FC3) return gap;
   const cv::Mat &left = outline.pages[0], &right = outline.pages[1];
-  if (left.size() != points.size() || right.size() != points.size()) return gap;
+  if (left.size() != points.size() || right.size() != points.size() ||
+      outline.mask.size() != points.size()) {
+    return gap;
+  }
   const cv::Rect box = cv::boundingRect(outline.mask);
   std::vector<float> lengths;
   for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; ++v) {
     const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    const uint8_t *in_left = left.ptr<uint8_t>(v), *in_right = right.ptr<uint8_t>(v);
+    const uint8_t *in_left = left.ptr<uint8_t>(v), *in_right = right.ptr<uint8_t>(v),
+                  *in_leaf = outline.mask.ptr<uint8_t>(v);
     auto measured = [&](int u) { return std::isfinite(p[u][2]); };
     int last_left = -1, first_right = -1;
     for (int u = box.x; u < box.x + box.width; ++u) {
@@ -191,7 +195,19 @@ GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline) {
       if (first_right < 0 && in_right[u] && measured(u)) first_right = u;
     }
     if (last_left < 0 || first_right < 0 || first_right <= last_left) continue;
-    lengths.push_back(static_cast<float>(cv::norm(p[first_right] - p[last_left])));
+    // Where the pages part and what lies under them is measured between them (off the leaf: the
+    // pixels the split gave neither page are the pages' too), each page is seen down to its foot:
+    // what is missing is from its last point to the first point beside it.
+    int after_left = -1, before_right = -1;
+    for (int u = last_left + 1; u < first_right; ++u) {
+      if (in_leaf[u] || !measured(u)) continue;
+      if (after_left < 0) after_left = u;
+      before_right = u;
+    }
+    const double length = after_left < 0 ? cv::norm(p[first_right] - p[last_left])
+                                         : cv::norm(p[after_left] - p[last_left]) +
+                                               cv::norm(p[first_right] - p[before_right]);
+    lengths.push_back(static_cast<float>(length));
   }
   gap.rows = static_cast<int>(lengths.size());
   if (lengths.empty()) return gap;

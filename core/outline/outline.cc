@@ -30,10 +30,11 @@ bool OutlineOptions::Check(std::string* why) const {
       !(edge_contrast > 0) || blocks_across < 16 || band_px < 0 ||
       !(min_area > 0 && min_area < 1) || !(max_view_share > 0 && max_view_share <= 1) ||
       border_px < 0 || !(gutter_rise_mm > 0) || !(gutter_reach_mm > 0) || !(gutter_width_mm > 0) ||
-      !(gutter_crease_mm >= 0)) {
+      !(gutter_crease_mm >= 0) || rim_look_px < 2 || rim_look_px > 64 || !(rim_look_contrast > 0)) {
     *why =
-        "step_mm, max_slope_deg, edge_contrast and the gutter's rise, reach and width must be > 0, "
-        "scale_px in [1, 16], blocks_across >= 16, band_px, border_px and gutter_crease_mm >= 0, "
+        "step_mm, max_slope_deg, edge_contrast, rim_look_contrast and the gutter's rise, reach and "
+        "width must be > 0, scale_px in [1, 16], rim_look_px in [2, 64], blocks_across >= 16, "
+        "band_px, border_px and gutter_crease_mm >= 0, "
         "min_area in (0, 1), max_view_share in (0, 1]";
     return false;
   }
@@ -441,7 +442,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   // with one the refinement left out are the surround (a burnt edge's bays, a hole).
   out.measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
                        std::max(1, cv::countNonZero(leaf | (full_cut & ~measured)));
-  out.confidence = RimConfidence(leaf, cues);
+  out.confidence = RimConfidence(leaf, cues, options.rim_look_px, options.rim_look_contrast);
   // What the cut found well inside its outline (beyond the block and band the refinement may move
   // it by) and the outline at the pixel left out, its holes aside: part of the leaf lost.
   const double lost = LostInside(full_cut, leaf, block + options.band_px);

@@ -90,6 +90,11 @@ struct OutlineOptions {
   double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
   cv::Rect hint;                 // Camera pixels inside the leaf (empty: the centre of the view).
   int border_px = 2;             // A leaf within this of the image border runs off the view.
+  // The rim's confidence (RimConfidence): set apart by its look where the brighter fifth of the
+  // leaf and of what lies beside it, within rim_look_px of the outline, differ by this share of
+  // the paper's brightness.
+  int rim_look_px = 6;
+  double rim_look_contrast = 0.04;
   // The leaf seen but not measured beside its outline (UnseenBeside: within unseen_reach_px of
   // it, at least unseen_look nats more like the leaf than the surround): over max_unseen_share
   // of the leaf's area is flagged (edge_unmeasured), as it is missing from the restored page.
@@ -167,7 +172,9 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
 // innermost point of the left page and of the right page). Deep in a gutter the camera or the
 // projector does not reach the pages, and that part of them is not measured: the restored pages
 // end there, and the line is the least page surface missing between them (the surface runs
-// down into the gutter and back up; the pages' own gap is part of it).
+// down into the gutter and back up). Where the pages part and what lies between them is measured
+// (the table seen in the gap, off the leaf), each page is seen to its foot, and the gap is no
+// page: the lines from each page's last point to the first point measured beside it instead.
 struct GutterGap {
   int rows = 0;          // Rows with a measured point on both sides.
   double median_mm = 0;  // The line's median length over those rows, mm.

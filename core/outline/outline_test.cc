@@ -190,6 +190,50 @@ TEST(LeafHint, ALeafOffTheCentreOfASupportIsFoundWithOrWithoutAHint) {
   EXPECT_EQ(HighestRaisedHole(map.points, found.mask, hinted.step_mm).area_px, 0);
 }
 
+// What a spread's gutter keeps from view, on a synthetic point map (0.25 mm pixels): two pages
+// rising 60 degrees towards a valley, their innermost 8 columns each unmeasured (hidden). Where
+// they meet (nothing measured between them), the line between their last points is missing;
+// where they part 3 mm and the table between them is measured, each page is seen to its foot and
+// the gap is no page: only what lies between each page's last point and the table is missing.
+TEST(UnseenAtGutter, ThePagesGapIsNoPageWhereTheTableShowsInIt) {
+  const cv::Size size(200, 100);
+  const double pixel = 0.25, rise = std::tan(60 * M_PI / 180);
+  auto spread = [&](int gap_px, bool table_seen) {
+    cv::Mat points(size, CV_32FC3, cv::Scalar::all(NAN));
+    Outline outline;
+    outline.pages = {cv::Mat::zeros(size, CV_8U), cv::Mat::zeros(size, CV_8U)};
+    const int left_end = 100 - gap_px / 2, right_start = left_end + gap_px;
+    for (int v = 0; v < size.height; ++v) {
+      for (int u = 0; u < size.width; ++u) {
+        const bool left = u < left_end, right = u >= right_start;
+        // Height above the table: the pages rise away from their feet at the gap.
+        const double from_foot = left ? (left_end - u) * pixel : (u - right_start + 1) * pixel;
+        const double z = left || right ? from_foot * rise : 0.0;
+        const bool hidden = (left && u >= left_end - 8) || (right && u < right_start + 8);
+        if (left || right) (left ? outline.pages[0] : outline.pages[1]).at<uint8_t>(v, u) = 255;
+        if (hidden || (!left && !right && !table_seen)) continue;
+        points.at<cv::Vec3f>(v, u) = cv::Vec3f(u * pixel, v * pixel, z);
+      }
+    }
+    outline.mask = outline.pages[0] | outline.pages[1];
+    return UnseenAtGutter(points, outline);
+  };
+  // Each page's last point lies 9 px from its foot, 2.25 mm out and 3.9 mm up.
+  const double out = 9 * pixel, up = out * rise;
+  // Meeting: the line between the last points, 17 px apart at the same height.
+  const GutterGap meet = spread(0, false);
+  ASSERT_GT(meet.rows, 0);
+  EXPECT_NEAR(meet.median_mm, 17 * pixel, 0.01);
+  // Parted by 12 px (3 mm) with the table seen between them: each page's last point to the
+  // table's first point beside it, down the page's slope.
+  const GutterGap parted = spread(12, true);
+  ASSERT_GT(parted.rows, 0);
+  EXPECT_NEAR(parted.median_mm, 2 * std::hypot(out, up), 0.01);
+  // The same parted pages with nothing measured between them: the whole line, gap and all.
+  const GutterGap unseen = spread(12, false);
+  EXPECT_NEAR(unseen.median_mm, 29 * pixel, 0.01);
+}
+
 // The outline stage's check for a support taken for the leaf (leaf_ambiguous): taken, the
 // support's outline holds the leaf as a hole whose surface stands above the support around it,
 // where a hole would show what is lower.

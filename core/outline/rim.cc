@@ -194,17 +194,72 @@ void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
   }
 }
 
-double RimConfidence(const cv::Mat& leaf, const Cues& cues) {
+cv::Mat LookApart(const cv::Mat& leaf, const cv::Mat& gray, double bright, int band_px,
+                  double contrast) {
+  cv::Mat apart = cv::Mat::zeros(leaf.size(), CV_8U);
+  if (band_px < 1 || cv::countNonZero(leaf) == 0) return apart;
+  const int reach = band_px + 2;
+  const cv::Rect view(0, 0, leaf.cols, leaf.rows);
+  const cv::Rect box =
+      (cv::boundingRect(leaf) + cv::Size(2 * reach, 2 * reach) - cv::Point(reach, reach)) & view;
+  const cv::Mat in_leaf = leaf(box), in_gray = gray(box);
+  // Distances from the outline, inside and out (city-block: one linear pass each).
+  cv::Mat in_depth, out_depth;
+  cv::distanceTransform(in_leaf, in_depth, cv::DIST_L1, 3, CV_8U);
+  cv::distanceTransform(~in_leaf, out_depth, cv::DIST_L1, 3, CV_8U);
+  // The bands: 2 to band_px pixels from the outline, clear of the pixels that mix both sides.
+  auto band = [&](const cv::Mat& depth, int u, int v) {
+    const int d = depth.at<uint8_t>(v, u);
+    return d >= 2 && d <= band_px;
+  };
+  const float least = static_cast<float>(contrast * bright);
+  // The rim: the leaf's pixels beside one outside it, 8-connected.
+  cv::Mat eroded;
+  cv::erode(in_leaf, eroded, cv::Mat());
+  std::vector<cv::Point> rim;
+  cv::findNonZero(in_leaf & ~eroded, rim);
+  cv::parallel_for_(cv::Range(0, static_cast<int>(rim.size())), [&](const cv::Range& range) {
+    std::vector<uint8_t> inside, outside;
+    for (int k = range.start; k < range.end; ++k) {
+      const cv::Point p = rim[k];
+      inside.clear();
+      outside.clear();
+      for (int v = std::max(0, p.y - band_px); v <= std::min(box.height - 1, p.y + band_px); ++v) {
+        const uint8_t* g = in_gray.ptr<uint8_t>(v);
+        for (int u = std::max(0, p.x - band_px); u <= std::min(box.width - 1, p.x + band_px); ++u) {
+          if (band(in_depth, u, v)) inside.push_back(g[u]);
+          if (band(out_depth, u, v)) outside.push_back(g[u]);
+        }
+      }
+      if (inside.size() < 4 || outside.size() < 4) continue;
+      // The brighter side of each: paper between lines of ink, or the table between its specks;
+      // ink, text and a checkerboard's squares on both sides of an outline drawn through the
+      // page leave it the same.
+      auto upper = [](std::vector<uint8_t>& values) {
+        auto at = values.begin() + (values.size() * 4) / 5;
+        std::nth_element(values.begin(), at, values.end());
+        return static_cast<float>(*at);
+      };
+      if (std::fabs(upper(inside) - upper(outside)) >= least) {
+        apart.at<uint8_t>(p + box.tl()) = 255;
+      }
+    }
+  });
+  return apart;
+}
+
+double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double contrast) {
   cv::Mat eroded;
   cv::erode(leaf, eroded, cv::Mat());
   const cv::Mat rim = leaf & ~eroded;
-  cv::Mat apart = (cues.rim > 0.5f) | (cues.edge > 1.0f);
+  cv::Mat apart = cues.rim > 0.5f;
   cv::dilate(apart, apart, cv::Mat(), cv::Point(-1, -1), 3);
   cv::Mat no_data = cues.z < -1e3f;
   cv::dilate(no_data, no_data, cv::Mat(), cv::Point(-1, -1), 2);
   const int total = cv::countNonZero(rim);
   if (total == 0) return 0;
-  return static_cast<double>(cv::countNonZero(rim & (apart | no_data))) / total;
+  const cv::Mat looks = LookApart(leaf, cues.gray, cues.bright, band_px, contrast);
+  return static_cast<double>(cv::countNonZero(rim & (apart | no_data | looks))) / total;
 }
 
 bool TouchesBorder(const cv::Mat& leaf, int border) { return SidesTouched(leaf, border) > 0; }

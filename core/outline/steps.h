@@ -254,9 +254,16 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
 // the table looks like the table and is not counted. Returns the pixels counted.
 int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
                  const Look& leaf_look, const Look& surround_look, int reach_px, double min_look);
-// Share of the leaf's rim pixels set apart from what is beside them: on a rim or a texture edge,
-// beside pixels without a height, or at the image border.
-double RimConfidence(const cv::Mat& leaf, const Cues& cues);
+// The leaf's rim pixels (CV_8U, 255) where its look and that of what lies beside it differ: the
+// brighter fifth of the pixels 2 to band_px inside the outline and of those outside it, within
+// band_px of the rim pixel, differ by `contrast` of the paper's brightness `bright` or more. Text
+// or a checkerboard on both sides of an outline drawn through the page does not set it apart (a
+// texture edge would); a leaf a shade lighter than its table does.
+cv::Mat LookApart(const cv::Mat& leaf, const cv::Mat& gray, double bright, int band_px,
+                  double contrast);
+// Share of the leaf's rim pixels set apart from what is beside them: on a rim (a height step),
+// beside pixels without a height, or by its look (LookApart).
+double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double contrast);
 // Whether the leaf runs off the view: leaf pixels within `border` of the image edge.
 bool TouchesBorder(const cv::Mat& leaf, int border);
 // How many of the view's four sides the mask reaches (within `border` pixels).

@@ -370,11 +370,43 @@ TEST(UnseenBeside, CountsWhatLooksLikeTheLeafBesideItWithoutHeights) {
   EXPECT_LE(counted, 17 * 120);
 }
 
-// An open book's gutter: pages rising 30 degrees into a valley down the middle. With a gap
-// between the pages (the table shows in it) they are parted: two sheets. Meeting in the valley
-// they are found as a gutter but not parted (one creased leaf would look the same), unless they
-// level off beyond the bend as pages lying on a book block do. A leaf rolled into a trough (a
-// circle of 100 mm radius) has no gutter.
+// A text page (paper 200 DN, lines of ink 60 DN) on a table a shade darker (184 DN, 8% of the
+// paper). The outline of the page itself is set apart by its look all round; an outline drawn
+// through the page (its lower half taken for the table, as a flush leaf's curl alone would be)
+// is not, along the cut through the text, though the text's ink gives texture edges there.
+TEST(LookApart, TellsTheLeafsEdgeFromACutThroughItsText) {
+  const cv::Size size(240, 240);
+  const cv::Rect page(40, 40, 160, 160);
+  const cv::Mat gray = Texture(size, [&](int u, int v) {
+    if (!page.contains({u, v})) return 184.0;
+    const bool line = (v - 48) % 12 < 5 && (u * 7 + v * 3) % 11 < 6;  // Words of ink.
+    return line && v > 46 && v < 192 && u > 48 && u < 192 ? 60.0 : 200.0;
+  });
+  cv::Mat whole(size, CV_8U, cv::Scalar(0));
+  whole(page).setTo(255);
+  const OutlineOptions options;
+  const double bright = 200;
+  auto share = [&](const cv::Mat& leaf, const cv::Rect& part) {
+    cv::Mat eroded;
+    cv::erode(leaf, eroded, cv::Mat());
+    const cv::Mat rim = (leaf & ~eroded)(part);
+    const cv::Mat apart =
+        LookApart(leaf, gray, bright, options.rim_look_px, options.rim_look_contrast)(part);
+    return static_cast<double>(cv::countNonZero(rim & apart)) / std::max(1, cv::countNonZero(rim));
+  };
+  EXPECT_GE(share(whole, cv::Rect(0, 0, 240, 240)), 0.98);
+  // The upper half only: its three sides on the table are apart, its lower side through the text
+  // (rows 119 and 120 of the page, inside the lines of ink) is not.
+  cv::Mat half(size, CV_8U, cv::Scalar(0));
+  half(cv::Rect(40, 40, 160, 80)).setTo(255);
+  EXPECT_GE(share(half, cv::Rect(0, 0, 240, 110)), 0.98);
+  EXPECT_LE(share(half, cv::Rect(50, 110, 140, 20)), 0.05);
+  // Yet the texture's edges lie along the cut: the cue the rim's confidence took before.
+  cv::Mat gx;
+  cv::Sobel(gray, gx, CV_32F, 0, 1);
+  EXPECT_GT(cv::countNonZero(cv::abs(gx(cv::Rect(50, 116, 140, 8))) > 200), 100);
+}
+
 TEST(SplitAtGutter, FindsAValleyAndWhatSaysItIsABooksGutter) {
   const cv::Size size(800, 300);  // 200 x 75 mm.
   const int middle = 400;
