@@ -1050,6 +1050,31 @@ void Decoder::Finish(DecodeResult* result) {
       });
       LocalLinearFit(raw, robust_weight_, options.smooth_radius_px, &fit_);
     }
+    if (options.correct_curvature) {
+      // A plane fitted over the window is biased where the surface curves: it rounds a crease's
+      // apex and lowers a ripple's crests by the curvature times the window's second moment.
+      // The same fit of what it left (twicing) puts that back: the two together fit a
+      // quadratic's value, at some more noise.
+      const cv::Mat& w = options.smooth_passes > 1 ? robust_weight_ : weight_;
+      residual_.resize(raw.size());
+      for (size_t p = 0; p < raw.size(); ++p) residual_[p].create(size, CV_32F);
+      cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+        for (int y = range.start; y < range.end; ++y) {
+          const float* wy = w.ptr<float>(y);
+          for (size_t p = 0; p < raw.size(); ++p) {
+            const float* r = raw[p].ptr<float>(y);
+            const float* f = fit_[p].ptr<float>(y);
+            float* out = residual_[p].ptr<float>(y);
+            for (int x = 0; x < width; ++x) {
+              const float d = r[x] - f[x];
+              out[x] = (wy[x] > 0) & (d == d) ? d : 0.0f;
+            }
+          }
+        }
+      });
+      LocalLinearFit(residual_, w, options.smooth_radius_px, &correction_);
+      for (size_t p = 0; p < raw.size(); ++p) fit_[p] += correction_[p];
+    }
     // Keep the fit where it agrees with the pixel; where it does not (a depth step inside the
     // window, or a pixel that lost its robust weight) keep the raw decode: unbiased, noisier.
     cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {

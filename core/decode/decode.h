@@ -28,6 +28,9 @@ struct DecodeOptions {
   int smooth_radius_px = 3;        // Local fit window radius, camera pixels, 0..8; 0 = no fit.
   int smooth_passes = 2;           // Robust (Tukey) reweighting passes of the local fit.
   double outlier_sigmas = 4.685;   // Tukey cut-off, in units of a pixel's expected noise.
+  // The local fit's bias where the surface curves (a plane over the window rounds a crease)
+  // removed by fitting its residual once more (twicing).
+  bool correct_curvature = true;
   // A Gray frame pair disagreeing (FramePairCheck) at more of its lit pixels than this is looked
   // into: where one frame of the two is told as the one that does not fit, the bit is decoded
   // from the other alone (a sound pair disagrees at 0.02% of its lit pixels on the virtual
@@ -145,6 +148,7 @@ class Decoder {
   cv::Mat weight_, sigma_,
       robust_weight_;         // Per-pixel fit weight, expected noise (px), IRLS weight.
   std::vector<cv::Mat> fit_;  // Fitted coordinates per encoded axis.
+  std::vector<cv::Mat> residual_, correction_;  // What the fit left, and its fit (twicing).
 };
 
 // One-shot convenience: a fresh Decoder and result.
