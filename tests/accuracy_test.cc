@@ -169,6 +169,34 @@ TEST(OtherRigs, GrayCodeWithoutInversesOrFinestBitsDecodesWithinWhatItAllows) {
   EXPECT_LE(gray_coarse.median_mm, 6 * gray_full.median_mm);
 }
 
+// The local fit's curvature bias (a plane over a 7 x 7 window rounds a ridge and lowers a crest
+// by the curvature times the window's second moment) and its correction by twicing: on a ripple,
+// whose arcs curve tightly, the points come closer to the true surface with it; on a flat page,
+// where it is only noise, it is applied almost nowhere and costs at most 5% in RMS.
+TEST(CurvatureBias, TwicingBringsARipplesCrestsBackAndLeavesAFlatPageAsItWas) {
+  const Triangulator tri(DefaultRig());
+  auto measure = [&](PageShape shape, bool correct) {
+    const SimulatedScan scan = SimulateScan(DefaultRig(), shape, 11);
+    DecodeOptions options;
+    options.correct_curvature = correct;
+    const DecodeResult decoded = Decode(scan.sequence, scan.frames, options);
+    EXPECT_TRUE(decoded.status.ok()) << decoded.status.message();
+    return ComparePoints(scan.gantry->truth(), tri.Triangulate(decoded).points);
+  };
+  const PointErrorStats ripple = measure(PageShape::kRipple, true),
+                        ripple_plain = measure(PageShape::kRipple, false),
+                        flat = measure(PageShape::kFlat, true),
+                        flat_plain = measure(PageShape::kFlat, false);
+  std::printf(
+      "[curvature] ripple median %.4f -> %.4f mm, RMS %.4f -> %.4f mm; flat median %.4f -> "
+      "%.4f mm, RMS %.4f -> %.4f mm\n",
+      ripple_plain.median_mm, ripple.median_mm, ripple_plain.rms_mm, ripple.rms_mm,
+      flat_plain.median_mm, flat.median_mm, flat_plain.rms_mm, flat.rms_mm);
+  EXPECT_LT(ripple.median_mm, 0.9 * ripple_plain.median_mm);
+  EXPECT_LE(flat.rms_mm, 1.05 * flat_plain.rms_mm);
+  EXPECT_LE(flat.median_mm, 1.05 * flat_plain.median_mm);
+}
+
 // The hard case as the issue states it: a board to the page's edges, half the page dark ink.
 TEST(FullBleedBoard, HalfThePageInkStillMeetsTheBar) {
   TextureOptions texture;

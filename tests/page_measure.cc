@@ -1,5 +1,7 @@
 #include "tests/page_measure.h"
 
+#include <algorithm>
+#include <cmath>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -123,6 +125,48 @@ int MaskOffLeaf(const PageResult& result, const Rigid2D& to_true, const Page& pa
   });
   if (leaf) *leaf = looked;
   return outside;
+}
+
+GutterTruth TrueGutter(const VirtualGantry& gantry) {
+  const GroundTruth& truth = gantry.truth();
+  const cv::Size2d size = gantry.pages().at(0).options().size_mm;
+  GutterTruth t;
+  for (auto& bins : t.innermost) bins.assign(static_cast<size_t>(size.height) + 1, std::nan(""));
+  const cv::Rect box = cv::boundingRect(truth.page_index);
+  std::vector<double> chords;
+  for (int v = 0; v < truth.page_index.rows; ++v) {
+    int last_left = -1, first_right = -1;
+    for (int u = 0; u < truth.page_index.cols; ++u) {
+      const int page = truth.page_index.at<uint8_t>(v, u);
+      if (!truth.lit.at<uint8_t>(v, u) || page == 0) continue;
+      if (page == 1) last_left = u;
+      if (page == 2 && first_right < 0) first_right = u;
+      const cv::Vec2f st = truth.page.at<cv::Vec2f>(v, u);
+      double& bin = t.innermost[page - 1].at(
+          std::clamp(static_cast<int>(st[1]), 0, static_cast<int>(size.height)));
+      bin = std::isnan(bin) ? st[0]
+            : page == 1     ? std::max<double>(bin, st[0])
+                            : std::min<double>(bin, st[0]);
+    }
+    if (v < box.y + box.height / 10 || v >= box.y + box.height * 9 / 10) continue;
+    if (last_left < 0 || first_right < 0) continue;
+    chords.push_back(cv::norm(truth.points.at<cv::Vec3f>(v, first_right) -
+                              truth.points.at<cv::Vec3f>(v, last_left)));
+  }
+  std::vector<double> hidden;
+  const int rows = static_cast<int>(size.height);
+  for (int k = rows / 10; k < rows * 9 / 10; ++k) {
+    const double left = t.innermost[0][k], right = t.innermost[1][k];
+    if (!std::isnan(left) && !std::isnan(right)) hidden.push_back(size.width - left + right);
+  }
+  if (!hidden.empty()) {
+    std::nth_element(hidden.begin(), hidden.begin() + hidden.size() / 2, hidden.end());
+    t.hidden_mm = hidden[hidden.size() / 2];
+  }
+  if (chords.empty()) return t;
+  std::nth_element(chords.begin(), chords.begin() + chords.size() / 2, chords.end());
+  t.chord_mm = chords.at(chords.size() / 2);
+  return t;
 }
 
 }  // namespace vellum

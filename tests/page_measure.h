@@ -75,4 +75,18 @@ Measured ExperimentOne(const PageResult& page, const std::vector<cv::Point2f>& g
 int MaskOffLeaf(const PageResult& result, const Rigid2D& to_true, const Page& page,
                 double tolerance_mm, int* leaf = nullptr, cv::Mat* off = nullptr);
 
+// A spread's gutter as the virtual gantry saw it: in each row across the middle 80% of the spread,
+// the innermost pixel of each page that the camera sees and the projector lights; and, per
+// millimetre of the page's height, how far from its outer edge the page was seen.
+struct GutterTruth {
+  double chord_mm = 0;  // Median straight line between those pixels' points (0: not a spread).
+  // The page surface not seen at the gutter: both pages' widths from their gutter edge to where
+  // they were seen, added, median over the middle 80% of the pages' height (0: not a spread).
+  double hidden_mm = 0;
+  // Per page and per millimetre of t: the seen s nearest the gutter (the left page's gutter is
+  // its s = w edge, the right page's its s = 0 edge); NaN where none.
+  std::vector<double> innermost[2];
+};
+GutterTruth TrueGutter(const VirtualGantry& gantry);
+
 }  // namespace vellum

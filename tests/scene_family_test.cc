@@ -130,6 +130,14 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   if (result.pages.size() != pages.size()) {
     missed << result.pages.size() << " pages found of " << pages.size() << "; ";
   }
+  // What the gutter keeps from view is no part of the restored pages, and no outline on camera
+  // pixels shows it: past the station's own limit the pages are not restored whole.
+  if (pages.size() == 2) {
+    const double hidden = TrueGutter(*scan.gantry).hidden_mm;
+    if (hidden > PipelineOptions().limits.max_gutter_unseen_mm) {
+      missed << "the gutter keeps " << hidden << " mm of the pages from view; ";
+    }
+  }
   for (size_t k = 0; k < std::min(pages.size(), result.pages.size()); ++k) {
     const PageResult& page = result.pages[k];
     const std::string name = page.name.empty() ? "" : page.name + " page: ";

@@ -1050,7 +1050,10 @@ void Decoder::Finish(DecodeResult* result) {
       });
       LocalLinearFit(raw, robust_weight_, options.smooth_radius_px, &fit_);
     }
-    if (options.correct_curvature) {
+    // With the phase only: a Gray code's coordinates step by its stripe, and what the fit leaves
+    // there is the staircase, not a curve.
+    const bool phase = (!col.present || col.steps > 0) && (!row.present || row.steps > 0);
+    if (options.correct_curvature && phase) {
       // A plane fitted over the window is biased where the surface curves: it rounds a crease's
       // apex and lowers a ripple's crests by the curvature times the window's second moment.
       // The same fit of what it left (twicing) puts that back: the two together fit a
@@ -1073,7 +1076,21 @@ void Decoder::Finish(DecodeResult* result) {
         }
       });
       LocalLinearFit(residual_, w, options.smooth_radius_px, &correction_);
-      for (size_t p = 0; p < raw.size(); ++p) fit_[p] += correction_[p];
+      // Only where the correction stands out of its own noise (the fit of a pixel's noise over
+      // the window: its expected noise over the window's side): on a flat or gently curved leaf
+      // it is that noise, and would only add it.
+      const float side = static_cast<float>(2 * options.smooth_radius_px + 1);
+      const float least = static_cast<float>(options.curvature_sigmas) / side;
+      cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+        for (int y = range.start; y < range.end; ++y) {
+          const float* sg = sigma_.ptr<float>(y);
+          for (size_t p = 0; p < raw.size(); ++p) {
+            const float* c = correction_[p].ptr<float>(y);
+            float* f = fit_[p].ptr<float>(y);
+            for (int x = 0; x < width; ++x) f[x] += std::fabs(c[x]) > least * sg[x] ? c[x] : 0.0f;
+          }
+        }
+      });
     }
     // Keep the fit where it agrees with the pixel; where it does not (a depth step inside the
     // window, or a pixel that lost its robust weight) keep the raw decode: unbiased, noisier.

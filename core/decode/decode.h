@@ -29,8 +29,11 @@ struct DecodeOptions {
   int smooth_passes = 2;           // Robust (Tukey) reweighting passes of the local fit.
   double outlier_sigmas = 4.685;   // Tukey cut-off, in units of a pixel's expected noise.
   // The local fit's bias where the surface curves (a plane over the window rounds a crease)
-  // removed by fitting its residual once more (twicing).
+  // removed by fitting its residual once more (twicing), where that correction exceeds this
+  // many times its own expected noise. With the phase patterns only (a Gray code's staircase is
+  // no curve).
   bool correct_curvature = true;
+  double curvature_sigmas = 2.0;
   // A Gray frame pair disagreeing (FramePairCheck) at more of its lit pixels than this is looked
   // into: where one frame of the two is told as the one that does not fit, the bit is decoded
   // from the other alone (a sound pair disagrees at 0.02% of its lit pixels on the virtual
