@@ -684,8 +684,8 @@ bool DecodeOptions::Check(std::string* why) const {
     *why = "smooth_radius_px must lie in [0, " + std::to_string(kMaxFitRadius) + "]";
     return false;
   }
-  if (smooth_passes < 1 || noise_dn <= 0 || outlier_sigmas <= 0) {
-    *why = "smooth_passes must be >= 1, noise_dn and outlier_sigmas > 0";
+  if (smooth_passes < 1 || noise_dn <= 0 || outlier_sigmas <= 0 || !(curvature_sigmas >= 0)) {
+    *why = "smooth_passes must be >= 1, noise_dn and outlier_sigmas > 0, curvature_sigmas >= 0";
     return false;
   }
   if (!(suspect_pair_share > 0 && suspect_pair_share <= 1)) {
