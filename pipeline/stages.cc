@@ -421,6 +421,7 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
   r.Number("flattening", "iterations", flat->iterations);
   r.Number("flattening", "mean_strain", flat->mean_strain);
   r.Number("flattening", "max_strain", flat->max_strain);
+  r.Number("flattening", "widespread_strain", flat->widespread_strain);
   r.Number("flattening", "folded_quads", flat->folded_quads);
   if (flat->mean_strain > limits.max_mean_strain) {
     r.Warn("strain_high", "the flattened sheet keeps a strain of " +
@@ -428,9 +429,10 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
                               Fixed(100 * flat->max_strain, 2) +
                               "% at most: the sheet may hold more than the leaf (a support or "
                               "frame), or the leaf was stretched or creased");
-  } else if (flat->max_strain > limits.max_strain) {
+  } else if (flat->widespread_strain > limits.max_strain) {
     r.Warn("strain_high", "the flattened sheet keeps a strain of " +
-                              Fixed(100 * flat->max_strain, 2) + "% in places (" +
+                              Fixed(100 * flat->widespread_strain, 2) + "% or more in " +
+                              std::to_string(kWidespreadSprings) + " places (" +
                               Fixed(100 * flat->mean_strain, 2) +
                               "% on average): most likely a crease sharper than the scanner "
                               "resolves, across which the restored page comes out short by "

@@ -115,9 +115,10 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   o.flagged = !o.warnings.empty();
   for (const std::string& page : result.report.Pages()) {
     char figures[160];
-    std::snprintf(figures, sizeof(figures), "%s%sstrain %.4f/%.4f warp %.2f px grid %s",
+    std::snprintf(figures, sizeof(figures), "%s%sstrain %.4f/%.4f/%.4f warp %.2f px grid %s",
                   o.figures.empty() ? "" : "; ", page.empty() ? "" : (page + " ").c_str(),
                   result.report.Number("flattening", "mean_strain", page),
+                  result.report.Number("flattening", "widespread_strain", page),
                   result.report.Number("flattening", "max_strain", page),
                   result.report.Number("sheet", "warp_error_px", page),
                   result.report.Text("sheet", "grid", page).c_str());

@@ -3,6 +3,7 @@
 #include <Eigen/SparseCore>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include "core/common/check.h"
@@ -498,17 +499,22 @@ bool FlattenOptions::Check(std::string* why) const {
 void MeasureStrain(const Mesh& mesh, const std::vector<cv::Point2d>& flat, FlattenResult* result) {
   // Over the leaf's own springs: a skirt node is the surface extrapolated past the leaf's edge
   // (beside a crease that runs off the edge its springs cannot all be kept), not the leaf.
-  double sum = 0, worst = 0;
-  int count = 0;
+  std::vector<double> strains;
+  strains.reserve(mesh.springs.size());
+  double sum = 0;
   for (const Spring& s : mesh.springs) {
     if (mesh.kind[s.a] == NodeKind::kSkirt || mesh.kind[s.b] == NodeKind::kSkirt) continue;
-    const double e = std::fabs(cv::norm(flat[s.a] - flat[s.b]) / s.rest_mm - 1.0);
-    sum += e;
-    worst = std::max(worst, e);
-    ++count;
+    strains.push_back(std::fabs(cv::norm(flat[s.a] - flat[s.b]) / s.rest_mm - 1.0));
+    sum += strains.back();
   }
+  const size_t count = strains.size();
   result->mean_strain = count ? sum / count : 0;
-  result->max_strain = worst;
+  result->max_strain = count ? *std::max_element(strains.begin(), strains.end()) : 0;
+  if (count) {
+    const size_t k = std::min<size_t>(kWidespreadSprings, count) - 1;
+    std::nth_element(strains.begin(), strains.begin() + k, strains.end(), std::greater<>());
+    result->widespread_strain = strains[k];
+  }
   // A fold flips a quad's orientation relative to how the camera saw it. Cells with two or
   // more skirt nodes lie mostly past the page's data, extrapolated: beyond a steep edge (a curl's
   // corner seen edge on) their camera image may turn over while the page's own cells do not;

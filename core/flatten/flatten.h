@@ -56,9 +56,17 @@ struct FlattenResult {
   int iterations = 0;             // Gauss-Newton iterations or simulator steps.
   double mean_strain = 0;         // Mean |length / rest - 1| over springs.
   double max_strain = 0;          // Max of the same.
-  int folded_quads = 0;           // Quads whose orientation flipped (a fold-over).
+  // The strain that kWidespreadSprings springs or more keep. A crease sharper than the decoder
+  // resolves shortens every spring across it (dozens, on a leaf), as does more than the leaf held
+  // in the sheet; a node whose fit cuts a crease's corner strains only its own few springs, and
+  // the sheet takes that up within its cell.
+  double widespread_strain = 0;
+  int folded_quads = 0;                            // Quads whose orientation flipped (a fold-over).
   std::vector<std::vector<cv::Vec3d>> trajectory;  // Simulator: recorded positions.
 };
+
+// How many springs must keep a strain for it to be widespread (FlattenResult::widespread_strain).
+inline constexpr int kWidespreadSprings = 10;
 
 FlattenResult Flatten(const Mesh& mesh, const FlattenOptions& options = FlattenOptions());
 

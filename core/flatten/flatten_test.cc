@@ -121,5 +121,31 @@ TEST(Flatten, TinyAndDegenerateSheetsNeverGiveNaN) {
   EXPECT_FALSE(Flatten(Mesh()).status.ok());
 }
 
+// One node whose rest lengths disagree with its neighbours' (its fit cut a crease's corner)
+// strains its own four springs; a line of springs all too long (a crease the decoder rounded, the
+// page short across it) strains every spring on the line. Only the line is widespread.
+TEST(Flatten, WidespreadStrainTellsALineOfSpringsFromOneNode) {
+  std::vector<cv::Point2d> truth;
+  Mesh flat_sheet = CurledSheet(15, 12, 1e9, &truth);  // Radius beyond the page: flat.
+  Mesh one_node = flat_sheet;
+  const int node = 5 * 15 + 7;
+  for (Spring& s : one_node.springs) {
+    if (s.kind == SpringKind::kStructural && (s.a == node || s.b == node)) s.rest_mm *= 1.04;
+  }
+  FlattenResult r;
+  MeasureStrain(one_node, truth, &r);
+  EXPECT_NEAR(r.max_strain, 0.04 / 1.04, 1e-6);
+  EXPECT_LT(r.widespread_strain, 1e-9);  // Four springs, fewer than kWidespreadSprings.
+
+  Mesh line = flat_sheet;
+  for (Spring& s : line.springs) {
+    const int ia = s.a % 15, ib = s.b % 15;
+    if (std::min(ia, ib) == 7 && std::max(ia, ib) == 8) s.rest_mm *= 1.04;  // Across column 7.
+  }
+  MeasureStrain(line, truth, &r);
+  EXPECT_NEAR(r.max_strain, 0.04 / 1.04, 1e-6);
+  EXPECT_NEAR(r.widespread_strain, 0.04 / 1.04, 1e-6);  // 12 structural + 22 shear springs.
+}
+
 }  // namespace
 }  // namespace vellum

@@ -132,9 +132,12 @@ cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
   // within the rim's band, which the decoder's fit spreads over 7 pixels), over the pixels with a
   // height: a band without heights (a shadow beside a raised edge, the edge seen edge-on) stops
   // both floods, and never carries the leaf onto what lies beyond it.
-  cv::Mat level = cues.rim + cues.edge;
-  level.setTo(cv::Scalar(-1), cues.z < -1e3f);
-  Flood(level, &labels);
+  // Within near_leaf: its own border lies farther than `reach` from the cut, seeded as the
+  // surround, as is all beyond it.
+  cv::Mat level = cues.rim(near_leaf) + cues.edge(near_leaf);
+  level.setTo(cv::Scalar(-1), cues.z(near_leaf) < -1e3f);
+  cv::Mat near_labels = labels(near_leaf);
+  Flood(level, &near_labels);
   return labels == 1;
 }
 
@@ -195,13 +198,27 @@ void TrimRim(const cv::Mat& z, double off_mm, cv::Mat* leaf) {
 }
 
 cv::Mat LookApart(const cv::Mat& leaf, const cv::Mat& gray, double bright, int band_px,
-                  double contrast) {
+                  double contrast, const cv::Mat& judge) {
   cv::Mat apart = cv::Mat::zeros(leaf.size(), CV_8U);
-  if (band_px < 1 || cv::countNonZero(leaf) == 0) return apart;
-  const int reach = band_px + 2;
+  if (band_px < 1) return apart;
   const cv::Rect view(0, 0, leaf.cols, leaf.rows);
-  const cv::Rect box =
-      (cv::boundingRect(leaf) + cv::Size(2 * reach, 2 * reach) - cv::Point(reach, reach)) & view;
+  const cv::Rect leaf_box = (cv::boundingRect(leaf) + cv::Size(2, 2) - cv::Point(1, 1)) & view;
+  if (leaf_box.empty()) return apart;
+  // The rim: the leaf's pixels beside one outside it, 8-connected (those to judge).
+  cv::Mat eroded;
+  cv::erode(leaf(leaf_box), eroded, cv::Mat());
+  cv::Mat rim_px = leaf(leaf_box) & ~eroded;
+  if (!judge.empty()) rim_px &= judge(leaf_box);
+  std::vector<cv::Point> rim;
+  cv::findNonZero(rim_px, rim);
+  if (rim.empty()) return apart;
+  // Worked within the judged pixels' box and a margin: a pixel within band_px of one lies within
+  // band_px of the outline (city-block) only through pixels in it, so its distance is exact.
+  const int reach = 2 * band_px + 2;
+  const cv::Rect box = (cv::boundingRect(rim) + leaf_box.tl() + cv::Size(2 * reach, 2 * reach) -
+                        cv::Point(reach, reach)) &
+                       view;
+  for (cv::Point& p : rim) p += leaf_box.tl() - box.tl();
   const cv::Mat in_leaf = leaf(box), in_gray = gray(box);
   // Distances from the outline, inside and out (city-block: one linear pass each).
   cv::Mat in_depth, out_depth;
@@ -213,11 +230,6 @@ cv::Mat LookApart(const cv::Mat& leaf, const cv::Mat& gray, double bright, int b
     return d >= 2 && d <= band_px;
   };
   const float least = static_cast<float>(contrast * bright);
-  // The rim: the leaf's pixels beside one outside it, 8-connected.
-  cv::Mat eroded;
-  cv::erode(in_leaf, eroded, cv::Mat());
-  std::vector<cv::Point> rim;
-  cv::findNonZero(in_leaf & ~eroded, rim);
   cv::parallel_for_(cv::Range(0, static_cast<int>(rim.size())), [&](const cv::Range& range) {
     std::vector<uint8_t> inside, outside;
     for (int k = range.start; k < range.end; ++k) {
@@ -249,17 +261,28 @@ cv::Mat LookApart(const cv::Mat& leaf, const cv::Mat& gray, double bright, int b
 }
 
 double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double contrast) {
+  // Within the leaf's box and a margin (the dilations' reach): beyond it there is no rim.
+  constexpr int kMargin = 4;
+  const cv::Rect view(0, 0, leaf.cols, leaf.rows);
+  const cv::Rect box =
+      (cv::boundingRect(leaf) + cv::Size(2 * kMargin, 2 * kMargin) - cv::Point(kMargin, kMargin)) &
+      view;
+  if (box.empty()) return 0;
   cv::Mat eroded;
-  cv::erode(leaf, eroded, cv::Mat());
-  const cv::Mat rim = leaf & ~eroded;
-  cv::Mat apart = cues.rim > 0.5f;
-  cv::dilate(apart, apart, cv::Mat(), cv::Point(-1, -1), 3);
-  cv::Mat no_data = cues.z < -1e3f;
-  cv::dilate(no_data, no_data, cv::Mat(), cv::Point(-1, -1), 2);
+  cv::erode(leaf(box), eroded, cv::Mat());
+  const cv::Mat rim = leaf(box) & ~eroded;
   const int total = cv::countNonZero(rim);
   if (total == 0) return 0;
-  const cv::Mat looks = LookApart(leaf, cues.gray, cues.bright, band_px, contrast);
-  return static_cast<double>(cv::countNonZero(rim & (apart | no_data | looks))) / total;
+  cv::Mat apart = cues.rim(box) > 0.5f;
+  cv::dilate(apart, apart, cv::Mat(), cv::Point(-1, -1), 3);
+  cv::Mat no_data = cues.z(box) < -1e3f;
+  cv::dilate(no_data, no_data, cv::Mat(), cv::Point(-1, -1), 2);
+  const cv::Mat found = rim & (apart | no_data);
+  // The look judged only where neither the height nor missing data set the rim apart.
+  cv::Mat judge = cv::Mat::zeros(leaf.size(), CV_8U);
+  judge(box).setTo(255, rim & ~found);
+  const cv::Mat looks = LookApart(leaf, cues.gray, cues.bright, band_px, contrast, judge);
+  return static_cast<double>(cv::countNonZero(found) + cv::countNonZero(rim & looks(box))) / total;
 }
 
 bool TouchesBorder(const cv::Mat& leaf, int border) { return SidesTouched(leaf, border) > 0; }

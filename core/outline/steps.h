@@ -258,9 +258,10 @@ int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& co
 // brighter fifth of the pixels 2 to band_px inside the outline and of those outside it, within
 // band_px of the rim pixel, differ by `contrast` of the paper's brightness `bright` or more. Text
 // or a checkerboard on both sides of an outline drawn through the page does not set it apart (a
-// texture edge would); a leaf a shade lighter than its table does.
+// texture edge would); a leaf a shade lighter than its table does. Only the rim pixels in
+// `judge` (CV_8U, the view's size) are judged, when it is given.
 cv::Mat LookApart(const cv::Mat& leaf, const cv::Mat& gray, double bright, int band_px,
-                  double contrast);
+                  double contrast, const cv::Mat& judge = cv::Mat());
 // Share of the leaf's rim pixels set apart from what is beside them: on a rim (a height step),
 // beside pixels without a height, or by its look (LookApart).
 double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double contrast);

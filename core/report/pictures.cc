@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <opencv2/imgproc.hpp>
+#include <unordered_map>
 
 namespace vellum {
 namespace {
@@ -96,21 +98,27 @@ std::function<cv::Point2d(const cv::Point2d&)> RestoredPixel(const RestoreResult
 cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                       const RestoreResult& restored, const CameraModel& camera) {
   const auto to_pixel = RestoredPixel(restored, camera);
-  // Strain per node pair, then per quad (the springs among its corners).
+  // Strain per spring against its own rest length (measured along the surface where the leaf
+  // bends: the chord between the nodes would show every crease as strain), then per quad (the
+  // springs among its corners).
+  const int64_t nodes = static_cast<int64_t>(mesh.point.size());
+  std::unordered_map<int64_t, double> rest;
+  rest.reserve(mesh.springs.size());
+  for (const Spring& s : mesh.springs) {
+    rest[std::min(s.a, s.b) * nodes + std::max(s.a, s.b)] = s.rest_mm;
+  }
   std::vector<double> sum(mesh.quads.size(), 0.0);
   std::vector<int> count(mesh.quads.size(), 0);
-  auto strain = [&](int a, int b) {
-    const double rest = cv::norm(mesh.point[a] - mesh.point[b]);
-    return std::fabs(cv::norm(flat[a] - flat[b]) / std::max(rest, 1e-12) - 1.0);
-  };
   double max_strain = 0;
   for (size_t q = 0; q < mesh.quads.size(); ++q) {
     const cv::Vec4i& c = mesh.quads[q];
     for (auto [i, j] : {std::pair{0, 1}, {1, 2}, {2, 3}, {3, 0}, {0, 2}, {1, 3}}) {
-      sum[q] += strain(c[i], c[j]);
+      const auto it = rest.find(std::min(c[i], c[j]) * nodes + std::max(c[i], c[j]));
+      if (it == rest.end() || !(it->second > 0)) continue;
+      sum[q] += std::fabs(cv::norm(flat[c[i]] - flat[c[j]]) / it->second - 1.0);
       ++count[q];
     }
-    max_strain = std::max(max_strain, sum[q] / count[q]);
+    if (count[q]) max_strain = std::max(max_strain, sum[q] / count[q]);
   }
   max_strain = std::max(max_strain, 1e-6);
   cv::Mat picture(restored.image.size(), CV_8UC3, cv::Scalar::all(255));
@@ -124,7 +132,8 @@ cv::Mat StrainPicture(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
       const cv::Point2d p = to_pixel(flat[mesh.quads[q][k]]);
       corners[k] = cv::Point(cvRound(p.x), cvRound(p.y));
     }
-    const int level = cv::saturate_cast<uint8_t>(255.0 * sum[q] / count[q] / max_strain);
+    const double mean = count[q] ? sum[q] / count[q] : 0.0;
+    const int level = cv::saturate_cast<uint8_t>(255.0 * mean / max_strain);
     const cv::Vec3b c = colours.at<cv::Vec3b>(level);
     cv::fillConvexPoly(picture, corners, cv::Scalar(c[0], c[1], c[2]), cv::LINE_AA);
   }
