@@ -342,11 +342,20 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
     if (gap.rows > 0) {
       r.Number("outline", "gutter_unseen_mm", gap.median_mm);
       r.Number("outline", "gutter_unseen_p95_mm", gap.p95_mm);
-      if (gap.median_mm > limits.max_gutter_unseen_mm) {
+      r.Number("outline", "gutter_unseen_bound_mm", gap.bound_mm);
+      // The line between the pages' last points is the least that is missing; where their
+      // slopes meet farther down, as much as the valley between can hold.
+      const double most_mm = std::max(gap.median_mm, gap.bound_mm);
+      if (most_mm > limits.max_gutter_unseen_mm) {
+        const std::string how_much =
+            most_mm > gap.median_mm + 0.05
+                ? Fixed(gap.median_mm, 1) + " to " + Fixed(most_mm, 1) + " mm"
+                : "at least " + Fixed(gap.median_mm, 1) + " mm (" + Fixed(gap.p95_mm, 1) +
+                      " mm in places)";
         r.Warn("gutter_hidden",
-               "the restored pages leave out at least " + Fixed(gap.median_mm, 1) +
-                   " mm of page at the gutter (" + Fixed(gap.p95_mm, 1) +
-                   " mm in places): the camera or the projector did not reach it, or it was not "
+               "the restored pages leave out " + how_much +
+                   " of page at the gutter: the camera or the projector did not reach it, or it "
+                   "was not "
                    "measured or not taken as the page (see the outline in the report); open "
                    "the book wider, or turn the cradle towards the projector");
       }

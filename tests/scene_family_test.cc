@@ -114,14 +114,17 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
     o.warnings += (o.warnings.empty() ? "" : ",") + w.code;
   o.flagged = !o.warnings.empty();
   for (const std::string& page : result.report.Pages()) {
-    char figures[160];
-    std::snprintf(figures, sizeof(figures), "%s%sstrain %.4f/%.4f/%.4f warp %.2f px grid %s",
+    char figures[200];
+    std::snprintf(figures, sizeof(figures),
+                  "%s%sstrain %.4f/%.4f/%.4f warp %.2f px grid %s sampling %.0f/%.0f ppi",
                   o.figures.empty() ? "" : "; ", page.empty() ? "" : (page + " ").c_str(),
                   result.report.Number("flattening", "mean_strain", page),
                   result.report.Number("flattening", "widespread_strain", page),
                   result.report.Number("flattening", "max_strain", page),
                   result.report.Number("sheet", "warp_error_px", page),
-                  result.report.Text("sheet", "grid", page).c_str());
+                  result.report.Text("sheet", "grid", page).c_str(),
+                  result.report.Number("sampling", "p5_ppi", page),
+                  result.report.Number("sampling", "median_ppi", page));
     o.figures += figures;
   }
   o.figures += "; unseen beside " + std::to_string(result.outline.unseen_share);
@@ -135,6 +138,9 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   // pixels shows it: past the station's own limit the pages are not restored whole.
   if (pages.size() == 2) {
     const double hidden = TrueGutter(*scan.gantry).hidden_mm;
+    o.figures += "; gutter hides " + std::to_string(hidden) + " mm, measured " +
+                 std::to_string(result.report.Number("outline", "gutter_unseen_mm")) + " to " +
+                 std::to_string(result.report.Number("outline", "gutter_unseen_bound_mm"));
     if (hidden > PipelineOptions().limits.max_gutter_unseen_mm) {
       missed << "the gutter keeps " << hidden << " mm of the pages from view; ";
     }

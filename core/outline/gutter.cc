@@ -183,7 +183,7 @@ GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline) {
     return gap;
   }
   const cv::Rect box = cv::boundingRect(outline.mask);
-  std::vector<float> lengths;
+  std::vector<float> lengths, bounds;
   for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; ++v) {
     const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
     const uint8_t *in_left = left.ptr<uint8_t>(v), *in_right = right.ptr<uint8_t>(v),
@@ -204,16 +204,48 @@ GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline) {
       if (after_left < 0) after_left = u;
       before_right = u;
     }
-    const double length = after_left < 0 ? cv::norm(p[first_right] - p[last_left])
-                                         : cv::norm(p[after_left] - p[last_left]) +
-                                               cv::norm(p[first_right] - p[before_right]);
+    // A page's length per pixel at its innermost point, over its last kSlopePx pixels.
+    auto per_px = [&](int at, int outward) {
+      const int out = at + outward * GutterGap::kSlopePx;
+      const uint8_t* page = outward < 0 ? in_left : in_right;
+      if (out < box.x || out >= box.x + box.width || !page[out] || !measured(out)) return 1e9;
+      return cv::norm(p[at] - p[out]) / GutterGap::kSlopePx;
+    };
+    // Beside a parted page, the line to the first point measured beside it runs down the page's
+    // edge to the table (no page), and its pixels between may be the page's shadow on the table:
+    // the page is missing over no more than either, its own length per pixel over them.
+    const double length = after_left < 0
+                              ? cv::norm(p[first_right] - p[last_left])
+                              : std::min(cv::norm(p[after_left] - p[last_left]),
+                                         (after_left - last_left) * per_px(last_left, -1)) +
+                                    std::min(cv::norm(p[first_right] - p[before_right]),
+                                             (first_right - before_right) * per_px(first_right, 1));
     lengths.push_back(static_cast<float>(length));
+    double bound = length;
+    const int out_left = last_left - GutterGap::kSlopePx,
+              out_right = first_right + GutterGap::kSlopePx;
+    if (after_left < 0 && out_left >= box.x && out_right < box.x + box.width && in_left[out_left] &&
+        measured(out_left) && in_right[out_right] && measured(out_right)) {
+      // The two slopes, A + s a and B + t b, where they come closest.
+      const cv::Vec3d A(p[last_left]), B(p[first_right]);
+      const cv::Vec3d a = cv::normalize(A - cv::Vec3d(p[out_left]));
+      const cv::Vec3d b = cv::normalize(B - cv::Vec3d(p[out_right]));
+      const cv::Vec3d w = A - B;
+      const double ab = a.dot(b), d = a.dot(w), e = b.dot(w), denom = 1 - ab * ab;
+      if (denom > 1e-6) {
+        const double s = (ab * e - d) / denom, t = (e - ab * d) / denom;
+        if (s > 0 && t > 0) bound = std::max(length, s + t + cv::norm((A + s * a) - (B + t * b)));
+      }
+    }
+    bounds.push_back(static_cast<float>(bound));
   }
   gap.rows = static_cast<int>(lengths.size());
   if (lengths.empty()) return gap;
   std::sort(lengths.begin(), lengths.end());
   gap.median_mm = lengths[lengths.size() / 2];
   gap.p95_mm = lengths[std::min(lengths.size() - 1, lengths.size() * 95 / 100)];
+  std::nth_element(bounds.begin(), bounds.begin() + bounds.size() / 2, bounds.end());
+  gap.bound_mm = bounds[bounds.size() / 2];
   return gap;
 }
 

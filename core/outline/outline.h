@@ -174,11 +174,19 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
 // end there, and the line is the least page surface missing between them (the surface runs
 // down into the gutter and back up). Where the pages part and what lies between them is measured
 // (the table seen in the gap, off the leaf), each page is seen to its foot, and the gap is no
-// page: the lines from each page's last point to the first point measured beside it instead.
+// page: the lines from each page's last point to the first point measured beside it instead,
+// each no longer than the page's own length per pixel over the pixels between (the line runs
+// down the page's edge to the table, and those pixels may be the page's shadow on the table).
+// Where the pages do not part, each page's slope at its innermost point (over its last
+// kSlopePx pixels) carried on down until the two meet bounds from above what a valley that bends
+// one way can hide between them: that surface lies within the triangle of the two points and
+// their meeting.
 struct GutterGap {
   int rows = 0;          // Rows with a measured point on both sides.
   double median_mm = 0;  // The line's median length over those rows, mm.
   double p95_mm = 0;     // Its 95th percentile, mm.
+  double bound_mm = 0;   // The median over the rows of the slopes' meeting (the line where none).
+  static constexpr int kSlopePx = 3;
 };
 // Rows 0 when the outline is not a spread.
 GutterGap UnseenAtGutter(const cv::Mat& points, const Outline& outline);

@@ -195,10 +195,10 @@ TEST(LeafHint, ALeafOffTheCentreOfASupportIsFoundWithOrWithoutAHint) {
 // they meet (nothing measured between them), the line between their last points is missing;
 // where they part 3 mm and the table between them is measured, each page is seen to its foot and
 // the gap is no page: only what lies between each page's last point and the table is missing.
-TEST(UnseenAtGutter, ThePagesGapIsNoPageWhereTheTableShowsInIt) {
+TEST(UnseenAtGutter, ThePagesGapIsNoPageWhereTheTableShowsInIt_AndTheValleyIsBounded) {
   const cv::Size size(200, 100);
   const double pixel = 0.25, rise = std::tan(60 * M_PI / 180);
-  auto spread = [&](int gap_px, bool table_seen) {
+  auto spread = [&](int gap_px, bool table_seen, double foot_mm = 0) {
     cv::Mat points(size, CV_32FC3, cv::Scalar::all(NAN));
     Outline outline;
     outline.pages = {cv::Mat::zeros(size, CV_8U), cv::Mat::zeros(size, CV_8U)};
@@ -208,7 +208,7 @@ TEST(UnseenAtGutter, ThePagesGapIsNoPageWhereTheTableShowsInIt) {
         const bool left = u < left_end, right = u >= right_start;
         // Height above the table: the pages rise away from their feet at the gap.
         const double from_foot = left ? (left_end - u) * pixel : (u - right_start + 1) * pixel;
-        const double z = left || right ? from_foot * rise : 0.0;
+        const double z = left || right ? foot_mm + from_foot * rise : 0.0;
         const bool hidden = (left && u >= left_end - 8) || (right && u < right_start + 8);
         if (left || right) (left ? outline.pages[0] : outline.pages[1]).at<uint8_t>(v, u) = 255;
         if (hidden || (!left && !right && !table_seen)) continue;
@@ -232,6 +232,19 @@ TEST(UnseenAtGutter, ThePagesGapIsNoPageWhereTheTableShowsInIt) {
   // The same parted pages with nothing measured between them: the whole line, gap and all.
   const GutterGap unseen = spread(12, false);
   EXPECT_NEAR(unseen.median_mm, 29 * pixel, 0.01);
+  // Pages parted over the table whose feet stand 10 mm above it (a book block's edges): the line
+  // to the table runs 14 mm down through the air; each page misses no more than its own 0.5 mm
+  // per pixel over the 9 pixels between its last point and the table.
+  const GutterGap raised = spread(12, true, 10.0);
+  EXPECT_NEAR(raised.median_mm, 2 * 9 * pixel * std::hypot(1.0, rise), 0.01);
+  // Where the pages meet, 9 mm of page hides in the valley (4.5 mm of each), and the line
+  // between the last points reads under half of it. Both slopes carried on down meet 17 px * 0.25
+  // mm / cos(60 deg) of page later (8.5 mm: the two feet are a pixel apart): the bound.
+  EXPECT_LT(meet.median_mm, 0.5 * 2 * std::hypot(out, up));
+  EXPECT_NEAR(meet.bound_mm, 17 * pixel * std::hypot(1.0, rise), 0.01);
+  EXPECT_LE(meet.bound_mm, 2 * std::hypot(out, up));
+  // Parted pages with the table seen: no valley between them to bound.
+  EXPECT_NEAR(parted.bound_mm, parted.median_mm, 1e-6);
 }
 
 // The outline stage's check for a support taken for the leaf (leaf_ambiguous): taken, the
