@@ -14,7 +14,8 @@ enum class Fit { kOk, kHole, kEdge };
 // How far a fit's value can be trusted: its standard error, and whether points surround it (a
 // quadratic; at the leaf's edge a plane over the points on one side).
 struct FitQuality {
-  double sigma_mm = 0;
+  double sigma_mm = 0;  // The fitted value's standard error.
+  double rms_mm = 0;    // The points' scatter about the fit (RMS).
   bool surrounded = false;
   Eigen::Matrix<double, 6, 3> coef = Eigen::Matrix<double, 6, 3>::Zero();  // x, y, z polynomials.
   int hu = 1, hv = 1;  // The window's half-sizes, px: the polynomials' units of offset.
@@ -207,6 +208,7 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
   // points per coefficient.
   if (quality) {
     quality->sigma_mm = std::sqrt(kept_r2 / std::max(1, kept - terms) * terms / kept);
+    quality->rms_mm = std::sqrt(kept_r2 / std::max(1, kept - terms));
     quality->surrounded = terms == 6;
     quality->coef = c;
     quality->hu = hu;
@@ -244,6 +246,10 @@ bool MeshOptions::Check(std::string* why) const {
   }
   if (!(straight_mm > 0) || !(min_bend_deg >= 0 && min_bend_deg < 45)) {
     *why = "straight_mm must be > 0, min_bend_deg in [0, 45)";
+    return false;
+  }
+  if (!(max_fit_rms_mm > 0)) {
+    *why = "max_fit_rms_mm must be > 0";
     return false;
   }
   return true;
@@ -526,6 +532,7 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
   std::vector<cv::Point2d> grid_px(n);
   std::vector<uint8_t> on_page(n, 0);
   std::vector<FitQuality> fits(options.rest_along_surface ? n : 0);
+  std::vector<uint8_t> strewn(n, 0);
   for (int j = 0; j < h; ++j) {
     for (int i = 0; i < g; ++i) {
       const cv::Point2d p(box.x + i * step_u, box.y + j * step_v);
@@ -537,9 +544,15 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
     for (int k = range.start; k < range.end; ++k) {
       if (!on_page[k]) continue;
       cv::Vec3d x;
-      const Fit fit = FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x,
-                              options.rest_along_surface ? &fits[k] : nullptr);
-      if (fit == Fit::kOk) {
+      FitQuality own;
+      FitQuality& quality = options.rest_along_surface ? fits[k] : own;
+      const Fit fit =
+          FitNode(points, page_mask, grid_px[k], hu, hv, options.min_points, &x, &quality);
+      if (fit == Fit::kOk && quality.rms_mm > options.max_fit_rms_mm) {
+        // Points strewn far off one surface: the window straddles the leaf's silhouette and what
+        // lies far behind it, and the fit would place the node in mid-air. Settled below.
+        strewn[k] = 1;
+      } else if (fit == Fit::kOk) {
         mesh.point[k] = x;
         mesh.kind[k] = NodeKind::kMeasured;
       } else if (fit == Fit::kHole) {
@@ -547,6 +560,24 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
       }  // kEdge stays off; the skirt extrapolates it from the page.
     }
   });
+  // A strewn node beside the page's edge (a neighbour off the page) is the edge: off, and the
+  // skirt extrapolates it from the page; inside the page, a hole filled from the nodes around it.
+  for (int k = 0; k < n; ++k) {
+    if (!strewn[k]) continue;
+    const int i = k % g, j = k / g;
+    const bool edge = i == 0 || j == 0 || i + 1 == g || j + 1 == h || !on_page[k - 1] ||
+                      !on_page[k + 1] || !on_page[k - g] || !on_page[k + g];
+    mesh.kind[k] = edge ? NodeKind::kOff : NodeKind::kFilled;
+  }
+  // A strewn node beside the page's edge (a neighbour off the page) is the edge: off, and the
+  // skirt extrapolates it from the page; inside the page, a hole filled from the nodes around it.
+  for (int k = 0; k < n; ++k) {
+    if (!strewn[k]) continue;
+    const int i = k % g, j = k / g;
+    const bool edge = i == 0 || j == 0 || i + 1 == g || j + 1 == h || !on_page[k - 1] ||
+                      !on_page[k + 1] || !on_page[k - g] || !on_page[k + g];
+    mesh.kind[k] = edge ? NodeKind::kOff : NodeKind::kFilled;
+  }
   mesh.measured =
       static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
   if (mesh.measured == 0) {

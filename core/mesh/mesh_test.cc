@@ -66,6 +66,39 @@ TEST(Mesh, HolesAreFilledFromTheirNeighbours) {
   EXPECT_EQ(m.quads.size(), 44u * 44u);  // The sheet stays whole.
 }
 
+// Where a node's window straddles the leaf's silhouette and what lies far behind it, its points
+// are strewn along the camera's rays (here every other pixel 150 mm up, the rest on the plane):
+// a fit would put the node in mid-air, 75 mm up, and the flattened sheet would throw it out as a
+// spike. Inside the page such a node is a hole filled from its neighbours; at the page's edge it
+// is the edge, and the skirt extrapolates it from the page.
+TEST(Mesh, ANodeWhosePointsAreStrewnIsNoSurface) {
+  Scene scene;
+  const CameraModel& cam = scene.rig.camera;
+  const cv::Vec3d c = cam.Center();
+  auto strew = [&](const cv::Rect& patch) {
+    for (int v = patch.y; v < patch.y + patch.height; ++v) {
+      for (int u = patch.x; u < patch.x + patch.width; ++u) {
+        const double up = (u + v) % 2 ? 150.0 : 0.0;
+        const cv::Vec3d d = cam.RayDirection(cv::Point2d(u, v));
+        scene.points.at<cv::Vec3f>(v, u) = cv::Vec3f(c - ((c[2] - up) / d[2]) * d);
+      }
+    }
+  };
+  strew(cv::Rect(785, 585, 30, 30));  // Around the node at the page's middle (800, 600).
+  strew(cv::Rect(400, 585, 15, 30));  // At its left edge (400, 600).
+  const Mesh m = scene.Build();
+  ASSERT_TRUE(m.status.ok()) << m.status.message();
+  EXPECT_EQ(m.kind[22 * 45 + 22], NodeKind::kFilled);
+  EXPECT_EQ(m.kind[22 * 45 + 0], NodeKind::kSkirt);
+  for (size_t k = 0; k < m.kind.size(); ++k) {
+    if (m.Active(static_cast<int>(k))) EXPECT_NEAR(m.point[k][2], 0.0, 0.5) << "node " << k;
+  }
+  const FlattenResult flat = Flatten(m);
+  ASSERT_TRUE(flat.status.ok());
+  EXPECT_LT(flat.max_strain, 0.01);
+  EXPECT_EQ(flat.folded_quads, 0);
+}
+
 TEST(Mesh, SkirtCoversThePageEdge) {
   Scene scene;
   scene.mask.setTo(0);
