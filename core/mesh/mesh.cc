@@ -208,7 +208,30 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
   // points per coefficient.
   if (quality) {
     quality->sigma_mm = std::sqrt(kept_r2 / std::max(1, kept - terms) * terms / kept);
-    quality->rms_mm = std::sqrt(kept_r2 / std::max(1, kept - terms));
+    // The kept points' scatter about the second fit (the first, pulled by the points dropped,
+    // overstates it).
+    double refit_r2 = kept_r2;
+    if (kept < count) {
+      refit_r2 = 0;
+      size_t at = 0;
+      for (int v = v0; v <= v1; ++v) {
+        const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+        const uint8_t* m = mask.ptr<uint8_t>(v);
+        const double dv = offset_v(v);
+        for (int u = u0; u <= u1; ++u) {
+          if (!usable(row[u], m[u])) continue;
+          if (residual[at++] > cut) continue;
+          const double du = offset_u(u);
+          const double mono[6] = {1, du, dv, du * du, du * dv, dv * dv};
+          for (int k = 0; k < 3; ++k) {
+            double f = -row[u][k];
+            for (int t = 0; t < 6; ++t) f += mono[t] * c(t, k);
+            refit_r2 += f * f;
+          }
+        }
+      }
+    }
+    quality->rms_mm = std::sqrt(refit_r2 / std::max(1, kept - terms));
     quality->surrounded = terms == 6;
     quality->coef = c;
     quality->hu = hu;
@@ -560,23 +583,16 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
       }  // kEdge stays off; the skirt extrapolates it from the page.
     }
   });
-  // A strewn node beside the page's edge (a neighbour off the page) is the edge: off, and the
-  // skirt extrapolates it from the page; inside the page, a hole filled from the nodes around it.
+  // A strewn node held on all four sides by measured nodes is a hole, filled from them; any other
+  // (beside the page's edge, or beside another such node) is off: a hole filled from fewer nodes
+  // would copy one of them, and the skirt extrapolates the page's edge from the page.
   for (int k = 0; k < n; ++k) {
     if (!strewn[k]) continue;
     const int i = k % g, j = k / g;
-    const bool edge = i == 0 || j == 0 || i + 1 == g || j + 1 == h || !on_page[k - 1] ||
-                      !on_page[k + 1] || !on_page[k - g] || !on_page[k + g];
-    mesh.kind[k] = edge ? NodeKind::kOff : NodeKind::kFilled;
-  }
-  // A strewn node beside the page's edge (a neighbour off the page) is the edge: off, and the
-  // skirt extrapolates it from the page; inside the page, a hole filled from the nodes around it.
-  for (int k = 0; k < n; ++k) {
-    if (!strewn[k]) continue;
-    const int i = k % g, j = k / g;
-    const bool edge = i == 0 || j == 0 || i + 1 == g || j + 1 == h || !on_page[k - 1] ||
-                      !on_page[k + 1] || !on_page[k - g] || !on_page[k + g];
-    mesh.kind[k] = edge ? NodeKind::kOff : NodeKind::kFilled;
+    auto held = [&](int m) { return mesh.kind[m] == NodeKind::kMeasured && !strewn[m]; };
+    const bool inside = i > 0 && j > 0 && i + 1 < g && j + 1 < h && held(k - 1) && held(k + 1) &&
+                        held(k - g) && held(k + g);
+    mesh.kind[k] = inside ? NodeKind::kFilled : NodeKind::kOff;
   }
   mesh.measured =
       static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));

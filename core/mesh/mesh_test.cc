@@ -69,8 +69,8 @@ TEST(Mesh, HolesAreFilledFromTheirNeighbours) {
 // Where a node's window straddles the leaf's silhouette and what lies far behind it, its points
 // are strewn along the camera's rays (here every other pixel 150 mm up, the rest on the plane):
 // a fit would put the node in mid-air, 75 mm up, and the flattened sheet would throw it out as a
-// spike. Inside the page such a node is a hole filled from its neighbours; at the page's edge it
-// is the edge, and the skirt extrapolates it from the page.
+// spike. Inside the page, held by measured nodes on all sides, such a node is a hole filled from
+// them; at the page's edge it is the edge, and the skirt extrapolates it from the page.
 TEST(Mesh, ANodeWhosePointsAreStrewnIsNoSurface) {
   Scene scene;
   const CameraModel& cam = scene.rig.camera;
@@ -84,8 +84,11 @@ TEST(Mesh, ANodeWhosePointsAreStrewnIsNoSurface) {
       }
     }
   };
-  strew(cv::Rect(785, 585, 30, 30));  // Around the node at the page's middle (800, 600).
-  strew(cv::Rect(400, 585, 15, 30));  // At its left edge (400, 600).
+  // Over the windows (23 x 23 px) of the node at the page's middle (800, 600) and of the one at
+  // its left edge (400, 600); the windows of the nodes beside them (18 px away) see a few strewn
+  // points, which their fits drop.
+  strew(cv::Rect(789, 589, 23, 23));
+  strew(cv::Rect(400, 589, 12, 23));
   const Mesh m = scene.Build();
   ASSERT_TRUE(m.status.ok()) << m.status.message();
   EXPECT_EQ(m.kind[22 * 45 + 22], NodeKind::kFilled);
