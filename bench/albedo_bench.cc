@@ -56,7 +56,8 @@ struct Fixture {
     const DecodeResult decoded = Decode(scan.sequence, scan.frames);
     amplitude = decoded.amplitude;
     points = Triangulator(DefaultRig()).Triangulate(decoded).points;
-    leaf = FindLeaf(points, texture).mask;
+    const Calibration rig = DefaultRig();
+    leaf = FindLeaf(points, texture, OutlineOptions(), &rig).mask;
     const CameraModel& camera = DefaultRig().camera;
     mesh = BuildMesh(points, leaf, MeshOptions(),
                      [&](const cv::Vec3d& x) { return camera.Project(x); });

@@ -79,7 +79,7 @@ void BM_Baseline_FindLeafV1(benchmark::State& state) {
 void BM_Vellum_FindLeaf(benchmark::State& state) {
   const Fixture& f = Shared();
   for (auto _ : state) {
-    const Outline outline = FindLeaf(f.points, f.texture);
+    const Outline outline = FindLeaf(f.points, f.texture, OutlineOptions(), &f.rig);
     if (!outline.status.ok()) state.SkipWithError(outline.status.message().c_str());
     benchmark::DoNotOptimize(outline.mask.data);
   }
@@ -88,7 +88,7 @@ void BM_Vellum_FindLeaf(benchmark::State& state) {
 void BM_Vellum_FindLeaf_SheetAuto(benchmark::State& state) {
   const Fixture& f = Shared();
   for (auto _ : state) {
-    const Outline outline = FindLeaf(f.points, f.texture);
+    const Outline outline = FindLeaf(f.points, f.texture, OutlineOptions(), &f.rig);
     // The outline stage's check for a support taken for the leaf (leaf_ambiguous).
     benchmark::DoNotOptimize(HighestRaisedHole(f.points, outline.mask, 0.08).area_px);
     const Mesh mesh = Sheet(f, outline.pages.at(0), true);

@@ -115,8 +115,8 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
     return out;
   }
   next("outline", 0.65);
-  if (!ran(OutlineStage(out.map.points, input.scan.texture, options.outline, options.limits,
-                        report.stages, results, &out.outline),
+  if (!ran(OutlineStage(out.map.points, input.scan.texture, input.calibration, options.outline,
+                        options.limits, report.stages, results, &out.outline),
            true)) {
     return out;
   }

@@ -261,7 +261,7 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   return stage.Finish(s);
 }
 
-StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
+StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
                          const OutlineOptions& options, const WarningLimits& limits,
                          const std::vector<StageReport>& earlier, const std::string& results,
                          Outline* outline) {
@@ -279,7 +279,7 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
   const ObjectKind said = ReportedObject(earlier);
   if (said != ObjectKind::kAuto) o.object = said;
   r.Text("outline", "object", ToString(o.object));
-  *outline = FindLeaf(points, texture, o);
+  *outline = FindLeaf(points, texture, o, &rig);
   if (!outline->status.ok()) return stage.Finish(outline->status);
   r.Text("outline", "method", outline->method);
   r.Number("outline", "confidence", outline->confidence);

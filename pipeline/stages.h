@@ -127,8 +127,8 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
 // (core/outline), seeded at the operator's hint for the scan when the decode stage among
 // `earlier` reported one, else at options.hint. Writes report/texture.png and
 // report/outline.png. Warns of a leaf that runs off the view and of an outline of low
-// confidence.
-StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture,
+// confidence. `rig` measured the points (its projector's shadows are told from the leaf).
+StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
                          const OutlineOptions& options, const WarningLimits& limits,
                          const std::vector<StageReport>& earlier, const std::string& results,
                          Outline* outline);

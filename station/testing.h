@@ -175,7 +175,7 @@ inline const SmallProducts& SmallScanProducts() {
     p.stages.push_back(DecodeStage(SmallScan(), &decoder, o.limits, &p.decoded));
     p.stages.push_back(
         TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, o.limits, p.results, &p.map));
-    p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, o.outline, o.limits,
+    p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, rig, o.outline, o.limits,
                                     p.stages, p.results, &p.outline));
     p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));
     p.stages.push_back(FlattenStage(p.mesh, o.flatten, o.limits, p.results, "", &p.flat));

@@ -6,6 +6,7 @@
 #include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 
 #include "core/common/text.h"
 #include "core/mesh/mesh.h"
@@ -49,12 +50,13 @@ bool OutlineOptions::Check(std::string* why) const {
     *why = "gutter_apart_px and gutter_borrow_rows must be >= 1, gutter_meet_px >= 0";
     return false;
   }
-  if (unseen_reach_px < 1 || !(unseen_look >= 0) ||
+  if (unseen_reach_px < 1 || !(unseen_look >= 0) || !(unseen_clear_mm > 0) ||
       !(max_unseen_share >= 0 && max_unseen_share <= 1) ||
       !(max_lost_share >= 0 && max_lost_share <= 1) ||
       !(wider_support_share >= 0 && wider_support_share <= 1)) {
     *why =
-        "unseen_reach_px must be >= 1, unseen_look >= 0, max_unseen_share, max_lost_share and "
+        "unseen_reach_px must be >= 1, unseen_look >= 0, unseen_clear_mm > 0, max_unseen_share, "
+        "max_lost_share and "
         "wider_support_share in [0, 1]";
     return false;
   }
@@ -320,7 +322,8 @@ bool LeafHintShareFits(double share, double max_share, const std::string& name, 
   return false;
 }
 
-Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options) {
+Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options,
+                 const Calibration* rig) {
   using namespace outline;
   Outline out;
   std::string why;
@@ -455,9 +458,11 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
              "(--leaf-hint) and scan again"});
   }
   const int leaf_px = std::max(1, cv::countNonZero(leaf));
-  out.unseen_share = static_cast<double>(UnseenBeside(leaf, measured, cues.colour, found.look_leaf,
-                                                      found.look_surround, options.unseen_reach_px,
-                                                      options.unseen_look)) /
+  std::optional<ProjectorSight> sight;
+  if (rig && !planes.empty()) sight.emplace(*rig, points, planes, options.unseen_clear_mm);
+  out.unseen_share = static_cast<double>(UnseenBeside(
+                         leaf, measured, cues.colour, found.look_leaf, found.look_surround,
+                         options.unseen_reach_px, options.unseen_look, sight ? &*sight : nullptr)) /
                      leaf_px;
   if (out.unseen_share > options.max_unseen_share) {
     out.doubts.push_back(

@@ -19,6 +19,7 @@
 
 #include "core/common/object_kind.h"
 #include "core/common/status.h"
+#include "core/geometry/calibration.h"
 
 namespace vellum {
 
@@ -98,9 +99,13 @@ struct OutlineOptions {
   // The leaf seen but not measured beside its outline (UnseenBeside: within unseen_reach_px of
   // it, at least unseen_look nats more like the leaf than the surround): over max_unseen_share
   // of the leaf's area is flagged (edge_unmeasured), as it is missing from the restored page.
+  // Where the look cannot tell (a table of the paper's shade), a pixel beside the leaf without a
+  // height is its leaf when the rig's projector lights the table behind it (ProjectorSight: the
+  // line to the projector passing unmeasured_clear_mm or more over every point beneath it).
   int unseen_reach_px = 40;
   double unseen_look = 1.0;
   double max_unseen_share = 0.01;
+  double unseen_clear_mm = 0.5;
   // The outline at the pixel leaving out more than this share of what the cut found well inside
   // its outline (its holes aside) is doubtful (outline_uncertain).
   double max_lost_share = 0.1;
@@ -162,10 +167,12 @@ bool LeafHintFits(const cv::Rect& hint, cv::Size view, double max_share, std::st
 // scan --leaf-hint`): `share` of the view, the hint as `name` in the reason.
 bool LeafHintShareFits(double share, double max_share, const std::string& name, std::string* why);
 
-// Finds the leaf in an organised point map (CV_32FC3, mm, NaN where invalid) and its texture
-// (the same size).
+// Finds the leaf in an organised point map (CV_32FC3, world mm, NaN where invalid) and its
+// texture (the same size). `rig`, the calibration that measured the points, if given, tells the
+// projector's shadows from the leaf unmeasured beside the outline where the look cannot.
 Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture,
-                 const OutlineOptions& options = OutlineOptions());
+                 const OutlineOptions& options = OutlineOptions(),
+                 const Calibration* rig = nullptr);
 
 // What a spread's gutter keeps from view: in each image row across the middle 80% of the
 // spread, the straight line between the last points measured on either side of the gutter (the

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -298,8 +299,66 @@ int SidesTouched(const cv::Mat& mask, int border) {
   return touched;
 }
 
+ProjectorSight::ProjectorSight(const Calibration& rig, const cv::Mat& points,
+                               const std::vector<Plane>& planes, double clear_mm)
+    : rig_(rig), points_(points), planes_(planes), clear_mm_(clear_mm) {
+  std::vector<cv::Mat> xyz;
+  cv::split(points, xyz);
+  cv::patchNaNs(xyz[2], -1e9);
+  cv::minMaxLoc(xyz[2], nullptr, &top_mm_);
+}
+
+bool ProjectorSight::Lit(cv::Point pixel, const cv::Mat& apart, cv::Point offset) const {
+  const cv::Vec3d eye = rig_.camera.Center();
+  const cv::Vec3d ray = rig_.camera.RayDirection(pixel);
+  // The first plane the ray meets: z = a x + b y + c along eye + t ray.
+  double t = std::numeric_limits<double>::infinity();
+  for (const Plane& plane : planes_) {
+    const double den = ray[2] - plane.a * ray[0] - plane.b * ray[1];
+    if (std::fabs(den) < 1e-9) continue;
+    const double at = (plane.At(eye[0], eye[1]) - eye[2]) / den;
+    if (at > 0) t = std::min(t, at);
+  }
+  if (!std::isfinite(t)) return false;
+  const cv::Vec3d from = eye + t * ray;
+  const cv::Vec3d to = rig_.projector.Center() - from;
+  if (to[2] <= 0) return false;
+  // Where the line stands above everything measured; from there on nothing shades it.
+  const double s_top = std::min(1.0, (top_mm_ + clear_mm_ - from[2]) / to[2]);
+  if (s_top <= 0) return true;
+  const cv::Vec3d top = from + s_top * to;
+  const cv::Point2d q0 = rig_.camera.Project(from), q1 = rig_.camera.Project(top);
+  if (!std::isfinite(q0.x) || !std::isfinite(q1.x)) return false;
+  // Walked in the image a pixel at a time; the line's point over each pixel found from the
+  // pixel's share w of the way (perspective: s = w d0 / (w d0 + (1 - w) d1), d the depths).
+  const cv::Vec3d axis(rig_.camera.rotation(2, 0), rig_.camera.rotation(2, 1),
+                       rig_.camera.rotation(2, 2));
+  const double d0 = (from - eye).dot(axis), d1 = (top - eye).dot(axis);
+  const int steps = std::max(1, static_cast<int>(std::ceil(cv::norm(q1 - q0))));
+  for (int k = 1; k <= steps; ++k) {
+    const double w = static_cast<double>(k) / steps;
+    const cv::Point q(cvRound(q0.x + w * (q1.x - q0.x)), cvRound(q0.y + w * (q1.y - q0.y)));
+    if (q == pixel) continue;
+    if (q.x < 0 || q.y < 0 || q.x >= points_.cols || q.y >= points_.rows) return false;
+    const cv::Vec3f x = points_.at<cv::Vec3f>(q);
+    if (!std::isfinite(x[2])) {
+      // Over a pixel without a height farther from the leaf than the pixel judged (the rest of
+      // the band, outward): the line leaves the leaf behind, and goes on. Nearer the leaf, what
+      // stands there may shade it.
+      const cv::Point b = q - offset;
+      const bool in_box = b.x >= 0 && b.y >= 0 && b.x < apart.cols && b.y < apart.rows;
+      if (in_box && apart.at<uint8_t>(b) <= apart.at<uint8_t>(pixel - offset)) return false;
+      continue;
+    }
+    const double s = s_top * w * d0 / (w * d0 + (1 - w) * d1);
+    if (from[2] + s * to[2] < x[2] + clear_mm_) return false;
+  }
+  return true;
+}
+
 int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
-                 const Look& leaf_look, const Look& surround_look, int reach_px, double min_look) {
+                 const Look& leaf_look, const Look& surround_look, int reach_px, double min_look,
+                 const ProjectorSight* sight) {
   if (leaf_look.empty() || surround_look.empty() || reach_px < 1) return 0;
   const cv::Rect view(0, 0, leaf.cols, leaf.rows);
   const cv::Rect box = (cv::boundingRect(leaf) + cv::Size(2 * reach_px, 2 * reach_px) -
@@ -331,16 +390,19 @@ int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& co
     }
   }
   // The look's evidence by colour bin, once.
-  std::array<uint8_t, Look::kBins> leafish;
+  std::array<uint8_t, Look::kBins> leafish, tableish;
   for (int b = 0; b < Look::kBins; ++b) {
     leafish[b] = leaf_look.Log(b) - surround_look.Log(b) >= min_look;
+    tableish[b] = surround_look.Log(b) - leaf_look.Log(b) >= min_look;
   }
   int unseen = 0;
   while (!queue.empty()) {
     const cv::Point p = queue.back();
     queue.pop_back();
     if (apart.at<uint8_t>(p) > 3) {
-      unseen += leafish[Look::Bin(Mean3x3(in_view, p.x, p.y))];
+      const int bin = Look::Bin(Mean3x3(in_view, p.x, p.y));
+      unseen +=
+          leafish[bin] || (sight && !tableish[bin] && sight->Lit(p + box.tl(), apart, box.tl()));
     }
     for (int dv = -1; dv <= 1; ++dv) {
       for (int du = -1; du <= 1; ++du) {

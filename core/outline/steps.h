@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "core/geometry/calibration.h"
 #include "core/outline/outline.h"
 
 namespace vellum::outline {
@@ -251,9 +252,38 @@ int FillHoles(const cv::Mat& z, const cv::Mat& gray, const cv::Mat& threshold, d
 // `surround`, the cut's looks, over the texture's 3 x 3 mean: at least `min_look` nats more like
 // the leaf). A curled edge turned nearly edge-on to the projector, a
 // slope facing away from it: seen, but no 3D point to restore it from. A projector's shadow on
-// the table looks like the table and is not counted. Returns the pixels counted.
+// the table looks like the table and is not counted. Where the look cannot tell the two apart (a
+// table of the paper's own shade), a pixel is counted when `sight` (if given) finds the table
+// behind it in the projector's light: had it shown the table, it would have been measured.
+// Returns the pixels counted.
+class ProjectorSight;
 int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
-                 const Look& leaf_look, const Look& surround_look, int reach_px, double min_look);
+                 const Look& leaf_look, const Look& surround_look, int reach_px, double min_look,
+                 const ProjectorSight* sight = nullptr);
+// Whether the projector lights the surround behind a camera pixel: the camera's ray through the
+// pixel meets the first of the surround's planes at T, and the line from T to the projector's
+// centre passes over every point measured beneath it (by `clear_mm` or more) until it stands
+// above the highest point measured. A pixel without a height whose T is lit showed the camera
+// something other than that table: beside a leaf, the leaf itself, seen edge-on or facing away
+// from the projector. Not lit where a measured surface stands in the way (the leaf's shadow),
+// nor where the line passes over pixels without a height nearer the leaf (nothing can be
+// said), nor off the view.
+class ProjectorSight {
+ public:
+  ProjectorSight(const Calibration& rig, const cv::Mat& points, const std::vector<Plane>& planes,
+                 double clear_mm);
+  // `apart`: each pixel's distance from the leaf (CV_8U, city-block) over a box at `offset` in
+  // the view; the line passes over pixels without a height only farther from the leaf than
+  // `pixel` (the band it lies in, outward: what shades a pixel beside the leaf stands towards it).
+  bool Lit(cv::Point pixel, const cv::Mat& apart, cv::Point offset) const;
+
+ private:
+  const Calibration& rig_;
+  const cv::Mat& points_;
+  std::vector<Plane> planes_;
+  double clear_mm_;
+  double top_mm_ = 0;  // The highest point measured, world z.
+};
 // The leaf's rim pixels (CV_8U, 255) where its look and that of what lies beside it differ: the
 // brighter fifth of the pixels 2 to band_px inside the outline and of those outside it, within
 // band_px of the rim pixel, differ by `contrast` of the paper's brightness `bright` or more. Text

@@ -6,10 +6,13 @@
 
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "core/sim/gantry.h"
 
 namespace vellum::outline {
 namespace {
@@ -368,6 +371,72 @@ TEST(UnseenBeside, CountsWhatLooksLikeTheLeafBesideItWithoutHeights) {
   // blur around its far side and ends; nothing of the shadow or the strip apart.
   EXPECT_GE(counted, 14 * 120);
   EXPECT_LE(counted, 17 * 120);
+}
+
+// On a table of the leaf's own shade the look cannot tell the leaf unmeasured from a shadow; the
+// projector's sight can. A slab 25 mm high (x within 20 mm of the table's centre, across the view)
+// on the quick rig (about 1 mm per pixel, the projector 225 mm to the left): its shadow on the
+// table to its right is unmeasured, and so is its own left end (x below -12 mm, as a curl's edge
+// turned from the projector would be). The left end's table points lie in the projector's light
+// (had the pixels shown the table, it would have been measured): counted. The shadow's lie behind
+// the slab: not counted.
+TEST(UnseenBeside, TellsTheLeafUnmeasuredFromItsShadowByTheProjectorsSight) {
+  const Calibration rig = QuickRig();
+  const cv::Size size = rig.camera.size;
+  const cv::Vec3d eye = rig.camera.Center(), projector = rig.projector.Center();
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat points(size, CV_32FC3, cv::Scalar::all(nan));
+  cv::Mat leaf(size, CV_8U, cv::Scalar(0)), measured(size, CV_8U, cv::Scalar(0));
+  cv::Mat band(size, CV_8U, cv::Scalar(0)), shadow(size, CV_8U, cv::Scalar(0));
+  cv::Mat wall(size, CV_8U, cv::Scalar(0));  // The slab's walls the camera sees, edge-on.
+  const cv::Mat colour(size, CV_8UC3, cv::Scalar(150, 150, 150));
+  constexpr double kHigh = 25, kHalfX = 20, kHalfY = 1000, kBandTo = -12;
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      const cv::Vec3d ray = rig.camera.RayDirection(cv::Point2d(u, v));
+      const cv::Vec3d top = eye + ((kHigh - eye[2]) / ray[2]) * ray;
+      const cv::Vec3d table = eye + (-eye[2] / ray[2]) * ray;
+      if (std::fabs(top[0]) <= kHalfX && std::fabs(top[1]) <= kHalfY) {
+        if (top[0] < kBandTo) {
+          band.at<uint8_t>(v, u) = 255;
+          continue;
+        }
+        points.at<cv::Vec3f>(v, u) = cv::Vec3f(top);
+        leaf.at<uint8_t>(v, u) = measured.at<uint8_t>(v, u) = 255;
+        continue;
+      }
+      if (std::fabs(table[0]) <= kHalfX && std::fabs(table[1]) <= kHalfY) {  // A wall.
+        wall.at<uint8_t>(v, u) = 255;
+        continue;
+      }
+      // In the slab's shadow: the line to the projector meets its right wall below its top.
+      const cv::Vec3d to = projector - table;
+      const double at = (kHalfX - table[0]) / to[0];
+      const cv::Vec3d wall = table + at * to;
+      if (table[0] > kHalfX && at > 0 && wall[2] < kHigh && std::fabs(wall[1]) <= kHalfY) {
+        shadow.at<uint8_t>(v, u) = 255;
+        continue;
+      }
+      points.at<cv::Vec3f>(v, u) = cv::Vec3f(table);
+      measured.at<uint8_t>(v, u) = 255;
+    }
+  }
+  ASSERT_GT(cv::countNonZero(band), 300);
+  ASSERT_GT(cv::countNonZero(shadow), 300);
+  Look look;  // The leaf's and the table's: one shade.
+  look.Add(Look::Bin(cv::Vec3b(150, 150, 150)), 1000);
+  look.Finish();
+  const std::vector<Plane> planes = {Plane{0, 0, 0}};
+  const ProjectorSight sight(rig, points, planes, 0.5);
+  EXPECT_EQ(UnseenBeside(leaf, measured, colour, look, look, 40, 1.0), 0);
+  const int counted = UnseenBeside(leaf, measured, colour, look, look, 40, 1.0, &sight);
+  // The band's pixels four or more from the leaf (its columns but the three nearest), and at most
+  // the slab's walls beside it (the slab too), none of the shadow's.
+  cv::Mat apart;
+  cv::distanceTransform(~leaf, apart, cv::DIST_L1, 3, CV_8U);
+  const int far_in_band = cv::countNonZero(band & (apart > 3));
+  EXPECT_GE(counted, far_in_band * 9 / 10);
+  EXPECT_LE(counted, cv::countNonZero((band | wall) & (apart > 3)));
 }
 
 // A text page (paper 200 DN, lines of ink 60 DN) on a table a shade darker (184 DN, 8% of the
