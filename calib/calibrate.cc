@@ -102,6 +102,19 @@ CameraModel ToModel(cv::Size size, const cv::Mat& k, const cv::Mat& d, const cv:
 
 }  // namespace
 
+bool CalibrateOptions::Check(std::string* why) const {
+  if (!(window_squares > 0) || min_window_points < 6 || min_views < 2 ||
+      !(warn_reprojection_px > 0) || !(max_reprojection_px >= warn_reprojection_px) ||
+      !(same_pose_px >= 0) || !(outlier_factor > 1) || !(outlier_floor_px >= 0)) {
+    *why =
+        "calibrate: window_squares and warn_reprojection_px must be > 0, min_window_points >= 6, "
+        "min_views >= 2, max_reprojection_px >= warn_reprojection_px, same_pose_px and "
+        "outlier_floor_px >= 0, outlier_factor > 1";
+    return false;
+  }
+  return decode.Check(why);
+}
+
 BoardView DetectBoard(const Scan& scan, const BoardSpec& board, const std::string& name,
                       const CalibrateOptions& options) {
   BoardView view;
@@ -109,6 +122,10 @@ BoardView DetectBoard(const Scan& scan, const BoardSpec& board, const std::strin
   view.camera_size = scan.texture.size();
   view.projector_size = scan.sequence.projector_size;
   const std::string where = name + ": ";
+  if (std::string why; !options.Check(&why)) {
+    view.status = Status::Error(where + why);
+    return view;
+  }
   cv::Mat gray = scan.texture;
   if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
   std::vector<cv::Point2f> corners;
@@ -318,6 +335,10 @@ double BoardScale(const Calibration& calibration, const BoardSpec& board, const 
 CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
                                      const BoardSpec& board, const CalibrateOptions& options) {
   CalibrationSolution sol;
+  if (std::string why; !options.Check(&why)) {
+    sol.status = Status::Error(why);
+    return sol;
+  }
   std::vector<cv::Point3f> object = BoardPoints(board);
   std::vector<std::vector<cv::Point2f>> cam, proj;
   std::vector<size_t> used;

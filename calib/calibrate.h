@@ -52,6 +52,8 @@ struct CalibrateOptions {
   double outlier_factor = 3.0;
   double outlier_floor_px = 0.3;
   DecodeOptions decode;
+
+  bool Check(std::string* why) const;
 };
 
 // One board pose: the corners in the camera and the projector, or why the pose is not usable.

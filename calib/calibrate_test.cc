@@ -392,5 +392,21 @@ TEST(Calibrate, AMirroredProjectorIsReportedNotAbsorbed) {
   EXPECT_NE(s.status.message().find("--flip"), std::string::npos);
 }
 
+// A solve from one pose cannot calibrate a projector against a camera: the options say so first.
+TEST(CalibrateOptions, TooFewViewsOrAnErrorBarBelowItsWarningAreRefused) {
+  CalibrateOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.min_views = 1;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("min_views"), std::string::npos) << why;
+  const CalibrationSolution sol = SolveCalibration({}, 0, BoardSpec(), o);
+  ASSERT_FALSE(sol.status.ok());
+  EXPECT_NE(sol.status.message().find("min_views"), std::string::npos);
+  o = CalibrateOptions();
+  o.max_reprojection_px = o.warn_reprojection_px / 2;
+  EXPECT_FALSE(o.Check(&why));
+}
+
 }  // namespace
 }  // namespace vellum

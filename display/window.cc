@@ -22,7 +22,16 @@ bool ParseFlip(const std::string& text, Flip* flip) {
   return true;
 }
 
+bool WindowOptions::Check(std::string* why) const {
+  if (size.width < 1 || size.height < 1 || display < 0) {
+    *why = "window: its size must be at least 1 x 1 and its display >= 0";
+    return false;
+  }
+  return true;
+}
+
 Window::Window(const WindowOptions& options) : size_(options.size) {
+  if (std::string why; !options.Check(&why)) throw std::invalid_argument(why);
   if (SDL_Init(SDL_INIT_VIDEO) != 0) {
     throw std::runtime_error(std::string("SDL video: ") + SDL_GetError() +
                              " (no display? set SDL_VIDEODRIVER=offscreen to run headless)");

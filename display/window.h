@@ -22,6 +22,7 @@ struct WindowOptions {
   int display = 0;           // SDL display index.
   bool fullscreen = false;   // Full screen on that display.
   bool vsync = false;        // Show() returns after the next vertical blank.
+  bool Check(std::string* why) const;
 };
 
 class Window {

@@ -34,6 +34,13 @@ int DaemonMain(int argc, char** argv, const std::string& process, const std::str
                const std::vector<Flags::Spec>& specs,
                const std::function<int(const Flags&, Node&)>& body);
 
+// Throws UsageError with the options' own reason when they fail their Check() (every daemon's
+// options, once its flags are read).
+template <class Options>
+void RequireValid(const Options& options) {
+  if (std::string why; !options.Check(&why)) throw UsageError(why);
+}
+
 // Wraps f so that calling it often (Node::Run's tick) runs it at most once a second.
 std::function<void()> EverySecond(std::function<void()> f);
 

@@ -174,10 +174,30 @@ double FlatField::At(const cv::Point2d& p) const {
   return weight > 0 ? sum / weight : std::nan("");
 }
 
+bool FlatFieldOptions::Check(std::string* why) const {
+  if (!(target_albedo > 0 && target_albedo <= 1) || cell_px < 1 || min_samples < 1) {
+    *why = "flat field: target_albedo must be in (0, 1], cell_px and min_samples >= 1";
+    return false;
+  }
+  return true;
+}
+
+bool AlbedoOptions::Check(std::string* why) const {
+  if (!(min_cos > 0 && min_cos < 1) || normal_window_px < 1) {
+    *why = "albedo: min_cos must be in (0, 1), normal_window_px >= 1";
+    return false;
+  }
+  return true;
+}
+
 FlatField MeasureFlatField(const cv::Mat& amplitude, const cv::Mat& points,
                            const Calibration& calibration, const FlatFieldOptions& options,
                            Status* status) {
   FlatField out;
+  if (std::string why; !options.Check(&why)) {
+    *status = Status::Error(why);
+    return out;
+  }
   if (amplitude.type() != CV_32F || points.type() != CV_32FC3 ||
       amplitude.size() != points.size()) {
     *status = Status::Error(
@@ -242,6 +262,10 @@ AlbedoResult EstimateAlbedo(const cv::Mat& amplitude, const cv::Mat& points, con
                             const Calibration& calibration, const FlatField& flat_field,
                             const AlbedoOptions& options) {
   AlbedoResult out;
+  if (std::string why; !options.Check(&why)) {
+    out.status = Status::Error(why);
+    return out;
+  }
   if (amplitude.type() != CV_32F || points.type() != CV_32FC3 ||
       amplitude.size() != points.size()) {
     out.status = Status::Error(
@@ -418,6 +442,10 @@ AlbedoResult CorrectTexture(const cv::Mat& texture, const cv::Mat& points, const
                             const Calibration& calibration, const StudioField& field,
                             const AlbedoOptions& options) {
   AlbedoResult out;
+  if (std::string why; !options.Check(&why)) {
+    out.status = Status::Error(why);
+    return out;
+  }
   if (!TextureKind(texture) || points.type() != CV_32FC3 || texture.size() != points.size()) {
     out.status = Status::Error(
         "reflectance: the texture (8 or 16 bit) and the point map must be "

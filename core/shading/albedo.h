@@ -20,6 +20,7 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <string>
 #include <vector>
 
 #include "core/common/status.h"
@@ -45,6 +46,8 @@ struct FlatFieldOptions {
   double target_albedo = 0.9;  // The white target's reflectance (its maker's figure).
   int cell_px = 8;             // Projector pixels per cell side.
   int min_samples = 4;         // Camera pixels a cell needs to be measured.
+
+  bool Check(std::string* why) const;
 };
 
 // The flat field from a scan of a white target lying flat on the table (z = 0): `amplitude` is
@@ -58,6 +61,8 @@ FlatField MeasureFlatField(const cv::Mat& amplitude, const cv::Mat& points,
 struct AlbedoOptions {
   double min_cos = 0.35;     // Incidence more grazing than this (about 70 degrees) is marked.
   int normal_window_px = 4;  // Half-size of the window the page's normal is taken over.
+
+  bool Check(std::string* why) const;
 };
 
 struct AlbedoResult {

@@ -225,5 +225,26 @@ TEST(StudioField, TheLampsShadingIsTakenOutOfTheTexture) {
   }
 }
 
+// Options no shading model can use are refused with their reason, not run.
+TEST(ShadingOptions, NonsenseIsRefusedByName) {
+  FlatFieldOptions field;
+  field.target_albedo = 0;  // A target that reflects nothing.
+  Status s = Status::Ok();
+  MeasureFlatField(cv::Mat::zeros(4, 4, CV_32F), cv::Mat(4, 4, CV_32FC3, cv::Scalar::all(0)),
+                   DefaultRig(), field, &s);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("target_albedo"), std::string::npos) << s.message();
+  AlbedoOptions albedo;
+  albedo.normal_window_px = 0;
+  const AlbedoResult r =
+      EstimateAlbedo(cv::Mat::zeros(4, 4, CV_32F), cv::Mat(4, 4, CV_32FC3, cv::Scalar::all(0)),
+                     cv::Mat(), DefaultRig(), FlatField(), albedo);
+  ASSERT_FALSE(r.status.ok());
+  EXPECT_NE(r.status.message().find("normal_window_px"), std::string::npos);
+  std::string why;
+  EXPECT_TRUE(FlatFieldOptions().Check(&why)) << why;
+  EXPECT_TRUE(AlbedoOptions().Check(&why)) << why;
+}
+
 }  // namespace
 }  // namespace vellum

@@ -40,10 +40,22 @@ Status LightLevels(const std::vector<cv::Mat>& images, std::vector<cv::Mat>* lev
 
 }  // namespace
 
+bool PhotometricOptions::Check(std::string* why) const {
+  if (!(min_level >= 0 && min_level < max_level && max_level <= 1)) {
+    *why = "photometric: min_level and max_level must hold 0 <= min_level < max_level <= 1";
+    return false;
+  }
+  return true;
+}
+
 PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
                                      const std::vector<cv::Vec3d>& directions, const cv::Mat& mask,
                                      const PhotometricOptions& options) {
   PhotometricResult result;
+  if (std::string why; !options.Check(&why)) {
+    result.status = Status::Error(why);
+    return result;
+  }
   if (images.size() < 3 || images.size() != directions.size()) {
     result.status = Status::Error(
         "photometric normals need three or more lights, each with a "
@@ -122,6 +134,10 @@ PhotometricResult PhotometricNormals(const std::vector<cv::Mat>& images,
 PtmResult FitPtm(const std::vector<cv::Mat>& images, const std::vector<cv::Vec3d>& directions,
                  const cv::Mat& right, const cv::Mat& up, const PhotometricOptions& options) {
   PtmResult result;
+  if (std::string why; !options.Check(&why)) {
+    result.status = Status::Error(why);
+    return result;
+  }
   if (images.size() < 6 || images.size() != directions.size() || right.type() != CV_32FC3 ||
       up.type() != CV_32FC3 || right.size() != images[0].size() || up.size() != right.size()) {
     result.status = Status::Error(

@@ -14,6 +14,7 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <string>
 #include <vector>
 
 #include "core/common/status.h"
@@ -23,6 +24,8 @@ namespace vellum {
 struct PhotometricOptions {
   double min_level = 0.03;  // Share of full scale below which a light is taken as not lighting.
   double max_level = 0.98;  // Share of full scale above which it is taken as clipped.
+
+  bool Check(std::string* why) const;
 };
 
 struct PhotometricResult {

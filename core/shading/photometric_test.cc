@@ -139,5 +139,19 @@ TEST(Photometric, NormalMapEncodesRightUpOut) {
   EXPECT_EQ(im.at<cv::Vec3w>(0, 2), cv::Vec3w(0, 0, 0));  // Marked.
 }
 
+// A light taken as clipped below the level it is taken as lighting: refused, not run.
+TEST(PhotometricOptions, LevelsOutOfOrderAreRefused) {
+  PhotometricOptions o;
+  o.min_level = 0.5;
+  o.max_level = 0.4;
+  const std::vector<cv::Mat> images(3, cv::Mat::zeros(4, 4, CV_8U));
+  const std::vector<cv::Vec3d> directions = {{0, 0, 1}, {1, 0, 1}, {0, 1, 1}};
+  const PhotometricResult r = PhotometricNormals(images, directions, cv::Mat(), o);
+  ASSERT_FALSE(r.status.ok());
+  EXPECT_NE(r.status.message().find("min_level"), std::string::npos) << r.status.message();
+  std::string why;
+  EXPECT_TRUE(PhotometricOptions().Check(&why)) << why;
+}
+
 }  // namespace
 }  // namespace vellum

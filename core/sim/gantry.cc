@@ -5,6 +5,7 @@
 #include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 namespace vellum {
 namespace {
@@ -120,10 +121,44 @@ Calibration QuickRig() {
   return rig;
 }
 
+bool LightOptions::Check(std::string* why) const {
+  auto share = [](double x) { return x >= 0 && x <= 1; };
+  if (!(ambient >= 0) || !(projector_gain >= 0) || !(studio_light >= 0) ||
+      !(defocus_sigma_px >= 0) || !(noise_dn >= 0) || !share(table_albedo) || !share(grain) ||
+      !(shadow_bias_mm > 0) || albedo_supersampling < 1 || !(camera_blur_px >= 0) ||
+      !(shot_noise_dn >= 0) || (texture_bits != 8 && texture_bits != 16) ||
+      !(projector_vignetting >= 0 && projector_vignetting < 1)) {
+    *why =
+        "light: ambient, projector_gain, studio_light, defocus_sigma_px, noise_dn, camera_blur_px "
+        "and shot_noise_dn must be >= 0, table_albedo and grain in [0, 1], shadow_bias_mm > 0, "
+        "albedo_supersampling >= 1, texture_bits 8 or 16, projector_vignetting in [0, 1)";
+    return false;
+  }
+  return true;
+}
+
+bool SceneOptions::Check(std::string* why) const {
+  auto share = [](double x) { return x >= 0 && x <= 1; };
+  if (!(support_mm.width > 0 && support_mm.height > 0) || !(support_height_mm >= 0) ||
+      !share(support_albedo) || !(frame_mm.width > 0 && frame_mm.height > 0) ||
+      !(frame_window_margin_mm >= 0) || !(frame_thickness_mm >= 0) || !share(frame_albedo) ||
+      !(spread_gap_mm >= 0)) {
+    *why =
+        "scene: support_mm and frame_mm must have a size > 0, support_height_mm, "
+        "frame_window_margin_mm, frame_thickness_mm and spread_gap_mm >= 0, support_albedo and "
+        "frame_albedo in [0, 1]";
+    return false;
+  }
+  return true;
+}
+
 VirtualGantry::VirtualGantry(const Calibration& rig, const PageOptions& page_options,
                              const TextureOptions& texture_options, const LightOptions& light,
                              const SceneOptions& scene)
     : rig_(rig), light_(light), scene_(scene) {
+  if (std::string why; !light.Check(&why) || !scene.Check(&why)) {
+    throw std::invalid_argument("virtual gantry: " + why);
+  }
   if (light.grain > 0) {
     // Eight waves of random direction, wavelength 2 to 40 mm and phase.
     cv::RNG rng(light.grain_seed);

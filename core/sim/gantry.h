@@ -48,6 +48,8 @@ struct LightOptions {
   // cos(incidence) / distance^2 (no shadows), the sum scaled to 1 at the world's origin on the
   // table. None: the texture is lit evenly, as before.
   std::vector<cv::Vec3d> studio_lamps;
+
+  bool Check(std::string* why) const;
 };
 
 // A light of the station other than the texture's studio lights, each giving one
@@ -91,6 +93,8 @@ struct SceneOptions {
   double frame_albedo = 0.80;
   bool spread = false;         // An open book: two pages (kGutter) left and right of x = 0.
   double spread_gap_mm = 2.0;  // Between the two pages' gutter edges, mm.
+
+  bool Check(std::string* why) const;
 };
 
 // The default station: camera 1600x1200, f = 2400 px, 600 mm above the table (0.25 mm/px),
@@ -112,6 +116,7 @@ struct GroundTruth {
 class VirtualGantry {
  public:
   // `page` is the leaf; with scene.spread, the shape of both pages of the book is kGutter.
+  // Options that fail their Check() throw std::invalid_argument, naming the option.
   VirtualGantry(const Calibration& rig, const PageOptions& page, const TextureOptions& texture,
                 const LightOptions& light = LightOptions(),
                 const SceneOptions& scene = SceneOptions());

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 
 namespace vellum {
 namespace {
@@ -67,7 +68,27 @@ bool ParsePageShape(const std::string& text, PageShape* shape) {
   return false;
 }
 
+bool PageOptions::Check(std::string* why) const {
+  auto angle = [](double deg, double below) { return deg >= 0 && deg < below; };
+  if (!(size_mm.width > 0 && size_mm.height > 0) || !(curl_radius_mm > 0) ||
+      !(curl_length_mm >= 0) || !(fold_radius_mm > 0) || !angle(fold_slope_deg, 90) ||
+      !(cone_half_angle_deg > 0 && cone_half_angle_deg < 90) || !(cone_apex_distance_mm > 0) ||
+      !(bump_sigma_mm > 0) || !(ripple_period_mm > 0) || !angle(ripple_slope_deg, 90) ||
+      !(gutter_radius_mm > 0) || !angle(gutter_angle_deg, 180) || !(thickness_mm >= 0) ||
+      !(burn_depth_mm >= 0) || holes < 0 || !(ridge_height_mm >= 0) || !(ridge_sigma_mm > 0)) {
+    *why =
+        "page: size_mm, curl_radius_mm, fold_radius_mm, cone_apex_distance_mm, bump_sigma_mm, "
+        "ripple_period_mm, gutter_radius_mm and ridge_sigma_mm must be > 0, curl_length_mm, "
+        "thickness_mm, burn_depth_mm, holes and ridge_height_mm >= 0, fold_slope_deg and "
+        "ripple_slope_deg in [0, 90), cone_half_angle_deg in (0, 90), gutter_angle_deg in "
+        "[0, 180)";
+    return false;
+  }
+  return true;
+}
+
 Page::Page(const PageOptions& options) : options_(options) {
+  if (std::string why; !options.Check(&why)) throw std::invalid_argument(why);
   const double w = options.size_mm.width, h = options.size_mm.height;
   if (options.shape == PageShape::kCurl) {
     // Flat from the left edge; the last curl_length_mm of the page roll up.

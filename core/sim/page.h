@@ -73,6 +73,8 @@ struct PageOptions {
   // table): world = pose_rotation * shaped point + pose_translation.
   cv::Matx33d pose_rotation = cv::Matx33d::eye();
   cv::Vec3d pose_translation{0.0, 0.0, 0.0};
+
+  bool Check(std::string* why) const;
 };
 
 // The rotation of a page pose: about x, then y, then z (degrees), R = Rz Ry Rx.
@@ -80,6 +82,7 @@ cv::Matx33d PoseRotation(double rx_deg, double ry_deg, double rz_deg);
 
 class Page {
  public:
+  // Options that fail their Check() throw std::invalid_argument.
   explicit Page(const PageOptions& options);
 
   const PageOptions& options() const { return options_; }

@@ -1,6 +1,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <functional>
+#include <stdexcept>
+#include <string>
 
 #include "core/sim/evaluate.h"
 #include "core/sim/gantry.h"
@@ -162,6 +165,35 @@ TEST(Gantry, AColourPageGivesAColourTextureAndGrayPatternFrames) {
   EXPECT_GT(right[1], 2 * right[2]) << right;
   EXPECT_NEAR(table[0], table[2], 2) << table;  // The table stays gray.
   EXPECT_NEAR(table[1], table[2], 2) << table;
+}
+
+// The virtual gantry refuses a scene it cannot draw, naming the option, rather than drawing
+// something else.
+TEST(SimOptions, AnImpossibleSceneIsRefusedByName) {
+  auto refused = [](const std::function<void()>& make, const std::string& name) {
+    try {
+      make();
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+      return true;
+    }
+    return false;
+  };
+  PageOptions page;
+  page.size_mm = {0, 240};
+  EXPECT_TRUE(refused([&] { Page p(page); }, "size_mm"));
+  TextureOptions texture;
+  texture.kind = TextureKind::kImage;  // And no image.
+  EXPECT_TRUE(refused([&] { PageTexture t(texture, {100, 100}); }, "image"));
+  LightOptions light;
+  light.texture_bits = 12;
+  EXPECT_TRUE(refused([&] { VirtualGantry g(QuickRig(), PageOptions(), TextureOptions(), light); },
+                      "texture_bits"));
+  SceneOptions scene;
+  scene.support_albedo = 1.5;
+  EXPECT_TRUE(refused(
+      [&] { VirtualGantry g(QuickRig(), PageOptions(), TextureOptions(), LightOptions(), scene); },
+      "support_albedo"));
 }
 
 }  // namespace

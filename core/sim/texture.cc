@@ -4,6 +4,7 @@
 #include <cmath>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 
 namespace vellum {
 namespace {
@@ -63,8 +64,23 @@ bool ParseTextureKind(const std::string& text, TextureKind* kind) {
   return false;
 }
 
+bool TextureOptions::Check(std::string* why) const {
+  auto share = [](double x) { return x >= 0 && x <= 1; };
+  if (!share(paper_albedo) || !share(ink_albedo) || !(square_mm > 0) || !(margin_mm >= 0)) {
+    *why = "texture: paper_albedo and ink_albedo must be in [0, 1], square_mm > 0, margin_mm >= 0";
+    return false;
+  }
+  if (kind == TextureKind::kImage && (image.empty() || image.depth() != CV_8U ||
+                                      (image.channels() != 1 && image.channels() != 3))) {
+    *why = "texture: an image page needs an 8-bit gray or BGR image";
+    return false;
+  }
+  return true;
+}
+
 PageTexture::PageTexture(const TextureOptions& options, cv::Size2d page_size_mm)
     : options_(options), page_size_(page_size_mm) {
+  if (std::string why; !options.Check(&why)) throw std::invalid_argument(why);
   cv::Mat gray;
   if (options.kind == TextureKind::kText) {
     gray = MakeText(page_size_mm, options.seed);

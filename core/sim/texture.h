@@ -20,10 +20,13 @@ struct TextureOptions {
   double margin_mm = 10.0;     // kCheckerboard: bare paper around the board, mm.
   uint64_t seed = 1;           // kText: seed of the generated text.
   cv::Mat image;  // kImage: 8-bit gray or BGR image covering the whole page, top row at its top.
+
+  bool Check(std::string* why) const;
 };
 
 class PageTexture {
  public:
+  // Options that fail their Check() throw std::invalid_argument.
   PageTexture(const TextureOptions& options, cv::Size2d page_size_mm);
   // Albedo (0..1) at page coordinate (s, t) mm.
   double Albedo(double s, double t) const;

@@ -7,6 +7,14 @@
 
 namespace vellum::station {
 
+bool CameraNodeOptions::Check(std::string* why) const {
+  if (!(preview_hz > 0)) {
+    *why = "camera: preview_hz must be > 0";
+    return false;
+  }
+  return true;
+}
+
 CameraNode::CameraNode(Node* node, std::unique_ptr<Camera> camera, const CameraNodeOptions& options)
     : node_(node), camera_(std::move(camera)), preview_period_(1.0 / options.preview_hz) {
   node->Log(camera_->Describe());

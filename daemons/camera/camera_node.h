@@ -15,6 +15,7 @@ namespace vellum::station {
 
 struct CameraNodeOptions {
   double preview_hz = 2;  // Live preview rate on PREVIEW while idle.
+  bool Check(std::string* why) const;
 };
 
 class CameraNode {

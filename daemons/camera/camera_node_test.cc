@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "daemons/camera/sim_camera.h"
+#include "station/daemon.h"
 #include "station/messages.h"
 #include "station/testing.h"
 #include "vellum/capture_t.hpp"
@@ -119,6 +120,23 @@ TEST_F(CameraNodeTest, BadPatternsAreReportedAndTheNodeGoesOn) {
   pattern_shown_t good = Shown(44, 0);
   bus_.probe().Publish(channel::kPatternShown, &good);
   EXPECT_TRUE(bus_.RunUntil([&] { return captures->size() == 1; }));
+}
+
+// What the daemon's flags or config may leave nonsensical is refused by name (the daemon exits 2
+// with it, by RequireValid), not run.
+TEST(CameraNodeOptions, NonsenseIsRefusedByName) {
+  CameraNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.preview_hz = 0;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("preview_hz"), std::string::npos) << why;
+  EXPECT_THROW(RequireValid(o), UsageError);
+  SimCameraOptions sim;
+  EXPECT_TRUE(sim.Check(&why)) << why;
+  sim.light.noise_dn = -1;
+  EXPECT_FALSE(sim.Check(&why));
+  EXPECT_NE(why.find("noise_dn"), std::string::npos) << why;
 }
 
 }  // namespace

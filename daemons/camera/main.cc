@@ -40,6 +40,7 @@ int main(int argc, char** argv) {
                         const Status s = SimOptionsFromFlags(flags, &sim.page, &sim.texture,
                                                              &sim.light, &sim.scene, &sim.seed);
                         if (!s.ok()) throw UsageError("--texture " + s.message());
+                        RequireValid(sim);
                         camera = std::make_unique<SimCamera>(sim);
                       } else if (backend == "v4l2") {
                         V4l2Options v4l2;
@@ -59,6 +60,7 @@ int main(int argc, char** argv) {
                       } else {
                         throw UsageError("--backend must be sim or v4l2, got '" + backend + "'");
                       }
+                      RequireValid(options);
                       CameraNode capture(&node, std::move(camera), options);
                       return node.Run([&] { capture.Tick(); });
                     });

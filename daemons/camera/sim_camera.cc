@@ -7,6 +7,11 @@
 
 namespace vellum::station {
 
+bool SimCameraOptions::Check(std::string* why) const {
+  return rig.Check(why) && page.Check(why) && texture.Check(why) && light.Check(why) &&
+         scene.Check(why);
+}
+
 SimCamera::SimCamera(const SimCameraOptions& options)
     : options_(options),
       gantry_(std::make_unique<VirtualGantry>(options.rig, options.page, options.texture,

@@ -19,6 +19,7 @@ struct SimCameraOptions {
   LightOptions light;
   SceneOptions scene;
   uint64_t seed = 1;  // Each frame's noise from it and the pattern index: repeatable.
+  bool Check(std::string* why) const;
 };
 
 class SimCamera : public Camera {

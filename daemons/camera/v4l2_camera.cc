@@ -41,7 +41,16 @@ void V4l2Camera::Close() {
   fd_ = -1;
 }
 
+bool V4l2Options::Check(std::string* why) const {
+  if (device.empty() || size.width < 1 || size.height < 1 || exposure < -1 || gain < -1) {
+    *why = "v4l2: the device must be named, its size at least 1 x 1, exposure and gain >= -1";
+    return false;
+  }
+  return true;
+}
+
 Status V4l2Camera::Open(const V4l2Options& o) {
+  if (std::string why; !o.Check(&why)) return Status::Error(why);
   Close();
   device_ = o.device;
   const std::string& dev = o.device;

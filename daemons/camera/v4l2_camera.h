@@ -19,6 +19,8 @@ struct V4l2Options {
   bool gray = false;  // Ask for GREY (monochrome cameras) instead of BGR24.
   int exposure = -1;  // V4L2_CID_EXPOSURE_ABSOLUTE, 100 us units; -1 = leave as is.
   int gain = -1;      // V4L2_CID_GAIN; -1 = leave as is.
+
+  bool Check(std::string* why) const;
 };
 
 class V4l2Camera : public Camera {

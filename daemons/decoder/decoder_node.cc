@@ -23,6 +23,14 @@ std::unique_ptr<DataLock> LockData(const std::string& data_dir) {
 
 }  // namespace
 
+bool DecoderNodeOptions::Check(std::string* why) const {
+  if (data_dir.empty() || !(scan_timeout_s > 0)) {
+    *why = "decoder: data_dir must be named and scan_timeout_s > 0";
+    return false;
+  }
+  return decode.Check(why);
+}
+
 DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
     : node_(node),
       options_(options),

@@ -33,6 +33,7 @@ struct DecoderNodeOptions {
   WarningLimits
       limits;  // What makes its decode doubtful (frame_contradicts), as `vellum process` has.
   double scan_timeout_s = 30;  // An incomplete scan with no capture for this long is given up.
+  bool Check(std::string* why) const;
 };
 
 class DecoderNode {

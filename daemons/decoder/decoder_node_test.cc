@@ -17,6 +17,7 @@
 
 #include "io/calibration_io.h"
 #include "io/scan_io.h"
+#include "station/daemon.h"
 #include "station/messages.h"
 #include "station/scan_log.h"
 #include "station/testing.h"
@@ -580,6 +581,19 @@ TEST_F(DecoderNodeTest, ACalibrationMidScanIsRefusedAndTheScanKeepsItsOwn) {
   Calibration recorded;
   ASSERT_TRUE(ReadCalibration(ScanFolder::For(data_, 71).calibration(), &recorded).ok());
   EXPECT_EQ(recorded.camera.matrix(0, 0), QuickRig().camera.matrix(0, 0));
+}
+
+TEST(DecoderNodeOptions, NonsenseIsRefusedByName) {
+  DecoderNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.scan_timeout_s = 0;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("scan_timeout_s"), std::string::npos) << why;
+  o = DecoderNodeOptions();
+  o.data_dir.clear();
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_THROW(RequireValid(o), UsageError);
 }
 
 }  // namespace

@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
         options.data_dir = flags.Get("data");
         options.decode = DecodeOptionsFromFlags(flags);
         options.scan_timeout_s = flags.GetDouble("scan-timeout", 1, 3600);
+        RequireValid(options);
         DecoderNode decoder(&node, options);
         return node.Run([&] { decoder.Tick(); });
       });

@@ -8,6 +8,14 @@
 
 namespace vellum::station {
 
+bool FlattenerNodeOptions::Check(std::string* why) const {
+  if (data_dir.empty()) {
+    *why = "flattener: data_dir must be named";
+    return false;
+  }
+  return pipeline.Check(why) && (!fallback_calibration || fallback_calibration->Check(why));
+}
+
 FlattenerNode::FlattenerNode(Node* node, const FlattenerNodeOptions& options)
     : node_(node),
       options_(options),

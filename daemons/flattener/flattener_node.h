@@ -19,6 +19,7 @@ struct FlattenerNodeOptions {
   std::string data_dir = "scans";  // Station data folder: results go to <data_dir>/scan-<id>.
   PipelineOptions pipeline;        // Its outline, mesh, flatten and limits parts.
   std::optional<Calibration> fallback_calibration;  // For a scan without CALIBRATION.
+  bool Check(std::string* why) const;
 };
 
 class FlattenerNode {

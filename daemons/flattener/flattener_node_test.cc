@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <opencv2/imgproc.hpp>
 
+#include "station/daemon.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
 #include "vellum/scan_progress_t.hpp"
@@ -98,6 +99,19 @@ TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   PublishPoints(9);
   EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
   EXPECT_EQ(node.Counter("scans flattened"), 1);
+}
+
+TEST(FlattenerNodeOptions, NonsenseIsRefusedByName) {
+  FlattenerNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.pipeline.outline.unseen_clear_mm = 0;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("unseen_clear_mm"), std::string::npos) << why;
+  o = FlattenerNodeOptions();
+  o.data_dir.clear();
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_THROW(RequireValid(o), UsageError);
 }
 
 }  // namespace

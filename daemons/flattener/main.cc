@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
                       options.data_dir = flags.Get("data");
                       FlattenGroupFromFlags(flags, &options.pipeline);
                       options.fallback_calibration = FallbackCalibrationFromFlags(flags);
+                      RequireValid(options);
                       FlattenerNode flattener(&node, options);
                       return node.Run(EverySecond([&] { flattener.Tick(); }));
                     });

@@ -11,6 +11,14 @@ namespace {
 constexpr char kScanOver[] = "the scan is over";
 }  // namespace
 
+bool LightsNodeOptions::Check(std::string* why) const {
+  if (settle.count() < 0 || !(max_on.count() > 0)) {
+    *why = "lights: settle must be >= 0 and max_on > 0";
+    return false;
+  }
+  return true;
+}
+
 LightsNode::LightsNode(Node* node, std::unique_ptr<Lights> lights, const LightsNodeOptions& options)
     : node_(node), lights_(std::move(lights)), options_(options) {
   node->Subscribe<light_t>(channel::kLightRequest, [this](const light_t& m) { OnRequest(m); });

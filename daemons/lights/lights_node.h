@@ -22,6 +22,7 @@ struct LightsNodeOptions {
   StationLights lights;                 // The station's lights file.
   std::chrono::milliseconds settle{0};  // After switching on, before LIGHT_ON (lamps warm up).
   std::chrono::duration<double> max_on{60.0};  // The longest a light stays on.
+  bool Check(std::string* why) const;
 };
 
 class LightsNode {

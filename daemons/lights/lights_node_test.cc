@@ -13,6 +13,7 @@
 #include <set>
 
 #include "daemons/lights/relay_lights.h"
+#include "station/daemon.h"
 #include "station/messages.h"
 #include "station/testing.h"
 
@@ -176,6 +177,15 @@ TEST(LightsNodeTest, TheManualBackendPromptsTheOperator) {
   EXPECT_EQ(prompts->size(), 2u);
   EXPECT_EQ(prompts->back().index, -1);
   EXPECT_NE(prompts->back().text.find("studio lamps on"), std::string::npos);
+}
+
+TEST(LightsNodeOptions, NonsenseIsRefusedByName) {
+  LightsNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.max_on = std::chrono::duration<double>(0);
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("max_on"), std::string::npos) << why;
 }
 
 }  // namespace

@@ -57,6 +57,7 @@ int main(int argc, char** argv) {
         } else {
           throw UsageError("--backend must be relay, manual or sim, got '" + backend + "'");
         }
+        RequireValid(options);
         LightsNode switcher(&node, std::move(lights), options);
         return node.Run([&] { switcher.Tick(); });
       });

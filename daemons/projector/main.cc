@@ -74,6 +74,8 @@ int main(int argc, char** argv) {
           throw UsageError("--flip must be none, horizontal, vertical or both, got '" +
                            flags.Get("flip") + "'");
         }
+        RequireValid(options);
+        RequireValid(screen);
         std::unique_ptr<Projector> projector;
         try {
           projector = std::make_unique<SdlProjector>(screen);

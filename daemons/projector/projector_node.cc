@@ -11,6 +11,14 @@
 
 namespace vellum::station {
 
+bool ProjectorNodeOptions::Check(std::string* why) const {
+  if (settle.count() < 0 || !(capture_timeout.count() > 0) || !(light_timeout.count() > 0)) {
+    *why = "projector: settle must be >= 0, capture_timeout and light_timeout > 0";
+    return false;
+  }
+  return patterns.Check(why) && (!calibration || calibration->Check(why));
+}
+
 ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
                              const ProjectorNodeOptions& options)
     : node_(node),

@@ -40,6 +40,7 @@ struct ProjectorNodeOptions {
   std::vector<ScanLight> lights;
   // Longest wait for a light's LIGHT_ON (an operator switching by hand needs time).
   std::chrono::duration<double> light_timeout{120.0};
+  bool Check(std::string* why) const;
 };
 
 class ProjectorNode {

@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "daemons/projector/sdl_projector.h"
+#include "station/daemon.h"
 #include "station/messages.h"
 #include "station/testing.h"
 #include "vellum/calibration_t.hpp"
@@ -288,6 +289,20 @@ TEST_F(ProjectorNodeTest, EachExtraLightIsAskedForAndCapturedAfterThePatterns) {
   EXPECT_TRUE(bus_.RunUntil([&] { return requests->back().index == -1; }));
   EXPECT_EQ(requests->back().scan_id, 91);
   EXPECT_EQ(node.Counter("scans failed"), 1);
+}
+
+TEST(ProjectorNodeOptions, NonsenseIsRefusedByName) {
+  ProjectorNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.capture_timeout = std::chrono::duration<double>(0);
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("capture_timeout"), std::string::npos) << why;
+  SdlProjectorOptions screen;
+  EXPECT_TRUE(screen.Check(&why)) << why;
+  screen.size = {0, 768};
+  EXPECT_FALSE(screen.Check(&why));
+  EXPECT_THROW(RequireValid(screen), UsageError);
 }
 
 }  // namespace

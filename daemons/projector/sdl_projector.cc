@@ -15,6 +15,14 @@ display::WindowOptions ToWindow(const SdlProjectorOptions& o) {
 
 }  // namespace
 
+bool SdlProjectorOptions::Check(std::string* why) const {
+  if (size.width < 1 || size.height < 1 || display < 0) {
+    *why = "projector screen: its size must be at least 1 x 1 and its display >= 0";
+    return false;
+  }
+  return true;
+}
+
 SdlProjector::SdlProjector(const SdlProjectorOptions& options)
     : window_(ToWindow(options)), flip_(options.flip) {}
 

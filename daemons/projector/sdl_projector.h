@@ -12,6 +12,7 @@ struct SdlProjectorOptions {
   int display = 0;           // SDL display index of the projector.
   bool fullscreen = true;
   display::Flip flip = display::Flip::kNone;  // Undoes the mirror.
+  bool Check(std::string* why) const;
 };
 
 class SdlProjector : public Projector {

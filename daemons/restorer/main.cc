@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
                       options.data_dir = flags.Get("data");
                       RestoreGroupFromFlags(flags, &options.pipeline);
                       options.fallback_calibration = FallbackCalibrationFromFlags(flags);
+                      RequireValid(options);
                       RestorerNode restorer(&node, options);
                       return node.Run(EverySecond([&] { restorer.Tick(); }));
                     });

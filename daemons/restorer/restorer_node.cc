@@ -16,6 +16,14 @@
 
 namespace vellum::station {
 
+bool RestorerNodeOptions::Check(std::string* why) const {
+  if (data_dir.empty() || !(preview_pixels >= 1)) {
+    *why = "restorer: data_dir must be named and preview_pixels >= 1";
+    return false;
+  }
+  return pipeline.Check(why) && (!fallback_calibration || fallback_calibration->Check(why));
+}
+
 RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
     : node_(node),
       options_(options),

@@ -23,6 +23,7 @@ struct RestorerNodeOptions {
   PipelineOptions pipeline;        // Its restore options and limits.
   std::optional<Calibration> fallback_calibration;  // For a scan without CALIBRATION.
   double preview_pixels = 1 << 20;  // RESTORED's preview is scaled down to at most this many.
+  bool Check(std::string* why) const;
 };
 
 class RestorerNode {

@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "core/common/text.h"
+#include "station/daemon.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
 #include "vellum/restored_t.hpp"
@@ -110,6 +111,15 @@ TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   Publish(8, Sheet(8));
   EXPECT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
   EXPECT_EQ(node.Counter("scans restored"), 1);
+}
+
+TEST(RestorerNodeOptions, NonsenseIsRefusedByName) {
+  RestorerNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.preview_pixels = 0;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("preview_pixels"), std::string::npos) << why;
 }
 
 }  // namespace

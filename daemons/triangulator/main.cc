@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
                       options.data_dir = flags.Get("data");
                       options.triangulate = TriangulateOptionsFromFlags(flags);
                       options.fallback_calibration = FallbackCalibrationFromFlags(flags);
+                      RequireValid(options);
                       TriangulatorNode triangulator(&node, options);
                       return node.Run(EverySecond([&] { triangulator.Tick(); }));
                     });

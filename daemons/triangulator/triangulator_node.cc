@@ -19,6 +19,14 @@ bool SameCalibration(const Calibration& a, const Calibration& b) {
 
 }  // namespace
 
+bool TriangulatorNodeOptions::Check(std::string* why) const {
+  if (data_dir.empty()) {
+    *why = "triangulator: data_dir must be named";
+    return false;
+  }
+  return triangulate.Check(why) && (!fallback_calibration || fallback_calibration->Check(why));
+}
+
 TriangulatorNode::TriangulatorNode(Node* node, const TriangulatorNodeOptions& options)
     : node_(node),
       options_(options),

@@ -22,6 +22,7 @@ struct TriangulatorNodeOptions {
   TriangulateOptions triangulate;
   WarningLimits limits;  // What makes its points doubtful (decode_low), as `vellum process` has.
   std::optional<Calibration> fallback_calibration;  // For a scan without CALIBRATION.
+  bool Check(std::string* why) const;
 };
 
 class TriangulatorNode {

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "station/daemon.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
 #include "vellum/scan_progress_t.hpp"
@@ -103,6 +104,18 @@ TEST_F(TriangulatorNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   PublishChunks(Chunks(9));
   EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
   EXPECT_EQ(node.Counter("scans triangulated"), 1);
+}
+
+TEST(TriangulatorNodeOptions, NonsenseIsRefusedByName) {
+  TriangulatorNodeOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.fallback_calibration = Calibration();  // Camera and projector at one point.
+  EXPECT_FALSE(o.Check(&why));
+  o = TriangulatorNodeOptions();
+  o.data_dir.clear();
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("data_dir"), std::string::npos) << why;
 }
 
 }  // namespace

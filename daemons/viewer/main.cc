@@ -27,6 +27,7 @@ int main(int argc, char** argv) {
                       window.title = "vellum station";
                       window.size = flags.GetSize("size");
                       window.fullscreen = flags.GetBool("fullscreen");
+                      RequireValid(window);
                       ViewerNode viewer(&node, std::make_unique<display::Window>(window));
                       return node.Run([&] { viewer.Tick(); }, 20);
                     });

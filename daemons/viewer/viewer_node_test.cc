@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <opencv2/imgproc.hpp>
 
+#include "station/daemon.h"
 #include "station/messages.h"
 #include "station/testing.h"
 #include "vellum/light_t.hpp"
@@ -528,6 +529,15 @@ TEST_F(ViewerNodeTest, OSaysWhetherTheScansAreLeavesOrABookAndEachRequestCarries
   }
   PushKey(SDLK_o);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.object() == ObjectKind::kAuto; }, 10));
+}
+
+TEST(WindowOptions, NonsenseIsRefusedByName) {
+  display::WindowOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.display = -1;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("display"), std::string::npos) << why;
 }
 
 }  // namespace
