@@ -141,7 +141,7 @@ RestoreResult RunRestoreStage(const Fixture& f, const std::string& dir) {
   PipelineOptions options;
   const StageReport r =
       RestoreStage(f.texture, f.leaf, f.mesh, f.flat, DefaultRig().camera, options.restore,
-                   options.limits, IccProfile(), {}, dir, "", &restored);
+                   options.limits, IccProfile(), ScanContext(), {}, dir, "", &restored);
   if (!r.status.ok()) restored.status = r.status;
   return restored;
 }
@@ -171,9 +171,9 @@ void BM_Vellum_RestoreStageAlbedoAndTwoLights(benchmark::State& state) {
     RestoreResult albedo;
     LightsResult lit;
     const StageReport a = AlbedoStage(f.amplitude, f.points, f.leaf, DefaultRig(), f.field,
-                                      restored, {}, dir, "", &albedo);
-    const StageReport l =
-        LightsStage(lights, f.leaf, f.mesh, f.flat, IccProfile(), restored, {}, dir, "", &lit);
+                                      restored, ScanContext(), dir, "", &albedo);
+    const StageReport l = LightsStage(lights, f.leaf, f.mesh, f.flat, IccProfile(), restored,
+                                      ScanContext(), dir, "", &lit);
     if (!restored.status.ok() || !a.status.ok() || !l.status.ok()) {
       state.SkipWithError("a stage failed");
     }

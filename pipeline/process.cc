@@ -115,8 +115,9 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
     return out;
   }
   next("outline", 0.65);
-  if (!ran(OutlineStage(out.map.points, input.scan.texture, input.calibration, options.outline,
-                        options.limits, report.stages, results, &out.outline),
+  const ScanContext context = ScanContext::For(input.scan, input.calibration);
+  if (!ran(OutlineStage(out.map.points, input.scan.texture, input.calibration, context,
+                        options.outline, options.limits, results, &out.outline),
            true)) {
     return out;
   }
@@ -138,15 +139,15 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
     }
     next("restore", done + (slow ? 0.8 : 0.3) * share);
     if (!ran(RestoreStage(input.scan.texture, mask, page.mesh, page.flat.flat, camera,
-                          options.restore, options.limits, options.camera_icc, report.stages,
-                          results, page.name, &page.restored),
+                          options.restore, options.limits, options.camera_icc, context,
+                          report.stages, results, page.name, &page.restored),
              true)) {
       return out;
     }
     if (!options.flat_field.empty()) {
       next("albedo", done + 0.9 * share);
       if (!ran(AlbedoStage(amplitude, out.map.points, mask, input.calibration, options.flat_field,
-                           page.restored, report.stages, results, page.name, &page.albedo),
+                           page.restored, context, results, page.name, &page.albedo),
                true)) {
         return out;
       }
@@ -154,8 +155,8 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
     if (!options.studio_field.empty()) {
       next("reflectance", done + 0.93 * share);
       if (!ran(ReflectanceStage(input.scan.texture, out.map.points, mask, input.calibration,
-                                options.studio_field, page.restored, report.stages, results,
-                                page.name, &page.reflectance),
+                                options.studio_field, page.restored, context, results, page.name,
+                                &page.reflectance),
                true)) {
         return out;
       }
@@ -163,7 +164,7 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
     if (!input.scan.lights.empty()) {
       next("lights", done + 0.95 * share);
       if (!ran(LightsStage(input.scan.lights, mask, page.mesh, page.flat.flat, options.camera_icc,
-                           page.restored, report.stages, results, page.name, &page.lights),
+                           page.restored, context, results, page.name, &page.lights),
                true)) {
         return out;
       }
@@ -171,8 +172,7 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
     out.pages.push_back(std::move(page));
   }
   next("archive", 0.96);
-  if (!ran(ArchiveStage(input.scan.texture, input.scan.identity, options.camera_icc, results),
-           true))
+  if (!ran(ArchiveStage(input.scan.texture, context.identity, options.camera_icc, results), true))
     return out;
   next("report", 0.97);
   out.status = WriteReports(results, input.scan_dir, &report);

@@ -148,6 +148,25 @@ void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
 
 }  // namespace
 
+ScanContext ScanContext::For(const Scan& scan, const Calibration& calibration) {
+  ScanContext c;
+  c.identity = scan.identity;
+  c.leaf_hint = scan.leaf_hint;
+  c.object = scan.object;
+  c.calibration_sha256 = CalibrationSha256(calibration);
+  c.scale_error_percent = calibration.scale_error_percent;
+  return c;
+}
+
+ScanContext ScanContextFromReports(const std::vector<StageReport>& stages,
+                                   const Calibration& calibration) {
+  Scan scan;
+  scan.identity = ReportedIdentity(stages);
+  scan.leaf_hint = ReportedLeafHint(stages);
+  scan.object = ReportedObject(stages);
+  return ScanContext::For(scan, calibration);
+}
+
 StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits& limits,
                         DecodeResult* decoded, const std::string& frames_dir) {
   Stage stage("decode");
@@ -262,21 +281,21 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
 }
 
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
-                         const OutlineOptions& options, const WarningLimits& limits,
-                         const std::vector<StageReport>& earlier, const std::string& results,
+                         const ScanContext& context, const OutlineOptions& options,
+                         const WarningLimits& limits, const std::string& results,
                          Outline* outline) {
   Stage stage("outline");
   StageReport& r = stage.report();
   r.Number("options", "outline_step_mm", options.step_mm);
   // The scan's own hint (drawn for it) outranks the options' (the station's configuration).
   OutlineOptions o = options;
-  const cv::Rect scan_hint = ReportedLeafHint(earlier);
+  const cv::Rect scan_hint = context.leaf_hint;
   if (!scan_hint.empty()) o.hint = scan_hint;
   if (!o.hint.empty()) {
     r.Text("outline", "hint", LeafHintText(o.hint));
     r.Text("outline", "hint_from", scan_hint.empty() ? "options" : "scan");
   }
-  const ObjectKind said = ReportedObject(earlier);
+  const ObjectKind said = context.object;
   if (said != ObjectKind::kAuto) o.object = said;
   r.Text("outline", "object", ToString(o.object));
   *outline = FindLeaf(points, texture, o, &rig);
@@ -466,6 +485,7 @@ namespace {
 // TIFF's XMP): its scale and measured error, its true sampling, the calibration's checksum and
 // every stage's options, from the stages so far and the restore stage's own report `own`.
 std::map<std::string, std::string> Provenance(const RestoreResult& restored,
+                                              const ScanContext& context,
                                               const std::vector<StageReport>& earlier,
                                               const StageReport& own, const std::string& page) {
   std::map<std::string, std::string> out;
@@ -488,8 +508,9 @@ std::map<std::string, std::string> Provenance(const RestoreResult& restored,
       out[v.key] = JsonNumber(v.number).dump();
     if (v.section == "restored" && v.key == "icc_profile") out[v.key] = v.text;
   }
-  const ReportValue* calibration = FindValue(earlier, "provenance", "calibration_sha256");
-  if (calibration) out["calibration_sha256"] = calibration->text;
+  if (!context.calibration_sha256.empty()) {
+    out["calibration_sha256"] = context.calibration_sha256;
+  }
   Json options = Json::object();
   auto add_options = [&](const StageReport& stage) {
     if (!stage.page.empty() && stage.page != page) return;
@@ -515,9 +536,9 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const IccProfile& camera_icc, const std::vector<StageReport>& earlier,
-                         const std::string& results, const std::string& page,
-                         RestoreResult* restored) {
+                         const IccProfile& camera_icc, const ScanContext& context,
+                         const std::vector<StageReport>& earlier, const std::string& results,
+                         const std::string& page, RestoreResult* restored) {
   Stage stage("restore", page);
   StageReport& r = stage.report();
   r.Text("options", "view", ToString(options.view));
@@ -541,12 +562,11 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
     // (`vellum calibrate`), when its file carries one. They add: the one is a bias of every
     // length, the other a mean departure from it.
     const double flattening = 100 * strain->number;
-    const ReportValue* calibration =
-        FindValue(earlier, "provenance", "calibration_scale_error_percent");
+    const double calibration = context.scale_error_percent;
+    const bool measured = std::isfinite(calibration);
     r.Number("restored", "scale_error_flattening_percent", flattening);
-    if (calibration) r.Number("restored", "scale_error_calibration_percent", calibration->number);
-    r.Number("restored", "scale_error_percent",
-             flattening + (calibration ? calibration->number : 0));
+    if (measured) r.Number("restored", "scale_error_calibration_percent", calibration);
+    r.Number("restored", "scale_error_percent", flattening + (measured ? calibration : 0));
   }
   if (!restored->sampling.empty()) {
     // What the camera truly saw of the page, beside the dpi it is written at.
@@ -567,7 +587,8 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
                  "the true sampling");
     }
   }
-  const std::map<std::string, std::string> provenance = Provenance(*restored, earlier, r, page);
+  const std::map<std::string, std::string> provenance =
+      Provenance(*restored, context, earlier, r, page);
   if (restored->view == RestoreView::kOrthographic && !restored->mask.empty()) {
     const cv::Rect leaf = cv::boundingRect(restored->mask);
     const double mm = 25.4 / restored->dpi;
@@ -590,7 +611,7 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
   }
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
-  const ScanIdentity identity = ReportedIdentity(earlier);
+  const ScanIdentity& identity = context.identity;
   if (s.ok()) {
     s = WriteRestored(dir, *restored, page.empty() ? identity : PageIdentity(identity, page),
                       provenance, camera_icc);
@@ -632,7 +653,7 @@ namespace {
 // report under `stage`'s name, written as `file` (16-bit, linear).
 StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
                                const cv::Mat& page_mask, const RestoreResult& restored,
-                               const std::vector<StageReport>& earlier, const std::string& results,
+                               const ScanContext& context, const std::string& results,
                                const std::string& page, const std::string& file,
                                const std::string& model, const char* dim_key, RestoreResult* out) {
   Stage stage(stage_name, page);
@@ -675,7 +696,7 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
   if (s.ok()) {
-    const ScanIdentity identity = ReportedIdentity(earlier);
+    const ScanIdentity& identity = context.identity;
     std::map<std::string, std::string> figures;
     figures["view"] = ToString(out->view);
     if (out->view == RestoreView::kOrthographic) figures["dpi"] = JsonNumber(out->dpi).dump();
@@ -692,12 +713,12 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
 
 StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
                         const Calibration& calibration, const FlatField& flat_field,
-                        const RestoreResult& restored, const std::vector<StageReport>& earlier,
+                        const RestoreResult& restored, const ScanContext& context,
                         const std::string& results, const std::string& page,
                         RestoreResult* albedo) {
   return RestoreReflectance(
       "albedo", EstimateAlbedo(amplitude, points, page_mask, calibration, flat_field), page_mask,
-      restored, earlier, results, page, "restored_albedo.tif",
+      restored, context, results, page, "restored_albedo.tif",
       "Lambertian, lit by the projector alone (white less black), its flat field from a white "
       "target on the table; interreflection and gloss not modelled",
       "marked_grazing_share", albedo);
@@ -706,11 +727,11 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
 StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
                              const cv::Mat& page_mask, const Calibration& calibration,
                              const StudioField& studio_field, const RestoreResult& restored,
-                             const std::vector<StageReport>& earlier, const std::string& results,
+                             const ScanContext& context, const std::string& results,
                              const std::string& page, RestoreResult* reflectance) {
   return RestoreReflectance(
       "reflectance", CorrectTexture(texture, points, page_mask, calibration, studio_field),
-      page_mask, restored, earlier, results, page, "restored_reflectance.tif",
+      page_mask, restored, context, results, page, "restored_reflectance.tif",
       "Lambertian, lit by the described studio lamps (point sources of equal strength), their "
       "field from a white target on the table; shadows the page casts on itself, "
       "interreflection and gloss not modelled",
@@ -720,7 +741,7 @@ StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
 StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
                         const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                         const IccProfile& camera_icc, const RestoreResult& restored,
-                        const std::vector<StageReport>& earlier, const std::string& results,
+                        const ScanContext& context, const std::string& results,
                         const std::string& page, LightsResult* out) {
   Stage stage("lights", page);
   StageReport& r = stage.report();
@@ -748,7 +769,7 @@ StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& pag
   if (!warped.ok()) return stage.Finish(warped);
   const std::string dir = PageDir(results, page);
   Status s = MakeDirectories(dir);
-  const ScanIdentity identity = ReportedIdentity(earlier);
+  const ScanIdentity& identity = context.identity;
   const ScanIdentity page_identity = page.empty() ? identity : PageIdentity(identity, page);
   std::map<std::string, std::string> figures;
   figures["view"] = ToString(restored.view);

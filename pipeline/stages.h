@@ -7,6 +7,7 @@
 // product. One function per stage, so both give the same files.
 #pragma once
 
+#include <limits>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -102,6 +103,26 @@ struct PipelineOptions {
   bool Check(std::string* why) const;
 };
 
+// What the stages need to know of a scan beyond its images, as types (never read back from a
+// report, which only records it): who it is, what the operator said of it, and the calibration
+// it was measured with. `vellum process` builds it from the scan and its calibration (For); the
+// station's processing daemons from what the decode stage reported of the scan, which travels
+// with every message down the chain, and the scan's calibration (FromReports), once each.
+struct ScanContext {
+  ScanIdentity identity;
+  cv::Rect leaf_hint;                     // Camera pixels inside the leaf; empty: none.
+  ObjectKind object = ObjectKind::kAuto;  // What the operator said lies there.
+  std::string calibration_sha256;         // Of the calibration the points were measured with.
+  // That calibration's measured error of every length, %, NaN when not measured.
+  double scale_error_percent = std::numeric_limits<double>::quiet_NaN();
+
+  static ScanContext For(const Scan& scan, const Calibration& calibration);
+};
+// The context of a scan as its decode stage among `stages` reported it (its identity, the
+// operator's leaf hint and object), measured with `calibration`.
+ScanContext ScanContextFromReports(const std::vector<StageReport>& stages,
+                                   const Calibration& calibration);
+
 // A page's name ("" for a single leaf; "left", "right" for the pages of a spread) and the
 // folder its files go to (the results folder, or results/pages/<name>).
 std::string PageName(const Outline& outline, size_t page);
@@ -124,14 +145,14 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
                              const std::string& results, PointMap* map);
 
 // Outline: the leaf (or a spread's two pages) in the point map and the texture
-// (core/outline), seeded at the operator's hint for the scan when the decode stage among
-// `earlier` reported one, else at options.hint. Writes report/texture.png and
-// report/outline.png. Warns of a leaf that runs off the view and of an outline of low
-// confidence. `rig` measured the points (its projector's shadows are told from the leaf).
+// (core/outline), seeded at the operator's hint for the scan (context.leaf_hint) when there is
+// one, else at options.hint, and told what the object is when the operator said
+// (context.object). Writes report/texture.png and report/outline.png. Warns of a leaf that runs
+// off the view and of an outline of low confidence. `rig` measured the points (its projector's
+// shadows are told from the leaf).
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
-                         const OutlineOptions& options, const WarningLimits& limits,
-                         const std::vector<StageReport>& earlier, const std::string& results,
-                         Outline* outline);
+                         const ScanContext& context, const OutlineOptions& options,
+                         const WarningLimits& limits, const std::string& results, Outline* outline);
 
 // Mesh (3.5-3.6): the sheet over one page (`page_mask`, camera pixels) of the point map, its
 // grid chosen from the page's shape when `options.auto_grid`. Writes nothing (the sheet is
@@ -156,16 +177,17 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 // restored.json in the page's folder and the report's pictures of the page (grid, strain,
 // before/after), and the camera's true sampling of the page (sampling_ppi.tif, its summary and
 // picture). Warns of a leaf whose size is not the one expected, and of a dpi asked above the
-// true sampling. `earlier` are the scan's stages so far: the scan's identity (a spread's page
-// gets its own, PageIdentity), its calibration's checksum, the page's flattening residual and
-// every stage's options go into restored.json and the TIFF's XMP. The TIFF embeds the camera's
-// ICC profile `camera_icc` (empty: sRGB), named in the report.
+// true sampling. The scan's identity (a spread's page gets its own, PageIdentity) and its
+// calibration's checksum and scale error (`context`), and, of `earlier` (the scan's stages so
+// far), the page's flattening residual and every stage's options go into restored.json and the
+// TIFF's XMP. The TIFF embeds the camera's ICC profile `camera_icc` (empty: sRGB), named in the
+// report.
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
                          const std::vector<cv::Point2d>& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
-                         const IccProfile& camera_icc, const std::vector<StageReport>& earlier,
-                         const std::string& results, const std::string& page,
-                         RestoreResult* restored);
+                         const IccProfile& camera_icc, const ScanContext& context,
+                         const std::vector<StageReport>& earlier, const std::string& results,
+                         const std::string& page, RestoreResult* restored);
 
 // Albedo: the page's reflectance from the projector's light (core/shading/albedo.h:
 // `amplitude` is the decoder's, `points` the point map), restored through the page's own warp
@@ -174,7 +196,7 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
 // the projector's shadow, the page's rim, grazing light, outside the flat field).
 StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
                         const Calibration& calibration, const FlatField& flat_field,
-                        const RestoreResult& restored, const std::vector<StageReport>& earlier,
+                        const RestoreResult& restored, const ScanContext& context,
                         const std::string& results, const std::string& page, RestoreResult* albedo);
 
 // Reflectance from the studio light: the texture's shading by the studio lamps taken
@@ -185,7 +207,7 @@ StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const c
 StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
                              const cv::Mat& page_mask, const Calibration& calibration,
                              const StudioField& studio_field, const RestoreResult& restored,
-                             const std::vector<StageReport>& earlier, const std::string& results,
+                             const ScanContext& context, const std::string& results,
                              const std::string& page, RestoreResult* reflectance);
 
 // Lights: the scan's extra images (`lights`, Scan::lights) restored through the page's
@@ -205,7 +227,7 @@ struct LightsResult {
 StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
                         const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                         const IccProfile& camera_icc, const RestoreResult& restored,
-                        const std::vector<StageReport>& earlier, const std::string& results,
+                        const ScanContext& context, const std::string& results,
                         const std::string& page, LightsResult* out);
 
 }  // namespace vellum

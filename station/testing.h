@@ -175,13 +175,14 @@ inline const SmallProducts& SmallScanProducts() {
     p.stages.push_back(DecodeStage(SmallScan(), &decoder, o.limits, &p.decoded));
     p.stages.push_back(
         TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, o.limits, p.results, &p.map));
-    p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, rig, o.outline, o.limits,
-                                    p.stages, p.results, &p.outline));
+    const ScanContext context = ScanContext::For(SmallScan(), rig);
+    p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, rig, context, o.outline,
+                                    o.limits, p.results, &p.outline));
     p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));
     p.stages.push_back(FlattenStage(p.mesh, o.flatten, o.limits, p.results, "", &p.flat));
     p.stages.push_back(RestoreStage(SmallScan().texture, p.outline.pages[0], p.mesh, p.flat.flat,
-                                    rig.camera, o.restore, o.limits, o.camera_icc, p.stages,
-                                    p.results, "", &p.restored));
+                                    rig.camera, o.restore, o.limits, o.camera_icc, context,
+                                    p.stages, p.results, "", &p.restored));
     for (const StageReport& stage : p.stages) {
       if (!stage.status.ok()) throw std::runtime_error(stage.stage + ": " + stage.status.message());
     }

@@ -47,9 +47,10 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
+  const ScanContext context = ScanContextFromReports(stages, calibration);
   Outline outline;
   stages.push_back(
-      OutlineStage(points_, texture, calibration, o.outline, o.limits, stages, results, &outline));
+      OutlineStage(points_, texture, calibration, context, o.outline, o.limits, results, &outline));
   if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
   const size_t common = stages.size();  // Every page's sheet carries the scan's reports.
   for (size_t k = 0; k < outline.pages.size(); ++k) {

@@ -68,11 +68,12 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
   s = MakeDirectories(folder.results());
   if (!s.ok()) return node_->FailScan(id, s.message());
+  const ScanContext context = ScanContextFromReports(stages, calibration);
   const PipelineOptions& o = options_.pipeline;
   RestoreResult restored;
   StageReport restore =
       RestoreStage(texture, sheet_page.mask, sheet_.mesh, sheet_.flat, camera, o.restore, o.limits,
-                   o.camera_icc, stages, folder.results(), name, &restored);
+                   o.camera_icc, context, stages, folder.results(), name, &restored);
   if (!restore.status.ok()) {
     scans_.erase(id);
     return node_->FailScan(id, restore.status.message());
@@ -83,11 +84,9 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   std::optional<StageReport> lit;
   if (s.ok() && !lights.empty()) {
     node_->SetState("busy", id, "restoring its " + std::to_string(lights.size()) + " extra lights");
-    std::vector<StageReport> earlier = stages;
-    earlier.push_back(restore);
     LightsResult result;
     lit = LightsStage(lights, sheet_page.mask, sheet_.mesh, sheet_.flat, o.camera_icc, restored,
-                      earlier, folder.results(), name, &result);
+                      context, folder.results(), name, &result);
     s = lit->status;
   }
   if (!s.ok()) {
@@ -104,6 +103,7 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   pages.restored[sheet_page.index] = std::move(restored);
   if (static_cast<int>(pages.names.size()) < sheet_page.count) pages.names.resize(sheet_page.count);
   pages.names[sheet_page.index] = name;
+  pages.identity = context.identity;
   while (scans_.size() > 8) scans_.erase(scans_.begin());  // Scans whose pages stopped.
   if (static_cast<int>(pages.restored.size()) == sheet_page.count) Finish(id, &pages);
 }
@@ -121,8 +121,8 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   cv::Mat texture;
   Status s = textures_.Get(id, &texture);
   if (s.ok()) {
-    const StageReport archive = ArchiveStage(texture, ReportedIdentity(pages->common),
-                                             options_.pipeline.camera_icc, folder.results());
+    const StageReport archive =
+        ArchiveStage(texture, pages->identity, options_.pipeline.camera_icc, folder.results());
     report.stages.push_back(archive);
     s = archive.status;
   }

@@ -50,6 +50,7 @@ class RestorerNode {
     std::map<int, std::vector<StageReport>> per_page;  // Mesh, flatten, restore of each page.
     std::map<int, RestoreResult> restored;
     std::vector<std::string> names;
+    ScanIdentity identity;  // The scan's, from its context (for the archival master).
   };
   void Process(int64_t id, const mesh_t& last);  // Worker thread.
   void Finish(int64_t id, Pages* pages);         // Every page is in: the report, RESTORED.
