@@ -56,8 +56,7 @@ bool OutlineOptions::Check(std::string* why) const {
       !(wider_support_share >= 0 && wider_support_share <= 1)) {
     *why =
         "unseen_reach_px must be >= 1, unseen_look >= 0, unseen_clear_mm > 0, max_unseen_share, "
-        "max_lost_share and "
-        "wider_support_share in [0, 1]";
+        "max_lost_share and wider_support_share in [0, 1]";
     return false;
   }
   return surround.Check(why) && cut.Check(why);

@@ -302,10 +302,15 @@ int SidesTouched(const cv::Mat& mask, int border) {
 ProjectorSight::ProjectorSight(const Calibration& rig, const cv::Mat& points,
                                const std::vector<Plane>& planes, double clear_mm)
     : rig_(rig), points_(points), planes_(planes), clear_mm_(clear_mm) {
-  std::vector<cv::Mat> xyz;
-  cv::split(points, xyz);
-  cv::patchNaNs(xyz[2], -1e9);
-  cv::minMaxLoc(xyz[2], nullptr, &top_mm_);
+  // The highest point measured, in one pass over the map (no copy of its heights).
+  float top = -std::numeric_limits<float>::infinity();
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < points.cols; ++u) {
+      if (p[u][2] > top) top = p[u][2];  // NaN compares false: skipped.
+    }
+  }
+  top_mm_ = std::isfinite(top) ? top : 0.0;
 }
 
 bool ProjectorSight::Lit(cv::Point pixel, const cv::Mat& apart, cv::Point offset) const {
