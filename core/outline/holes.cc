@@ -192,6 +192,14 @@ bool SurroundLook::Shows(int u, int v) const {
          looks_[k].Log(bin) - leaf_.Log(bin) >= look_;
 }
 
+cv::Mat Filled(const cv::Mat& mask) {
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  cv::Mat filled = cv::Mat::zeros(mask.size(), CV_8U);
+  cv::drawContours(filled, contours, -1, cv::Scalar(255), cv::FILLED);
+  return filled;
+}
+
 // Fills the holes of `leaf` that show no other surface, and returns how many it keeps. A hole
 // with heights is kept when they differ from the leaf's around it (another surface shows
 // through), filled when they do not (an island the rim test cut out). The two are compared

@@ -175,15 +175,6 @@ double ShareOutsideAtPlane(const outline::Blocks& blocks, const cv::Mat& found,
   return measured ? static_cast<double>(level) / measured : 0.0;
 }
 
-// `mask` with its holes filled: what its outer outlines enclose.
-cv::Mat Filled(const cv::Mat& mask) {
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
-  cv::Mat filled = cv::Mat::zeros(mask.size(), CV_8U);
-  cv::drawContours(filled, contours, -1, cv::Scalar(255), cv::FILLED);
-  return filled;
-}
-
 // The share of `cut`'s pixels more than `inset` pixels inside its outline (along rows and
 // columns) that `leaf`, its holes filled, leaves out.
 double LostInside(const cv::Mat& cut, const cv::Mat& leaf, int inset) {
@@ -196,7 +187,7 @@ double LostInside(const cv::Mat& cut, const cv::Mat& leaf, int inset) {
             1, cv::BORDER_CONSTANT, cv::Scalar(0));
   const int total = cv::countNonZero(deep);
   if (total == 0) return 0;
-  return static_cast<double>(cv::countNonZero(deep & ~Filled(leaf(box)))) / total;
+  return static_cast<double>(cv::countNonZero(deep & ~outline::Filled(leaf(box)))) / total;
 }
 
 // Whether `inner` (blocks) stands off what lies around it inside `outer` at its rim, as a leaf on
@@ -243,10 +234,11 @@ bool SetApartInside(const outline::Blocks& blocks, const cv::Mat& outer, const c
   const int area = cv::countNonZero(inner);
   if (area < std::max(1, min_blocks) || area > 0.9 * cv::countNonZero(outer)) return false;
   cv::Mat eroded, deep, apart;
-  cv::erode(inner, eroded, cv::Mat(), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
-  const cv::Mat rim = inner & ~eroded;
-  cv::erode(outer, deep, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+  cv::erode(outline::Filled(inner), eroded, cv::Mat(), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
             cv::Scalar(0));
+  const cv::Mat rim = inner & ~eroded;
+  cv::erode(outline::Filled(outer), deep, cv::Mat::ones(5, 5, CV_8U), cv::Point(-1, -1), 1,
+            cv::BORDER_CONSTANT, cv::Scalar(0));
   cv::dilate((blocks.rim > 0.5f) | (blocks.edge > 1.0f) | (blocks.valid < 0.5f), apart, cv::Mat());
   const int total = cv::countNonZero(rim);
   return total > 0 && cv::countNonZero(rim & deep) >= 0.8 * total &&
@@ -278,22 +270,32 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
 
 // Whether `inner` (blocks) is a leaf in a window of `outer` (a frame, or a support beside it):
 // set apart inside it (SetApartInside) and lying below `plane`, outer's plane along its outline,
-// on what shows through the window (its median height under the plane at least
-// options.lies_on_mm and three times the blocks' noise: a paper frame stands 0.3 mm high).
+// on what shows through the window, along its own outline (the median height of its blocks
+// within three of its outline under the plane by at least options.lies_on_mm and three times the
+// blocks' noise: a paper frame stands 0.3 mm high). Judged at its rim, not over all of it: a
+// creased or curled leaf in a window rises above the frame's face away from its edges.
 bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
               const outline::Plane& plane, int min_blocks, const OutlineOptions& options) {
   if (!SetApartInside(blocks, outer, inner, min_blocks, options)) return false;
+  cv::Mat deep;
+  cv::erode(outline::Filled(inner), deep, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1,
+            cv::BORDER_CONSTANT, cv::Scalar(0));
   std::vector<float> below, noise;
+  int measured = 0;
   for (int by = 0; by < inner.rows; ++by) {
     for (int bx = 0; bx < inner.cols; ++bx) {
       const float z = blocks.z.at<float>(by, bx), n = blocks.noise.at<float>(by, bx);
       if (!inner.at<uint8_t>(by, bx) || std::isnan(z)) continue;
+      ++measured;
       if (!std::isnan(n)) noise.push_back(n);
+      if (deep.at<uint8_t>(by, bx)) continue;
       below.push_back(
           static_cast<float>(plane.At(blocks.x.at<float>(by, bx), blocks.y.at<float>(by, bx)) - z));
     }
   }
-  if (below.size() * 2 < static_cast<size_t>(cv::countNonZero(inner))) return false;
+  if (measured * 2 < cv::countNonZero(inner) || below.empty()) {
+    return false;  // Mostly unmeasured.
+  }
   return outline::Median(&below) >= std::max(options.lies_on_mm, 3 * outline::Median(&noise));
 }
 
@@ -381,7 +383,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     std::vector<Plane> more = planes;
     more.push_back(plane);
     const cv::Mat above_more = AboveSurround(blocks, more);
-    Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, cut, options.cut);
+    Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, outline::Filled(cut), options.cut);
     cv::Mat inner = AtSeed(inner_cut.leaf, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     const bool lies_on = LiesOn(blocks, cut, inner, above_more, min_blocks, options);
@@ -434,7 +436,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
   // The surround's looks learned outside the leaf's outline: not from the holes to be judged.
-  const SurroundLook surround(points, cues.colour, Filled(leaf), planes, found.look_leaf,
+  const SurroundLook surround(points, cues.colour, outline::Filled(leaf), planes, found.look_leaf,
                               options.well_plane_mm, options.well_look);
   out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf,
                         &surround, holes_box.tl());

@@ -29,6 +29,9 @@ namespace vellum::outline {
 constexpr float kNoData = -1e4f;  // Heights below -1e3 mean "no point".
 inline bool Valid(float z) { return z > -1e3f; }
 
+// `mask` (CV_8U) with its holes filled: what its outer outlines enclose.
+cv::Mat Filled(const cv::Mat& mask);
+
 // The median of `values` (reordered); 0 when empty.
 double Median(std::vector<float>* values);
 

@@ -168,6 +168,42 @@ TEST(RefitSurround, LevelsAPlaneOverAllTheSurroundLeftOfTheLeaf) {
   EXPECT_EQ(many[0].b, tilted.b);
 }
 
+// A frame taken with the leaf in its window: the plane along what was found is the frame's face,
+// judged along its outer outline. The leaf's dark squares, cut out of what was found, lie flush
+// on the table; along their edges (more blocks than along the frame's outline) lies the table,
+// not the frame, and counted with them the frame's face is not most of the outline.
+TEST(PlaneAlongOutline, FindsAFramesFaceAlongItsOuterOutlineNotAlongItsHoles) {
+  const cv::Size size(400, 300);
+  auto frame = [](int u, int v) {
+    const bool outer = u >= 40 && u < 360 && v >= 30 && v < 270;
+    return outer && !(u >= 80 && u < 320 && v >= 60 && v < 240);
+  };
+  auto square = [](int u, int v) {  // The leaf's dark squares, 16 px, 8 px apart.
+    return u >= 80 && u < 320 && v >= 60 && v < 240 && (u - 80) % 24 >= 8 && (v - 60) % 24 >= 8;
+  };
+  const cv::Mat points = Points(
+      size, [&](int u, int v) { return frame(u, v) ? 1.0 : 0.0; }, 0.005);
+  const Scene s = Prepare(points, cv::Mat(size, CV_8U, cv::Scalar(120)));
+  ASSERT_EQ(s.planes.size(), 1u);
+  EXPECT_NEAR(s.planes[0].c, 0.0, 0.01);
+  const cv::Mat found = BlocksWhere(s.blocks, [&](int u, int v) {
+    return u >= 40 && u < 360 && v >= 30 && v < 270 && !square(u, v);
+  });
+  Plane plane;
+  cv::Mat ring;
+  ASSERT_TRUE(
+      PlaneAlongOutline(s.blocks, found, s.planes, OutlineOptions().surround, &plane, &ring));
+  // The face within 0.15 mm of the frame's 1 mm: the outermost blocks straddle the frame's edge
+  // (part frame, part table) and draw the fit a little toward the table; the table is 1 mm off.
+  EXPECT_NEAR(plane.At(50, 37.5), 1.0, 0.15) << plane.a << " " << plane.b << " " << plane.c;
+  EXPECT_LT(std::hypot(plane.a, plane.b), 1e-4);
+  // The ring is the frame's outer edge, none of it on the leaf.
+  EXPECT_GT(cv::countNonZero(ring), 0);
+  EXPECT_EQ(
+      cv::countNonZero(ring & BlocksWhere(s.blocks, [&](int u, int v) { return !frame(u, v); })),
+      0);
+}
+
 // One energy over every cue: a leaf is found by its height off the table where it looks like the
 // table (0.1 mm, ten times the table's noise), by its look where it lies flush (0 mm: a bright
 // leaf on a dark table), and not at all where neither sets it apart (flush and looking alike: the

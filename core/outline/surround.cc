@@ -315,10 +315,11 @@ double RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOp
 
 bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vector<Plane>& planes,
                        const SurroundOptions& options, Plane* plane, cv::Mat* ring) {
-  // The blocks within three of the outline, inside.
+  // The blocks within three of the outer outline, inside (not those along its holes: a leaf's
+  // dark squares cut out of a frame taken with it lie on the table the frame lies on).
   cv::Mat inner;
-  cv::erode(leaf, inner, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
-            cv::Scalar(0));
+  cv::erode(Filled(leaf), inner, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1,
+            cv::BORDER_CONSTANT, cv::Scalar(0));
   const cv::Mat band = leaf & ~inner;
   std::vector<cv::Vec3f> samples;
   std::vector<float> noise;
