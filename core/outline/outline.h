@@ -29,6 +29,9 @@ struct SurroundOptions {
   double min_share = 0.08;     // A plane holds at least this share of the samples.
   double tolerance_mm = 0.05;  // Its inliers lie this close to it, mm (more where noisier).
   double max_tilt_deg = 20;    // A surround is near level, degrees.
+  // Table, support and frame lie on one another: each plane after the first (the table) is
+  // parallel to it within this, degrees (a folded leaf's flat halves are not).
+  double max_relative_tilt_deg = 3;
   bool Check(std::string* why) const;
 };
 

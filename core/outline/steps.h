@@ -93,8 +93,11 @@ struct Plane {
   int inliers = 0;
   double At(double x, double y) const { return a * x + b * y + c; }
 };
+// The angle between two planes, degrees.
+double TiltBetweenDeg(const Plane& p, const Plane& q);
 // The surround's planes, from the samples: the outermost measured blocks of each row and column
-// of the grid (within its outer quarter), by RANSAC (deterministic), one plane after another.
+// of the grid (within its outer quarter), by RANSAC (deterministic), one plane after another,
+// each after the first parallel to it (SurroundOptions::max_relative_tilt_deg).
 std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& options);
 // The planes fitted again over everything of the surround in view: the solidly measured blocks
 // two or more from `leaf` (blocks), each on the plane it lies nearest and within tolerance of.

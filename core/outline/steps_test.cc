@@ -141,6 +141,36 @@ TEST(FitSurround, FindsTheTableAndASupportReachingTheViewsEdge) {
   EXPECT_NEAR(s.above.at<float>(20 / b, 200 / b), 0.0f, 0.01f);
 }
 
+// A leaf folded across its middle, turned 45 degrees (a diamond, its fold along the view's
+// middle row), on a dark support that gives no heights, the table beyond it in the view's
+// corners: the outermost measured blocks of the rows and columns between the corners lie along
+// the leaf's edges on its two flat halves, each tilted 6 degrees the other way, and each holds a
+// plane's share of the samples. Neither is the surround: table, support and frame lie on one
+// another, parallel.
+TEST(FitSurround, TakesNoFoldedLeafsHalvesForTheSurround) {
+  const cv::Size size(400, 300);
+  const double slope = std::tan(6 * M_PI / 180) * kPixelMm;  // mm per pixel.
+  const cv::Mat points = Points(
+      size,
+      [&](int u, int v) {
+        const double across = std::abs(u - 200) / 175.0 + std::abs(v - 150) / 145.0;
+        if (across <= 1) return 0.2 + (145 - std::abs(v - 150)) * slope;  // The leaf.
+        if ((u < 70 || u >= 330) && (v < 70 || v >= 230)) return 0.0;     // The table.
+        return std::numeric_limits<double>::quiet_NaN();                  // The support.
+      },
+      0.005);
+  const Scene s = Prepare(points, cv::Mat(size, CV_8U, cv::Scalar(120)));
+  ASSERT_EQ(s.planes.size(), 1u);
+  EXPECT_NEAR(s.planes[0].c, 0.0, 0.01);
+  EXPECT_LT(std::hypot(s.planes[0].a, s.planes[0].b), 1e-4);
+  // The angle between planes, by which they were told apart.
+  Plane left, right;
+  left.a = std::tan(6 * M_PI / 180);
+  right.a = -left.a;
+  EXPECT_NEAR(TiltBetweenDeg(left, right), 12.0, 1e-9);
+  EXPECT_NEAR(TiltBetweenDeg(s.planes[0], left), 6.0, 0.01);
+}
+
 // Fitted again over all the surround in view, a plane tilted by its first fit (0.3 mm per metre:
 // 0.06 mm across a 200 mm support, which the cut reads as a thin leaf) comes level, and the leaf
 // 0.2 mm above it, with the blocks beside it, stays out of the fit.

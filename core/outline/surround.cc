@@ -11,10 +11,11 @@ namespace vellum {
 
 bool SurroundOptions::Check(std::string* why) const {
   if (max_planes < 1 || max_planes > 8 || !(min_share > 0 && min_share < 1) ||
-      !(tolerance_mm > 0) || !(max_tilt_deg > 0 && max_tilt_deg < 90)) {
+      !(tolerance_mm > 0) || !(max_tilt_deg > 0 && max_tilt_deg < 90) ||
+      !(max_relative_tilt_deg > 0 && max_relative_tilt_deg < 90)) {
     *why =
-        "surround: max_planes in [1, 8], min_share in (0, 1), tolerance_mm > 0, max_tilt_deg in "
-        "(0, 90)";
+        "surround: max_planes in [1, 8], min_share in (0, 1), tolerance_mm > 0, max_tilt_deg and "
+        "max_relative_tilt_deg in (0, 90)";
     return false;
   }
   return true;
@@ -210,6 +211,12 @@ bool RansacPlane(const std::vector<cv::Vec3f>& samples, const std::vector<float>
 
 }  // namespace
 
+double TiltBetweenDeg(const Plane& p, const Plane& q) {
+  const cv::Vec3d n(-p.a, -p.b, 1), m(-q.a, -q.b, 1);
+  const double c = n.dot(m) / (cv::norm(n) * cv::norm(m));
+  return std::acos(std::clamp(c, -1.0, 1.0)) * 180 / M_PI;
+}
+
 std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& options) {
   const cv::Size g = blocks.grid;
   // The samples: the outermost solidly measured block of each row and column from each side,
@@ -260,7 +267,10 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
   const size_t least = std::max<size_t>(8, static_cast<size_t>(options.min_share * samples.size()));
   cv::RNG rng(0x5a11);  // Deterministic: the same scan gives the same planes.
   std::vector<uint8_t> used(samples.size(), 0);
-  for (int p = 0; p < options.max_planes; ++p) {
+  // A plane tilted against the first is set aside (its samples too), and the next sought.
+  for (int tries = 0;
+       tries < 2 * options.max_planes && static_cast<int>(planes.size()) < options.max_planes;
+       ++tries) {
     std::vector<int> left;
     for (size_t k = 0; k < samples.size(); ++k) {
       if (!used[k]) left.push_back(static_cast<int>(k));
@@ -269,7 +279,9 @@ std::vector<Plane> FitSurround(const Blocks& blocks, const SurroundOptions& opti
     std::vector<int> in;
     if (!RansacPlane(samples, noise, left, least, options, &rng, &plane, &in)) break;
     for (int m : in) used[m] = 1;
-    planes.push_back(plane);
+    if (planes.empty() || TiltBetweenDeg(planes.front(), plane) <= options.max_relative_tilt_deg) {
+      planes.push_back(plane);
+    }
   }
   return planes;
 }
