@@ -293,6 +293,27 @@ INSTANTIATE_TEST_SUITE_P(Issue, MustShowScenes, ::testing::ValuesIn(MustShow()),
                            return info.param.name;
                          });
 
+// Scenes of the full run that were missed and are met now, each by the change named: drawn by
+// their seed, met without a warning, so that the change cannot be lost unseen between full runs.
+std::vector<Named> OnceMissed() {
+  return {
+      // A frame taken with the leaf: its face judged along its outer outline, not along the
+      // leaf's dark squares cut out of it (PlaneAlongOutline).
+      {"seed_177_developable_flush_in_a_light_frame", DrawFamilyScene(177)},
+      // A folded leaf's flat halves on a dark support are not the surround (FitSurround keeps
+      // planes parallel to the table's).
+      {"seed_145_fold_on_a_dark_support", DrawFamilyScene(145)},
+      // A frame the surround's samples caught, tilted, fitted again along its outline; the table
+      // showing in the window beside the leaf known by its look (FindLeaf's InWindow cut).
+      {"seed_118_curl_in_a_frame_it_nearly_fills", DrawFamilyScene(118)},
+  };
+}
+
+INSTANTIATE_TEST_SUITE_P(Family, MustShowScenes, ::testing::ValuesIn(OnceMissed()),
+                         [](const ::testing::TestParamInfo<Named>& info) {
+                           return info.param.name;
+                         });
+
 TEST(SceneFamily, EveryScanMeetsTheBarsOrIsFlagged) {
   const uint64_t count = EnvNumber("VELLUM_FAMILY_SCENES", 20);
   const uint64_t first = EnvNumber("VELLUM_FAMILY_FIRST", 1);

@@ -379,15 +379,34 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   for (int level = 0; level < 2 && cv::countNonZero(cut) > 0; ++level) {
     Plane plane;
     cv::Mat ring;
-    if (!PlaneAlongOutline(blocks, cut, planes, options.surround, &plane, &ring)) break;
+    int known = -1;
+    if (!PlaneAlongOutline(blocks, cut, planes, options.surround, &plane, &ring, &known)) {
+      break;
+    }
     std::vector<Plane> more = planes;
-    more.push_back(plane);
+    if (known >= 0) {
+      more[known] = plane;  // A frame or support known, fitted better along its own outline.
+    } else {
+      more.push_back(plane);
+    }
     const cv::Mat above_more = AboveSurround(blocks, more);
     Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, outline::Filled(cut), options.cut);
     cv::Mat inner = AtSeed(inner_cut.leaf, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     const bool lies_on = LiesOn(blocks, cut, inner, above_more, min_blocks, options);
     const bool in_window = !lies_on && InWindow(blocks, cut, inner, plane, min_blocks, options);
+    if (in_window) {
+      // What shows through the window beside the leaf is the table: cut again knowing its look
+      // as well as the frame's.
+      Cut again = CutLeaf(blocks, above_more, seed, ring | OuterSurround(blocks, above),
+                          outline::Filled(cut), options.cut);
+      cv::Mat inner_again = AtSeed(again.leaf, seed);
+      if (cv::countNonZero(inner_again) == 0) inner_again = Largest(again.leaf);
+      if (InWindow(blocks, cut, inner_again, plane, min_blocks, options)) {
+        inner_cut = again;
+        inner = inner_again;
+      }
+    }
     if (!lies_on && !in_window) {
       // What was found lies on a plane well above the table, and nothing on it stands off it: a
       // support or a box, maybe, with the leaf flush on it or elsewhere. Unless enough of what

@@ -191,9 +191,13 @@ cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above);
 
 // A support or a frame found inside `leaf` (blocks): when the blocks along its outline lie on
 // one plane (most of them within the tolerance) that is not one of `planes`, that plane (a
-// support's top, a frame's face), with the blocks on it in *ring. False when there is none.
+// support's top, a frame's face), with the blocks on it in *ring. False when there is none, or
+// when it is the lowest of `planes` (the table: a leaf lying flush on it). When it is another of
+// them (a frame the surround's samples caught, fitted there from a few blocks and a little
+// tilted, so that its far side reads as a thin leaf), its index in *known (-1 when new), and the
+// plane fitted along the outline in *plane.
 bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vector<Plane>& planes,
-                       const SurroundOptions& options, Plane* plane, cv::Mat* ring);
+                       const SurroundOptions& options, Plane* plane, cv::Mat* ring, int* known);
 
 // ---- RefineRim ----
 // Labels (1 leaf, 2 surround) spread from their seeds, lowest `level` first (a watershed: two

@@ -221,17 +221,39 @@ TEST(PlaneAlongOutline, FindsAFramesFaceAlongItsOuterOutlineNotAlongItsHoles) {
   });
   Plane plane;
   cv::Mat ring;
-  ASSERT_TRUE(
-      PlaneAlongOutline(s.blocks, found, s.planes, OutlineOptions().surround, &plane, &ring));
+  int known = 0;
+  ASSERT_TRUE(PlaneAlongOutline(s.blocks, found, s.planes, OutlineOptions().surround, &plane, &ring,
+                                &known));
   // The face within 0.15 mm of the frame's 1 mm: the outermost blocks straddle the frame's edge
   // (part frame, part table) and draw the fit a little toward the table; the table is 1 mm off.
   EXPECT_NEAR(plane.At(50, 37.5), 1.0, 0.15) << plane.a << " " << plane.b << " " << plane.c;
   EXPECT_LT(std::hypot(plane.a, plane.b), 1e-4);
+  EXPECT_EQ(known, -1);  // A new plane.
   // The ring is the frame's outer edge, none of it on the leaf.
   EXPECT_GT(cv::countNonZero(ring), 0);
   EXPECT_EQ(
       cv::countNonZero(ring & BlocksWhere(s.blocks, [&](int u, int v) { return !frame(u, v); })),
       0);
+
+  // The frame known already, fitted from a few blocks and tilted (0.8 mm per metre: 0.03 mm
+  // off at the frame's ends, which the cut reads as a thin leaf): the plane along the outline is
+  // that one, fitted again level at the frame's face without the outermost blocks, which
+  // straddle its edge (within 0.01 mm: twice the blocks' noise, where the first fit was 0.08 mm
+  // off).
+  Plane tilted;
+  tilted.b = 8e-4;
+  tilted.c = 1.0 - 8e-4 * 37.5;
+  const std::vector<Plane> with_frame{s.planes[0], tilted};
+  ASSERT_TRUE(PlaneAlongOutline(s.blocks, found, with_frame, OutlineOptions().surround, &plane,
+                                &ring, &known));
+  EXPECT_EQ(known, 1);
+  EXPECT_NEAR(plane.At(50, 37.5), 1.0, 0.01) << plane.a << " " << plane.b << " " << plane.c;
+  EXPECT_LT(std::hypot(plane.a, plane.b), 1e-4);
+  // What lies on the table (the lowest known plane) along its outline is no support or frame.
+  const cv::Mat on_table = BlocksWhere(
+      s.blocks, [&](int u, int v) { return u >= 100 && u < 300 && v >= 80 && v < 220; });
+  EXPECT_FALSE(PlaneAlongOutline(s.blocks, on_table, with_frame, OutlineOptions().surround, &plane,
+                                 &ring, &known));
 }
 
 // One energy over every cue: a leaf is found by its height off the table where it looks like the

@@ -326,7 +326,7 @@ double RefitSurround(const Blocks& blocks, const cv::Mat& leaf, const SurroundOp
 }
 
 bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vector<Plane>& planes,
-                       const SurroundOptions& options, Plane* plane, cv::Mat* ring) {
+                       const SurroundOptions& options, Plane* plane, cv::Mat* ring, int* known) {
   // The blocks within three of the outer outline, inside (not those along its holes: a leaf's
   // dark squares cut out of a frame taken with it lie on the table the frame lies on).
   cv::Mat inner;
@@ -355,11 +355,35 @@ bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vec
   if (!RansacPlane(samples, noise, all, samples.size() * 6 / 10, options, &rng, plane, &in)) {
     return false;
   }
-  // Not a plane already known: it stands off each by more than the tolerance.
-  for (const Plane& known : planes) {
+  // Not a plane already known (it stands off each by more than the tolerance), or a raised one.
+  *known = -1;
+  size_t lowest = 0;
+  for (size_t k = 0; k < planes.size(); ++k) {
+    if (planes[k].c < planes[lowest].c) lowest = k;
+  }
+  for (size_t k = 0; k < planes.size(); ++k) {
     double off = 0;
-    for (int m : in) off += std::fabs(known.At(samples[m][0], samples[m][1]) - samples[m][2]);
-    if (off / in.size() <= 2 * options.tolerance_mm) return false;
+    for (int m : in) off += std::fabs(planes[k].At(samples[m][0], samples[m][1]) - samples[m][2]);
+    if (off / in.size() > 2 * options.tolerance_mm) continue;
+    if (k == lowest) return false;
+    *known = static_cast<int>(k);
+  }
+  if (*known >= 0) {
+    // Fitted again without the outermost blocks, which straddle its edge and draw the fit toward
+    // what lies beyond it: fitted as it was, the face stands off it by a thin leaf's height.
+    const cv::Mat filled = Filled(leaf);
+    cv::Mat off_edge;
+    cv::erode(filled, off_edge, cv::Mat(), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+              cv::Scalar(0));
+    std::vector<cv::Vec3f> kept;
+    for (int m : in) {
+      if (off_edge.at<uint8_t>(where[m])) kept.push_back(samples[m]);
+    }
+    Plane refit;
+    if (kept.size() >= 24 && FitPlane(kept, &refit)) {
+      refit.inliers = static_cast<int>(kept.size());
+      *plane = refit;
+    }
   }
   *ring = cv::Mat::zeros(leaf.size(), CV_8U);
   for (int m : in) ring->at<uint8_t>(where[m]) = 255;
