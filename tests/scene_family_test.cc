@@ -306,6 +306,10 @@ std::vector<Named> OnceMissed() {
       // A frame the surround's samples caught, tilted, fitted again along its outline; the table
       // showing in the window beside the leaf known by its look (FindLeaf's InWindow cut).
       {"seed_118_curl_in_a_frame_it_nearly_fills", DrawFamilyScene(118)},
+      // A creased and a waved leaf in a frame's window, rising above its face away from where
+      // they rest on the table (InWindow: resting on the table along a share of the rim).
+      {"seed_1_crease_in_a_dark_frame", DrawFamilyScene(1)},
+      {"seed_101_wave_in_a_dark_frame", DrawFamilyScene(101)},
   };
 }
 

@@ -40,10 +40,11 @@ bool OutlineOptions::Check(std::string* why) const {
     return false;
   }
   if (!(well_plane_mm > 0) || !(well_depth_mm > 0) || !(well_look >= 0) || !(trim_off_mm > 0) ||
-      !(lies_on_mm >= 0) || !(lies_on_apart >= 0 && lies_on_apart <= 1) || !(raised_plane_mm > 0)) {
+      !(lies_on_mm >= 0) || !(lies_on_apart >= 0 && lies_on_apart <= 1) ||
+      !(window_resting_share > 0 && window_resting_share <= 1) || !(raised_plane_mm > 0)) {
     *why =
         "well_plane_mm, well_depth_mm, trim_off_mm and raised_plane_mm must be > 0, well_look and "
-        "lies_on_mm >= 0, lies_on_apart in [0, 1]";
+        "lies_on_mm >= 0, lies_on_apart in [0, 1], window_resting_share in (0, 1]";
     return false;
   }
   if (gutter_apart_px < 1 || gutter_borrow_rows < 1 || !(gutter_meet_px >= 0)) {
@@ -272,15 +273,20 @@ bool LiesOn(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& 
 // set apart inside it (SetApartInside) and lying below `plane`, outer's plane along its outline,
 // on what shows through the window, along its own outline (the median height of its blocks
 // within three of its outline under the plane by at least options.lies_on_mm and three times the
-// blocks' noise: a paper frame stands 0.3 mm high). Judged at its rim, not over all of it: a
-// creased or curled leaf in a window rises above the frame's face away from its edges.
+// blocks' noise: a paper frame stands 0.3 mm high), or resting on what shows through along
+// options.window_resting_share of that rim (under the plane so, and within a leaf's thickness of
+// the lowest of `planes`, the table). Judged at its rim, not over all of it: a creased or curled
+// leaf in a window rises above the frame's face away from its edges, and a waved one along them
+// where its crests meet the window's edge.
 bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat& inner,
-              const outline::Plane& plane, int min_blocks, const OutlineOptions& options) {
+              const outline::Plane& plane, const std::vector<outline::Plane>& planes,
+              int min_blocks, const OutlineOptions& options) {
   if (!SetApartInside(blocks, outer, inner, min_blocks, options)) return false;
   cv::Mat deep;
   cv::erode(outline::Filled(inner), deep, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1,
             cv::BORDER_CONSTANT, cv::Scalar(0));
   std::vector<float> below, noise;
+  std::vector<double> lowest;  // Each rim block's height above the lowest known plane.
   int measured = 0;
   for (int by = 0; by < inner.rows; ++by) {
     for (int bx = 0; bx < inner.cols; ++bx) {
@@ -289,14 +295,25 @@ bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat
       ++measured;
       if (!std::isnan(n)) noise.push_back(n);
       if (deep.at<uint8_t>(by, bx)) continue;
-      below.push_back(
-          static_cast<float>(plane.At(blocks.x.at<float>(by, bx), blocks.y.at<float>(by, bx)) - z));
+      const double x = blocks.x.at<float>(by, bx), y = blocks.y.at<float>(by, bx);
+      below.push_back(static_cast<float>(plane.At(x, y) - z));
+      double ground = plane.At(x, y);
+      for (const outline::Plane& p : planes) ground = std::min(ground, p.At(x, y));
+      lowest.push_back(z - ground);
     }
   }
   if (measured * 2 < cv::countNonZero(inner) || below.empty()) {
     return false;  // Mostly unmeasured.
   }
-  return outline::Median(&below) >= std::max(options.lies_on_mm, 3 * outline::Median(&noise));
+  const double bar = std::max(options.lies_on_mm, 3 * outline::Median(&noise));
+  // Its rim on what lies below the frame (the table), a leaf's thickness above it, along a share
+  // of it: a waved or creased leaf's rim rises above the frame's face away from where it rests.
+  int resting = 0;
+  for (size_t k = 0; k < below.size(); ++k) {
+    if (below[k] >= bar && lowest[k] <= options.cut.thickness_mm) ++resting;
+  }
+  return outline::Median(&below) >= bar ||
+         resting >= options.window_resting_share * static_cast<double>(below.size());
 }
 
 }  // namespace
@@ -394,7 +411,8 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     cv::Mat inner = AtSeed(inner_cut.leaf, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     const bool lies_on = LiesOn(blocks, cut, inner, above_more, min_blocks, options);
-    const bool in_window = !lies_on && InWindow(blocks, cut, inner, plane, min_blocks, options);
+    const bool in_window =
+        !lies_on && InWindow(blocks, cut, inner, plane, planes, min_blocks, options);
     if (in_window) {
       // What shows through the window beside the leaf is the table: cut again knowing its look
       // as well as the frame's.
@@ -402,7 +420,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
                           outline::Filled(cut), options.cut);
       cv::Mat inner_again = AtSeed(again.leaf, seed);
       if (cv::countNonZero(inner_again) == 0) inner_again = Largest(again.leaf);
-      if (InWindow(blocks, cut, inner_again, plane, min_blocks, options)) {
+      if (InWindow(blocks, cut, inner_again, plane, planes, min_blocks, options)) {
         inner_cut = again;
         inner = inner_again;
       }

@@ -85,6 +85,10 @@ struct OutlineOptions {
   // (flagged).
   double lies_on_mm = 0.03;
   double lies_on_apart = 0.7;
+  // A leaf in a frame's window lies below the frame's face along most of its outline, or rests on
+  // the table (within cut.thickness_mm of it) along at least this share of it: a waved or creased
+  // leaf rises above the face where its crests meet the window's edge.
+  double window_resting_share = 0.15;
   double raised_plane_mm = 1.0;
   // ... unless at least this share of what lies just outside it is as high (within
   // raised_plane_mm): then it is a leaf on a support wider than itself.
