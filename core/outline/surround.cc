@@ -329,9 +329,10 @@ bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vec
                        const SurroundOptions& options, Plane* plane, cv::Mat* ring, int* known) {
   // The blocks within three of the outer outline, inside (not those along its holes: a leaf's
   // dark squares cut out of a frame taken with it lie on the table the frame lies on).
+  const cv::Mat filled = Filled(leaf);
   cv::Mat inner;
-  cv::erode(Filled(leaf), inner, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1,
-            cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::erode(filled, inner, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
+            cv::Scalar(0));
   const cv::Mat band = leaf & ~inner;
   std::vector<cv::Vec3f> samples;
   std::vector<float> noise;
@@ -371,7 +372,6 @@ bool PlaneAlongOutline(const Blocks& blocks, const cv::Mat& leaf, const std::vec
   if (*known >= 0) {
     // Fitted again without the outermost blocks, which straddle its edge and draw the fit toward
     // what lies beyond it: fitted as it was, the face stands off it by a thin leaf's height.
-    const cv::Mat filled = Filled(leaf);
     cv::Mat off_edge;
     cv::erode(filled, off_edge, cv::Mat(), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
               cv::Scalar(0));
