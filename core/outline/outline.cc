@@ -286,7 +286,7 @@ bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat
   cv::erode(outline::Filled(inner), deep, cv::Mat::ones(7, 7, CV_8U), cv::Point(-1, -1), 1,
             cv::BORDER_CONSTANT, cv::Scalar(0));
   std::vector<float> below, noise;
-  std::vector<double> lowest;  // Each rim block's height above the lowest known plane.
+  std::vector<double> above_ground;  // Each rim block's height above the lowest known plane.
   int measured = 0;
   for (int by = 0; by < inner.rows; ++by) {
     for (int bx = 0; bx < inner.cols; ++bx) {
@@ -299,7 +299,7 @@ bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat
       below.push_back(static_cast<float>(plane.At(x, y) - z));
       double ground = plane.At(x, y);
       for (const outline::Plane& p : planes) ground = std::min(ground, p.At(x, y));
-      lowest.push_back(z - ground);
+      above_ground.push_back(z - ground);
     }
   }
   if (measured * 2 < cv::countNonZero(inner) || below.empty()) {
@@ -310,7 +310,7 @@ bool InWindow(const outline::Blocks& blocks, const cv::Mat& outer, const cv::Mat
   // of it: a waved or creased leaf's rim rises above the frame's face away from where it rests.
   int resting = 0;
   for (size_t k = 0; k < below.size(); ++k) {
-    if (below[k] >= bar && lowest[k] <= options.cut.thickness_mm) ++resting;
+    if (below[k] >= bar && above_ground[k] <= options.cut.thickness_mm) ++resting;
   }
   return outline::Median(&below) >= bar ||
          resting >= options.window_resting_share * static_cast<double>(below.size());
@@ -407,7 +407,8 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
       more.push_back(plane);
     }
     const cv::Mat above_more = AboveSurround(blocks, more);
-    Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, outline::Filled(cut), options.cut);
+    const cv::Mat within = outline::Filled(cut);  // The inner leaf may reach into cut's holes.
+    Cut inner_cut = CutLeaf(blocks, above_more, seed, ring, within, options.cut);
     cv::Mat inner = AtSeed(inner_cut.leaf, seed);
     if (cv::countNonZero(inner) == 0) inner = Largest(inner_cut.leaf);
     const bool lies_on = LiesOn(blocks, cut, inner, above_more, min_blocks, options);
@@ -416,8 +417,8 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     if (in_window) {
       // What shows through the window beside the leaf is the table: cut again knowing its look
       // as well as the frame's.
-      Cut again = CutLeaf(blocks, above_more, seed, ring | OuterSurround(blocks, above),
-                          outline::Filled(cut), options.cut);
+      Cut again = CutLeaf(blocks, above_more, seed, ring | OuterSurround(blocks, above), within,
+                          options.cut);
       cv::Mat inner_again = AtSeed(again.leaf, seed);
       if (cv::countNonZero(inner_again) == 0) inner_again = Largest(again.leaf);
       if (InWindow(blocks, cut, inner_again, plane, planes, min_blocks, options)) {
