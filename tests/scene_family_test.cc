@@ -310,6 +310,9 @@ std::vector<Named> OnceMissed() {
       // they rest on the table (InWindow: resting on the table along a share of the rim).
       {"seed_1_crease_in_a_dark_frame", DrawFamilyScene(1)},
       {"seed_101_wave_in_a_dark_frame", DrawFamilyScene(101)},
+      // A cone 0.1 mm thick on a table nearly its shade, whose cut strayed three blocks past its
+      // rim: no leaf seed on the rim, so the leaf keeps to it (RefineRim).
+      {"seed_184_cone_on_a_table_of_its_shade", DrawFamilyScene(184)},
   };
 }
 

@@ -73,6 +73,30 @@ cv::Mat BlocksToPixels(const cv::Mat& blocks, int block, cv::Size size) {
   return full;
 }
 
+namespace {
+
+// The pixels of `open` that a path through `open` (4-connected) joins to `from`.
+cv::Mat ReachedFrom(const cv::Mat& open, const cv::Mat& from) {
+  cv::Mat parts;
+  const int count = cv::connectedComponents(open | from, parts, 4, CV_32S);
+  std::vector<uint8_t> reached(count, 0);
+  for (int v = 0; v < parts.rows; ++v) {
+    const uint8_t* f = from.ptr<uint8_t>(v);
+    const int* p = parts.ptr<int>(v);
+    for (int u = 0; u < parts.cols; ++u) reached[p[u]] |= f[u] != 0;
+  }
+  cv::Mat out(open.size(), CV_8U);
+  for (int v = 0; v < parts.rows; ++v) {
+    const uint8_t* o = open.ptr<uint8_t>(v);
+    const int* p = parts.ptr<int>(v);
+    uint8_t* r = out.ptr<uint8_t>(v);
+    for (int u = 0; u < parts.cols; ++u) r[u] = o[u] && reached[p[u]] ? 255 : 0;
+  }
+  return out;
+}
+
+}  // namespace
+
 cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
                   const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
                   int block, const OutlineOptions& options) {
@@ -138,6 +162,16 @@ cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
   cv::Mat level = cues.rim(near_leaf) + cues.edge(near_leaf);
   level.setTo(cv::Scalar(-1), cues.z(near_leaf) < -1e3f);
   cv::Mat near_labels = labels(near_leaf);
+  // No leaf seed on a rim or an edge (a full step of either): the floods meet there. Where the
+  // cut's outline strays past the leaf's rim by more than a block and the band (a stretch of
+  // table beside a low rim, whose heights the rim's blur lifts), the seeds reach the rim itself,
+  // and from it the leaf would flood the table before the surround arrives. Inside the leaf, its
+  // texture's edges join it again from the seeds around them.
+  near_labels.setTo(0, (near_labels == 1) & (level >= 1));
+  // And the surround seeded over what has no height outside the cut, as far as it reaches from the
+  // surround's seeds: a dark table gives heights only here and there, and an island of them beside
+  // the leaf, which no flood but the leaf's would reach, would be taken across the leaf's edge.
+  near_labels.setTo(2, ReachedFrom((level < 0) & ~full(near_leaf), near_labels == 2));
   Flood(level, &near_labels);
   return labels == 1;
 }

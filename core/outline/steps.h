@@ -211,7 +211,10 @@ cv::Mat BlocksToPixels(const cv::Mat& blocks, int block, cv::Size size);
 // rims and edges within a block and options.band_px pixels of it.
 // Seeds of the surround also where a pixel inside the cut lies on one of `planes` and looks like
 // the surround (by the cut's looks) with the leaf well above it close by (options.well_*): the
-// table between an open book's pages, narrower than the blocks resolve.
+// table between an open book's pages, narrower than the blocks resolve; and over the pixels
+// without a height outside the cut that join the surround's seeds (a dark table's). No seed of
+// the leaf on a full step of a rim or an edge: where the cut strays past the rim, the floods
+// still meet on it.
 cv::Mat RefineRim(const cv::Mat& full, const Cues& cues, const cv::Mat& points,
                   const std::vector<Plane>& planes, const Look& leaf, const Look& surround,
                   int block, const OutlineOptions& options);

@@ -313,6 +313,72 @@ TEST(RefineRim, BringsTheCutsOutlineToThePixel) {
   EXPECT_GE(IoU(refined, truth), 0.95);
 }
 
+// Where the cut strays past the leaf's rim by more than a block and the band (a stretch of table
+// beside a low rim taken with the leaf), its seeds reach the rim itself; the leaf keeps to its rim
+// and does not flood the table beyond it. A 0.15 mm leaf on a table nearly as light as itself
+// (its edge a fifth of a full texture edge; a basin of the table's pattern beside the rim), the
+// cut 14 pixels too far out along its whole left side.
+TEST(RefineRim, KeepsToTheRimWhereTheCutStraysFarPastIt) {
+  const cv::Size size(200, 160);
+  const cv::Rect leaf(62, 41, 87, 78);
+  auto in_leaf = [&](int u, int v) { return leaf.contains(cv::Point(u, v)); };
+  const cv::Mat points = Points(
+      size, [&](int u, int v) { return in_leaf(u, v) ? 0.15 : 0.0; }, 0.01);
+  const cv::Mat texture = Texture(size, [&](int u, int v) {
+    // The table's texture closes a basin beside the rim, as a table's pattern may.
+    const bool across = (v == 36 || v == 37 || v == 122 || v == 123) && u >= 50 && u <= 62;
+    const bool along = (u == 50 || u == 51) && v >= 36 && v <= 123;
+    return in_leaf(u, v) ? 200.0 : across || along ? 166.0 : 196.0;
+  });
+  const OutlineOptions options;
+  const Cues cues = MeasureCues(points, texture, options);
+  const int block = 4;
+  cv::Mat cut(size.height / block, size.width / block, CV_8U, cv::Scalar(0));
+  cut(cv::Rect(12, 10, 26, 20)).setTo(255);  // Pixels 48..151 x 40..119.
+  const cv::Mat refined =
+      RefineRim(BlocksToPixels(cut, block, size), cues, points, {}, Look(), Look(), block, options);
+  cv::Mat truth(size, CV_8U, cv::Scalar(0));
+  truth(leaf).setTo(255);
+  // Off the leaf: a pixel all round at most (the rim's mixed pixels), where the seeds on the rim
+  // took 917; the stray part alone is 1,120.
+  EXPECT_LE(cv::countNonZero(refined & ~truth), 340);
+  cv::Mat beyond(size, CV_8U, cv::Scalar(0));
+  beyond(cv::Rect(48, 40, 12, 80)).setTo(255);  // More than two pixels out from the rim.
+  EXPECT_EQ(cv::countNonZero(refined & beyond), 0);
+}
+
+// On a dark table the decoder gives heights only here and there: islands of them beside the
+// leaf, cut off from the surround's seeds by pixels with no height, stay the table's. A leaf at
+// level 200 on a table at 15 of which one pixel in three has a height, the cut's outline a block
+// off the leaf's (the islands beyond it).
+TEST(RefineRim, LeavesADarkTablesIslandsOfHeightsOut) {
+  const cv::Size size(200, 160);
+  const cv::Rect leaf(51, 41, 98, 78);
+  auto in_leaf = [&](int u, int v) { return leaf.contains(cv::Point(u, v)); };
+  cv::RNG rng(7);
+  const cv::Mat points = Points(size, [&](int u, int v) {
+    return in_leaf(u, v) ? 0.1 : rng.uniform(0.0, 1.0) < 0.33 ? 0.0 : NAN;
+  });
+  const cv::Mat texture = Texture(size, [&](int u, int v) { return in_leaf(u, v) ? 200.0 : 15.0; });
+  const OutlineOptions options;
+  const Cues cues = MeasureCues(points, texture, options);
+  const int block = 4;
+  cv::Mat cut(size.height / block, size.width / block, CV_8U, cv::Scalar(0));
+  cut(cv::Rect(13, 10, 25, 20)).setTo(255);  // Pixels 52..151 x 40..119: -1 to 3 pixels out.
+  const cv::Mat full = BlocksToPixels(cut, block, size);
+  const cv::Mat refined = RefineRim(full, cues, points, {}, Look(), Look(), block, options);
+  cv::Mat truth(size, CV_8U, cv::Scalar(0));
+  truth(leaf).setTo(255);
+  // Nothing more than 5 pixels (1.25 mm) out, under the family's 1.5 mm bar for the restored
+  // mask: an island on the texture edge's slope (the edge measured over 2 x 3 pixels) is the
+  // crest's, and either flood may take it. The islands beyond reach 121 pixels without the
+  // surround's seeds over the table's pixels without a height.
+  cv::Mat near_rim;
+  cv::dilate(truth, near_rim, cv::Mat::ones(11, 11, CV_8U));
+  EXPECT_EQ(cv::countNonZero(refined & ~near_rim), 0);
+  EXPECT_GE(IoU(refined, truth), 0.97);
+}
+
 // A raised edge's mixed pixels (half leaf, half table) are not the leaf: a plateau 20 mm up
 // whose outermost ring of pixels stands at 10 mm loses that ring and no more.
 TEST(TrimRim, TakesTheRaisedEdgesMixedPixelsOut) {
