@@ -316,8 +316,8 @@ TEST(RefineRim, BringsTheCutsOutlineToThePixel) {
 // Where the cut strays past the leaf's rim by more than a block and the band (a stretch of table
 // beside a low rim taken with the leaf), its seeds reach the rim itself; the leaf keeps to its rim
 // and does not flood the table beyond it. A 0.15 mm leaf on a table nearly as light as itself
-// (its edge a fifth of a full texture edge; a basin of the table's pattern beside the rim), the
-// cut 14 pixels too far out along its whole left side.
+// (its texture edge a tenth of a full one at most; a basin of the table's pattern beside the
+// rim), the cut 14 pixels too far out along its whole left side.
 TEST(RefineRim, KeepsToTheRimWhereTheCutStraysFarPastIt) {
   const cv::Size size(200, 160);
   const cv::Rect leaf(62, 41, 87, 78);
