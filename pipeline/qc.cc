@@ -120,7 +120,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
         report.Number("outline", "touches_border") > 0 ? "the leaf touches the view's edge"
                                                        : "the leaf lies inside the view");
   const double valid = report.Number("outline", "valid_in_leaf");
-  check("measured", {"valid_low", "gutter_hidden", "edge_unmeasured"}, {},
+  check("measured", {"valid_low", "gutter_hidden", "edge_unmeasured", "edge_on"}, {},
         has_outline && valid < limits.fail_valid_in_leaf,
         Percent(valid) + " of the leaf measured in 3D");
   std::string strain;

@@ -306,6 +306,7 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
   r.Number("outline", "leaf_pixels", leaf);
   r.Number("outline", "holes", outline->holes);
   r.Number("outline", "unseen_beside_share", outline->unseen_share);
+  r.Number("outline", "edge_on_share", outline->edge_on_share);
   r.Number("outline", "pages", static_cast<double>(outline->pages.size()));
   r.Number("outline", "touches_border", outline->touches_border ? 1 : 0);
   // How much of the leaf was measured, and how much of its texture is clipped.

@@ -60,6 +60,13 @@ bool OutlineOptions::Check(std::string* why) const {
         "max_lost_share and wider_support_share in [0, 1]";
     return false;
   }
+  if (!(edge_on_height_mm >= 0) || !(edge_on_deg > 0 && edge_on_deg < 90) || edge_on_band_px < 4 ||
+      !(max_edge_on_share >= 0 && max_edge_on_share <= 1)) {
+    *why =
+        "edge_on_height_mm must be >= 0, edge_on_deg in (0, 90), edge_on_band_px >= 4, "
+        "max_edge_on_share in [0, 1]";
+    return false;
+  }
   return surround.Check(why) && cut.Check(why);
 }
 
@@ -510,6 +517,20 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
              "% more of the leaf (by its look) has no 3D point: an edge curled up edge-on to the "
              "projector, or a slope facing away from it; it is left out of the restored page: "
              "lay that edge flatter or turn the leaf towards the projector and scan again"});
+  }
+  if (rig) {
+    out.edge_on_share = EdgeOnShare(leaf, points, planes, rig->camera, options.edge_on_height_mm,
+                                    options.edge_on_deg, options.edge_on_band_px);
+  }
+  if (out.edge_on_share > options.max_edge_on_share) {
+    out.doubts.push_back(
+        {"edge_on",
+         "along " + Fixed(100 * out.edge_on_share, 0) + "% of the outline the leaf's edge stands " +
+             Fixed(options.edge_on_height_mm, 0) + " mm or more off what it lies on and the " +
+             "camera sees it nearly edge-on (over " + Fixed(options.edge_on_deg, 0) +
+             " degrees from face-on): if that edge curls over, the camera sees only a sliver "
+             "of it and the leaf beneath is missing from the restored page; lay that edge "
+             "flatter, or turn it towards the camera, and scan again"});
   }
   out.touches_border = TouchesBorder(leaf, options.border_px);
   // Plausibility: a leaf lies inside the view; what fills most of it, or reaches two or more of

@@ -113,6 +113,18 @@ struct OutlineOptions {
   double unseen_look = 1.0;
   double max_unseen_share = 0.01;
   double unseen_clear_mm = 0.5;
+  // The leaf's edge seen edge-on (EdgeOnShare): an outline pixel whose edge stands at least
+  // edge_on_height_mm above the surround beneath it, where the surface 3 to edge_on_band_px
+  // pixels inside is seen more than edge_on_deg from face-on (each pixel's patch of it
+  // 1 / cos(edge_on_deg) times a face-on pixel's). Over max_edge_on_share of the outline is
+  // flagged (edge_on): a curl rolled past the camera's line of sight shows only a sliver of its
+  // edge and hides the leaf beneath it, and the measured surface does not tell the two apart
+  // (on the scene family, a curl whose edge hides 10 mm of the leaf measured 73 to 79 degrees
+  // along a third of its outline, as one that hides nothing; every other leaf under a tenth).
+  double edge_on_height_mm = 5;
+  double edge_on_deg = 73;
+  int edge_on_band_px = 6;
+  double max_edge_on_share = 0.15;
   // The outline at the pixel leaving out more than this share of what the cut found well inside
   // its outline (its holes aside) is doubtful (outline_uncertain).
   double max_lost_share = 0.1;
@@ -159,6 +171,8 @@ struct Outline {
   // Of the leaf's area, the share more of it seen beside the outline without a 3D point (a
   // curled edge turned edge-on to the projector): not in `mask`, not restored.
   double unseen_share = 0;
+  // Share of the outline that is its edge standing off the surround seen edge-on (EdgeOnShare).
+  double edge_on_share = 0;
   int holes = 0;                     // Holes in the leaf that show what is under it.
   cv::Vec4f gutter{0, 0, 0, 0};      // A spread's gutter line in the image: (vx, vy, x0, y0).
   std::vector<OutlineDoubt> doubts;  // What makes it doubtful (none: found with confidence).

@@ -458,4 +458,65 @@ int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& co
   return unseen;
 }
 
+double EdgeOnShare(const cv::Mat& leaf, const cv::Mat& points, const std::vector<Plane>& planes,
+                   const CameraModel& camera, double height_mm, double deg, int band_px) {
+  constexpr int kReach = 2;  // The slopes across 2 x kReach pixels.
+  const cv::Rect box = (cv::boundingRect(leaf) + cv::Size(2, 2) - cv::Point(1, 1)) &
+                       cv::Rect(0, 0, leaf.cols, leaf.rows);
+  if (box.empty()) return 0;
+  const cv::Mat in_leaf = leaf(box) > 0;
+  cv::Mat inner, deep;
+  cv::erode(in_leaf, inner, cv::Mat::ones(2 * kReach + 1, 2 * kReach + 1, CV_8U));
+  cv::erode(in_leaf, deep, cv::Mat::ones(2 * band_px + 1, 2 * band_px + 1, CV_8U));
+  const cv::Mat band = inner & ~deep;
+  const cv::Vec3d centre = camera.Center();
+  const double face_on = camera.matrix(0, 0) * camera.matrix(1, 1);
+  const double steepest = 1 / std::cos(deg * CV_PI / 180);
+  auto point = [&](int u, int v, cv::Vec3d* p) {
+    if (u < 0 || v < 0 || u >= box.width || v >= box.height || !in_leaf.at<uint8_t>(v, u)) {
+      return false;
+    }
+    const cv::Vec3f x = points.at<cv::Vec3f>(v + box.y, u + box.x);
+    if (!std::isfinite(x[0]) || !std::isfinite(x[1]) || !std::isfinite(x[2])) return false;
+    *p = cv::Vec3d(x[0], x[1], x[2]);
+    return true;
+  };
+  // The band's pixels seen edge-on.
+  cv::Mat edge_on(box.size(), CV_8U, cv::Scalar(0));
+  for (int v = 0; v < box.height; ++v) {
+    for (int u = 0; u < box.width; ++u) {
+      if (!band.at<uint8_t>(v, u)) continue;
+      cv::Vec3d p, l, r, t, b;
+      if (!point(u, v, &p) || !point(u - kReach, v, &l) || !point(u + kReach, v, &r) ||
+          !point(u, v - kReach, &t) || !point(u, v + kReach, &b)) {
+        continue;
+      }
+      const double patch = cv::norm(((r - l) / (2 * kReach)).cross((b - t) / (2 * kReach)));
+      const double d = cv::norm(p - centre);
+      edge_on.at<uint8_t>(v, u) = patch * face_on > steepest * d * d ? 255 : 0;
+    }
+  }
+  cv::dilate(edge_on, edge_on, cv::Mat::ones(2 * band_px + 1, 2 * band_px + 1, CV_8U));
+  // The outline's pixels: of those, the edges standing off the surround beside such a surface.
+  int outline = 0, counted = 0;
+  for (int v = 0; v < box.height; ++v) {
+    for (int u = 0; u < box.width; ++u) {
+      if (!in_leaf.at<uint8_t>(v, u) || inner.at<uint8_t>(v, u)) continue;
+      ++outline;
+      cv::Vec3d p;
+      if (!edge_on.at<uint8_t>(v, u) || !point(u, v, &p)) continue;
+      // The plane beneath: the highest at or below the edge, else the lowest.
+      double beneath = -std::numeric_limits<double>::infinity(), lowest = 0;
+      for (size_t k = 0; k < planes.size(); ++k) {
+        const double z = planes[k].At(p[0], p[1]);
+        if (z <= p[2] && z > beneath) beneath = z;
+        if (k == 0 || z < lowest) lowest = z;
+      }
+      if (!std::isfinite(beneath)) beneath = planes.empty() ? 0.0 : lowest;
+      counted += p[2] - beneath >= height_mm;
+    }
+  }
+  return outline ? static_cast<double>(counted) / outline : 0.0;
+}
+
 }  // namespace vellum::outline

@@ -273,6 +273,15 @@ class ProjectorSight;
 int UnseenBeside(const cv::Mat& leaf, const cv::Mat& measured, const cv::Mat& colour,
                  const Look& leaf_look, const Look& surround_look, int reach_px, double min_look,
                  const ProjectorSight* sight = nullptr);
+// The share of the leaf's outline (its outer two pixels) that is an edge standing off the
+// surround seen edge-on by `camera`: where the edge stands `height_mm` or more above the plane of
+// `planes` beneath it (world z where there are none), and the surface within `band_px` of it,
+// 3 to `band_px` pixels inside the outline, is seen more than `deg` from face-on (the patch of
+// it one pixel sees, from the point map's slopes across four pixels, over 1 / cos(deg) times a
+// face-on pixel's at that distance). The camera sees such an edge as a sliver: a curl rolled
+// past its line of sight hides what lies beneath the sliver, and the point map cannot tell.
+double EdgeOnShare(const cv::Mat& leaf, const cv::Mat& points, const std::vector<Plane>& planes,
+                   const CameraModel& camera, double height_mm, double deg, int band_px);
 // Whether the projector lights the surround behind a camera pixel: the camera's ray through the
 // pixel meets the first of the surround's planes at T, and the line from T to the projector's
 // centre passes over every point measured beneath it (by `clear_mm` or more) until it stands

@@ -593,6 +593,59 @@ TEST(UnseenBeside, TellsTheLeafUnmeasuredFromItsShadowByTheProjectorsSight) {
   EXPECT_LE(counted, cv::countNonZero((band | wall) & (apart > 3)));
 }
 
+// A leaf lying flat under the camera whose right side rises as a ramp `rise_mm` high at `deg`
+// degrees from the table (a curled edge, straightened), on a table at z = 0; points by casting
+// the camera's rays. `leaf` gets the leaf's pixels.
+cv::Mat RampLeaf(const Calibration& rig, double deg, double rise_mm, cv::Mat* leaf) {
+  const cv::Size size = rig.camera.size;
+  const cv::Vec3d eye = rig.camera.Center();
+  const cv::Vec3d below = rig.camera.RayDirection(cv::Point2d(size.width / 2.0, size.height / 2.0));
+  const cv::Vec3d middle = eye + (-eye[2] / below[2]) * below;  // On the table.
+  const double slope = std::tan(deg * CV_PI / 180), lies = 0.2;
+  const double left = middle[0] - 60, foot = middle[0] + 10, top = foot + rise_mm / slope;
+  const double half_y = 50;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  cv::Mat points(size, CV_32FC3, cv::Scalar::all(nan));
+  *leaf = cv::Mat(size, CV_8U, cv::Scalar(0));
+  for (int v = 0; v < size.height; ++v) {
+    for (int u = 0; u < size.width; ++u) {
+      const cv::Vec3d ray = rig.camera.RayDirection(cv::Point2d(u, v));
+      double nearest = std::numeric_limits<double>::infinity();
+      bool on_leaf = false;
+      auto hit = [&](double t, bool part_of_leaf, double from_x, double to_x) {
+        const cv::Vec3d x = eye + t * ray;
+        if (t <= 0 || t >= nearest || x[0] < from_x || x[0] > to_x) return;
+        if (part_of_leaf && std::fabs(x[1] - middle[1]) > half_y) return;
+        nearest = t;
+        on_leaf = part_of_leaf;
+      };
+      hit((lies - eye[2]) / ray[2], true, left, foot);
+      hit((lies - eye[2] + (eye[0] - foot) * slope) / (ray[2] - ray[0] * slope), true, foot, top);
+      hit(-eye[2] / ray[2], false, -1e9, 1e9);
+      points.at<cv::Vec3f>(v, u) = cv::Vec3f(eye + nearest * ray);
+      leaf->at<uint8_t>(v, u) = on_leaf ? 255 : 0;
+    }
+  }
+  return points;
+}
+
+// A leaf whose side rises 30 mm at 80 degrees is seen edge-on along that side (a third of its
+// outline: the side is 100 mm of about 300); one rising as high at 45 degrees is not, and an edge
+// lower than the height asked for is not counted however steep.
+TEST(EdgeOnShare, FindsTheSideRisingSteeplyOffTheTable) {
+  const Calibration rig = QuickRig();
+  const std::vector<Plane> table = {Plane{0, 0, 0}};
+  cv::Mat leaf;
+  const cv::Mat steep = RampLeaf(rig, 80, 30, &leaf);
+  ASSERT_GT(cv::countNonZero(leaf), 5000);
+  const double share = EdgeOnShare(leaf, steep, table, rig.camera, 5, 73, 6);
+  EXPECT_GT(share, 0.2);
+  EXPECT_LT(share, 0.45);
+  EXPECT_LT(EdgeOnShare(leaf, steep, table, rig.camera, 40, 73, 6), 0.01);
+  const cv::Mat gentle = RampLeaf(rig, 45, 30, &leaf);
+  EXPECT_LT(EdgeOnShare(leaf, gentle, table, rig.camera, 5, 73, 6), 0.01);
+}
+
 // A text page (paper 200 DN, lines of ink 60 DN) on a table a shade darker (184 DN, 8% of the
 // paper). The outline of the page itself is set apart by its look all round; an outline drawn
 // through the page (its lower half taken for the table, as a flush leaf's curl alone would be)
@@ -723,6 +776,10 @@ TEST(OutlineOptions, CheckRefusesEachThresholdOutOfItsRange) {
       {"unseen_look", [](OutlineOptions* o) { o->unseen_look = -1; }},
       {"max_unseen_share", [](OutlineOptions* o) { o->max_unseen_share = 2; }},
       {"max_lost_share", [](OutlineOptions* o) { o->max_lost_share = -0.1; }},
+      {"edge_on_height_mm", [](OutlineOptions* o) { o->edge_on_height_mm = -1; }},
+      {"edge_on_deg", [](OutlineOptions* o) { o->edge_on_deg = 90; }},
+      {"edge_on_band_px", [](OutlineOptions* o) { o->edge_on_band_px = 3; }},
+      {"max_edge_on_share", [](OutlineOptions* o) { o->max_edge_on_share = 1.5; }},
       {"gutter_apart_px", [](OutlineOptions* o) { o->gutter_apart_px = 0; }},
       {"gutter_borrow_rows", [](OutlineOptions* o) { o->gutter_borrow_rows = 0; }},
       {"gutter_meet_px", [](OutlineOptions* o) { o->gutter_meet_px = -1; }},
