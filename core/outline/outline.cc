@@ -347,37 +347,25 @@ bool LeafHintShareFits(double share, double max_share, const std::string& name, 
   return false;
 }
 
-Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options,
-                 const Calibration* rig) {
+namespace {
+
+// What the cut found on the blocks (CutOnBlocks): the leaf's blocks with the cut's looks, the
+// surround's planes (a support's or a frame's among them), and how high above the table lies a
+// plane with nothing standing on it that was taken for the leaf (0: none).
+struct BlockCut {
+  std::vector<outline::Plane> planes;
+  cv::Mat leaf;  // CV_8U over the blocks.
+  outline::Cut found;
+  double raised_mm = 0;
+};
+
+// The leaf on the blocks: the surround's planes, the cut seeded at the hint or the view's centre
+// (cut again where the planes moved when fitted again), the largest part off the centre when
+// nothing lies there (`min_blocks`: a leaf's least size), and the cut again inside a support or
+// a frame found with the leaf. What makes it doubtful goes to `out`.
+BlockCut CutOnBlocks(const outline::Blocks& blocks, cv::Size size, int min_blocks,
+                     const OutlineOptions& options, Outline* out) {
   using namespace outline;
-  Outline out;
-  std::string why;
-  if (!options.Check(&why)) {
-    out.status = Status::Error("outline options: " + why);
-    return out;
-  }
-  if (!options.hint.empty() &&
-      !LeafHintFits(options.hint, points.size(), options.max_view_share, &why)) {
-    out.status = Status::Error(why);
-    return out;
-  }
-  if (points.type() != CV_32FC3 || points.empty()) {
-    out.status = Status::Error("outline input: the point map must be CV_32FC3");
-    return out;
-  }
-  if (texture.size() != points.size()) {
-    out.status = Status::Error("the texture is " + SizeText(texture.size()) + ", the point map " +
-                               SizeText(points.size()));
-    return out;
-  }
-  const cv::Size size = points.size();
-  const Cues cues = MeasureCues(points, texture, options);
-  const int block = BlockSize(size, options.blocks_across);
-  const Blocks blocks = MakeBlocks(cues, points, block);
-  if (blocks.grid.width < 4 || blocks.grid.height < 4) {
-    out.status = Status::Error("outline input: the view of " + SizeText(size) + " is too small");
-    return out;
-  }
   std::vector<Plane> planes = FitSurround(blocks, options.surround);
   cv::Mat above = AboveSurround(blocks, planes);
   const cv::Mat seed = SeedBlocks(blocks, size, options.hint);
@@ -389,12 +377,10 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     found = CutLeaf(blocks, above, seed, OuterSurround(blocks, above), cv::Mat(), options.cut);
   }
   cv::Mat cut = AtSeed(found.leaf, seed);
-  const double area_min = options.min_area * size.area();
-  const int min_blocks = static_cast<int>(area_min / (block * block));
   if (cv::countNonZero(cut) < min_blocks && options.hint.empty()) {
     // Nothing at the view's centre: the leaf lies off it. The largest part found that does not
     // run off the view, flagged when another almost as large was found too.
-    cut = LargestWithin(found.leaf, &out);
+    cut = LargestWithin(found.leaf, out);
   }
   // What was found may be a support or a frame with the leaf on it, or a frame with the leaf in
   // its window, on the table below it: cut again inside it, against the plane along its outline
@@ -457,46 +443,59 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     }
     found = inner_cut;
   }
-  if (cv::countNonZero(cut) * block * block < area_min) {
-    out.status = Status::Error(
-        "no leaf found: nothing around the centre of the view stands off the table or support "
-        "by its height or its look");
-    return out;
-  }
+  return {planes, cut, found, raised_mm};
+}
+
+// The leaf at the pixel (ToThePixel): the cut's blocks brought to the rim by the refinement, over
+// the pixels with a height, its holes filled or kept (`holes`: those kept), the rim's mixed pixels
+// trimmed. Empty when less than `area_min` pixels of it were measured. `full_cut` gets the cut at
+// the pixel.
+cv::Mat ToThePixel(const BlockCut& c, const outline::Cues& cues, const cv::Mat& points, int block,
+                   double area_min, const OutlineOptions& options, cv::Mat* full_cut, int* holes) {
+  using namespace outline;
   // Brought to the pixel, over the pixels with a height: what the cut holds without one, where
   // that reaches its outline (a shadow, a side seen edge-on), is not restored.
-  const cv::Mat full_cut = BlocksToPixels(cut, block, size);
-  cv::Mat region = RefineRim(full_cut, cues, points, planes, found.look_leaf, found.look_surround,
-                             block, options);
-  region = AtSeed(region, full_cut);
+  *full_cut = BlocksToPixels(c.leaf, block, points.size());
+  cv::Mat region = RefineRim(*full_cut, cues, points, c.planes, c.found.look_leaf,
+                             c.found.look_surround, block, options);
+  region = AtSeed(region, *full_cut);
   const cv::Mat measured = cues.z > -1e3f;
-  cv::Mat leaf = AtSeed(region & measured, full_cut);
-  if (cv::countNonZero(leaf) < area_min) {
-    out.status = Status::Error("no leaf found: too little of it was measured in 3D");
-    return out;
-  }
+  cv::Mat leaf = AtSeed(region & measured, *full_cut);
+  if (cv::countNonZero(leaf) < area_min) return cv::Mat();
   const cv::Rect holes_box = (cv::boundingRect(leaf) + cv::Size(4, 4) - cv::Point(2, 2)) &
-                             cv::Rect(0, 0, size.width, size.height);
+                             cv::Rect(0, 0, points.cols, points.rows);
   cv::Mat box_leaf = leaf(holes_box);
   const cv::Mat cautious = StepThreshold(cues.gray(holes_box), cues.bright, options.step_mm,
                                          options.scale_px, /*darkest=*/true);
   // The surround's looks learned outside the leaf's outline: not from the holes to be judged.
-  const SurroundLook surround(points, cues.colour, outline::Filled(leaf), planes, found.look_leaf,
-                              options.well_plane_mm, options.well_look);
-  out.holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf,
-                        &surround, holes_box.tl());
+  const SurroundLook surround(points, cues.colour, outline::Filled(leaf), c.planes,
+                              c.found.look_leaf, options.well_plane_mm, options.well_look);
+  *holes = FillHoles(cues.z(holes_box), cues.gray(holes_box), cautious, cues.bright, &box_leaf,
+                     &surround, holes_box.tl());
   // The rim's mixed pixels out, once the holes are settled (their rims are the leaf's too).
   TrimRim(cues.z, options.trim_off_mm, &leaf);
+  return leaf;
+}
+
+// The outline's figures and doubts (JudgeLeaf): how much of the leaf was measured and how much of
+// its rim is set apart, what the outline at the pixel lost of the cut, the leaf unmeasured or seen
+// edge-on beside its outline, and whether it runs off the view or is more likely the table or a
+// support than a leaf.
+void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues& cues,
+               const cv::Mat& points, const BlockCut& c, int block, const OutlineOptions& options,
+               const Calibration* rig, Outline* out) {
+  using namespace outline;
+  const cv::Mat measured = cues.z > -1e3f;
   // Of the cut's pixels outside the leaf, those without a height may be leaf unmeasured; those
   // with one the refinement left out are the surround (a burnt edge's bays, a hole).
-  out.measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
-                       std::max(1, cv::countNonZero(leaf | (full_cut & ~measured)));
-  out.confidence = RimConfidence(leaf, cues, options.rim_look_px, options.rim_look_contrast);
+  out->measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
+                        std::max(1, cv::countNonZero(leaf | (full_cut & ~measured)));
+  out->confidence = RimConfidence(leaf, cues, options.rim_look_px, options.rim_look_contrast);
   // What the cut found well inside its outline (beyond the block and band the refinement may move
   // it by) and the outline at the pixel left out, its holes aside: part of the leaf lost.
   const double lost = LostInside(full_cut, leaf, block + options.band_px);
   if (lost > options.max_lost_share) {
-    out.doubts.push_back(
+    out->doubts.push_back(
         {"outline_uncertain",
          "the outline brought to the pixel leaves out " + Fixed(100 * lost, 0) +
              "% of the leaf the cut found well inside its outline: part of the leaf is not "
@@ -505,41 +504,43 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   const int leaf_px = std::max(1, cv::countNonZero(leaf));
   std::optional<ProjectorSight> sight;
-  if (rig && !planes.empty()) sight.emplace(*rig, points, planes, options.unseen_clear_mm);
-  out.unseen_share = static_cast<double>(UnseenBeside(
-                         leaf, measured, cues.colour, found.look_leaf, found.look_surround,
-                         options.unseen_reach_px, options.unseen_look, sight ? &*sight : nullptr)) /
-                     leaf_px;
-  if (out.unseen_share > options.max_unseen_share) {
-    out.doubts.push_back(
+  if (rig && !c.planes.empty()) sight.emplace(*rig, points, c.planes, options.unseen_clear_mm);
+  out->unseen_share =
+      static_cast<double>(UnseenBeside(leaf, measured, cues.colour, c.found.look_leaf,
+                                       c.found.look_surround, options.unseen_reach_px,
+                                       options.unseen_look, sight ? &*sight : nullptr)) /
+      leaf_px;
+  if (out->unseen_share > options.max_unseen_share) {
+    out->doubts.push_back(
         {"edge_unmeasured",
-         "beside the outline, " + Fixed(100 * out.unseen_share, 1) +
+         "beside the outline, " + Fixed(100 * out->unseen_share, 1) +
              "% more of the leaf (by its look) has no 3D point: an edge curled up edge-on to the "
              "projector, or a slope facing away from it; it is left out of the restored page: "
              "lay that edge flatter or turn the leaf towards the projector and scan again"});
   }
   if (rig) {
-    out.edge_on_share = EdgeOnShare(leaf, points, planes, rig->camera, options.edge_on_height_mm,
-                                    options.edge_on_deg, options.edge_on_band_px);
+    out->edge_on_share = EdgeOnShare(leaf, points, c.planes, rig->camera, options.edge_on_height_mm,
+                                     options.edge_on_deg, options.edge_on_band_px);
   }
-  if (out.edge_on_share > options.max_edge_on_share) {
-    out.doubts.push_back(
+  if (out->edge_on_share > options.max_edge_on_share) {
+    out->doubts.push_back(
         {"edge_on",
-         "along " + Fixed(100 * out.edge_on_share, 0) + "% of the outline the leaf's edge stands " +
-             Fixed(options.edge_on_height_mm, 0) + " mm or more off what it lies on and the " +
-             "camera sees it nearly edge-on (over " + Fixed(options.edge_on_deg, 0) +
+         "along " + Fixed(100 * out->edge_on_share, 0) +
+             "% of the outline the leaf's edge stands " + Fixed(options.edge_on_height_mm, 0) +
+             " mm or more off what it lies on and the camera sees it nearly edge-on (over " +
+             Fixed(options.edge_on_deg, 0) +
              " degrees from face-on): if that edge curls over, the camera sees only a sliver "
              "of it and the leaf beneath is missing from the restored page; lay that edge "
              "flatter, or turn it towards the camera, and scan again"});
   }
-  out.touches_border = TouchesBorder(leaf, options.border_px);
+  out->touches_border = TouchesBorder(leaf, options.border_px);
   // Plausibility: a leaf lies inside the view; what fills most of it, or reaches two or more of
   // its sides, is more likely the table or a support.
   const int sides = SidesTouched(leaf, options.border_px);
   const double view_share =
       static_cast<double>(cv::countNonZero(leaf)) / std::max(1, cv::countNonZero(measured));
   if (sides >= 2 || view_share > options.max_view_share) {
-    out.doubts.push_back(
+    out->doubts.push_back(
         {"outline_uncertain",
          "the leaf found covers " + Fixed(100 * view_share, 0) + "% of what was measured and " +
              "reaches " + std::to_string(sides) +
@@ -547,8 +548,14 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
              "outline in the report, or draw a leaf hint in the viewer (--leaf-hint) and scan "
              "again"});
   }
-  out.method = "cut";
-  out.mask = leaf;
+}
+
+// The leaf's pages (SplitPages): a spread's two at its gutter, or the one leaf, with the doubts on
+// what lies there: a valley that may be a crease as well as a gutter, a book said with no gutter
+// found, a plane `raised_mm` above the table with nothing standing on it taken for the leaf.
+void SplitPages(const cv::Mat& points, const outline::Cues& cues, const cv::Mat& leaf,
+                double raised_mm, const OutlineOptions& options, Outline* out) {
+  using namespace outline;
   // An open book: its two pages at the gutter. Split when the operator says it is a book, or,
   // on auto, when the two sides are parted along the valley (two sheets) or level off beyond
   // its bend (pages on a book block); any other valley is one creased leaf as well as a book's
@@ -557,19 +564,19 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   GutterSigns signs;
   const bool valley =
       options.find_spread && options.object != ObjectKind::kLeaf &&
-      SplitAtGutter(points, cues.z, leaf, options, &out.gutter, &left, &right, &signs);
+      SplitAtGutter(points, cues.z, leaf, options, &out->gutter, &left, &right, &signs);
   if (valley && (options.object == ObjectKind::kBook || signs.parted || signs.bound)) {
-    out.pages = {left, right};
+    out->pages = {left, right};
   } else {
-    out.pages = {leaf};
+    out->pages = {leaf};
     if (valley) {
-      out.doubts.push_back(
+      out->doubts.push_back(
           {"object_ambiguous",
            "a sharp valley runs down the leaf, its two sides meeting in it: one creased leaf, or "
            "an open book's two pages; restored as one leaf: say object: book (vellum scan "
            "--object book, or in the viewer) to restore two pages, or object: leaf"});
     } else if (options.find_spread && options.object == ObjectKind::kBook) {
-      out.doubts.push_back(
+      out->doubts.push_back(
           {"object_ambiguous",
            "said to be an open book, but no gutter was found between two pages (a valley both "
            "pages rise from): restored as one leaf; check the outline in the report"});
@@ -577,14 +584,69 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   }
   // On a raised plane with nothing standing on it: a support or a box, perhaps, unless two pages
   // were found rising from a gutter on it (an open book's block, which a support does not have).
-  if (raised_mm > 0 && out.pages.size() < 2) {
-    out.doubts.push_back(
+  if (raised_mm > 0 && out->pages.size() < 2) {
+    out->doubts.push_back(
         {"leaf_ambiguous",
          "what was found as the leaf lies on a plane " + Fixed(raised_mm, 1) +
              " mm above the table with nothing standing on it: a support or a box, perhaps, "
              "with the leaf flush on it or beside it: check the outline in the report, draw "
              "a leaf hint over the leaf in the viewer (or give --leaf-hint) and scan again"});
   }
+}
+
+}  // namespace
+
+Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOptions& options,
+                 const Calibration* rig) {
+  using namespace outline;
+  Outline out;
+  std::string why;
+  if (!options.Check(&why)) {
+    out.status = Status::Error("outline options: " + why);
+    return out;
+  }
+  if (!options.hint.empty() &&
+      !LeafHintFits(options.hint, points.size(), options.max_view_share, &why)) {
+    out.status = Status::Error(why);
+    return out;
+  }
+  if (points.type() != CV_32FC3 || points.empty()) {
+    out.status = Status::Error("outline input: the point map must be CV_32FC3");
+    return out;
+  }
+  if (texture.size() != points.size()) {
+    out.status = Status::Error("the texture is " + SizeText(texture.size()) + ", the point map " +
+                               SizeText(points.size()));
+    return out;
+  }
+  const cv::Size size = points.size();
+  const Cues cues = MeasureCues(points, texture, options);
+  const int block = BlockSize(size, options.blocks_across);
+  const Blocks blocks = MakeBlocks(cues, points, block);
+  if (blocks.grid.width < 4 || blocks.grid.height < 4) {
+    out.status = Status::Error("outline input: the view of " + SizeText(size) + " is too small");
+    return out;
+  }
+  const double area_min = options.min_area * size.area();
+  const int min_blocks = static_cast<int>(area_min / (block * block));
+  const BlockCut cut = CutOnBlocks(blocks, size, min_blocks, options, &out);
+  if (cv::countNonZero(cut.leaf) * block * block < area_min) {
+    out.status = Status::Error(
+        "no leaf found: nothing around the centre of the view stands off the table or support "
+        "by its height or its look");
+    return out;
+  }
+  cv::Mat full_cut;
+  const cv::Mat leaf =
+      ToThePixel(cut, cues, points, block, area_min, options, &full_cut, &out.holes);
+  if (leaf.empty()) {
+    out.status = Status::Error("no leaf found: too little of it was measured in 3D");
+    return out;
+  }
+  JudgeLeaf(leaf, full_cut, cues, points, cut, block, options, rig, &out);
+  out.method = "cut";
+  out.mask = leaf;
+  SplitPages(points, cues, leaf, cut.raised_mm, options, &out);
   out.status = Status::Ok();
   return out;
 }
