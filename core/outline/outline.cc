@@ -448,10 +448,11 @@ BlockCut CutOnBlocks(const outline::Blocks& blocks, cv::Size size, int min_block
 
 // The leaf at the pixel (ToThePixel): the cut's blocks brought to the rim by the refinement, over
 // the pixels with a height, its holes filled or kept (`holes`: those kept), the rim's mixed pixels
-// trimmed. Empty when less than `area_min` pixels of it were measured. `full_cut` gets the cut at
-// the pixel.
-cv::Mat ToThePixel(const BlockCut& c, const outline::Cues& cues, const cv::Mat& points, int block,
-                   double area_min, const OutlineOptions& options, cv::Mat* full_cut, int* holes) {
+// trimmed. Empty when less than `area_min` pixels of it were measured (`measured`: the pixels with
+// a height). `full_cut` gets the cut at the pixel.
+cv::Mat ToThePixel(const BlockCut& c, const outline::Cues& cues, const cv::Mat& points,
+                   const cv::Mat& measured, int block, double area_min,
+                   const OutlineOptions& options, cv::Mat* full_cut, int* holes) {
   using namespace outline;
   // Brought to the pixel, over the pixels with a height: what the cut holds without one, where
   // that reaches its outline (a shadow, a side seen edge-on), is not restored.
@@ -459,7 +460,6 @@ cv::Mat ToThePixel(const BlockCut& c, const outline::Cues& cues, const cv::Mat& 
   cv::Mat region = RefineRim(*full_cut, cues, points, c.planes, c.found.look_leaf,
                              c.found.look_surround, block, options);
   region = AtSeed(region, *full_cut);
-  const cv::Mat measured = cues.z > -1e3f;
   cv::Mat leaf = AtSeed(region & measured, *full_cut);
   if (cv::countNonZero(leaf) < area_min) return cv::Mat();
   const cv::Rect holes_box = (cv::boundingRect(leaf) + cv::Size(4, 4) - cv::Point(2, 2)) &
@@ -482,10 +482,9 @@ cv::Mat ToThePixel(const BlockCut& c, const outline::Cues& cues, const cv::Mat& 
 // edge-on beside its outline, and whether it runs off the view or is more likely the table or a
 // support than a leaf.
 void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues& cues,
-               const cv::Mat& points, const BlockCut& c, int block, const OutlineOptions& options,
-               const Calibration* rig, Outline* out) {
+               const cv::Mat& points, const cv::Mat& measured, const BlockCut& c, int block,
+               const OutlineOptions& options, const Calibration* rig, Outline* out) {
   using namespace outline;
-  const cv::Mat measured = cues.z > -1e3f;
   // Of the cut's pixels outside the leaf, those without a height may be leaf unmeasured; those
   // with one the refinement left out are the surround (a burnt edge's bays, a hole).
   out->measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
@@ -637,13 +636,14 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
     return out;
   }
   cv::Mat full_cut;
+  const cv::Mat measured = cues.z > -1e3f;
   const cv::Mat leaf =
-      ToThePixel(cut, cues, points, block, area_min, options, &full_cut, &out.holes);
+      ToThePixel(cut, cues, points, measured, block, area_min, options, &full_cut, &out.holes);
   if (leaf.empty()) {
     out.status = Status::Error("no leaf found: too little of it was measured in 3D");
     return out;
   }
-  JudgeLeaf(leaf, full_cut, cues, points, cut, block, options, rig, &out);
+  JudgeLeaf(leaf, full_cut, cues, points, measured, cut, block, options, rig, &out);
   out.method = "cut";
   out.mask = leaf;
   SplitPages(points, cues, leaf, cut.raised_mm, options, &out);
