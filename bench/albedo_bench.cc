@@ -61,13 +61,15 @@ struct Fixture {
     const CameraModel& camera = DefaultRig().camera;
     mesh = BuildMesh(points, leaf, MeshOptions(),
                      [&](const cv::Vec3d& x) { return camera.Project(x); });
-    flat = Flatten(mesh, FlattenOptions()).flat;
+    flattened = Flatten(mesh, FlattenOptions());
+    flat = flattened.flat;
   }
   FlatField field;
   cv::Mat texture, amplitude, points, leaf;
   std::vector<cv::Mat> lights;  // Two raking lights' images.
   Mesh mesh;
-  std::vector<cv::Point2d> flat;
+  FlattenResult flattened;
+  std::vector<cv::Point2d> flat;  // flattened.flat
 };
 
 Fixture& Shared() {
@@ -140,7 +142,7 @@ RestoreResult RunRestoreStage(const Fixture& f, const std::string& dir) {
   RestoreResult restored;
   PipelineOptions options;
   const StageReport r =
-      RestoreStage(f.texture, f.leaf, f.mesh, f.flat, DefaultRig().camera, options.restore,
+      RestoreStage(f.texture, f.leaf, f.mesh, f.flattened, DefaultRig().camera, options.restore,
                    options.limits, IccProfile(), ScanContext(), {}, dir, "", &restored);
   if (!r.status.ok()) restored.status = r.status;
   return restored;

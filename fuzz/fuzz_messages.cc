@@ -2,8 +2,8 @@
 // is decoded as that type (LCM checks the fingerprint and lengths) and, when it decodes, goes
 // through the station's readers exactly as a daemon would take it: image conversion, capture
 // sets, chunk reassembly of correspondences, point clouds, flat meshes (and the sheet rebuilt
-// from the nodes) and textures, calibration, stage reports. Nothing may crash, hang or read out of
-// bounds.
+// from the nodes) and the scan contexts they carry, textures, calibration, stage reports.
+// Nothing may crash, hang or read out of bounds.
 #include <cstddef>
 #include <cstdint>
 
@@ -55,6 +55,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (chunks.Add(m.scan_id, m.chunk_index, m.chunk_count).ok()) {
         (void)AddChunk(m, &decoded, &projector);
       }
+      ScanContext context;
+      (void)FromMessage(m.context, &context);
       break;
     }
     case 3: {
@@ -62,13 +64,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (!Decode(data, size, &m)) break;
       cv::Mat points;
       (void)AddChunk(m, &points);
+      ScanContext context;
+      (void)FromMessage(m.context, &context);
       break;
     }
     case 4: {
       mesh_t m;
       if (!Decode(data, size, &m)) break;
       Mesh mesh;
-      std::vector<cv::Point2d> flat;
+      FlattenResult flat;
       SheetPage page;
       if (AddChunk(m, &mesh, &flat, &page).ok() && m.chunk_count == 1) {
         static const Calibration rig = DefaultRig();

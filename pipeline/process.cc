@@ -138,9 +138,9 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
       return out;
     }
     next("restore", done + (slow ? 0.8 : 0.3) * share);
-    if (!ran(RestoreStage(input.scan.texture, mask, page.mesh, page.flat.flat, camera,
-                          options.restore, options.limits, options.camera_icc, context,
-                          report.stages, results, page.name, &page.restored),
+    if (!ran(RestoreStage(input.scan.texture, mask, page.mesh, page.flat, camera, options.restore,
+                          options.limits, options.camera_icc, context, report.stages, results,
+                          page.name, &page.restored),
              true)) {
       return out;
     }

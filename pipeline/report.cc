@@ -335,19 +335,6 @@ Status WriteJson(const std::string& dir, const ProcessReport& r) {
 
 }  // namespace
 
-ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages) {
-  ScanIdentity identity;
-  for (const StageReport& stage : stages) {
-    for (const ReportValue& v : stage.values) {
-      if (v.section != "identity" || !v.is_text) continue;
-      ForEachIdentityField(identity, [&](const char* key, std::string& field) {
-        if (v.key == key) field = v.text;
-      });
-    }
-  }
-  return identity;
-}
-
 std::string LeafHintText(const cv::Rect& hint) {
   return std::to_string(hint.x) + "," + std::to_string(hint.y) + "," + std::to_string(hint.width) +
          "," + std::to_string(hint.height);
@@ -362,20 +349,6 @@ bool ParseLeafHint(const std::string& text, cv::Rect* hint) {
   }
   *hint = cv::Rect(x, y, w, h);
   return true;
-}
-
-cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages) {
-  const ReportValue* v = FindValue(stages, "operator", "leaf_hint");
-  cv::Rect hint;
-  if (!v || !v->is_text || !ParseLeafHint(v->text, &hint)) return cv::Rect();
-  return hint;
-}
-
-ObjectKind ReportedObject(const std::vector<StageReport>& stages) {
-  const ReportValue* v = FindValue(stages, "operator", "object");
-  ObjectKind object = ObjectKind::kAuto;
-  if (v && v->is_text) ParseObjectKind(v->text, &object);
-  return object;
 }
 
 void StageReport::Text(const std::string& section, const std::string& key,

@@ -71,13 +71,6 @@ struct ProcessReport {
 const ReportValue* FindValue(const std::vector<StageReport>& stages, const std::string& section,
                              const std::string& key, const std::string& page = "");
 
-// The scan's catalogue identity as its decode stage reported it (the `identity` section).
-ScanIdentity ReportedIdentity(const std::vector<StageReport>& stages);
-// The operator's leaf hint for the scan as its decode stage reported it (operator/leaf_hint:
-// "x,y,width,height", camera pixels); empty when none.
-cv::Rect ReportedLeafHint(const std::vector<StageReport>& stages);
-// What the operator said the object is (the decode stage's operator/object), auto when nothing.
-ObjectKind ReportedObject(const std::vector<StageReport>& stages);
 // A leaf hint as text, "x,y,width,height" (camera pixels), and back: false unless the text is
 // exactly that, x, y >= 0 and width, height > 0.
 std::string LeafHintText(const cv::Rect& hint);

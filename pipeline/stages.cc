@@ -148,25 +148,6 @@ void JudgeFramePairs(const Scan& scan, const std::vector<FramePairCheck>& pairs,
 
 }  // namespace
 
-ScanContext ScanContext::For(const Scan& scan, const Calibration& calibration) {
-  ScanContext c;
-  c.identity = scan.identity;
-  c.leaf_hint = scan.leaf_hint;
-  c.object = scan.object;
-  c.calibration_sha256 = CalibrationSha256(calibration);
-  c.scale_error_percent = calibration.scale_error_percent;
-  return c;
-}
-
-ScanContext ScanContextFromReports(const std::vector<StageReport>& stages,
-                                   const Calibration& calibration) {
-  Scan scan;
-  scan.identity = ReportedIdentity(stages);
-  scan.leaf_hint = ReportedLeafHint(stages);
-  scan.object = ReportedObject(stages);
-  return ScanContext::For(scan, calibration);
-}
-
 StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits& limits,
                         DecodeResult* decoded, const std::string& frames_dir) {
   Stage stage("decode");
@@ -483,25 +464,19 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
 namespace {
 
 // What the restored page's files say of how it was made (restored.json's `provenance` and the
-// TIFF's XMP): its scale and measured error, its true sampling, the calibration's checksum and
-// every stage's options, from the stages so far and the restore stage's own report `own`.
+// TIFF's XMP): its scale and measured error, its true sampling, its flattening's strain
+// (`flat`), the calibration's checksum (`context`) and the options every stage recorded in its
+// report (`earlier`, the scan's stages so far, and the restore stage's own, `own`).
 std::map<std::string, std::string> Provenance(const RestoreResult& restored,
-                                              const ScanContext& context,
+                                              const FlattenResult& flat, const ScanContext& context,
                                               const std::vector<StageReport>& earlier,
                                               const StageReport& own, const std::string& page) {
   std::map<std::string, std::string> out;
-  auto number = [&](const std::string& section, const std::string& key, const std::string& p) {
-    const ReportValue* v = FindValue(earlier, section, key, p);
-    return v && !v->is_text ? v->number : std::nan("");
-  };
   if (restored.view == RestoreView::kOrthographic && restored.dpi > 0) {
     out["scale_mm_per_pixel"] = JsonNumber(25.4 / restored.dpi).dump();
   }
-  const double mean_strain = number("flattening", "mean_strain", page);
-  if (!std::isnan(mean_strain)) {
-    out["flattening_mean_strain"] = JsonNumber(mean_strain).dump();
-    out["flattening_max_strain"] = JsonNumber(number("flattening", "max_strain", page)).dump();
-  }
+  out["flattening_mean_strain"] = JsonNumber(flat.mean_strain).dump();
+  out["flattening_max_strain"] = JsonNumber(flat.max_strain).dump();
   for (const ReportValue& v : own.values) {
     if (v.section == "sampling" && (v.key == "median_ppi" || v.key == "p5_ppi"))
       out["true_" + v.key] = JsonNumber(v.number).dump();
@@ -535,13 +510,14 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 }
 
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
-                         const std::vector<cv::Point2d>& flat, const CameraModel& camera,
+                         const FlattenResult& flattened, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
                          const IccProfile& camera_icc, const ScanContext& context,
                          const std::vector<StageReport>& earlier, const std::string& results,
                          const std::string& page, RestoreResult* restored) {
   Stage stage("restore", page);
   StageReport& r = stage.report();
+  const std::vector<cv::Point2d>& flat = flattened.flat;
   r.Text("options", "view", ToString(options.view));
   *restored = Restore(texture, mesh, flat, camera, options, page_mask);
   if (!restored->status.ok()) return stage.Finish(restored->status);
@@ -556,13 +532,12 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
              ? std::string(texture.channels() == 3 ? "sRGB" : "gray, sRGB tone curve") +
                    " (no camera profile configured)"
              : camera_icc.description);
-  if (const ReportValue* strain = FindValue(earlier, "flattening", "mean_strain", page);
-      strain && restored->view == RestoreView::kOrthographic) {
+  if (restored->view == RestoreView::kOrthographic) {
     // The reproduction scale error: the flat page's lengths against the measured surface's
     // (the flattening's mean strain) plus the calibration's measured error of every length
     // (`vellum calibrate`), when its file carries one. They add: the one is a bias of every
     // length, the other a mean departure from it.
-    const double flattening = 100 * strain->number;
+    const double flattening = 100 * flattened.mean_strain;
     const double calibration = context.scale_error_percent;
     const bool measured = std::isfinite(calibration);
     r.Number("restored", "scale_error_flattening_percent", flattening);
@@ -589,7 +564,7 @@ StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const
     }
   }
   const std::map<std::string, std::string> provenance =
-      Provenance(*restored, context, earlier, r, page);
+      Provenance(*restored, flattened, context, earlier, r, page);
   if (restored->view == RestoreView::kOrthographic && !restored->mask.empty()) {
     const cv::Rect leaf = cv::boundingRect(restored->mask);
     const double mm = 25.4 / restored->dpi;

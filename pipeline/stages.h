@@ -23,6 +23,7 @@
 #include "core/shading/albedo.h"
 #include "core/shading/photometric.h"
 #include "io/xmp.h"
+#include "pipeline/context.h"
 #include "pipeline/report.h"
 
 namespace vellum {
@@ -103,26 +104,6 @@ struct PipelineOptions {
   bool Check(std::string* why) const;
 };
 
-// What the stages need to know of a scan beyond its images, as types (never read back from a
-// report, which only records it): who it is, what the operator said of it, and the calibration
-// it was measured with. `vellum process` builds it from the scan and its calibration (For); the
-// station's processing daemons from what the decode stage reported of the scan, which travels
-// with every message down the chain, and the scan's calibration (FromReports), once each.
-struct ScanContext {
-  ScanIdentity identity;
-  cv::Rect leaf_hint;                     // Camera pixels inside the leaf; empty: none.
-  ObjectKind object = ObjectKind::kAuto;  // What the operator said lies there.
-  std::string calibration_sha256;         // Of the calibration the points were measured with.
-  // That calibration's measured error of every length, %, NaN when not measured.
-  double scale_error_percent = std::numeric_limits<double>::quiet_NaN();
-
-  static ScanContext For(const Scan& scan, const Calibration& calibration);
-};
-// The context of a scan as its decode stage among `stages` reported it (its identity, the
-// operator's leaf hint and object), measured with `calibration`.
-ScanContext ScanContextFromReports(const std::vector<StageReport>& stages,
-                                   const Calibration& calibration);
-
 // A page's name ("" for a single leaf; "left", "right" for the pages of a spread) and the
 // folder its files go to (the results folder, or results/pages/<name>).
 std::string PageName(const Outline& outline, size_t page);
@@ -178,12 +159,12 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
 // before/after), and the camera's true sampling of the page (sampling_ppi.tif, its summary and
 // picture). Warns of a leaf whose size is not the one expected, and of a dpi asked above the
 // true sampling. The scan's identity (a spread's page gets its own, PageIdentity) and its
-// calibration's checksum and scale error (`context`), and, of `earlier` (the scan's stages so
-// far), the page's flattening residual and every stage's options go into restored.json and the
-// TIFF's XMP. The TIFF embeds the camera's ICC profile `camera_icc` (empty: sRGB), named in the
-// report.
+// calibration's checksum and scale error (`context`), the page's flattening residual (`flat`, the
+// page's FlattenResult: its flat positions and strains) and the options every stage so far
+// recorded in its report (`earlier`) go into restored.json and the TIFF's XMP. The TIFF embeds the
+// camera's ICC profile `camera_icc` (empty: sRGB), named in the report.
 StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
-                         const std::vector<cv::Point2d>& flat, const CameraModel& camera,
+                         const FlattenResult& flat, const CameraModel& camera,
                          const RestoreOptions& options, const WarningLimits& limits,
                          const IccProfile& camera_icc, const ScanContext& context,
                          const std::vector<StageReport>& earlier, const std::string& results,

@@ -215,6 +215,50 @@ ScanIdentity FromMessage(const scan_identity_t& m) {
   return SanitizedIdentity(id);
 }
 
+scan_context_t ToMessage(const ScanContext& context) {
+  scan_context_t m;
+  m.identity = ToMessage(context.identity);
+  const cv::Rect& hint = context.leaf_hint;
+  const bool has_hint = !hint.empty();
+  m.leaf_hint[0] = has_hint ? hint.x : 0;
+  m.leaf_hint[1] = has_hint ? hint.y : 0;
+  m.leaf_hint[2] = has_hint ? hint.width : 0;
+  m.leaf_hint[3] = has_hint ? hint.height : 0;
+  m.object = ToString(context.object);
+  m.calibration_sha256 = context.calibration_sha256;
+  m.scale_error_percent = context.scale_error_percent;
+  return m;
+}
+
+Status FromMessage(const scan_context_t& m, ScanContext* context) {
+  ScanContext c;
+  c.identity = FromMessage(m.identity);
+  const int32_t* h = m.leaf_hint;
+  if (h[2] != 0 || h[3] != 0) {
+    if (h[0] < 0 || h[1] < 0 || h[2] <= 0 || h[3] <= 0 || h[2] > 65535 || h[3] > 65535) {
+      return Status::Error("scan context: leaf hint " + std::to_string(h[0]) + "," +
+                           std::to_string(h[1]) + "," + std::to_string(h[2]) + "," +
+                           std::to_string(h[3]) + " is not a rectangle of camera pixels");
+    }
+    c.leaf_hint = cv::Rect(h[0], h[1], h[2], h[3]);
+  }
+  if (!ParseObjectKind(m.object, &c.object)) {
+    return Status::Error("scan context: unknown object '" + m.object + "'");
+  }
+  const std::string& sha = m.calibration_sha256;
+  if (!sha.empty() &&
+      (sha.size() != 64 || sha.find_first_not_of("0123456789abcdef") != std::string::npos)) {
+    return Status::Error("scan context: calibration_sha256 '" + sha + "' is not a SHA-256 in hex");
+  }
+  c.calibration_sha256 = sha;
+  if (std::isinf(m.scale_error_percent)) {
+    return Status::Error("scan context: the scale error is infinite");
+  }
+  c.scale_error_percent = m.scale_error_percent;
+  *context = c;
+  return Status::Ok();
+}
+
 cv::Rect LeafHintPixels(const float hint[4], cv::Size camera) {
   const float x = hint[0], y = hint[1], w = hint[2], h = hint[3];
   // Written as they are so that NaN fails each test.
@@ -446,8 +490,9 @@ Status AddChunk(const texture_t& m, cv::Mat* texture) {
 }
 
 std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
-                                         cv::Size projector_size,
+                                         cv::Size projector_size, const ScanContext& context,
                                          const std::vector<StageReport>& stages) {
+  const scan_context_t context_message = ToMessage(context);
   const int width = decoded.projector_x.cols, height = decoded.projector_x.rows;
   const auto chunks = RowChunks(height, static_cast<size_t>(width) * 9);
   std::vector<correspondence_t> out(chunks.size());
@@ -475,6 +520,8 @@ std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& de
       std::memcpy(&m.projector_y[r * width], decoded.projector_y.ptr<float>(y), width * 4);
       std::memcpy(&m.valid[r * width], decoded.valid.ptr<uint8_t>(y), width);
     }
+    m.lit = decoded.stats.lit;
+    m.context = context_message;
     SetStages(stages, &m);
   }
   return out;
@@ -487,6 +534,10 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
   if (m.projector_width <= 0 || m.projector_height <= 0) {
     return Status::Error("CORRESPONDENCE: bad projector size");
   }
+  if (m.lit < 0 || m.lit > static_cast<int64_t>(m.width) * m.height) {
+    return Status::Error("CORRESPONDENCE: " + std::to_string(m.lit) + " lit pixels of " +
+                         std::to_string(m.width) + "x" + std::to_string(m.height));
+  }
   const cv::Size size(m.width, m.height);
   if (decoded->projector_x.empty()) {
     decoded->projector_x.create(size, CV_32F);
@@ -495,9 +546,10 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
     decoded->has_columns = m.has_columns;
     decoded->has_rows = m.has_rows;
     decoded->status = Status::Ok();
+    decoded->stats.lit = m.lit;
     *projector_size = cv::Size(m.projector_width, m.projector_height);
   } else if (decoded->projector_x.size() != size || decoded->has_columns != m.has_columns ||
-             decoded->has_rows != m.has_rows ||
+             decoded->has_rows != m.has_rows || decoded->stats.lit != m.lit ||
              *projector_size != cv::Size(m.projector_width, m.projector_height)) {
     return Status::Error("CORRESPONDENCE: chunk " + std::to_string(m.chunk_index) +
                          " disagrees with the first chunk on sizes or axes");
@@ -512,7 +564,9 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
 }
 
 std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
+                                      const ScanContext& context,
                                       const std::vector<StageReport>& stages) {
+  const scan_context_t context_message = ToMessage(context);
   const int width = points.cols;
   const auto chunks = RowChunks(points.rows, static_cast<size_t>(width) * 12);
   std::vector<point_cloud_t> out(chunks.size());
@@ -531,6 +585,7 @@ std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
     for (int r = 0; r < m.row_count; ++r) {
       std::memcpy(&m.xyz[3 * r * width], points.ptr<float>(m.row_begin + r), 12 * width);
     }
+    m.context = context_message;
     SetStages(stages, &m);
   }
   return out;
@@ -555,8 +610,10 @@ Status AddChunk(const point_cloud_t& m, cv::Mat* points) {
 }
 
 std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
-                               const std::vector<cv::Point2d>& flat,
+                               const FlattenResult& flattened, const ScanContext& context,
                                const std::vector<StageReport>& stages, const SheetPage& page) {
+  const std::vector<cv::Point2d>& flat = flattened.flat;
+  const scan_context_t context_message = ToMessage(context);
   // The mask's runs of page pixels: row, first column, length.
   std::vector<int32_t> runs;
   for (int v = 0; v < page.mask.rows; ++v) {
@@ -604,16 +661,27 @@ std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_spri
     m.mask_height = page.mask.rows;
     if (c == 0) m.runs = runs;
     m.nruns = static_cast<int32_t>(m.runs.size());
+    m.mean_strain = flattened.mean_strain;
+    m.max_strain = flattened.max_strain;
+    m.context = context_message;
     SetStages(stages, &m);
   }
   return out;
 }
 
-Status AddChunk(const mesh_t& m, Mesh* mesh, std::vector<cv::Point2d>* flat, SheetPage* page) {
+Status AddChunk(const mesh_t& m, Mesh* mesh, FlattenResult* flattened, SheetPage* page) {
+  std::vector<cv::Point2d>* flat = &flattened->flat;
   Status s = CheckRows("FLAT_MESH", m.cols, m.rows, m.row_begin, m.row_count, m.n, m.chunk_index,
                        m.chunk_count);
   if (!s.ok()) return s;
   if (m.cols < 2 || m.rows < 2) return Status::Error("FLAT_MESH: a grid needs 2x2 nodes");
+  if (!(m.mean_strain >= 0 && m.max_strain >= m.mean_strain && std::isfinite(m.max_strain))) {
+    return Status::Error("FLAT_MESH: strains mean " + std::to_string(m.mean_strain) + " and max " +
+                         std::to_string(m.max_strain) + " are not a flattening's");
+  }
+  flattened->mean_strain = m.mean_strain;
+  flattened->max_strain = m.max_strain;
+  flattened->status = Status::Ok();
   if (m.npoint != 3 * static_cast<int64_t>(m.n) || m.nflat != 2 * static_cast<int64_t>(m.n)) {
     return Status::Error("FLAT_MESH: " + std::to_string(m.n) + " nodes need " +
                          std::to_string(3 * m.n) + " point and " + std::to_string(2 * m.n) +

@@ -11,11 +11,13 @@
 
 #include "core/common/status.h"
 #include "core/decode/decode.h"
+#include "core/flatten/flatten.h"
 #include "core/geometry/calibration.h"
 #include "core/geometry/triangulate.h"
 #include "core/mesh/mesh.h"
 #include "core/patterns/patterns.h"
 #include "core/patterns/scan.h"
+#include "pipeline/context.h"
 #include "pipeline/report.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
@@ -25,6 +27,7 @@
 #include "vellum/mesh_t.hpp"
 #include "vellum/pattern_spec_t.hpp"
 #include "vellum/point_cloud_t.hpp"
+#include "vellum/scan_context_t.hpp"
 #include "vellum/scan_identity_t.hpp"
 #include "vellum/scan_started_t.hpp"
 #include "vellum/stage_report_t.hpp"
@@ -44,6 +47,10 @@ pattern_spec_t ToMessage(const PatternSpec& spec);
 // A scan's identity on the bus and back (FromMessage sanitises: SanitizedIdentity).
 scan_identity_t ToMessage(const ScanIdentity& identity);
 ScanIdentity FromMessage(const scan_identity_t& msg);
+// A scan's context as it travels with its products, and back (checked: the hint a rectangle, the
+// object known, the checksum a SHA-256; the identity sanitised).
+scan_context_t ToMessage(const ScanContext& context);
+Status FromMessage(const scan_context_t& msg, ScanContext* context);
 // The leaf hint of SCAN_REQUEST and SCAN_STARTED (x, y, width, height as fractions of the
 // camera's view) and back. In camera pixels of a view of `camera` pixels, within it; empty when
 // the message has none (width 0) or it is not a region of the view (NaN, outside 0 .. 1).
@@ -108,15 +115,17 @@ std::vector<texture_t> TextureMessages(int64_t scan_id, const cv::Mat& texture, 
 Status AddChunk(const texture_t& msg, cv::Mat* texture);
 
 // Decoded correspondences: chunks of rows, and their reassembly. A reassembled map has an ok
-// status (it decoded upstream).
+// status (it decoded upstream) and the decoder's count of lit pixels. Every chunk carries the
+// scan's context and the reports of its stages so far.
 std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
-                                         cv::Size projector_size,
+                                         cv::Size projector_size, const ScanContext& context,
                                          const std::vector<StageReport>& stages);
 // Checks a chunk against the map under construction (allocated on the first chunk) and copies
 // its rows into it.
 Status AddChunk(const correspondence_t& msg, DecodeResult* decoded, cv::Size* projector_size);
 
 std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
+                                      const ScanContext& context,
                                       const std::vector<StageReport>& stages);
 Status AddChunk(const point_cloud_t& msg, cv::Mat* points);
 
@@ -129,11 +138,12 @@ struct SheetPage {
 
 // The flattened sheet of one page as nodes (kind, point, flat), with the page's mask as runs;
 // the receiver rebuilds springs and quads with ConnectSheet.
+// The flattening's figures (its strains) travel with the sheet.
 std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
-                               const std::vector<cv::Point2d>& flat,
+                               const FlattenResult& flat, const ScanContext& context,
                                const std::vector<StageReport>& stages, const SheetPage& page);
-// Copies a chunk's nodes into *mesh (cols, rows, kind, point) and *flat, and its page (the
-// mask from chunk 0) into *page.
-Status AddChunk(const mesh_t& msg, Mesh* mesh, std::vector<cv::Point2d>* flat, SheetPage* page);
+// Copies a chunk's nodes into *mesh (cols, rows, kind, point) and *flat (its flat positions and
+// strains; status ok), and its page (the mask from chunk 0) into *page.
+Status AddChunk(const mesh_t& msg, Mesh* mesh, FlattenResult* flat, SheetPage* page);
 
 }  // namespace vellum::station

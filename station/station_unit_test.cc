@@ -86,7 +86,16 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
   stage.stage = "decode";
   stage.Number("pixels", "decoded", 12345);
   stage.outputs = {"nothing.txt"};
-  std::vector<correspondence_t> chunks = ToMessages(7, d, cv::Size(1024, 768), {stage});
+  d.stats.lit = 1500000;
+  ScanContext context;
+  context.identity.shelfmark = "MS 12";
+  context.identity.folio = "4";
+  context.identity.side = "verso";
+  context.leaf_hint = cv::Rect(100, 80, 900, 700);
+  context.object = ObjectKind::kBook;
+  context.calibration_sha256 = std::string(64, 'a');
+  context.scale_error_percent = 0.03;
+  std::vector<correspondence_t> chunks = ToMessages(7, d, cv::Size(1024, 768), context, {stage});
   ASSERT_GT(chunks.size(), 10u);  // 17 MB in all.
   DecodeResult back;
   cv::Size projector;
@@ -101,9 +110,18 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
     ASSERT_EQ(stages[0].values.size(), 1u);
     EXPECT_EQ(stages[0].values[0].number, 12345);
     EXPECT_EQ(stages[0].outputs, stage.outputs);
+    ScanContext carried;
+    ASSERT_TRUE(FromMessage(c.context, &carried).ok());
+    EXPECT_EQ(carried.identity.shelfmark, "MS 12");
+    EXPECT_EQ(carried.identity.side, "verso");
+    EXPECT_EQ(carried.leaf_hint, context.leaf_hint);
+    EXPECT_EQ(carried.object, ObjectKind::kBook);
+    EXPECT_EQ(carried.calibration_sha256, context.calibration_sha256);
+    EXPECT_EQ(carried.scale_error_percent, 0.03);
     ASSERT_TRUE(set.Add(c.scan_id, c.chunk_index, c.chunk_count).ok());
     ASSERT_TRUE(AddChunk(c, &back, &projector).ok());
   }
+  EXPECT_EQ(back.stats.lit, 1500000);
   EXPECT_TRUE(set.Complete());
   EXPECT_EQ(projector, cv::Size(1024, 768));
   EXPECT_TRUE(SameBits(d.projector_x, back.projector_x));
@@ -156,7 +174,7 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
       points.at<cv::Vec3f>(v, u) = cv::Vec3f(x, y, 0.002f * x * x);
     }
   }
-  std::vector<point_cloud_t> pc = ToMessages(9, points, {});
+  std::vector<point_cloud_t> pc = ToMessages(9, points, ScanContext(), {});
   cv::Mat back;
   for (const point_cloud_t& m : pc) ASSERT_TRUE(AddChunk(m, &back).ok());
   EXPECT_TRUE(SameBits(points, back));
@@ -168,7 +186,11 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   mesh.kind[0] = NodeKind::kOff;
   mesh.kind[7] = NodeKind::kFilled;
   mesh.point.assign(30, cv::Vec3d(0, 0, 0));
-  std::vector<cv::Point2d> flat(30);
+  FlattenResult flattened;
+  flattened.mean_strain = 0.0012;
+  flattened.max_strain = 0.031;
+  std::vector<cv::Point2d>& flat = flattened.flat;
+  flat.resize(30);
   for (int k = 0; k < 30; ++k) {
     mesh.point[k] = cv::Vec3d(10.0 * (k % 6), 10.0 * (k / 6), 0.1 * k);
     flat[k] = cv::Point2d(mesh.point[k][0], mesh.point[k][1]);
@@ -184,9 +206,9 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   cv::circle(page.mask, {70, 60}, 40, cv::Scalar(255), cv::FILLED);
   cv::circle(page.mask, {70, 60}, 10, cv::Scalar(0), cv::FILLED);  // A hole.
   Mesh received;
-  std::vector<cv::Point2d> received_flat;
+  FlattenResult received_flat;
   SheetPage received_page;
-  for (const mesh_t& m : ToMessages(9, mesh, true, flat, {}, page)) {
+  for (const mesh_t& m : ToMessages(9, mesh, true, flattened, ScanContext(), {}, page)) {
     ASSERT_TRUE(AddChunk(m, &received, &received_flat, &received_page).ok());
   }
   EXPECT_EQ(received_page.name, "right");
@@ -198,19 +220,59 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   EXPECT_EQ(received.springs.size(), mesh.springs.size());
   EXPECT_EQ(received.quads, mesh.quads);
   EXPECT_EQ(received.pixel, mesh.pixel);
-  EXPECT_EQ(received_flat, flat);
+  EXPECT_EQ(received_flat.flat, flat);
+  EXPECT_TRUE(received_flat.status.ok());
+  EXPECT_EQ(received_flat.mean_strain, 0.0012);
+  EXPECT_EQ(received_flat.max_strain, 0.031);
 
-  mesh_t bad = ToMessages(9, mesh, true, flat, {}, page)[0];
+  mesh_t bad = ToMessages(9, mesh, true, flattened, ScanContext(), {}, page)[0];
   bad.kind[3] = 9;
   Mesh m2;
-  std::vector<cv::Point2d> f2;
+  FlattenResult f2;
   SheetPage p2;
   EXPECT_NE(AddChunk(bad, &m2, &f2, &p2).message().find("unknown kind 9"), std::string::npos);
-  bad = ToMessages(9, mesh, true, flat, {}, page)[0];
+  bad = ToMessages(9, mesh, true, flattened, ScanContext(), {}, page)[0];
   bad.runs[2] = 1000;  // A run past the mask's edge.
   Mesh m3;
   SheetPage p3;
   EXPECT_NE(AddChunk(bad, &m3, &f2, &p3).message().find("lies outside"), std::string::npos);
+  bad = ToMessages(9, mesh, true, flattened, ScanContext(), {}, page)[0];
+  bad.max_strain = std::nan("");
+  Mesh m4;
+  SheetPage p4;
+  EXPECT_NE(AddChunk(bad, &m4, &f2, &p4).message().find("not a flattening's"), std::string::npos);
+}
+
+TEST(Messages, AScanContextFromTheBusIsCheckedAndNamesWhatIsWrong) {
+  ScanContext context;
+  context.leaf_hint = cv::Rect(10, 20, 30, 40);
+  context.calibration_sha256 = std::string(64, '0');
+  scan_context_t m = ToMessage(context);
+  ScanContext back;
+  ASSERT_TRUE(FromMessage(m, &back).ok());
+  EXPECT_EQ(back.leaf_hint, context.leaf_hint);
+  EXPECT_EQ(back.object, ObjectKind::kAuto);
+  EXPECT_TRUE(std::isnan(back.scale_error_percent));  // Not measured travels as not measured.
+  auto error = [](const scan_context_t& bad) {
+    ScanContext c;
+    return FromMessage(bad, &c).message();
+  };
+  scan_context_t bad = m;
+  bad.leaf_hint[2] = -5;
+  EXPECT_NE(error(bad).find("leaf hint 10,20,-5,40"), std::string::npos) << error(bad);
+  bad = m;
+  bad.object = "scroll";
+  EXPECT_NE(error(bad).find("unknown object 'scroll'"), std::string::npos) << error(bad);
+  bad = m;
+  bad.calibration_sha256 = "123";
+  EXPECT_NE(error(bad).find("not a SHA-256"), std::string::npos) << error(bad);
+  bad = m;
+  bad.scale_error_percent = INFINITY;
+  EXPECT_NE(error(bad).find("infinite"), std::string::npos) << error(bad);
+  // No hint travels as no hint.
+  bad = ToMessage(ScanContext());
+  ASSERT_TRUE(FromMessage(bad, &back).ok());
+  EXPECT_TRUE(back.leaf_hint.empty());
 }
 
 TEST(Messages, CalibrationRoundTripsAndNaNIsRejected) {

@@ -148,6 +148,9 @@ inline const Scan& SmallScan() {
   return scan;
 }
 
+// SmallScan()'s context, measured with the quick rig: what travels with its products.
+inline ScanContext SmallScanContext() { return ScanContext::For(SmallScan(), QuickRig()); }
+
 // SmallScan() through each stage with the default options (computed once per process, its
 // files in a temporary folder): the inputs the daemons after the decoder take, and what their
 // products must equal.
@@ -175,12 +178,12 @@ inline const SmallProducts& SmallScanProducts() {
     p.stages.push_back(DecodeStage(SmallScan(), &decoder, o.limits, &p.decoded));
     p.stages.push_back(
         TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, o.limits, p.results, &p.map));
-    const ScanContext context = ScanContext::For(SmallScan(), rig);
+    const ScanContext context = SmallScanContext();
     p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, rig, context, o.outline,
                                     o.limits, p.results, &p.outline));
     p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));
     p.stages.push_back(FlattenStage(p.mesh, o.flatten, o.limits, p.results, "", &p.flat));
-    p.stages.push_back(RestoreStage(SmallScan().texture, p.outline.pages[0], p.mesh, p.flat.flat,
+    p.stages.push_back(RestoreStage(SmallScan().texture, p.outline.pages[0], p.mesh, p.flat,
                                     rig.camera, o.restore, o.limits, o.camera_icc, context,
                                     p.stages, p.results, "", &p.restored));
     for (const StageReport& stage : p.stages) {

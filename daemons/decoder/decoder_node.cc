@@ -334,7 +334,7 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
     return report.status;
   }
   std::vector<correspondence_t> chunks =
-      ToMessages(id, decoded_, scan.sequence.projector_size, {report});
+      ToMessages(id, decoded_, scan.sequence.projector_size, ScanContext::Of(scan), {report});
   node_->PublishChunks(channel::kCorrespondence, &chunks);
   node_->Count("scans decoded");
   AnnounceHandedOn(node_, id, channel::kCorrespondence);

@@ -130,8 +130,9 @@ TEST_F(DecoderNodeTest, RecordsAScanAndSendsItDownTheChain) {
 }
 
 // The operator's leaf hint (drawn in the viewer: fractions of the camera's view on the bus)
-// reaches scan.yaml and the decode stage's report in the camera's pixels, exactly, and the log
-// keeps it (a replay or an export finds the same); so does what the operator says the object is.
+// reaches scan.yaml, the scan's context and the decode stage's report in the camera's pixels,
+// exactly, and the log keeps it (a replay or an export finds the same); so does what the operator
+// says the object is.
 TEST_F(DecoderNodeTest, TheOperatorsLeafHintIsRecordedInCameraPixels) {
   Node node("vellum-decoder", &bus_.lcm());
   DecoderNode decoder(&node, options_);
@@ -150,10 +151,16 @@ TEST_F(DecoderNodeTest, TheOperatorsLeafHintIsRecordedInCameraPixels) {
   ASSERT_TRUE(ReadScanHeader(folder.raw(), &recorded).ok());
   EXPECT_EQ(recorded.leaf_hint, hinted.leaf_hint);
   EXPECT_EQ(recorded.object, ObjectKind::kBook);
+  // It travels down the chain in the scan's context, as a type, and the report records it.
+  ScanContext context;
+  ASSERT_TRUE(FromMessage(correspondence->back().context, &context).ok());
+  EXPECT_EQ(context.leaf_hint, hinted.leaf_hint);
+  EXPECT_EQ(context.object, ObjectKind::kBook);
   std::vector<StageReport> stages;
   ASSERT_TRUE(FromMessages(correspondence->back().stages, &stages).ok());
-  EXPECT_EQ(ReportedLeafHint(stages), hinted.leaf_hint);
-  EXPECT_EQ(ReportedObject(stages), ObjectKind::kBook);
+  const ReportValue* recorded_hint = FindValue(stages, "operator", "leaf_hint");
+  ASSERT_NE(recorded_hint, nullptr);
+  EXPECT_EQ(recorded_hint->text, LeafHintText(hinted.leaf_hint));
   Scan logged;
   bool has_calibration = false;
   calibration_t calibration;

@@ -47,7 +47,9 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  const ScanContext context = ScanContextFromReports(stages, calibration);
+  ScanContext context;
+  s = FromMessage(last.context, &context);
+  if (!s.ok()) return node_->FailScan(id, "POINT_CLOUD: " + s.message());
   Outline outline;
   stages.push_back(
       OutlineStage(points_, texture, calibration, context, o.outline, o.limits, results, &outline));
@@ -69,7 +71,8 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
     FlattenResult flat;
     stages.push_back(FlattenStage(mesh, o.flatten, o.limits, results, page.name, &flat));
     if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-    std::vector<mesh_t> chunks = ToMessages(id, mesh, o.mesh.bend_springs, flat.flat, stages, page);
+    std::vector<mesh_t> chunks =
+        ToMessages(id, mesh, o.mesh.bend_springs, flat, context, stages, page);
     node_->PublishChunks(channel::kFlatMesh, &chunks);
     const std::string what = page.name.empty() ? "the leaf" : "the " + page.name + " page";
     node_->Log("scan " + std::to_string(id) + ": flattened " + what + " on a " +

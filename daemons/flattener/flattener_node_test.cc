@@ -23,6 +23,7 @@ using testing::FirstStages;
 using testing::MemqBus;
 using testing::ReadBytes;
 using testing::SmallScan;
+using testing::SmallScanContext;
 using testing::SmallScanProducts;
 
 class FlattenerNodeTest : public ::testing::Test {
@@ -38,7 +39,8 @@ class FlattenerNodeTest : public ::testing::Test {
     for (texture_t& m : TextureMessages(id, texture)) bus_.probe().Publish(channel::kTexture, &m);
   }
   void PublishPoints(int64_t id) {
-    for (point_cloud_t& m : ToMessages(id, SmallScanProducts().map.points, FirstStages(2))) {
+    for (point_cloud_t& m :
+         ToMessages(id, SmallScanProducts().map.points, SmallScanContext(), FirstStages(2))) {
       bus_.probe().Publish(channel::kPointCloud, &m);
     }
   }
@@ -57,10 +59,16 @@ TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
   ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
   EXPECT_EQ(progress->back().product, "FLAT_MESH");
   Mesh mesh;
-  std::vector<cv::Point2d> flat;
+  FlattenResult flat;
   SheetPage page;
   for (const mesh_t& m : *sheets) ASSERT_TRUE(AddChunk(m, &mesh, &flat, &page).ok());
-  EXPECT_EQ(flat, SmallScanProducts().flat.flat);
+  EXPECT_EQ(flat.flat, SmallScanProducts().flat.flat);
+  EXPECT_EQ(flat.mean_strain, SmallScanProducts().flat.mean_strain);
+  EXPECT_EQ(flat.max_strain, SmallScanProducts().flat.max_strain);
+  // The scan's context passes on as it came.
+  ScanContext context;
+  ASSERT_TRUE(FromMessage(sheets->back().context, &context).ok());
+  EXPECT_EQ(context.calibration_sha256, SmallScanContext().calibration_sha256);
   EXPECT_EQ(mesh.point, SmallScanProducts().mesh.point);
   EXPECT_EQ(cv::norm(page.mask, SmallScanProducts().outline.pages[0], cv::NORM_INF), 0);
   EXPECT_EQ(page.count, 1);
@@ -88,7 +96,8 @@ TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   EXPECT_TRUE(
       bus_.WaitForError("vellum-flattener", "the texture is 200x150, the point map 400x300"))
       << bus_.Status("vellum-flattener").last_error;
-  point_cloud_t bad = ToMessages(8, SmallScanProducts().map.points, FirstStages(2))[0];
+  point_cloud_t bad =
+      ToMessages(8, SmallScanProducts().map.points, SmallScanContext(), FirstStages(2))[0];
   bad.nxyz -= 1;
   bad.xyz.pop_back();
   bus_.probe().Publish(channel::kPointCloud, &bad);

@@ -68,7 +68,9 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
   s = MakeDirectories(folder.results());
   if (!s.ok()) return node_->FailScan(id, s.message());
-  const ScanContext context = ScanContextFromReports(stages, calibration);
+  ScanContext context;
+  s = FromMessage(last.context, &context);
+  if (!s.ok()) return node_->FailScan(id, "FLAT_MESH: " + s.message());
   const PipelineOptions& o = options_.pipeline;
   RestoreResult restored;
   StageReport restore =
@@ -85,8 +87,8 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   if (s.ok() && !lights.empty()) {
     node_->SetState("busy", id, "restoring its " + std::to_string(lights.size()) + " extra lights");
     LightsResult result;
-    lit = LightsStage(lights, sheet_page.mask, sheet_.mesh, sheet_.flat, o.camera_icc, restored,
-                      context, folder.results(), name, &result);
+    lit = LightsStage(lights, sheet_page.mask, sheet_.mesh, sheet_.flat.flat, o.camera_icc,
+                      restored, context, folder.results(), name, &result);
     s = lit->status;
   }
   if (!s.ok()) {

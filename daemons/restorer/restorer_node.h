@@ -41,7 +41,7 @@ class RestorerNode {
   // The flattened sheet of a page under reassembly.
   struct Sheet {
     Mesh mesh;
-    std::vector<cv::Point2d> flat;
+    FlattenResult flat;  // Its flat positions and strains.
     SheetPage page;
   };
   // The pages of a scan restored so far.

@@ -26,6 +26,7 @@ using testing::FirstStages;
 using testing::MemqBus;
 using testing::ReadBytes;
 using testing::SmallScan;
+using testing::SmallScanContext;
 using testing::SmallScanProducts;
 
 class RestorerNodeTest : public ::testing::Test {
@@ -41,7 +42,8 @@ class RestorerNodeTest : public ::testing::Test {
     const auto& p = SmallScanProducts();
     SheetPage page;
     page.mask = p.outline.pages[0];
-    return ToMessages(id, p.mesh, MeshOptions().bend_springs, p.flat.flat, FirstStages(5), page);
+    return ToMessages(id, p.mesh, MeshOptions().bend_springs, p.flat, SmallScanContext(),
+                      FirstStages(5), page);
   }
   void Publish(int64_t id, std::vector<mesh_t> sheet) {
     for (texture_t& m : TextureMessages(id, SmallScan().texture)) {

@@ -52,12 +52,13 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   Calibration calibration;
   s = calibrations_.Get(id, &calibration);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  DecodeResult& decoded = product_.decoded;
-  // The decoder's counts do not cross the bus with the correspondences: the lit pixels, which
-  // the points are judged against (decode_low), come from its stage's report.
-  if (const ReportValue* lit = FindValue(stages, "pixels", "lit")) {
-    decoded.stats.lit = static_cast<int>(lit->number);
-  }
+  ScanContext context;
+  s = FromMessage(last.context, &context);
+  if (!s.ok()) return node_->FailScan(id, "CORRESPONDENCE: " + s.message());
+  // The points are measured with this calibration: the context carries its checksum on.
+  context.MeasuredWith(calibration);
+  // With the decoder's count of the lit pixels, which the points are judged against.
+  const DecodeResult& decoded = product_.decoded;
   if (calibration.camera.size != decoded.projector_x.size() ||
       calibration.projector.size != product_.projector) {
     return node_->FailScan(
@@ -74,7 +75,7 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   stages.push_back(TriangulateStage(decoded, *triangulator_, options_.triangulate, options_.limits,
                                     results, &map_));
   if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-  std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, stages);
+  std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, context, stages);
   node_->PublishChunks(channel::kPointCloud, &chunks);
   node_->Count("scans triangulated");
   AnnounceHandedOn(node_, id, channel::kPointCloud);

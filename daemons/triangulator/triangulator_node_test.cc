@@ -11,6 +11,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "io/calibration_io.h"
 #include "station/daemon.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
@@ -40,7 +41,7 @@ class TriangulatorNodeTest : public ::testing::Test {
   }
   std::vector<correspondence_t> Chunks(int64_t id) {
     return ToMessages(id, SmallScanProducts().decoded, SmallScan().sequence.projector_size,
-                      FirstStages(1));
+                      ScanContext::Of(SmallScan()), FirstStages(1));
   }
   void PublishChunks(std::vector<correspondence_t> chunks) {
     for (correspondence_t& m : chunks) bus_.probe().Publish(channel::kCorrespondence, &m);
@@ -72,6 +73,15 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
   ASSERT_EQ(stages.size(), 2u);
   EXPECT_EQ(stages[1].stage, "triangulate");
   EXPECT_EQ(stages[1].outputs, SmallScanProducts().stages[1].outputs);
+  // The scan's context came without the calibration's part and leaves with it: the points were
+  // measured with this calibration. The decoder's count of lit pixels came typed, and judged.
+  ScanContext context;
+  ASSERT_TRUE(FromMessage(clouds->back().context, &context).ok());
+  EXPECT_EQ(context.calibration_sha256, CalibrationSha256(QuickRig()));
+  EXPECT_EQ(context.identity.shelfmark, SmallScan().identity.shelfmark);
+  const ReportValue* of_lit = FindValue(stages, "pixels", "points_of_lit");
+  ASSERT_NE(of_lit, nullptr);
+  EXPECT_GT(of_lit->number, 0.5);
   EXPECT_EQ(node.Counter("scans triangulated"), 1);
 }
 
