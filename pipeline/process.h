@@ -8,6 +8,7 @@
 #include "core/common/status.h"
 #include "core/geometry/calibration.h"
 #include "core/patterns/scan.h"
+#include "pipeline/pipeline.h"
 #include "pipeline/report.h"
 #include "pipeline/stages.h"
 
@@ -26,17 +27,6 @@ struct ProcessInput {
 Status ReadProcessInput(const std::string& scan_dir, const std::string& calibration_path,
                         ProcessInput* input);
 
-// One page of the scan: the leaf, or a page of a spread.
-struct PageResult {
-  std::string name;  // "" for a single leaf; "left", "right".
-  Mesh mesh;
-  FlattenResult flat;
-  RestoreResult restored;
-  RestoreResult albedo;       // With a flat field: the page's albedo, restored as `restored` is.
-  RestoreResult reflectance;  // With a studio field: the texture's reflectance, restored alike.
-  LightsResult lights;        // The scan's extra lights (and their normals), restored alike.
-};
-
 struct ProcessResult {
   Status status = Status::Error("pipeline not run");
   ProcessReport report;  // The stages that ran, their warnings, and the files written.
@@ -44,9 +34,6 @@ struct ProcessResult {
   Outline outline;
   std::vector<PageResult> pages;
 };
-
-// Called before each stage with its name and the share of the whole run done so far.
-using PipelineProgress = std::function<void(const std::string& stage, double done)>;
 
 // Runs decode, triangulate and outline, then mesh, flatten and restore for each page, into
 // `results`, then writes report.html and report.json. Errors name the scan directory, or the
