@@ -83,6 +83,10 @@ void MakePages(ScanWork* work) {
 }  // namespace
 
 Status Pipeline::Check(const ScanWork& work) const {
+  const std::string texture_name =
+      work.name.empty() ? "the scan's texture" : work.name + "/texture.png";
+  const std::string calibration_name =
+      work.calibration_name.empty() ? "the scan's calibration" : work.calibration_name;
   const IccProfile& icc = options_.camera_icc;
   const cv::Mat& texture = work.scan.texture;
   if (!icc.empty() && !texture.empty() && icc.channels != texture.channels()) {
@@ -95,7 +99,7 @@ Status Pipeline::Check(const ScanWork& work) const {
   const FlatField& field = options_.flat_field;
   if (!field.empty() && field.projector_size != calibration.projector.size) {
     return Status::Error("the flat field is for a " + SizeText(field.projector_size) +
-                         " projector, but " + work.calibration_name + " calibrates a " +
+                         " projector, but " + calibration_name + " calibrates a " +
                          SizeText(calibration.projector.size) + " one");
   }
   const StudioField& studio = options_.studio_field;
@@ -103,8 +107,8 @@ Status Pipeline::Check(const ScanWork& work) const {
                           (!texture.empty() && studio.gain.channels() != texture.channels()))) {
     return Status::Error("the studio field is for a " + SizeText(studio.camera_size) +
                          " camera of " + std::to_string(studio.gain.channels()) +
-                         " channel(s), but " + work.name + "/texture.png is " +
-                         SizeText(texture.size()) + " with " + std::to_string(texture.channels()));
+                         " channel(s), but " + texture_name + " is " + SizeText(texture.size()) +
+                         " with " + std::to_string(texture.channels()));
   }
   return Status::Ok();
 }

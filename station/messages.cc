@@ -494,7 +494,8 @@ std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& de
                                          const std::vector<StageReport>& stages) {
   const scan_context_t context_message = ToMessage(context);
   const int width = decoded.projector_x.cols, height = decoded.projector_x.rows;
-  const auto chunks = RowChunks(height, static_cast<size_t>(width) * 9);
+  const bool amplitude = decoded.amplitude.size() == decoded.projector_x.size();
+  const auto chunks = RowChunks(height, static_cast<size_t>(width) * (amplitude ? 13 : 9));
   std::vector<correspondence_t> out(chunks.size());
   for (size_t c = 0; c < chunks.size(); ++c) {
     correspondence_t& m = out[c];
@@ -520,6 +521,14 @@ std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& de
       std::memcpy(&m.projector_y[r * width], decoded.projector_y.ptr<float>(y), width * 4);
       std::memcpy(&m.valid[r * width], decoded.valid.ptr<uint8_t>(y), width);
     }
+    if (amplitude) {
+      m.amplitude.resize(m.n);
+      for (int r = 0; r < m.row_count; ++r) {
+        std::memcpy(&m.amplitude[r * width], decoded.amplitude.ptr<float>(m.row_begin + r),
+                    width * 4);
+      }
+    }
+    m.namplitude = static_cast<int32_t>(m.amplitude.size());
     m.lit = decoded.stats.lit;
     m.context = context_message;
     SetStages(stages, &m);
@@ -534,6 +543,10 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
   if (m.projector_width <= 0 || m.projector_height <= 0) {
     return Status::Error("CORRESPONDENCE: bad projector size");
   }
+  if (m.namplitude != 0 && m.namplitude != m.n) {
+    return Status::Error("CORRESPONDENCE: " + std::to_string(m.namplitude) + " amplitudes for " +
+                         std::to_string(m.n) + " pixels");
+  }
   if (m.lit < 0 || m.lit > static_cast<int64_t>(m.width) * m.height) {
     return Status::Error("CORRESPONDENCE: " + std::to_string(m.lit) + " lit pixels of " +
                          std::to_string(m.width) + "x" + std::to_string(m.height));
@@ -543,6 +556,11 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
     decoded->projector_x.create(size, CV_32F);
     decoded->projector_y.create(size, CV_32F);
     decoded->valid.create(size, CV_8U);
+    if (m.namplitude > 0) {
+      decoded->amplitude.create(size, CV_32F);
+    } else {
+      decoded->amplitude.release();
+    }
     decoded->has_columns = m.has_columns;
     decoded->has_rows = m.has_rows;
     decoded->status = Status::Ok();
@@ -550,6 +568,7 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
     *projector_size = cv::Size(m.projector_width, m.projector_height);
   } else if (decoded->projector_x.size() != size || decoded->has_columns != m.has_columns ||
              decoded->has_rows != m.has_rows || decoded->stats.lit != m.lit ||
+             decoded->amplitude.empty() != (m.namplitude == 0) ||
              *projector_size != cv::Size(m.projector_width, m.projector_height)) {
     return Status::Error("CORRESPONDENCE: chunk " + std::to_string(m.chunk_index) +
                          " disagrees with the first chunk on sizes or axes");
@@ -559,16 +578,21 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
     std::memcpy(decoded->projector_x.ptr<float>(y), &m.projector_x[r * m.width], m.width * 4);
     std::memcpy(decoded->projector_y.ptr<float>(y), &m.projector_y[r * m.width], m.width * 4);
     std::memcpy(decoded->valid.ptr<uint8_t>(y), &m.valid[r * m.width], m.width);
+    if (m.namplitude > 0) {
+      std::memcpy(decoded->amplitude.ptr<float>(y), &m.amplitude[r * m.width], m.width * 4);
+    }
   }
   return Status::Ok();
 }
 
 std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
-                                      const ScanContext& context,
+                                      const cv::Mat& amplitude, const ScanContext& context,
                                       const std::vector<StageReport>& stages) {
   const scan_context_t context_message = ToMessage(context);
   const int width = points.cols;
-  const auto chunks = RowChunks(points.rows, static_cast<size_t>(width) * 12);
+  const bool with_amplitude = amplitude.size() == points.size();
+  const auto chunks =
+      RowChunks(points.rows, static_cast<size_t>(width) * (with_amplitude ? 16 : 12));
   std::vector<point_cloud_t> out(chunks.size());
   for (size_t c = 0; c < chunks.size(); ++c) {
     point_cloud_t& m = out[c];
@@ -585,19 +609,31 @@ std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
     for (int r = 0; r < m.row_count; ++r) {
       std::memcpy(&m.xyz[3 * r * width], points.ptr<float>(m.row_begin + r), 12 * width);
     }
+    if (with_amplitude) {
+      m.amplitude.resize(static_cast<size_t>(m.row_count) * width);
+      for (int r = 0; r < m.row_count; ++r) {
+        std::memcpy(&m.amplitude[r * width], amplitude.ptr<float>(m.row_begin + r), 4 * width);
+      }
+    }
+    m.namplitude = static_cast<int32_t>(m.amplitude.size());
     m.context = context_message;
     SetStages(stages, &m);
   }
   return out;
 }
 
-Status AddChunk(const point_cloud_t& m, cv::Mat* points) {
+Status AddChunk(const point_cloud_t& m, cv::Mat* points, cv::Mat* amplitude) {
   if (m.nxyz % 3 != 0) return Status::Error("POINT_CLOUD: nxyz is not a multiple of 3");
   Status s = CheckRows("POINT_CLOUD", m.width, m.height, m.row_begin, m.row_count, m.nxyz / 3,
                        m.chunk_index, m.chunk_count);
   if (!s.ok()) return s;
+  if (m.namplitude != 0 && m.namplitude != m.nxyz / 3) {
+    return Status::Error("POINT_CLOUD: " + std::to_string(m.namplitude) + " amplitudes for " +
+                         std::to_string(m.nxyz / 3) + " points");
+  }
   const cv::Size size(m.width, m.height);
-  if (points->empty()) {
+  const bool first = points->empty();
+  if (first) {
     points->create(size, CV_32FC3);
   } else if (points->size() != size) {
     return Status::Error("POINT_CLOUD: chunk " + std::to_string(m.chunk_index) +
@@ -605,6 +641,20 @@ Status AddChunk(const point_cloud_t& m, cv::Mat* points) {
   }
   for (int r = 0; r < m.row_count; ++r) {
     std::memcpy(points->ptr<float>(m.row_begin + r), &m.xyz[3 * r * m.width], 12 * m.width);
+  }
+  if (!amplitude) return Status::Ok();
+  if (first) {
+    if (m.namplitude > 0) {
+      amplitude->create(size, CV_32F);
+    } else {
+      amplitude->release();
+    }
+  } else if (amplitude->empty() != (m.namplitude == 0)) {
+    return Status::Error("POINT_CLOUD: chunk " + std::to_string(m.chunk_index) +
+                         " disagrees with the first chunk on the amplitude");
+  }
+  for (int r = 0; r < m.row_count && m.namplitude > 0; ++r) {
+    std::memcpy(amplitude->ptr<float>(m.row_begin + r), &m.amplitude[r * m.width], 4 * m.width);
   }
   return Status::Ok();
 }

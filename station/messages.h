@@ -124,10 +124,13 @@ std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& de
 // its rows into it.
 Status AddChunk(const correspondence_t& msg, DecodeResult* decoded, cv::Size* projector_size);
 
+// The point map, with the decoder's amplitude (for the albedo) when it is of its size.
 std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
-                                      const ScanContext& context,
+                                      const cv::Mat& amplitude, const ScanContext& context,
                                       const std::vector<StageReport>& stages);
-Status AddChunk(const point_cloud_t& msg, cv::Mat* points);
+// Copies a chunk's rows into *points and, given `amplitude`, its amplitude (left empty when
+// the product came without).
+Status AddChunk(const point_cloud_t& msg, cv::Mat* points, cv::Mat* amplitude = nullptr);
 
 // Which page of its scan a sheet is, and the page's mask (CV_8U, camera pixels).
 struct SheetPage {

@@ -81,6 +81,8 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
   cv::randu(d.projector_y, 0, 768);
   d.projector_x(cv::Rect(10, 10, 50, 50)).setTo(std::numeric_limits<float>::quiet_NaN());
   d.valid = d.projector_x == d.projector_x;
+  d.amplitude.create(size, CV_32F);
+  cv::randu(d.amplitude, 0, 127.5);
   d.has_columns = d.has_rows = true;
   StageReport stage;
   stage.stage = "decode";
@@ -96,7 +98,7 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
   context.calibration_sha256 = std::string(64, 'a');
   context.scale_error_percent = 0.03;
   std::vector<correspondence_t> chunks = ToMessages(7, d, cv::Size(1024, 768), context, {stage});
-  ASSERT_GT(chunks.size(), 10u);  // 17 MB in all.
+  ASSERT_GT(chunks.size(), 10u);  // 25 MB in all.
   DecodeResult back;
   cv::Size projector;
   ChunkSet set;
@@ -125,6 +127,7 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
   EXPECT_TRUE(set.Complete());
   EXPECT_EQ(projector, cv::Size(1024, 768));
   EXPECT_TRUE(SameBits(d.projector_x, back.projector_x));
+  EXPECT_TRUE(SameBits(d.amplitude, back.amplitude));
   EXPECT_TRUE(SameBits(d.projector_y, back.projector_y));
   EXPECT_TRUE(SameBits(d.valid, back.valid));
 
@@ -174,10 +177,20 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
       points.at<cv::Vec3f>(v, u) = cv::Vec3f(x, y, 0.002f * x * x);
     }
   }
-  std::vector<point_cloud_t> pc = ToMessages(9, points, ScanContext(), {});
-  cv::Mat back;
-  for (const point_cloud_t& m : pc) ASSERT_TRUE(AddChunk(m, &back).ok());
+  std::vector<point_cloud_t> pc = ToMessages(9, points, cv::Mat(), ScanContext(), {});
+  cv::Mat back, no_amplitude;
+  for (const point_cloud_t& m : pc) ASSERT_TRUE(AddChunk(m, &back, &no_amplitude).ok());
   EXPECT_TRUE(SameBits(points, back));
+  EXPECT_TRUE(no_amplitude.empty());
+  // With the decoder's amplitude (for the albedo), which comes back bit for bit.
+  cv::Mat amplitude(points.size(), CV_32F);
+  cv::randu(amplitude, 0, 127.5);
+  cv::Mat back2, amplitude_back;
+  for (const point_cloud_t& m : ToMessages(9, points, amplitude, ScanContext(), {})) {
+    ASSERT_TRUE(AddChunk(m, &back2, &amplitude_back).ok());
+  }
+  EXPECT_TRUE(SameBits(points, back2));
+  EXPECT_TRUE(SameBits(amplitude, amplitude_back));
 
   Mesh mesh;
   mesh.cols = 6;

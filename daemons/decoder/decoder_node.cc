@@ -4,7 +4,7 @@
 #include <memory>
 #include <stdexcept>
 
-#include "pipeline/stages.h"
+#include "pipeline/pipeline.h"
 #include "station/chain.h"
 #include "station/messages.h"
 
@@ -324,17 +324,27 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
   stream_id_ = 0;
   stream_begun_ = false;
   node_->Count(streamed ? "scans decoded as captured" : "scans decoded from their folder");
-  const StageReport report =
-      DecodeStage(scan, &decoder_, options_.limits, &decoded_,
-                  streamed ? std::string() : ScanFolder::For(options_.data_dir, id).raw());
-  if (!report.status.ok()) {
-    supervisor_.Failed(id, "decoding failed: " + report.status.message());  // Not sent again.
-    node_->Error("scan " + std::to_string(id) + ": " + report.status.message(), id);
+  // The pipeline's decode step, with this node's decoder (its buffers kept between scans).
+  PipelineOptions options;
+  options.decode = options_.decode;
+  options.limits = options_.limits;
+  ScanWork work;
+  work.scan = scan;
+  work.frames_dir = streamed ? std::string() : ScanFolder::For(options_.data_dir, id).raw();
+  work.decoder = &decoder_;
+  work.context = ScanContext::Of(scan);  // The calibration's part is the triangulator's.
+  std::swap(work.decoded, decoded_);
+  const Status decoded = Pipeline(options).Run(Step::kDecode, Step::kDecode, &work);
+  std::swap(work.decoded, decoded_);
+  if (!decoded.ok()) {
+    supervisor_.Failed(id, "decoding failed: " + decoded.message());  // Not sent again.
+    node_->Error("scan " + std::to_string(id) + ": " + decoded.message(), id);
     node_->SetState("idle");
-    return report.status;
+    return decoded;
   }
+  const StageReport& report = work.stages.back();
   std::vector<correspondence_t> chunks =
-      ToMessages(id, decoded_, scan.sequence.projector_size, ScanContext::Of(scan), {report});
+      ToMessages(id, decoded_, scan.sequence.projector_size, work.context, work.stages);
   node_->PublishChunks(channel::kCorrespondence, &chunks);
   node_->Count("scans decoded");
   AnnounceHandedOn(node_, id, channel::kCorrespondence);

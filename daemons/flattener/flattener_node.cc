@@ -2,7 +2,7 @@
 
 #include "core/common/text.h"
 #include "io/scan_io.h"
-#include "pipeline/stages.h"
+#include "pipeline/pipeline.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
 
@@ -47,38 +47,48 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  ScanContext context;
-  s = FromMessage(last.context, &context);
+  // The pipeline's outline step, then each page's mesh and flatten steps.
+  ScanWork work;
+  s = FromMessage(last.context, &work.context);
   if (!s.ok()) return node_->FailScan(id, "POINT_CLOUD: " + s.message());
-  Outline outline;
-  stages.push_back(
-      OutlineStage(points_, texture, calibration, context, o.outline, o.limits, results, &outline));
-  if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-  const size_t common = stages.size();  // Every page's sheet carries the scan's reports.
-  for (size_t k = 0; k < outline.pages.size(); ++k) {
-    SheetPage page;
-    page.name = PageName(outline, k);
-    page.index = static_cast<int>(k);
-    page.count = static_cast<int>(outline.pages.size());
-    page.mask = outline.pages[k];
-    const std::string of = page.name.empty() ? "" : " of the " + page.name + " page";
+  work.scan.texture = texture;
+  work.calibration = calibration;
+  work.results = results;
+  work.stages = std::move(stages);
+  work.map.points = points_;
+  const Pipeline pipeline(o);
+  s = pipeline.Run(Step::kOutline, Step::kOutline, &work);
+  if (!s.ok()) return node_->FailScan(id, s.message());
+  const size_t common = work.stages.size();  // Every page's sheet carries the scan's reports.
+  const size_t pages = work.outline.pages.size();
+  for (size_t k = 0; k < pages; ++k) {
+    const size_t before = work.stages.size();
+    const std::string& name = PageName(work.outline, k);
+    const std::string of = name.empty() ? "" : " of the " + name + " page";
     node_->SetState("busy", id, "building the sheet" + of);
-    stages.resize(common);
-    Mesh mesh;
-    stages.push_back(MeshStage(points_, page.mask, calibration.camera, o, page.name, &mesh));
-    if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-    node_->SetState("busy", id, "flattening the sheet" + of);
-    FlattenResult flat;
-    stages.push_back(FlattenStage(mesh, o.flatten, o.limits, results, page.name, &flat));
-    if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
+    s = pipeline.RunPage(k, Step::kMesh, Step::kMesh, &work);
+    if (s.ok()) {
+      node_->SetState("busy", id, "flattening the sheet" + of);
+      s = pipeline.RunPage(k, Step::kFlatten, Step::kFlatten, &work);
+    }
+    if (!s.ok()) return node_->FailScan(id, s.message());
+    const PageResult& page = work.pages[k];
+    SheetPage sheet;
+    sheet.name = page.name;
+    sheet.index = static_cast<int>(k);
+    sheet.count = static_cast<int>(pages);
+    sheet.mask = page.mask;
+    std::vector<StageReport> carried(work.stages.begin(), work.stages.begin() + common);
+    carried.insert(carried.end(), work.stages.begin() + before, work.stages.end());
     std::vector<mesh_t> chunks =
-        ToMessages(id, mesh, o.mesh.bend_springs, flat, context, stages, page);
+        ToMessages(id, page.mesh, o.mesh.bend_springs, page.flat, work.context, carried, sheet);
     node_->PublishChunks(channel::kFlatMesh, &chunks);
-    const std::string what = page.name.empty() ? "the leaf" : "the " + page.name + " page";
+    const std::string what = name.empty() ? "the leaf" : "the " + name + " page";
     node_->Log("scan " + std::to_string(id) + ": flattened " + what + " on a " +
-               SizeText(cv::Size(mesh.cols, mesh.rows)) + " sheet in " +
-               std::to_string(stages.back().seconds) + " s, strain mean " +
-               std::to_string(flat.mean_strain) + " max " + std::to_string(flat.max_strain));
+               SizeText(cv::Size(page.mesh.cols, page.mesh.rows)) + " sheet in " +
+               std::to_string(carried.back().seconds) + " s, strain mean " +
+               std::to_string(page.flat.mean_strain) + " max " +
+               std::to_string(page.flat.max_strain));
   }
   node_->Count("scans flattened");
   AnnounceHandedOn(node_, id, channel::kFlatMesh);

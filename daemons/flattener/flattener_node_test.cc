@@ -39,8 +39,8 @@ class FlattenerNodeTest : public ::testing::Test {
     for (texture_t& m : TextureMessages(id, texture)) bus_.probe().Publish(channel::kTexture, &m);
   }
   void PublishPoints(int64_t id) {
-    for (point_cloud_t& m :
-         ToMessages(id, SmallScanProducts().map.points, SmallScanContext(), FirstStages(2))) {
+    for (point_cloud_t& m : ToMessages(id, SmallScanProducts().map.points, cv::Mat(),
+                                       SmallScanContext(), FirstStages(2))) {
       bus_.probe().Publish(channel::kPointCloud, &m);
     }
   }
@@ -96,8 +96,8 @@ TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   EXPECT_TRUE(
       bus_.WaitForError("vellum-flattener", "the texture is 200x150, the point map 400x300"))
       << bus_.Status("vellum-flattener").last_error;
-  point_cloud_t bad =
-      ToMessages(8, SmallScanProducts().map.points, SmallScanContext(), FirstStages(2))[0];
+  point_cloud_t bad = ToMessages(8, SmallScanProducts().map.points, cv::Mat(), SmallScanContext(),
+                                 FirstStages(2))[0];
   bad.nxyz -= 1;
   bad.xyz.pop_back();
   bus_.probe().Publish(channel::kPointCloud, &bad);

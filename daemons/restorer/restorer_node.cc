@@ -6,9 +6,9 @@
 #include "core/common/text.h"
 #include "io/manifest.h"
 #include "io/scan_io.h"
+#include "pipeline/pipeline.h"
 #include "pipeline/qc.h"
 #include "pipeline/report.h"
-#include "pipeline/stages.h"
 #include "station/contact_sheet.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
@@ -40,56 +40,124 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
             Process(id, last);
           }) {
   sheets_.AwaitAnnounced(channel::kFlatMesh);
+  if (NeedsCloud()) {
+    // The albedo and reflectance are made from the point map (and the projector's light, which
+    // travels with it): heard as the flattener hears it.
+    clouds_assembler_ = std::make_unique<Assembler<point_cloud_t, Cloud>>(
+        node, channel::kPointCloud,
+        [](const point_cloud_t& m, Cloud* c) { return AddChunk(m, &c->points, &c->amplitude); },
+        [this](int64_t id, Cloud* cloud, const point_cloud_t&) { CloudDone(id, cloud); });
+    clouds_assembler_->AwaitAnnounced(channel::kPointCloud);
+  }
+}
+
+bool RestorerNode::NeedsCloud() const {
+  return !options_.pipeline.flat_field.empty() || !options_.pipeline.studio_field.empty();
+}
+
+void RestorerNode::CloudDone(int64_t id, Cloud* cloud) {
+  clouds_[id] = std::move(*cloud);
+  while (clouds_.size() > 2) clouds_.erase(clouds_.begin());  // The newest scans'.
+  // The pages that came before their scan's point map.
+  auto waiting = waiting_.find(id);
+  if (waiting == waiting_.end()) return;
+  std::vector<Waiting> sheets = std::move(waiting->second.sheets);
+  waiting_.erase(waiting);
+  for (Waiting& w : sheets) {
+    std::swap(sheet_, w.sheet);
+    Process(id, w.last);
+  }
+}
+
+void RestorerNode::GiveUpWaiting() {
+  const auto now = std::chrono::steady_clock::now();
+  for (auto it = waiting_.begin(); it != waiting_.end();) {
+    if (now - it->second.since < std::chrono::seconds(30)) {
+      ++it;
+      continue;
+    }
+    const int64_t id = it->first;
+    it = waiting_.erase(it);
+    scans_.erase(id);
+    node_->FailScan(id,
+                    "POINT_CLOUD never came whole: the albedo and reflectance are made from the "
+                    "point map and the projector's light (the restorer has a flat field or a "
+                    "studio field), so the page was not restored");
+  }
 }
 
 void RestorerNode::Process(int64_t id, const mesh_t& last) {
   const SheetPage& sheet_page = sheet_.page;
   const std::string& name = sheet_page.name;
-  node_->SetState("busy", id, "restoring" + (name.empty() ? "" : " the " + name + " page"));
-  std::vector<StageReport> stages;
-  Status s = FromMessages(last.stages, &stages);
+  const std::string which = name.empty() ? "" : " the " + name + " page";
+  if (NeedsCloud() && !clouds_.count(id)) {
+    // The point map is still on its way (or was asked again): the page waits for it.
+    WaitingScan& w = waiting_[id];
+    if (w.sheets.empty()) w.since = std::chrono::steady_clock::now();
+    w.sheets.push_back({std::move(sheet_), last});
+    sheet_ = Sheet();
+    node_->SetState("busy", id, "waiting for the point map to restore" + which);
+    return;
+  }
+  node_->SetState("busy", id, "restoring" + which);
+  ScanWork work;
+  Status s = FromMessages(last.stages, &work.stages);
   if (!s.ok()) return node_->FailScan(id, "FLAT_MESH: " + s.message());
-  Calibration calibration;
-  s = calibrations_.Get(id, &calibration);
+  s = FromMessage(last.context, &work.context);
+  if (!s.ok()) return node_->FailScan(id, "FLAT_MESH: " + s.message());
+  s = calibrations_.Get(id, &work.calibration);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  cv::Mat texture;
-  s = textures_.Get(id, &texture);
+  s = textures_.Get(id, &work.scan.texture);
+  if (s.ok()) s = textures_.GetLights(id, &work.scan.lights);
   if (!s.ok()) return node_->FailScan(id, s.message());
+  const cv::Mat& texture = work.scan.texture;
   if (sheet_page.mask.size() != texture.size()) {
     return node_->FailScan(id, "FLAT_MESH: the page mask is " + SizeText(sheet_page.mask.size()) +
                                    ", the texture " + SizeText(texture.size()));
   }
-  const CameraModel& camera = calibration.camera;
+  const CameraModel& camera = work.calibration.camera;
   ConnectSheet(
       last.bend_springs, [&](const cv::Vec3d& x) { return camera.Project(x); }, &sheet_.mesh);
   if (!sheet_.mesh.status.ok()) {
     return node_->FailScan(id, "FLAT_MESH: " + sheet_.mesh.status.message());
   }
-  const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
-  s = MakeDirectories(folder.results());
-  if (!s.ok()) return node_->FailScan(id, s.message());
-  ScanContext context;
-  s = FromMessage(last.context, &context);
-  if (!s.ok()) return node_->FailScan(id, "FLAT_MESH: " + s.message());
-  const PipelineOptions& o = options_.pipeline;
-  RestoreResult restored;
-  StageReport restore =
-      RestoreStage(texture, sheet_page.mask, sheet_.mesh, sheet_.flat, camera, o.restore, o.limits,
-                   o.camera_icc, context, stages, folder.results(), name, &restored);
-  if (!restore.status.ok()) {
-    scans_.erase(id);
-    return node_->FailScan(id, restore.status.message());
+  if (NeedsCloud()) {
+    const Cloud& cloud = clouds_.at(id);
+    if (cloud.points.size() != texture.size()) {
+      return node_->FailScan(id, "POINT_CLOUD: the point map is " + SizeText(cloud.points.size()) +
+                                     ", the texture " + SizeText(texture.size()));
+    }
+    work.map.points = cloud.points;
+    work.amplitude = cloud.amplitude;
+    if (!options_.pipeline.flat_field.empty() && work.amplitude.empty()) {
+      return node_->FailScan(id,
+                             "POINT_CLOUD came without the projector's light (amplitude), "
+                             "which the albedo is made from");
+    }
   }
-  // The scan's extra lights through the page's own warp, as `vellum process` does it.
-  std::vector<ScanLight> lights;
-  s = textures_.GetLights(id, &lights);
-  std::optional<StageReport> lit;
-  if (s.ok() && !lights.empty()) {
-    node_->SetState("busy", id, "restoring its " + std::to_string(lights.size()) + " extra lights");
-    LightsResult result;
-    lit = LightsStage(lights, sheet_page.mask, sheet_.mesh, sheet_.flat.flat, o.camera_icc,
-                      restored, context, folder.results(), name, &result);
-    s = lit->status;
+  const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
+  work.results = folder.results();
+  work.name = "";
+  s = MakeDirectories(work.results);
+  if (!s.ok()) return node_->FailScan(id, s.message());
+  // The pipeline's page steps from the restore on: the page through its sheet, then its albedo,
+  // reflectance and extra lights through the same warp, as `vellum process` does it.
+  const Pipeline pipeline(options_.pipeline);
+  s = pipeline.Check(work);
+  const size_t k = static_cast<size_t>(sheet_page.index);
+  work.pages.resize(static_cast<size_t>(sheet_page.count));
+  PageResult& page = work.pages[k];
+  page.name = name;
+  page.mask = sheet_page.mask;
+  page.mesh = std::move(sheet_.mesh);
+  page.flat = std::move(sheet_.flat);
+  const size_t before = work.stages.size();
+  if (s.ok()) s = pipeline.RunPage(k, Step::kRestore, Step::kRestore, &work);
+  if (s.ok() && (NeedsCloud() || !work.scan.lights.empty())) {
+    node_->SetState("busy", id,
+                    "restoring the albedo, reflectance or extra lights" +
+                        (name.empty() ? std::string() : " of the " + name + " page"));
+    s = pipeline.RunPage(k, Step::kAlbedo, Step::kLights, &work);
   }
   if (!s.ok()) {
     scans_.erase(id);
@@ -99,13 +167,14 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   pages.common.clear();
   std::vector<StageReport>& mine = pages.per_page[sheet_page.index];
   mine.clear();
-  for (StageReport& stage : stages) (stage.page.empty() ? pages.common : mine).push_back(stage);
-  mine.push_back(restore);
-  if (lit) mine.push_back(*lit);
-  pages.restored[sheet_page.index] = std::move(restored);
+  for (size_t j = 0; j < work.stages.size(); ++j) {
+    StageReport& stage = work.stages[j];
+    (j < before && stage.page.empty() ? pages.common : mine).push_back(std::move(stage));
+  }
+  pages.restored[sheet_page.index] = std::move(page.restored);
   if (static_cast<int>(pages.names.size()) < sheet_page.count) pages.names.resize(sheet_page.count);
   pages.names[sheet_page.index] = name;
-  pages.identity = context.identity;
+  pages.context = work.context;
   while (scans_.size() > 8) scans_.erase(scans_.begin());  // Scans whose pages stopped.
   if (static_cast<int>(pages.restored.size()) == sheet_page.count) Finish(id, &pages);
 }
@@ -119,14 +188,14 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   }
   report.scan = folder.raw();
   report.calibration = folder.calibration();
-  // The archival master, once the pages are restored (as RunPipeline does).
-  cv::Mat texture;
-  Status s = textures_.Get(id, &texture);
+  // The archival master, once the pages are restored: the pipeline's last step.
+  ScanWork work;
+  work.context = pages->context;
+  work.results = folder.results();
+  Status s = textures_.Get(id, &work.scan.texture);
   if (s.ok()) {
-    const StageReport archive =
-        ArchiveStage(texture, pages->identity, options_.pipeline.camera_icc, folder.results());
-    report.stages.push_back(archive);
-    s = archive.status;
+    s = Pipeline(options_.pipeline).Run(Step::kArchive, Step::kArchive, &work);
+    report.stages.insert(report.stages.end(), work.stages.begin(), work.stages.end());
   }
   if (s.ok()) s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
   // The archive's proof that the scan is whole: a SHA-256 of every file of raw/ and results/,

@@ -5,12 +5,14 @@
 // report, as `vellum process` writes them) -> RESTORED with a preview and the warnings.
 #pragma once
 
+#include <chrono>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "pipeline/stages.h"
+#include "pipeline/pipeline.h"
 #include "station/assembler.h"
 #include "station/books.h"
 #include "station/messages.h"
@@ -35,6 +37,10 @@ class RestorerNode {
   void Tick() {
     textures_.Tick();
     sheets_.Tick();
+    if (clouds_assembler_) {
+      clouds_assembler_->Tick();
+      node_->Post([this] { GiveUpWaiting(); });
+    }
   }
 
  private:
@@ -50,19 +56,38 @@ class RestorerNode {
     std::map<int, std::vector<StageReport>> per_page;  // Mesh, flatten, restore of each page.
     std::map<int, RestoreResult> restored;
     std::vector<std::string> names;
-    ScanIdentity identity;  // The scan's, from its context (for the archival master).
+    ScanContext context;  // The scan's (for the archival master).
   };
+  // The point map of a scan and the projector's light, for the albedo and reflectance.
+  struct Cloud {
+    cv::Mat points, amplitude;
+  };
+  // A page that came before its scan's point map.
+  struct Waiting {
+    Sheet sheet;
+    mesh_t last;
+  };
+  struct WaitingScan {
+    std::chrono::steady_clock::time_point since;
+    std::vector<Waiting> sheets;
+  };
+  bool NeedsCloud() const;                       // With a flat field or a studio field.
   void Process(int64_t id, const mesh_t& last);  // Worker thread.
   void Finish(int64_t id, Pages* pages);         // Every page is in: the report, RESTORED.
+  void CloudDone(int64_t id, Cloud* cloud);      // Worker thread.
+  void GiveUpWaiting();  // Worker thread: fails a scan whose point map did not come in 30 s.
 
   Node* node_;
   RestorerNodeOptions options_;
   CalibrationBook calibrations_;
   TextureBook textures_;
   Assembler<mesh_t, Sheet> sheets_;
+  std::unique_ptr<Assembler<point_cloud_t, Cloud>> clouds_assembler_;  // With NeedsCloud().
   // Worker thread only:
   Sheet sheet_;
-  std::map<int64_t, Pages> scans_;  // Scans with pages still to come.
+  std::map<int64_t, Pages> scans_;   // Scans with pages still to come.
+  std::map<int64_t, Cloud> clouds_;  // The newest scans' point maps (with NeedsCloud()).
+  std::map<int64_t, WaitingScan> waiting_;
 };
 
 }  // namespace vellum::station

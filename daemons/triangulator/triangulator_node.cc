@@ -2,7 +2,7 @@
 
 #include "core/common/text.h"
 #include "io/scan_io.h"
-#include "pipeline/stages.h"
+#include "pipeline/pipeline.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
 
@@ -57,7 +57,6 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   if (!s.ok()) return node_->FailScan(id, "CORRESPONDENCE: " + s.message());
   // The points are measured with this calibration: the context carries its checksum on.
   context.MeasuredWith(calibration);
-  // With the decoder's count of the lit pixels, which the points are judged against.
   const DecodeResult& decoded = product_.decoded;
   if (calibration.camera.size != decoded.projector_x.size() ||
       calibration.projector.size != product_.projector) {
@@ -72,15 +71,30 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  stages.push_back(TriangulateStage(decoded, *triangulator_, options_.triangulate, options_.limits,
-                                    results, &map_));
-  if (!stages.back().status.ok()) return node_->FailScan(id, stages.back().status.message());
-  std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, context, stages);
+  // The pipeline's triangulate step, with this node's triangulator (the calibration's rays).
+  PipelineOptions options;
+  options.triangulate = options_.triangulate;
+  options.limits = options_.limits;
+  ScanWork work;
+  work.calibration = calibration;
+  work.context = context;
+  work.results = results;
+  work.triangulator = triangulator_.get();
+  work.stages = std::move(stages);
+  // With the decoder's count of the lit pixels, which the points are judged against, and its
+  // amplitude, which passes on for the albedo.
+  const cv::Mat amplitude = decoded.amplitude;
+  std::swap(work.decoded, product_.decoded);
+  std::swap(work.map, map_);
+  s = Pipeline(options).Run(Step::kTriangulate, Step::kTriangulate, &work);
+  std::swap(work.map, map_);
+  if (!s.ok()) return node_->FailScan(id, s.message());
+  std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, amplitude, context, work.stages);
   node_->PublishChunks(channel::kPointCloud, &chunks);
   node_->Count("scans triangulated");
   AnnounceHandedOn(node_, id, channel::kPointCloud);
   node_->Log("scan " + std::to_string(id) + ": " + std::to_string(map_.valid) + " points in " +
-             std::to_string(stages.back().seconds) + " s");
+             std::to_string(work.stages.back().seconds) + " s");
   node_->SetState("idle");
 }
 
