@@ -21,14 +21,6 @@ int RunProcess(const std::vector<std::string>& args) {
            "restored (every stage), or points: stop after the point cloud (points.ply, "
            "depth.png, the report), for an object that is not a page",
            "restored"},
-          {"flatfield", "FILE",
-           "the projector's flat field (vellum calibrate flatfield): also writes each page's "
-           "albedo, its reflectance without the shading, as restored_albedo.tif",
-           ""},
-          {"studio-field", "FILE",
-           "the studio lamps' field (vellum calibrate studio): also writes each page's texture "
-           "without the lamps' shading, as restored_reflectance.tif",
-           ""},
       },
       PipelineFlagSpecs());
   Flags flags(
@@ -61,14 +53,6 @@ int RunProcess(const std::vector<std::string>& args) {
     throw UsageError("--until must be restored or points, got '" + until + "'");
   }
   options.points_only = until == "points";
-  if (!flags.Get("flatfield").empty()) {
-    const Status read = ReadFlatField(flags.Get("flatfield"), &options.flat_field);
-    if (!read.ok()) throw UsageError("--flatfield: " + read.message());
-  }
-  if (!flags.Get("studio-field").empty()) {
-    const Status read = ReadStudioField(flags.Get("studio-field"), &options.studio_field);
-    if (!read.ok()) throw UsageError("--studio-field: " + read.message());
-  }
 
   Progress progress;
   progress.Update("read", 0);

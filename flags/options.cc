@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "io/calibration_io.h"
 #include "io/image_file.h"
 
 namespace vellum {
@@ -218,6 +219,14 @@ std::vector<Flags::Spec> RestoreFlagSpecs() {
        "the camera's ICC profile (RGB, or gray for a gray camera), embedded in the masters "
        "(restored.tif, archival.tif) in place of sRGB (default: sRGB)",
        ""},
+      {"flatfield", "FILE",
+       "the projector's flat field (vellum calibrate flatfield): also writes each page's "
+       "albedo, its reflectance without the shading, as restored_albedo.tif",
+       ""},
+      {"studio-field", "FILE",
+       "the studio lamps' field (vellum calibrate studio): also writes each page's texture "
+       "without the lamps' shading, as restored_reflectance.tif",
+       ""},
   };
 }
 
@@ -293,6 +302,14 @@ void RestoreGroupFromFlags(const Flags& flags, PipelineOptions* options) {
   if (!flags.Get("camera-icc").empty()) {
     const Status s = ReadIccFile(flags.Get("camera-icc"), &options->camera_icc);
     if (!s.ok()) throw UsageError("--camera-icc: " + s.message());
+  }
+  if (!flags.Get("flatfield").empty()) {
+    const Status read = ReadFlatField(flags.Get("flatfield"), &options->flat_field);
+    if (!read.ok()) throw UsageError("--flatfield: " + read.message());
+  }
+  if (!flags.Get("studio-field").empty()) {
+    const Status read = ReadStudioField(flags.Get("studio-field"), &options->studio_field);
+    if (!read.ok()) throw UsageError("--studio-field: " + read.message());
   }
 }
 

@@ -46,7 +46,8 @@ TriangulateOptions TriangulateOptionsFromFlags(const Flags& flags);
 FlattenOptions FlattenOptionsFromFlags(const Flags& flags);
 // The outline, sheet and flattening options of FlattenFlagSpecs().
 void FlattenGroupFromFlags(const Flags& flags, PipelineOptions* options);
-// The restoration options and the expected leaf size of RestoreFlagSpecs().
+// The restoration options, the expected leaf size, the camera's ICC profile and the flat and
+// studio fields (read and checked) of RestoreFlagSpecs().
 void RestoreGroupFromFlags(const Flags& flags, PipelineOptions* options);
 
 // The flags of every stage (`vellum process`), and the options they give.

@@ -37,21 +37,69 @@ nlohmann::json ReadJson(const std::string& path) {
 }
 
 // A scene on the quick rig: a leaf on the dark table (the station tests' scan), an open book,
-// a leaf in a paper frame.
+// a leaf in a paper frame; `lit`: under studio lamps and a projector whose light falls off as a
+// real one's, with extra raking lights, processed with the projector's flat field and the
+// lamps' studio field (the albedo and the reflectance).
 struct Scene {
   const char* name;
   bool spread, frame;
+  int raking = 0;  // Extra raking lights (with the fields).
 };
 
+// The light of the lit scenes.
+LightOptions StudioLight() {
+  LightOptions light;
+  light.projector_falloff = true;
+  light.studio_lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
+  return light;
+}
+
+// The options of a scene's processing, the same for `vellum process` and the daemons: for a lit
+// scene, the flat field and studio field measured on a white target of albedo 0.85 larger than
+// the view under the same light (once per process), as `vellum calibrate flatfield` and
+// `vellum calibrate studio` measure them.
+PipelineOptions SceneOptionsFor(const Scene& scene) {
+  PipelineOptions options;
+  if (scene.raking == 0) return options;
+  static const PipelineOptions lit = [] {
+    TextureOptions plain;
+    plain.kind = TextureKind::kPlain;
+    plain.paper_albedo = 0.85;
+    PageOptions target;
+    target.size_mm = {420, 320};
+    const LightOptions light = StudioLight();
+    const SimulatedScan white = SimulateScan(QuickRig(), target, plain, SceneOptions(), 41, light);
+    const DecodeResult decoded = Decode(white.sequence, white.frames);
+    const PointMap map = Triangulator(QuickRig()).Triangulate(decoded);
+    FlatFieldOptions field;
+    field.target_albedo = plain.paper_albedo;
+    Status s = Status::Ok();
+    PipelineOptions o;
+    o.flat_field = MeasureFlatField(decoded.amplitude, map.points, QuickRig(), field, &s);
+    if (s.ok()) {
+      o.studio_field = MeasureStudioField(white.texture, QuickRig().camera, light.studio_lamps,
+                                          plain.paper_albedo, &s);
+    }
+    if (!s.ok()) throw std::runtime_error("the fields: " + s.message());
+    return o;
+  }();
+  return lit;
+}
+
 Scan SceneScan(const Scene& scene) {
-  if (!scene.spread && !scene.frame) return SmallScan();
+  if (!scene.spread && !scene.frame && scene.raking == 0) return SmallScan();
   PageOptions page;
   page.shape = scene.spread ? PageShape::kFlat : PageShape::kCurl;
   if (scene.spread) page.size_mm = {170.0, 230.0};
   SceneOptions options;
   options.spread = scene.spread;
   options.frame = scene.frame;
-  Scan scan = AsScan(SimulateScan(QuickRig(), page, TextureOptions(), options, 7));
+  TextureOptions texture;
+  if (scene.raking > 0) texture.kind = TextureKind::kText;  // Ink: the albedo is not even.
+  const LightOptions light = scene.raking > 0 ? StudioLight() : LightOptions();
+  const SimulatedScan sim = SimulateScan(QuickRig(), page, texture, options, 7, light);
+  Scan scan = AsScan(sim);
+  if (scene.raking > 0) scan.lights = RenderLights(*sim.gantry, RakingLights(scene.raking), 7);
   scan.identity.shelfmark = "MS 5";
   scan.identity.folio = scene.spread ? "2v-3r" : "4";  // A spread names its opening.
   if (!scene.spread) scan.identity.side = "recto";
@@ -88,6 +136,10 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   f.data_dir = data;
   RestorerNodeOptions r;
   r.data_dir = data;
+  const PipelineOptions options = SceneOptionsFor(GetParam());
+  // Only the restorer is told of the fields: the other daemons hand on what it needs.
+  r.pipeline.flat_field = options.flat_field;
+  r.pipeline.studio_field = options.studio_field;
   DecoderNode decoder(&decoder_node, d);
   TriangulatorNode triangulator(&triangulator_node, t);
   FlattenerNode flattener(&flattener_node, f);
@@ -109,7 +161,8 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   calibration.session = session;
   ToMessage(QuickRig(), &calibration);
   bus.probe().Publish(channel::kCalibration, &calibration);
-  for (int k = -1; k < static_cast<int>(scan.frames.size()); ++k) {
+  // The patterns, then the extra lights.
+  for (int k = -1; k < static_cast<int>(scan.frames.size() + scan.lights.size()); ++k) {
     capture_t c = MakeCapture(scan, 3, k, NowUtime());
     c.session = session;
     bus.probe().Publish(channel::kCapture, &c);
@@ -129,15 +182,21 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   ProcessInput input;
   ASSERT_TRUE(ReadProcessInput(folder.raw(), folder.calibration(), &input).ok());
   const std::string process = (dir / "process").string();
-  const ProcessResult result = RunPipeline(input, PipelineOptions(), process);
+  const ProcessResult result = RunPipeline(input, options, process);
   ASSERT_TRUE(result.status.ok()) << result.status.message();
   // Every product, each page's and the report's pictures, byte for byte (the reports hold run
   // times and are compared below).
   const std::set<std::string> files = Files(process);
   EXPECT_EQ(Files(folder.results()), files);
   const bool spread = GetParam().spread;
-  for (const char* file : {"restored.tif", "restored.json", "mesh.ply", "flat.ply"}) {
-    const std::string page = spread ? std::string("pages/left/") + file : file;
+  std::vector<std::string> expected = {"restored.tif", "restored.json", "mesh.ply", "flat.ply"};
+  if (GetParam().raking > 0) {
+    // Every product of the lit scan: the albedo, the reflectance, each light, the normals.
+    expected.insert(expected.end(), {"restored_albedo.tif", "restored_reflectance.tif",
+                                     "lights/raking-000.tif", "normals.tif"});
+  }
+  for (const std::string& file : expected) {
+    const std::string page = spread ? "pages/left/" + file : file;
     EXPECT_EQ(files.count(page), 1u) << page;
   }
   for (const std::string& file : files) {
@@ -183,7 +242,9 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
 INSTANTIATE_TEST_SUITE_P(Scenes, Chain,
                          ::testing::Values(Scene{"leaf", false, false},
                                            Scene{"spread", true, false},
-                                           Scene{"frame", false, true}),
+                                           Scene{"frame", false, true},
+                                           Scene{"lit", false, false, 6},
+                                           Scene{"lit_spread", true, false, 3}),
                          [](const auto& info) { return std::string(info.param.name); });
 
 }  // namespace

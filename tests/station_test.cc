@@ -26,6 +26,7 @@
 #include <tuple>
 
 #include "core/sim/gantry.h"
+#include "io/calibration_io.h"
 #include "io/scan_io.h"
 #include "io/xmp.h"
 #include "station/node.h"
@@ -116,10 +117,15 @@ class StationTest : public ::testing::Test {
     processes_.push_back(std::make_unique<Process>(args, log, env));
     return processes_.back().get();
   }
-  void StartProcessing() {
+  // The four processing daemons; the restorer also given `restorer_flags`.
+  void StartProcessing(const std::vector<std::string>& restorer_flags = {}) {
     for (const char* name :
          {"vellum-decoder", "vellum-triangulator", "vellum-flattener", "vellum-restorer"}) {
-      Start(Daemon(name), {"--data", dir_ + "/scans"});
+      std::vector<std::string> flags = {"--data", dir_ + "/scans"};
+      if (std::string(name) == "vellum-restorer") {
+        flags.insert(flags.end(), restorer_flags.begin(), restorer_flags.end());
+      }
+      Start(Daemon(name), flags);
     }
   }
   // Runs a tool to completion; returns its exit code and output.
@@ -142,15 +148,17 @@ class StationTest : public ::testing::Test {
         << "only " << seen.size() << " of " << channels.size() << " daemons sent a heartbeat";
   }
   // The same scan through `vellum process` (into dir_/<out>): the products must be identical.
+  // `flags`: more of vellum process's flags, as the daemons were given them.
   void ExpectSameAsProcess(const std::string& scan_dir, const std::string& results,
-                           const std::string& out_name = "process") {
+                           const std::string& out_name = "process",
+                           const std::vector<std::string>& flags = {}) {
     std::string out;
     const std::string processed = dir_ + "/" + out_name;
-    ASSERT_EQ(RunTool({"process", "--scan", scan_dir, "--calibration",
-                       scan_dir + "/calibration.yaml", "--out", processed},
-                      &out),
-              0)
-        << out;
+    std::vector<std::string> args = {
+        "process", "--scan", scan_dir, "--calibration", scan_dir + "/calibration.yaml",
+        "--out",   processed};
+    args.insert(args.end(), flags.begin(), flags.end());
+    ASSERT_EQ(RunTool(args, &out), 0) << out;
     for (const char* file : {"restored.tif", "restored_mask.png", "flat.ply", "mesh.ply",
                              "points.ply", "restored.json", "depth.png"}) {
       EXPECT_EQ(ReadText(results + "/" + file), ReadText(processed + "/" + file))
@@ -385,8 +393,27 @@ TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) { RunFullSc
 // camera takes its frame; the scan's folder holds them (light_<name>.png, named in scan.yaml
 // with their directions), and the restorer restores each through the page's own warp, with the
 // photometric normals of the three directed ones, file for file as `vellum process` of the
-// recorded scan does.
+// recorded scan does. Given the projector's flat field and the lamps' studio field, it writes
+// the page's albedo and reflectance as `vellum process` with the same files does, byte for byte.
 TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes) {
+  // Fields as `vellum calibrate flatfield` and `vellum calibrate studio` write them, even (the
+  // files must only be the same for both).
+  Calibration rig;
+  ASSERT_TRUE(ReadCalibration(kRig, &rig).ok());
+  FlatField flat;
+  flat.projector_size = rig.projector.size;
+  flat.reference_mm = cv::norm(rig.projector.Center());
+  flat.gain = cv::Mat((rig.projector.size.height + 7) / 8, (rig.projector.size.width + 7) / 8,
+                      CV_32F, cv::Scalar(110.0));
+  StudioField studio;
+  studio.camera_size = rig.camera.size;
+  studio.gain = cv::Mat((rig.camera.size.height + 7) / 8, (rig.camera.size.width + 7) / 8, CV_32F,
+                        cv::Scalar(250.0));  // The sim camera's texture is gray.
+  studio.lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
+  const std::string flat_file = dir_ + "/flatfield.yaml", studio_file = dir_ + "/studio.yaml";
+  ASSERT_TRUE(WriteFlatField(flat_file, flat).ok());
+  ASSERT_TRUE(WriteStudioField(studio_file, studio).ok());
+  const std::vector<std::string> fields = {"--flatfield", flat_file, "--studio-field", studio_file};
   const std::string lights_file = dir_ + "/lights.yaml";
   {
     std::ofstream out(lights_file);
@@ -404,7 +431,7 @@ TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes
          "--lights", lights_file},
         {"SDL_VIDEODRIVER=offscreen"});
   Start(Daemon("vellum-lights"), {"--backend", "sim", "--lights", lights_file, "--settle-ms", "0"});
-  StartProcessing();
+  StartProcessing(fields);
   std::vector<std::string> all = kProcessingStatus;
   for (const char* s : {"STATUS_CAMERA", "STATUS_PROJECTOR", "STATUS_LIGHTS"}) all.push_back(s);
   WaitForHeartbeats(all);
@@ -434,8 +461,12 @@ TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes
           << recorded.lights[k].name << " is " << recorded.lights[j].name << "'s frame";
     }
   }
-  ExpectSameAsProcess(raw, results);
+  ExpectSameAsProcess(raw, results, "process", fields);
   const std::string processed = dir_ + "/process";
+  for (const char* file : {"restored_albedo.tif", "restored_reflectance.tif"}) {
+    ASSERT_TRUE(fs::exists(results + "/" + file)) << file;
+    EXPECT_EQ(ReadText(results + "/" + file), ReadText(processed + "/" + file)) << file;
+  }
   for (const ScanLight& light : recorded.lights) {
     const std::string file = "lights/" + light.name + ".tif";
     ASSERT_TRUE(fs::exists(results + "/" + file)) << file;

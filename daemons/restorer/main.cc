@@ -12,7 +12,9 @@ int main(int argc, char** argv) {
   return DaemonMain(argc, argv, "vellum-restorer",
                     "Restores each scan's TEXTURE through its FLAT_MESH: writes restored.tif,\n"
                     "restored.json, report.html and report.json to the scan's results folder\n"
-                    "(<data>/scan-<id>[-<slug>]/results), the scan's SHA-256 manifest of raw/\n"
+                    "(with --flatfield and --studio-field also restored_albedo.tif and\n"
+                    "restored_reflectance.tif, from the POINT_CLOUD it then hears too)\n"
+                    "in <data>/scan-<id>[-<slug>]/results, the scan's SHA-256 manifest of raw/\n"
                     "and results/ (its folder's manifest-sha256.txt), rewrites the contact sheet\n"
                     "<data>/index.html, and publishes RESTORED (the results folder, the quality\n"
                     "verdict and a preview of at most 1 Mpixel).",

@@ -115,6 +115,55 @@ TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   EXPECT_EQ(node.Counter("scans restored"), 1);
 }
 
+// With a studio field the reflectance is made from the point map, which the restorer hears as
+// the flattener does: a page that comes before it waits for it, and is restored when it comes.
+// With a flat field, a point map without the projector's light is refused by name.
+TEST_F(RestorerNodeTest, WithAFieldAPageWaitsForItsPointMapAndIsRestoredWhenItComes) {
+  const Calibration rig = QuickRig();
+  StudioField studio;
+  studio.camera_size = rig.camera.size;
+  studio.gain = cv::Mat(cv::Size(rig.camera.size.width / 8 + 1, rig.camera.size.height / 8 + 1),
+                        CV_32FC(SmallScan().texture.channels()), cv::Scalar::all(250.0));
+  studio.lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
+  options_.pipeline.studio_field = studio;
+  Node node("vellum-restorer", &bus_.lcm());
+  RestorerNode restorer(&node, options_);
+  bus_.Watch("vellum-restorer");
+  auto restored = bus_.Record<restored_t>(channel::kRestored);
+  Publish(9, Sheet(9));
+  ASSERT_TRUE(bus_.RunUntil([&] {
+    return bus_.Status("vellum-restorer").detail.find("waiting for the point map") !=
+           std::string::npos;
+  })) << bus_.Status("vellum-restorer").detail;
+  EXPECT_TRUE(restored->empty());
+  for (point_cloud_t& m : ToMessages(9, SmallScanProducts().map.points, cv::Mat(),
+                                     SmallScanContext(), FirstStages(2))) {
+    bus_.probe().Publish(channel::kPointCloud, &m);
+  }
+  ASSERT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
+  const std::string results = ScanFolder::For(options_.data_dir, 9).results();
+  EXPECT_TRUE(fs::exists(results + "/restored_reflectance.tif"));
+  EXPECT_EQ(ReadBytes(results + "/restored.tif"),
+            ReadBytes(SmallScanProducts().results + "/restored.tif"));
+
+  // A flat field asks for the projector's light too; this point map came without it.
+  RestorerNodeOptions with_flat = options_;
+  with_flat.pipeline.studio_field = StudioField();
+  with_flat.pipeline.flat_field.projector_size = rig.projector.size;
+  with_flat.pipeline.flat_field.gain = cv::Mat(8, 8, CV_32F, cv::Scalar(100.0));
+  with_flat.data_dir = options_.data_dir + "/flat";
+  Node flat_node("vellum-restorer-flat", &bus_.lcm());
+  RestorerNode flat_restorer(&flat_node, with_flat);
+  bus_.Watch("vellum-restorer-flat");
+  for (point_cloud_t& m : ToMessages(10, SmallScanProducts().map.points, cv::Mat(),
+                                     SmallScanContext(), FirstStages(2))) {
+    bus_.probe().Publish(channel::kPointCloud, &m);
+  }
+  Publish(10, Sheet(10));
+  EXPECT_TRUE(bus_.WaitForError("vellum-restorer-flat", "came without the projector's light"))
+      << bus_.Status("vellum-restorer-flat").last_error;
+}
+
 TEST(RestorerNodeOptions, NonsenseIsRefusedByName) {
   RestorerNodeOptions o;
   std::string why;
