@@ -332,22 +332,30 @@ double BoardScale(const Calibration& calibration, const BoardSpec& board, const 
                        view.projector_corners);
 }
 
-CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
-                                     const BoardSpec& board, const CalibrateOptions& options) {
-  CalibrationSolution sol;
-  if (std::string why; !options.Check(&why)) {
-    sol.status = Status::Error(why);
-    return sol;
-  }
-  std::vector<cv::Point3f> object = BoardPoints(board);
+namespace {
+
+// The board poses a solve uses: each pose's camera and projector corners (in the board's
+// order), which of `views` each is, and the table pose's index among them.
+struct Poses {
+  std::vector<cv::Point3f> object;  // The board's corners, mm.
   std::vector<std::vector<cv::Point2f>> cam, proj;
-  std::vector<size_t> used;
+  std::vector<size_t> used;  // Index into the views of each.
+  size_t table = 0;          // Of cam, proj, used.
   cv::Size camera_size, projector_size;
-  int mirrored = 0;
-  sol.views.resize(views.size());
+  int mirrored = 0;  // Poses whose projector corners run the other way round from the camera's.
+};
+
+// The usable poses of `views` (each pose's status in sol->views): the board's size, one camera
+// and projector size, not the same pose twice.
+Poses GatherPoses(const std::vector<BoardView>& views, const BoardSpec& board,
+                  const CalibrateOptions& options, CalibrationSolution* sol) {
+  Poses p;
+  p.object = BoardPoints(board);
+  const std::vector<cv::Point3f>& object = p.object;
+  sol->views.resize(views.size());
   for (size_t i = 0; i < views.size(); ++i) {
     const BoardView& v = views[i];
-    ViewReport& r = sol.views[i];
+    ViewReport& r = sol->views[i];
     r.name = v.name;
     r.status = v.status;
     if (!v.status.ok()) continue;
@@ -355,16 +363,16 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
       r.status = Status::Error(v.name + ": corners do not match the board size");
       continue;
     }
-    if (used.empty()) {
-      camera_size = v.camera_size;
-      projector_size = v.projector_size;
-    } else if (v.camera_size != camera_size || v.projector_size != projector_size) {
+    if (p.used.empty()) {
+      p.camera_size = v.camera_size;
+      p.projector_size = v.projector_size;
+    } else if (v.camera_size != p.camera_size || v.projector_size != p.projector_size) {
       r.status = Status::Error(v.name + ": camera or projector size differs from the first pose's");
       continue;
     }
     // The same pose twice (one folder given twice, or a board not moved between captures)
     // adds no constraint and biases the solve towards it: refused, naming the first.
-    const auto same = std::find_if(used.begin(), used.end(), [&](size_t u) {
+    const auto same = std::find_if(p.used.begin(), p.used.end(), [&](size_t u) {
       double sum = 0;
       for (size_t k = 0; k < object.size(); ++k) {
         const cv::Point2f d = views[u].camera_corners[k] - v.camera_corners[k];
@@ -372,128 +380,144 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
       }
       return std::sqrt(sum / object.size()) < options.same_pose_px;
     });
-    if (same != used.end()) {
+    if (same != p.used.end()) {
       r.status = Status::Error(v.name + ": the same pose as " + views[*same].name +
                                " (its corners within " + Px(options.same_pose_px) +
                                "); refused: move the board between poses");
       continue;
     }
-    mirrored += Handedness(v.camera_corners, board) != Handedness(v.projector_corners, board);
+    p.mirrored += Handedness(v.camera_corners, board) != Handedness(v.projector_corners, board);
     r.corners = static_cast<int>(object.size());
-    cam.push_back(v.camera_corners);
-    proj.push_back(v.projector_corners);
-    used.push_back(i);
+    p.cam.push_back(v.camera_corners);
+    p.proj.push_back(v.projector_corners);
+    p.used.push_back(i);
   }
+  return p;
+}
+
+// Whether the poses can be solved: enough of them, the table pose among them, the projector's
+// image not mirrored. Sets p->table.
+Status CheckPoses(const std::vector<BoardView>& views, size_t table,
+                  const CalibrateOptions& options, const CalibrationSolution& sol, Poses* p) {
   std::string reasons;
   for (const ViewReport& r : sol.views) {
     if (!r.status.ok()) reasons += "\n  " + r.status.message();
   }
+  const std::vector<size_t>& used = p->used;
   if (static_cast<int>(used.size()) < options.min_views) {
-    sol.status = Status::Error("only " + std::to_string(used.size()) + " usable board poses of " +
-                               std::to_string(views.size()) + " (at least " +
-                               std::to_string(options.min_views) + " are needed)" + reasons);
-    return sol;
+    return Status::Error("only " + std::to_string(used.size()) + " usable board poses of " +
+                         std::to_string(views.size()) + " (at least " +
+                         std::to_string(options.min_views) + " are needed)" + reasons);
   }
   const auto table_at = std::find(used.begin(), used.end(), table);
   if (table >= views.size() || table_at == used.end()) {
-    sol.status = Status::Error(
-        "the table pose is not usable: " +
-        (table < views.size() ? sol.views[table].status.message() : std::string("no such pose")));
-    return sol;
+    return Status::Error("the table pose is not usable: " + (table < views.size()
+                                                                 ? sol.views[table].status.message()
+                                                                 : std::string("no such pose")));
   }
-  if (2 * mirrored > static_cast<int>(used.size())) {
-    sol.status = Status::Error(
-        "the projector's image reaches the board mirrored (" + std::to_string(mirrored) + " of " +
-        std::to_string(used.size()) +
+  if (2 * p->mirrored > static_cast<int>(used.size())) {
+    return Status::Error(
+        "the projector's image reaches the board mirrored (" + std::to_string(p->mirrored) +
+        " of " + std::to_string(used.size()) +
         " poses): the projector daemon's --flip does not match the mirror; the calibration "
         "describes the virtual, unmirrored projector, so fix --flip and capture again");
-    return sol;
   }
-  size_t ti = static_cast<size_t>(table_at - used.begin());
-  // The world's x runs along the camera's image rows on the table pose (as the rig's world
-  // does, and the restored page with it). Each pose's corners are renumbered by the quarter
-  // turns that make it so: a board size given transposed (COLSxROWS for ROWSxCOLS) solves just
-  // as well, but with the world, and every restored page, turned a quarter turn; so does a board
-  // laid on the table turned round. Then the board is taken at its size as it lies, and named.
-  const int table_turns = TurnsAlongImageX(cam[ti], board.inner_corners, -1);
+  p->table = static_cast<size_t>(table_at - used.begin());
+  return Status::Ok();
+}
+
+// The world's x runs along the camera's image rows on the table pose (as the rig's world
+// does, and the restored page with it). Each pose's corners are renumbered by the quarter
+// turns that make it so: a board size given transposed (COLSxROWS for ROWSxCOLS) solves just
+// as well, but with the world, and every restored page, turned a quarter turn; so does a board
+// laid on the table turned round. Then the board is taken at its size as it lies, and named.
+void TurnToTheTable(const BoardSpec& board, Poses* p, CalibrationSolution* sol) {
+  const int table_turns = TurnsAlongImageX(p->cam[p->table], board.inner_corners, -1);
   cv::Size size = board.inner_corners;
-  for (size_t n = 0; n < cam.size(); ++n) {
-    const int turns =
-        n == ti ? table_turns : TurnsAlongImageX(cam[n], board.inner_corners, table_turns % 2);
-    cam[n] = TurnGrid(cam[n], board.inner_corners, turns, &size);
+  for (size_t n = 0; n < p->cam.size(); ++n) {
+    const int turns = n == p->table
+                          ? table_turns
+                          : TurnsAlongImageX(p->cam[n], board.inner_corners, table_turns % 2);
+    p->cam[n] = TurnGrid(p->cam[n], board.inner_corners, turns, &size);
     cv::Size same;
-    proj[n] = TurnGrid(proj[n], board.inner_corners, turns, &same);
+    p->proj[n] = TurnGrid(p->proj[n], board.inner_corners, turns, &same);
   }
   if (size != board.inner_corners) {
     const auto wxh = [](cv::Size s) {
       return std::to_string(s.width) + "x" + std::to_string(s.height);
     };
-    sol.warnings.push_back("the board was given as " + wxh(board.inner_corners) +
-                           " inner corners, but on the table "
-                           "pose its rows run down the camera's image: it lies " +
-                           wxh(size) +
-                           " (the size given transposed, or the board turned a quarter turn on the "
-                           "table); solved as " +
-                           wxh(size) + ", so that the world's x runs along the camera's rows");
+    sol->warnings.push_back("the board was given as " + wxh(board.inner_corners) +
+                            " inner corners, but on the table "
+                            "pose its rows run down the camera's image: it lies " +
+                            wxh(size) +
+                            " (the size given transposed, or the board turned a quarter turn on "
+                            "the table); solved as " +
+                            wxh(size) + ", so that the world's x runs along the camera's rows");
     BoardSpec turned = board;
     turned.inner_corners = size;
-    object = BoardPoints(turned);
+    p->object = BoardPoints(turned);
   }
-  sol.board = size;
-  PoseSolve solved;
-  Status s = SolvePoses(object, cam, proj, ti, camera_size, projector_size, &solved);
-  if (!s.ok()) {
-    sol.status = s;
-    return sol;
-  }
-  // Leave one pose out: each pose (but the table pose, which defines the world) is predicted
-  // by the solve without it (HeldOutError), and the projector's pose without it is compared.
-  // Returns false when a solve fails.
-  struct LeftOut {
-    size_t n;
-    double error_px, deg, mm;
-    double scale;  // MeasuredScale of the pose by the solve without it.
-  };
-  auto leave_one_out = [&](const PoseSolve& all, std::vector<LeftOut>* out) {
-    out->clear();
-    for (size_t n = 0; n < used.size(); ++n) {
-      if (n == ti) continue;
-      std::vector<std::vector<cv::Point2f>> c2, p2;
-      for (size_t m = 0; m < used.size(); ++m) {
-        if (m == n) continue;
-        c2.push_back(cam[m]);
-        p2.push_back(proj[m]);
-      }
-      PoseSolve without;
-      if (!SolvePoses(object, c2, p2, ti < n ? ti : ti - 1, camera_size, projector_size, &without)
-               .ok()) {
-        continue;
-      }
-      LeftOut l{n, HeldOutError(without.calibration, object, cam[n], proj[n]), 0, 0,
-                MeasuredScale(without.calibration, object, cam[n], proj[n])};
-      RelativePoseChange(without.calibration, all.calibration, &l.deg, &l.mm);
-      out->push_back(l);
+  sol->board = size;
+}
+
+Status Solve(const Poses& p, PoseSolve* solved) {
+  return SolvePoses(p.object, p.cam, p.proj, p.table, p.camera_size, p.projector_size, solved);
+}
+
+// A pose left out: predicted by the solve without it (HeldOutError), and the projector's pose
+// without it against the whole solve's.
+struct LeftOut {
+  size_t n;
+  double error_px, deg, mm;
+  double scale;  // MeasuredScale of the pose by the solve without it.
+};
+
+// Leave one pose out: each pose (but the table pose, which defines the world), when the
+// options ask it and there are poses to spare. A solve that fails leaves its pose out of it.
+std::vector<LeftOut> LeaveOneOut(const Poses& p, const PoseSolve& all,
+                                 const CalibrateOptions& options) {
+  std::vector<LeftOut> out;
+  if (!options.leave_one_out || static_cast<int>(p.used.size()) <= options.min_views) return out;
+  for (size_t n = 0; n < p.used.size(); ++n) {
+    if (n == p.table) continue;
+    Poses without_n = p;
+    without_n.cam.clear();
+    without_n.proj.clear();
+    for (size_t m = 0; m < p.used.size(); ++m) {
+      if (m == n) continue;
+      without_n.cam.push_back(p.cam[m]);
+      without_n.proj.push_back(p.proj[m]);
     }
-  };
-  std::vector<LeftOut> left_out;
-  if (options.leave_one_out && static_cast<int>(used.size()) > options.min_views) {
-    leave_one_out(solved, &left_out);
+    without_n.table = p.table < n ? p.table : p.table - 1;
+    PoseSolve without;
+    if (!Solve(without_n, &without).ok()) continue;
+    LeftOut l{n, HeldOutError(without.calibration, p.object, p.cam[n], p.proj[n]), 0, 0,
+              MeasuredScale(without.calibration, p.object, p.cam[n], p.proj[n])};
+    RelativePoseChange(without.calibration, all.calibration, &l.deg, &l.mm);
+    out.push_back(l);
   }
-  // Outlier poses: predicted far worse than the others (a board that moved or bent, corners
-  // that are off). Dropped from the solve and named, as long as enough poses remain.
+  return out;
+}
+
+// Outlier poses: predicted far worse than the others (a board that moved or bent, corners
+// that are off), or fitted far worse by one device alone (corners that are noisy). Named in
+// sol->warnings; returned to be dropped when enough poses remain (the table pose, which
+// defines the world frame, is never dropped).
+std::vector<size_t> Outliers(const std::vector<BoardView>& views, const Poses& p,
+                             const PoseSolve& solved, const std::vector<LeftOut>& left_out,
+                             const CalibrateOptions& options, CalibrationSolution* sol) {
   std::vector<double> held;
   for (const LeftOut& l : left_out) held.push_back(l.error_px);
-  // Also a pose that one device alone fits far worse than the others (corners that are noisy).
   std::vector<size_t> drop;
   std::vector<std::string> named;
   const double mc = Median(solved.camera_px), mp = Median(solved.projector_px);
-  for (size_t n = 0; n < used.size(); ++n) {
-    const double c = solved.camera_px[n], p = solved.projector_px[n];
+  for (size_t n = 0; n < p.used.size(); ++n) {
+    const double c = solved.camera_px[n], pr = solved.projector_px[n];
     if ((c > options.outlier_factor * mc && c > options.outlier_floor_px) ||
-        (p > options.outlier_factor * mp && p > options.outlier_floor_px)) {
+        (pr > options.outlier_factor * mp && pr > options.outlier_floor_px)) {
       drop.push_back(n);
-      named.push_back(views[used[n]].name + ": an outlier (camera " + Px(c) + ", projector " +
-                      Px(p) + " against medians " + Px(mc) + ", " + Px(mp) +
+      named.push_back(views[p.used[n]].name + ": an outlier (camera " + Px(c) + ", projector " +
+                      Px(pr) + " against medians " + Px(mc) + ", " + Px(mp) +
                       "): did the board move or bend?");
     }
   }
@@ -503,119 +527,153 @@ CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t
       if (l.error_px > options.outlier_factor * median && l.error_px > options.outlier_floor_px &&
           std::find(drop.begin(), drop.end(), l.n) == drop.end()) {
         drop.push_back(l.n);
-        named.push_back(views[used[l.n]].name +
+        named.push_back(views[p.used[l.n]].name +
                         ": an outlier (the other poses predict its projector corners to " +
                         Px(l.error_px) + ", the median pose to " + Px(median) +
                         "): did the board move or bend?");
       }
     }
   }
-  // The table pose defines the world frame: named, never dropped.
   for (size_t k = 0; k < drop.size(); ++k) {
-    if (drop[k] != ti) continue;
-    sol.warnings.push_back(named[k] + " It is the table pose, so it is kept: capture it again");
+    if (drop[k] != p.table) continue;
+    sol->warnings.push_back(named[k] + " It is the table pose, so it is kept: capture it again");
     drop.erase(drop.begin() + static_cast<long>(k));
     named.erase(named.begin() + static_cast<long>(k));
     break;
   }
-  const bool can_drop = static_cast<int>(used.size() - drop.size()) >= options.min_views;
+  const bool can_drop = static_cast<int>(p.used.size() - drop.size()) >= options.min_views;
   for (const std::string& w : named) {
-    sol.warnings.push_back(w + (can_drop ? " Dropped from the solve; capture it again"
-                                         : " Kept: too few poses to solve without it; "
-                                           "capture it again or add poses"));
+    sol->warnings.push_back(w + (can_drop ? " Dropped from the solve; capture it again"
+                                          : " Kept: too few poses to solve without it; "
+                                            "capture it again or add poses"));
   }
   if (!can_drop) drop.clear();
-  if (!drop.empty()) {
-    std::vector<std::vector<cv::Point2f>> kept_cam, kept_proj;
-    std::vector<size_t> kept;
-    for (size_t n = 0; n < used.size(); ++n) {
-      if (std::find(drop.begin(), drop.end(), n) != drop.end()) {
-        sol.views[used[n]].status = Status::Error(views[used[n]].name + ": dropped, an outlier");
-        sol.views[used[n]].camera_rms_px = solved.camera_px[n];
-        sol.views[used[n]].projector_rms_px = solved.projector_px[n];
-        continue;
-      }
-      if (n == ti) ti = kept.size();
-      kept.push_back(used[n]);
-      kept_cam.push_back(cam[n]);
-      kept_proj.push_back(proj[n]);
+  return drop;
+}
+
+// The poses without those in `drop` (each marked dropped in sol->views, with its errors).
+void DropPoses(const std::vector<BoardView>& views, const std::vector<size_t>& drop,
+               const PoseSolve& solved, Poses* p, CalibrationSolution* sol) {
+  Poses kept = *p;
+  kept.used.clear();
+  kept.cam.clear();
+  kept.proj.clear();
+  for (size_t n = 0; n < p->used.size(); ++n) {
+    if (std::find(drop.begin(), drop.end(), n) != drop.end()) {
+      ViewReport& r = sol->views[p->used[n]];
+      r.status = Status::Error(views[p->used[n]].name + ": dropped, an outlier");
+      r.camera_rms_px = solved.camera_px[n];
+      r.projector_rms_px = solved.projector_px[n];
+      continue;
     }
-    used = kept;
-    cam = kept_cam;
-    proj = kept_proj;
-    s = SolvePoses(object, cam, proj, ti, camera_size, projector_size, &solved);
-    if (!s.ok()) {
-      sol.status = s;
-      return sol;
-    }
-    left_out.clear();
-    if (options.leave_one_out && static_cast<int>(used.size()) > options.min_views) {
-      leave_one_out(solved, &left_out);
-    }
+    if (n == p->table) kept.table = kept.used.size();
+    kept.used.push_back(p->used[n]);
+    kept.cam.push_back(p->cam[n]);
+    kept.proj.push_back(p->proj[n]);
   }
-  for (const LeftOut& l : left_out) {
-    sol.leave_one_out_deg = std::max(sol.leave_one_out_deg, l.deg);
-    if (l.mm >= sol.leave_one_out_mm) {
-      sol.leave_one_out_mm = l.mm;
-      sol.leave_one_out_pose = views[used[l.n]].name;
-    }
-  }
-  sol.calibration = solved.calibration;
-  // The scale error: each pose by the solve without it where there is one, else by the whole.
+  *p = std::move(kept);
+}
+
+// The scale error: each pose's measured scale by the solve without it where there is one, else
+// by the whole; their RMS, and the worst pose.
+void ScaleError(const std::vector<BoardView>& views, const Poses& p, const PoseSolve& solved,
+                const std::vector<LeftOut>& left_out, CalibrationSolution* sol) {
   double sum_squares = 0;
   int scaled = 0;
-  for (size_t n = 0; n < used.size(); ++n) {
-    double scale = MeasuredScale(solved.calibration, object, cam[n], proj[n]);
+  for (size_t n = 0; n < p.used.size(); ++n) {
+    double scale = MeasuredScale(solved.calibration, p.object, p.cam[n], p.proj[n]);
     for (const LeftOut& l : left_out)
       if (l.n == n) scale = l.scale;
     if (std::isnan(scale)) continue;
     const double error = 100 * (scale - 1);
     sum_squares += error * error;
     ++scaled;
-    if (std::fabs(error) >= std::fabs(sol.worst_scale_error_percent)) {
-      sol.worst_scale_error_percent = error;
-      sol.worst_scale_pose = views[used[n]].name;
+    if (std::fabs(error) >= std::fabs(sol->worst_scale_error_percent)) {
+      sol->worst_scale_error_percent = error;
+      sol->worst_scale_pose = views[p.used[n]].name;
     }
   }
   if (scaled > 0) {
-    sol.scale_error_percent = std::sqrt(sum_squares / scaled);
-    sol.calibration.scale_error_percent = sol.scale_error_percent;
+    sol->scale_error_percent = std::sqrt(sum_squares / scaled);
+    sol->calibration.scale_error_percent = sol->scale_error_percent;
   }
+}
+
+// The reprojection errors above the warning level, each named, and the first above the limit
+// past which the calibration is not written (unless forced).
+void JudgeReprojection(const std::vector<BoardView>& views, const Poses& p,
+                       const CalibrateOptions& options, CalibrationSolution* sol) {
+  const double warn = options.warn_reprojection_px;
+  auto check = [&](const std::string& what, double rms) {
+    if (rms > warn)
+      sol->warnings.push_back(what + " reprojection error " + Px(rms) + " (above " + Px(warn) +
+                              ")");
+  };
+  check("camera", sol->camera_rms_px);
+  check("projector", sol->projector_rms_px);
+  check("camera-projector stereo", sol->stereo_rms_px);
+  for (size_t n : p.used) {
+    check(views[n].name + ": camera", sol->views[n].camera_rms_px);
+    check(views[n].name + ": projector", sol->views[n].projector_rms_px);
+  }
+  for (const auto& [what, rms] : {std::pair<const char*, double>{"camera", sol->camera_rms_px},
+                                  {"projector", sol->projector_rms_px},
+                                  {"stereo", sol->stereo_rms_px}}) {
+    if (rms > options.max_reprojection_px && sol->over_limits.empty()) {
+      sol->over_limits = std::string(what) + " reprojection error " + Px(rms) +
+                         " is above the limit of " + Px(options.max_reprojection_px);
+    }
+  }
+}
+
+}  // namespace
+
+CalibrationSolution SolveCalibration(const std::vector<BoardView>& views, size_t table,
+                                     const BoardSpec& board, const CalibrateOptions& options) {
+  CalibrationSolution sol;
+  if (std::string why; !options.Check(&why)) {
+    sol.status = Status::Error(why);
+    return sol;
+  }
+  Poses p = GatherPoses(views, board, options, &sol);
+  sol.status = CheckPoses(views, table, options, sol, &p);
+  if (!sol.status.ok()) return sol;
+  TurnToTheTable(board, &p, &sol);
+  PoseSolve solved;
+  sol.status = Solve(p, &solved);
+  if (!sol.status.ok()) return sol;
+  std::vector<LeftOut> left_out = LeaveOneOut(p, solved, options);
+  const std::vector<size_t> drop = Outliers(views, p, solved, left_out, options, &sol);
+  if (!drop.empty()) {
+    DropPoses(views, drop, solved, &p, &sol);
+    sol.status = Solve(p, &solved);
+    if (!sol.status.ok()) return sol;
+    left_out = LeaveOneOut(p, solved, options);
+  }
+  for (const LeftOut& l : left_out) {
+    sol.leave_one_out_deg = std::max(sol.leave_one_out_deg, l.deg);
+    if (l.mm >= sol.leave_one_out_mm) {
+      sol.leave_one_out_mm = l.mm;
+      sol.leave_one_out_pose = views[p.used[l.n]].name;
+    }
+  }
+  sol.calibration = solved.calibration;
+  ScaleError(views, p, solved, left_out, &sol);
   sol.camera_rms_px = solved.camera_rms_px;
   sol.projector_rms_px = solved.projector_rms_px;
   sol.stereo_rms_px = solved.stereo_rms_px;
-  for (size_t n = 0; n < used.size(); ++n) {
-    sol.views[used[n]].camera_rms_px = solved.camera_px[n];
-    sol.views[used[n]].projector_rms_px = solved.projector_px[n];
+  for (size_t n = 0; n < p.used.size(); ++n) {
+    sol.views[p.used[n]].camera_rms_px = solved.camera_px[n];
+    sol.views[p.used[n]].projector_rms_px = solved.projector_px[n];
   }
   std::string why;
   if (!sol.calibration.Check(&why)) {
     sol.status = Status::Error("the solved calibration is not valid: " + why);
     return sol;
   }
-  sol.views_used = static_cast<int>(used.size());
-  sol.corners_used = static_cast<int>(used.size() * object.size());
-  const double warn = options.warn_reprojection_px;
-  auto check = [&](const std::string& what, double rms) {
-    if (rms > warn)
-      sol.warnings.push_back(what + " reprojection error " + Px(rms) + " (above " + Px(warn) + ")");
-  };
-  check("camera", sol.camera_rms_px);
-  check("projector", sol.projector_rms_px);
-  check("camera-projector stereo", sol.stereo_rms_px);
-  for (size_t n : used) {
-    check(views[n].name + ": camera", sol.views[n].camera_rms_px);
-    check(views[n].name + ": projector", sol.views[n].projector_rms_px);
-  }
-  // The limits past which the calibration is not written (unless forced).
-  for (const auto& [what, rms] : {std::pair<const char*, double>{"camera", sol.camera_rms_px},
-                                  {"projector", sol.projector_rms_px},
-                                  {"stereo", sol.stereo_rms_px}}) {
-    if (rms > options.max_reprojection_px && sol.over_limits.empty()) {
-      sol.over_limits = std::string(what) + " reprojection error " + Px(rms) +
-                        " is above the limit of " + Px(options.max_reprojection_px);
-    }
-  }
+  sol.views_used = static_cast<int>(p.used.size());
+  sol.corners_used = static_cast<int>(p.used.size() * p.object.size());
+  JudgeReprojection(views, p, options, &sol);
   sol.status = Status::Ok();
   return sol;
 }

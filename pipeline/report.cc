@@ -73,8 +73,9 @@ std::string StageKey(const StageReport& stage) {
 
 Json ToJson(const ReportValue& v) { return v.is_text ? Json(v.text) : JsonNumber(v.number); }
 
-Status WriteHtml(const std::string& dir, const std::string& title, const ProcessReport& r) {
-  std::ostringstream h;
+// The page's head and style, and its title.
+void HtmlHead(const std::string& title, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>vellum: "
     << HtmlEscape(title) << "</title>\n<style>\n"
     << "body{font-family:sans-serif;margin:2em;max-width:1500px;color:#222}\n"
@@ -89,6 +90,12 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
        "{color:inherit}\n"
        "</style></head><body>\n";
   h << "<h1>vellum: " << HtmlEscape(title) << "</h1>\n";
+}
+
+// What was scanned (the scan's identity) and when this report was made; then quality
+// control: the verdict in its colour, and each check.
+void HtmlIdentityAndQuality(const ProcessReport& r, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   // What was scanned (the scan's identity) and when this report was made.
   std::string identity;
   for (const char* key : {"shelfmark", "folio", "side", "label", "operator", "note"}) {
@@ -112,6 +119,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
       << "</td></tr>\n";
   }
   h << "</table></div>\n";
+}
+
+// The restored page(s), whole, each linking to its full-resolution TIFF.
+void HtmlRestoredPages(const ProcessReport& r, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   // The restored page(s), whole, each linking to its full-resolution TIFF.
   const std::vector<std::string> written = r.Outputs();
   for (const std::string& page : r.Pages()) {
@@ -135,6 +147,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
       << HtmlEscape(caption.str()) << "\"></a><figcaption>" << HtmlEscape(caption.str())
       << ". Full resolution: <a href=\"" << tif << "\">" << tif << "</a></figcaption></figure>\n";
   }
+}
+
+// The warnings, then the FADGI figures vellum can vouch for.
+void HtmlWarningsAndFadgi(const ProcessReport& r, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   const std::vector<Warning> warnings = r.Warnings();
   if (!warnings.empty()) {
     h << "<div class=warnings><h2 class=warn>Warnings: check this scan before it is "
@@ -161,6 +178,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
     }
     h << "</table>\n";
   }
+}
+
+// The key figures: pixels, the leaf, each page's strain, sheet, size; heights and sizes.
+void HtmlKeyFigures(const ProcessReport& r, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   const double pixels = r.Number("pixels", "camera"), valid = r.Number("pixels", "valid");
   h << "<h2>Key figures</h2>\n<table>\n";
   h << "<tr><th>Valid pixels</th><td>" << valid << " of " << pixels << " ("
@@ -203,6 +225,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
   h << "<tr><th>Sizes</th><td>camera " << HtmlEscape(r.Text("sizes", "camera")) << ", projector "
     << HtmlEscape(r.Text("sizes", "projector")) << ", " << r.Number("sizes", "patterns")
     << " patterns</td></tr>\n";
+}
+
+// Each stage's time and peak memory, then the pictures the stages wrote, the scan's own first.
+void HtmlTimingsAndPictures(const ProcessReport& r, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   h << "</table>\n<h2>Stage timings and memory</h2>\n<table>\n";
   double total = 0;
   for (const StageReport& stage : r.stages) {
@@ -228,6 +255,11 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
         << HtmlEscape(caption) << "</figcaption></figure>\n";
     }
   }
+}
+
+// Where the scan and calibration came from and the options, and the page's end.
+void HtmlConfiguration(const ProcessReport& r, std::ostringstream* out) {
+  std::ostringstream& h = *out;
   h << "<h2>Configuration</h2>\n<table>\n";
   h << "<tr><th>scan</th><td>" << HtmlEscape(r.scan) << "</td></tr>\n";
   h << "<tr><th>calibration</th><td>" << HtmlEscape(r.calibration) << "</td></tr>\n";
@@ -245,6 +277,17 @@ Status WriteHtml(const std::string& dir, const std::string& title, const Process
        "for(var i=0;i<im.length;i++)if(im[i].complete&&im[i].naturalWidth>0)n++;"
        "document.body.setAttribute('data-images',n+'/'+im.length);});</script>\n";
   h << "</body></html>\n";
+}
+
+Status WriteHtml(const std::string& dir, const std::string& title, const ProcessReport& r) {
+  std::ostringstream h;
+  HtmlHead(title, &h);
+  HtmlIdentityAndQuality(r, &h);
+  HtmlRestoredPages(r, &h);
+  HtmlWarningsAndFadgi(r, &h);
+  HtmlKeyFigures(r, &h);
+  HtmlTimingsAndPictures(r, &h);
+  HtmlConfiguration(r, &h);
   return WriteTextFile((fs::path(dir) / "report.html").string(), h.str());
 }
 

@@ -261,6 +261,111 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   return stage.Finish(s);
 }
 
+namespace {
+
+// How much of the leaf (`leaf` pixels of outline.mask) was measured in 3D, and how much of its
+// texture is clipped: the figures, and the warnings when below or above the limits.
+void JudgeMeasuredAndExposure(const cv::Mat& points, const cv::Mat& texture, const Outline& outline,
+                              int leaf, const WarningLimits& limits, StageReport* report) {
+  StageReport& r = *report;
+  int measured = 0, high = 0, low = 0;
+  const double top = texture.depth() == CV_16U ? 65535 : 255;
+  for (int v = 0; v < outline.mask.rows; ++v) {
+    const uint8_t* in = outline.mask.ptr<uint8_t>(v);
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < outline.mask.cols; ++u) {
+      if (!in[u]) continue;
+      measured += !std::isnan(p[u][0]);
+      double hi = 0, lo = top;
+      for (int c = 0; c < texture.channels(); ++c) {
+        const double value = texture.depth() == CV_16U
+                                 ? texture.ptr<uint16_t>(v)[u * texture.channels() + c]
+                                 : texture.ptr<uint8_t>(v)[u * texture.channels() + c];
+        hi = std::max(hi, value);
+        lo = std::min(lo, value);
+      }
+      high += hi >= top;
+      low += lo <= 0;
+    }
+  }
+  // Measured: of the leaf found by every cue, the share with a point (FindLeaf's), which counts
+  // what the mask leaves out for want of points (a shadow at the rim, a side seen edge-on).
+  const double share_measured =
+      std::min(leaf > 0 ? static_cast<double>(measured) / leaf : 0.0, outline.measured_share);
+  const double share_high = leaf > 0 ? static_cast<double>(high) / leaf : 0;
+  const double share_low = leaf > 0 ? static_cast<double>(low) / leaf : 0;
+  r.Number("outline", "valid_in_leaf", share_measured);
+  r.Number("exposure", "clipped_highlights", share_high);
+  r.Number("exposure", "clipped_shadows", share_low);
+  if (share_measured < limits.min_valid_in_leaf) {
+    r.Warn("valid_low", "only " + Fixed(100 * share_measured, 1) +
+                            "% of the leaf was measured in 3D (glare, the projector's light not "
+                            "reaching, or ink too dark to decode); the rest of the sheet is "
+                            "filled in");
+  }
+  if (std::max(share_high, share_low) > limits.max_clipped) {
+    r.Warn("exposure_clipped",
+           Fixed(100 * share_high, 1) + "% of the leaf's pixels are at the camera's maximum and " +
+               Fixed(100 * share_low, 1) +
+               "% at 0: detail is lost there; shorten or lengthen the exposure, or move the "
+               "lights (glare)");
+  }
+}
+
+// On a spread: how much page the gutter keeps from view (UnseenAtGutter), and the warning
+// when it is more than the limit.
+void JudgeGutter(const cv::Mat& points, const Outline& outline, const WarningLimits& limits,
+                 StageReport* report) {
+  StageReport& r = *report;
+  const GutterGap gap = UnseenAtGutter(points, outline);
+  if (gap.rows > 0) {
+    r.Number("outline", "gutter_unseen_mm", gap.median_mm);
+    r.Number("outline", "gutter_unseen_p95_mm", gap.p95_mm);
+    r.Number("outline", "gutter_unseen_bound_mm", gap.bound_mm);
+    // The line between the pages' last points is the least that is missing; where their
+    // slopes meet farther down, as much as the valley between can hold.
+    const double most_mm = std::max(gap.median_mm, gap.bound_mm);
+    if (most_mm > limits.max_gutter_unseen_mm) {
+      const std::string how_much =
+          most_mm > gap.median_mm + 0.05
+              ? Fixed(gap.median_mm, 1) + " to " + Fixed(most_mm, 1) + " mm"
+              : "at least " + Fixed(gap.median_mm, 1) + " mm (" + Fixed(gap.p95_mm, 1) +
+                    " mm in places)";
+      r.Warn("gutter_hidden",
+             "the restored pages leave out " + how_much +
+                 " of page at the gutter: the camera or the projector did not reach it, or it "
+                 "was not "
+                 "measured or not taken as the page (see the outline in the report); open "
+                 "the book wider, or turn the cradle towards the projector");
+    }
+  }
+}
+
+// A surface standing above the leaf inside it, in a hole of the leaf: the leaf itself, more
+// likely, on a support (HighestRaisedHole); the warning when the hole is large enough.
+void JudgeRaisedHole(const cv::Mat& points, const Outline& outline, int leaf, double step_mm,
+                     const WarningLimits& limits, StageReport* report) {
+  StageReport& r = *report;
+  const RaisedHole raised = HighestRaisedHole(points, outline.mask, step_mm);
+  if (raised.area_px > 0) {
+    r.Number("outline", "raised_hole_pixels", raised.area_px);
+    r.Number("outline", "raised_hole_rise_mm", raised.rise_mm);
+  }
+  if (leaf > 0 && raised.area_px >= limits.min_raised_hole * leaf) {
+    const cv::Rect& b = raised.box;
+    r.Warn("leaf_ambiguous",
+           "a surface " + Fixed(raised.rise_mm, 2) +
+               " mm above the leaf found lies inside it, in " + "a hole of " +
+               Fixed(100.0 * raised.area_px / leaf, 0) + "% of its area (camera pixels " +
+               LeafHintText(b) +
+               "); through a hole one sees what is under the leaf, so that surface is likely "
+               "the leaf itself, on a support taken for the leaf: draw a leaf hint over it in "
+               "the viewer (or give --leaf-hint) and scan again");
+  }
+}
+
+}  // namespace
+
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
                          const ScanContext& context, const OutlineOptions& options,
                          const WarningLimits& limits, const std::string& results,
@@ -290,95 +395,14 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
   r.Number("outline", "edge_on_share", outline->edge_on_share);
   r.Number("outline", "pages", static_cast<double>(outline->pages.size()));
   r.Number("outline", "touches_border", outline->touches_border ? 1 : 0);
-  // How much of the leaf was measured, and how much of its texture is clipped.
-  int measured = 0, high = 0, low = 0;
-  const double top = texture.depth() == CV_16U ? 65535 : 255;
-  for (int v = 0; v < outline->mask.rows; ++v) {
-    const uint8_t* in = outline->mask.ptr<uint8_t>(v);
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    for (int u = 0; u < outline->mask.cols; ++u) {
-      if (!in[u]) continue;
-      measured += !std::isnan(p[u][0]);
-      double hi = 0, lo = top;
-      for (int c = 0; c < texture.channels(); ++c) {
-        const double value = texture.depth() == CV_16U
-                                 ? texture.ptr<uint16_t>(v)[u * texture.channels() + c]
-                                 : texture.ptr<uint8_t>(v)[u * texture.channels() + c];
-        hi = std::max(hi, value);
-        lo = std::min(lo, value);
-      }
-      high += hi >= top;
-      low += lo <= 0;
-    }
-  }
-  // Measured: of the leaf found by every cue, the share with a point (FindLeaf's), which counts
-  // what the mask leaves out for want of points (a shadow at the rim, a side seen edge-on).
-  const double share_measured =
-      std::min(leaf > 0 ? static_cast<double>(measured) / leaf : 0.0, outline->measured_share);
-  const double share_high = leaf > 0 ? static_cast<double>(high) / leaf : 0;
-  const double share_low = leaf > 0 ? static_cast<double>(low) / leaf : 0;
-  r.Number("outline", "valid_in_leaf", share_measured);
-  r.Number("exposure", "clipped_highlights", share_high);
-  r.Number("exposure", "clipped_shadows", share_low);
-  if (share_measured < limits.min_valid_in_leaf) {
-    r.Warn("valid_low", "only " + Fixed(100 * share_measured, 1) +
-                            "% of the leaf was measured in 3D (glare, the projector's light not "
-                            "reaching, or ink too dark to decode); the rest of the sheet is "
-                            "filled in");
-  }
-  if (std::max(share_high, share_low) > limits.max_clipped) {
-    r.Warn("exposure_clipped",
-           Fixed(100 * share_high, 1) + "% of the leaf's pixels are at the camera's maximum and " +
-               Fixed(100 * share_low, 1) +
-               "% at 0: detail is lost there; shorten or lengthen the exposure, or move the "
-               "lights (glare)");
-  }
+  JudgeMeasuredAndExposure(points, texture, *outline, leaf, limits, &r);
   if (outline->touches_border) {
     r.Warn("page_cut_off",
            "the leaf runs off the camera's view: what lies outside it is missing from the "
            "restored page; move the leaf into the view and scan again");
   }
-  if (outline->pages.size() == 2) {
-    const GutterGap gap = UnseenAtGutter(points, *outline);
-    if (gap.rows > 0) {
-      r.Number("outline", "gutter_unseen_mm", gap.median_mm);
-      r.Number("outline", "gutter_unseen_p95_mm", gap.p95_mm);
-      r.Number("outline", "gutter_unseen_bound_mm", gap.bound_mm);
-      // The line between the pages' last points is the least that is missing; where their
-      // slopes meet farther down, as much as the valley between can hold.
-      const double most_mm = std::max(gap.median_mm, gap.bound_mm);
-      if (most_mm > limits.max_gutter_unseen_mm) {
-        const std::string how_much =
-            most_mm > gap.median_mm + 0.05
-                ? Fixed(gap.median_mm, 1) + " to " + Fixed(most_mm, 1) + " mm"
-                : "at least " + Fixed(gap.median_mm, 1) + " mm (" + Fixed(gap.p95_mm, 1) +
-                      " mm in places)";
-        r.Warn("gutter_hidden",
-               "the restored pages leave out " + how_much +
-                   " of page at the gutter: the camera or the projector did not reach it, or it "
-                   "was not "
-                   "measured or not taken as the page (see the outline in the report); open "
-                   "the book wider, or turn the cradle towards the projector");
-      }
-    }
-  }
-  // A surface standing above the leaf inside it: the leaf itself, more likely, on a support.
-  const RaisedHole raised = HighestRaisedHole(points, outline->mask, options.step_mm);
-  if (raised.area_px > 0) {
-    r.Number("outline", "raised_hole_pixels", raised.area_px);
-    r.Number("outline", "raised_hole_rise_mm", raised.rise_mm);
-  }
-  if (leaf > 0 && raised.area_px >= limits.min_raised_hole * leaf) {
-    const cv::Rect& b = raised.box;
-    r.Warn("leaf_ambiguous",
-           "a surface " + Fixed(raised.rise_mm, 2) +
-               " mm above the leaf found lies inside it, in " + "a hole of " +
-               Fixed(100.0 * raised.area_px / leaf, 0) + "% of its area (camera pixels " +
-               LeafHintText(b) +
-               "); through a hole one sees what is under the leaf, so that surface is likely "
-               "the leaf itself, on a support taken for the leaf: draw a leaf hint over it in "
-               "the viewer (or give --leaf-hint) and scan again");
-  }
+  if (outline->pages.size() == 2) JudgeGutter(points, *outline, limits, &r);
+  JudgeRaisedHole(points, *outline, leaf, options.step_mm, limits, &r);
   if (outline->confidence < limits.min_outline_confidence) {
     r.Warn("outline_uncertain",
            "only " + Fixed(100 * outline->confidence, 0) +

@@ -12,6 +12,7 @@ bash scripts/install-deps.sh
 bash scripts/check-format.sh
 bash scripts/check-docs.sh
 bash scripts/check-options.sh
+bash scripts/check-function-length.sh
 bash scripts/build.sh
 (cd build && ctest --output-on-failure -j2 --timeout 900 -LE 'family_full|station')
 bash scripts/fuzz.sh --ci

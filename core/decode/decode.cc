@@ -703,6 +703,122 @@ namespace {
 // loops over x vectorise with every moment held in registers. Rows are processed in strips; a
 // ring of 2R + 1 rows of horizontal moments (w, w du, w du^2, w v, w v du per plane) feeds the
 // vertical sums, which are solved in place.
+// The horizontal moments of row y for LocalLinearFitImpl (w, w du, w du^2, then w v, w v du per
+// plane) into `m` (kPlanes rows of `width`), through the padded rows `wpad` and `vpad`. Inlined:
+// each of its loops vectorises in place.
+template <int R, int N>
+[[gnu::always_inline]] inline void HorizontalMoments(const cv::Mat* values, const cv::Mat& weights,
+                                                     int y, int width, float* wpad_data,
+                                                     float* vpad_data, float* m) {
+  const int padded = width + 2 * R;
+  const float* w = weights.ptr<float>(y);
+  float* wp = wpad_data + R;
+  for (int x = 0; x < width; ++x) {
+    const float wx = w[x];
+    wp[x] = wx > 0 ? wx : 0.0f;
+  }
+  for (int p = 0; p < N; ++p) {
+    const float* v = values[p].ptr<float>(y);
+    float* vp = vpad_data + static_cast<size_t>(p) * padded + R;
+    for (int x = 0; x < width; ++x) {
+      const float wx = w[x], vx = v[x];
+      vp[x] = wx > 0 ? wx * vx : 0.0f;
+    }
+  }
+  // One output per loop: each reads a single padded source row, so every loop vectorises.
+  auto taps = [&](const float* src, float* dst, int power) {
+    for (int x = 0; x < width; ++x) {
+      float acc = 0;
+#pragma GCC unroll 17
+      for (int d = -R; d <= R; ++d) {
+        const float c = power == 0 ? 1.0f : (power == 1 ? float(d) : float(d * d));
+        acc += src[x + d] * c;
+      }
+      dst[x] = acc;
+    }
+  };
+  taps(wp, m, 0);
+  taps(wp, m + width, 1);
+  taps(wp, m + 2 * width, 2);
+  for (int p = 0; p < N; ++p) {
+    const float* vp = vpad_data + static_cast<size_t>(p) * padded + R;
+    taps(vp, m + (3 + 2 * p) * width, 0);
+    taps(vp, m + (4 + 2 * p) * width, 1);
+  }
+}
+
+// One row of LocalLinearFitImpl's output from the 2R + 1 rows of horizontal moments around it
+// (`rows`): the vertical sums in chunks, and each pixel's weighted plane's intercept (NaN where
+// its weight `w` is 0). Inlined, for the same reason.
+template <int R, int N>
+[[gnu::always_inline]] inline void FitRow(const float* const* rows, const float* w, int width,
+                                          float* out0, float* out1) {
+  // Vertical sums in chunks of kChunk pixels, accumulated in L1-resident arrays:
+  // S, Su, Sv, Suu, Suv, Svv, then X, Xu, Xv per plane.
+  constexpr int kChunk = 64;
+  constexpr int kSums = 6 + 3 * N;
+  alignas(32) float acc[kSums][kChunk];
+  for (int x0 = 0; x0 < width; x0 += kChunk) {
+    const int len = std::min(kChunk, width - x0);
+    for (int k = 0; k < kSums; ++k) {
+      for (int i = 0; i < kChunk; ++i) acc[k][i] = 0.0f;
+    }
+    for (int d = -R; d <= R; ++d) {
+      const float* m = rows[d + R] + x0;
+      const float fd = static_cast<float>(d), fd2 = fd * fd;
+      const float* m0 = m;
+      const float* m1 = m + width;
+      const float* m2 = m + 2 * width;
+      for (int i = 0; i < len; ++i) {
+        acc[0][i] += m0[i];
+        acc[1][i] += m1[i];
+        acc[2][i] += m0[i] * fd;
+        acc[3][i] += m2[i];
+        acc[4][i] += m1[i] * fd;
+        acc[5][i] += m0[i] * fd2;
+      }
+      const float* a0 = m + 3 * width;
+      const float* a1 = m + 4 * width;
+      for (int i = 0; i < len; ++i) {
+        acc[6][i] += a0[i];
+        acc[7][i] += a1[i];
+        acc[8][i] += a0[i] * fd;
+      }
+      if constexpr (N > 1) {
+        const float* b0 = m + 5 * width;
+        const float* b1 = m + 6 * width;
+        for (int i = 0; i < len; ++i) {
+          acc[9][i] += b0[i];
+          acc[10][i] += b1[i];
+          acc[11][i] += b0[i] * fd;
+        }
+      }
+    }
+    for (int i = 0; i < len; ++i) {
+      const float S = acc[0][i], Su = acc[1][i], Sv = acc[2][i];
+      const float Suu = acc[3][i], Suv = acc[4][i], Svv = acc[5][i];
+      // Intercept of the 3x3 weighted normal equations: first row of the adjugate. Float
+      // suffices: weights are O(1) and the window coordinates small integers.
+      const float c0 = Suu * Svv - Suv * Suv;
+      const float c1 = Sv * Suv - Su * Svv;
+      const float c2 = Su * Suv - Suu * Sv;
+      const float det = S * c0 + Su * c1 + Sv * c2;
+      const bool solvable = det > 1e-4f * S * Suu * Svv && S > 0;
+      const float inv_det = solvable ? 1.0f / det : 0.0f;
+      const float inv_s = 1.0f / std::max(S, 1e-30f);
+      const bool keep = w[x0 + i] > 0;
+      const float fit0 = solvable ? (c0 * acc[6][i] + c1 * acc[7][i] + c2 * acc[8][i]) * inv_det
+                                  : acc[6][i] * inv_s;
+      out0[x0 + i] = keep ? fit0 : kNaN;
+      if constexpr (N > 1) {
+        const float fit1 = solvable ? (c0 * acc[9][i] + c1 * acc[10][i] + c2 * acc[11][i]) * inv_det
+                                    : acc[9][i] * inv_s;
+        out1[x0 + i] = keep ? fit1 : kNaN;
+      }
+    }
+  }
+}
+
 template <int R, int N>
 void LocalLinearFitImpl(const cv::Mat* values, const cv::Mat& weights, cv::Mat* fitted) {
   const int width = weights.cols, height = weights.rows;
@@ -720,41 +836,7 @@ void LocalLinearFitImpl(const cv::Mat* values, const cv::Mat& weights, cv::Mat* 
           return &ring[static_cast<size_t>(y % kRing) * kPlanes * width];
         };
         auto horizontal = [&](int y) {
-          const float* w = weights.ptr<float>(y);
-          float* wp = wpad.data() + R;
-          for (int x = 0; x < width; ++x) {
-            const float wx = w[x];
-            wp[x] = wx > 0 ? wx : 0.0f;
-          }
-          for (int p = 0; p < N; ++p) {
-            const float* v = values[p].ptr<float>(y);
-            float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
-            for (int x = 0; x < width; ++x) {
-              const float wx = w[x], vx = v[x];
-              vp[x] = wx > 0 ? wx * vx : 0.0f;
-            }
-          }
-          // One output per loop: each reads a single padded source row, so every loop vectorises.
-          float* m = ring_row(y);
-          auto taps = [&](const float* src, float* dst, int power) {
-            for (int x = 0; x < width; ++x) {
-              float acc = 0;
-#pragma GCC unroll 17
-              for (int d = -R; d <= R; ++d) {
-                const float c = power == 0 ? 1.0f : (power == 1 ? float(d) : float(d * d));
-                acc += src[x + d] * c;
-              }
-              dst[x] = acc;
-            }
-          };
-          taps(wp, m, 0);
-          taps(wp, m + width, 1);
-          taps(wp, m + 2 * width, 2);
-          for (int p = 0; p < N; ++p) {
-            const float* vp = vpad.data() + static_cast<size_t>(p) * padded + R;
-            taps(vp, m + (3 + 2 * p) * width, 0);
-            taps(vp, m + (4 + 2 * p) * width, 1);
-          }
+          HorizontalMoments<R, N>(values, weights, y, width, wpad.data(), vpad.data(), ring_row(y));
         };
         for (int strip = strip_range.start; strip < strip_range.end; ++strip) {
           const int y0 = strip * kFitStripRows, y1 = std::min(height, y0 + kFitStripRows);
@@ -769,72 +851,7 @@ void LocalLinearFitImpl(const cv::Mat* values, const cv::Mat& weights, cv::Mat* 
             const float* w = weights.ptr<float>(y);
             float* out0 = fitted[0].ptr<float>(y);
             float* out1 = fitted[N > 1 ? 1 : 0].ptr<float>(y);
-            // Vertical sums in chunks of kChunk pixels, accumulated in L1-resident arrays:
-            // S, Su, Sv, Suu, Suv, Svv, then X, Xu, Xv per plane.
-            constexpr int kChunk = 64;
-            constexpr int kSums = 6 + 3 * N;
-            alignas(32) float acc[kSums][kChunk];
-            for (int x0 = 0; x0 < width; x0 += kChunk) {
-              const int len = std::min(kChunk, width - x0);
-              for (int k = 0; k < kSums; ++k) {
-                for (int i = 0; i < kChunk; ++i) acc[k][i] = 0.0f;
-              }
-              for (int d = -R; d <= R; ++d) {
-                const float* m = rows[d + R] + x0;
-                const float fd = static_cast<float>(d), fd2 = fd * fd;
-                const float* m0 = m;
-                const float* m1 = m + width;
-                const float* m2 = m + 2 * width;
-                for (int i = 0; i < len; ++i) {
-                  acc[0][i] += m0[i];
-                  acc[1][i] += m1[i];
-                  acc[2][i] += m0[i] * fd;
-                  acc[3][i] += m2[i];
-                  acc[4][i] += m1[i] * fd;
-                  acc[5][i] += m0[i] * fd2;
-                }
-                const float* a0 = m + 3 * width;
-                const float* a1 = m + 4 * width;
-                for (int i = 0; i < len; ++i) {
-                  acc[6][i] += a0[i];
-                  acc[7][i] += a1[i];
-                  acc[8][i] += a0[i] * fd;
-                }
-                if constexpr (N > 1) {
-                  const float* b0 = m + 5 * width;
-                  const float* b1 = m + 6 * width;
-                  for (int i = 0; i < len; ++i) {
-                    acc[9][i] += b0[i];
-                    acc[10][i] += b1[i];
-                    acc[11][i] += b0[i] * fd;
-                  }
-                }
-              }
-              for (int i = 0; i < len; ++i) {
-                const float S = acc[0][i], Su = acc[1][i], Sv = acc[2][i];
-                const float Suu = acc[3][i], Suv = acc[4][i], Svv = acc[5][i];
-                // Intercept of the 3x3 weighted normal equations: first row of the adjugate. Float
-                // suffices: weights are O(1) and the window coordinates small integers.
-                const float c0 = Suu * Svv - Suv * Suv;
-                const float c1 = Sv * Suv - Su * Svv;
-                const float c2 = Su * Suv - Suu * Sv;
-                const float det = S * c0 + Su * c1 + Sv * c2;
-                const bool solvable = det > 1e-4f * S * Suu * Svv && S > 0;
-                const float inv_det = solvable ? 1.0f / det : 0.0f;
-                const float inv_s = 1.0f / std::max(S, 1e-30f);
-                const bool keep = w[x0 + i] > 0;
-                const float fit0 =
-                    solvable ? (c0 * acc[6][i] + c1 * acc[7][i] + c2 * acc[8][i]) * inv_det
-                             : acc[6][i] * inv_s;
-                out0[x0 + i] = keep ? fit0 : kNaN;
-                if constexpr (N > 1) {
-                  const float fit1 =
-                      solvable ? (c0 * acc[9][i] + c1 * acc[10][i] + c2 * acc[11][i]) * inv_det
-                               : acc[9][i] * inv_s;
-                  out1[x0 + i] = keep ? fit1 : kNaN;
-                }
-              }
-            }
+            FitRow<R, N>(rows, w, width, out0, out1);
           }
         }
       },
@@ -900,30 +917,18 @@ void Decoder::Decode(const PatternSequence& sequence, const std::vector<cv::Mat>
   Finish(result);
 }
 
-void Decoder::Finish(DecodeResult* result) {
+// The final pass over the rows: each pixel's light (the amplitude, lit and clipped pixels),
+// its projector coordinates from the codes and phases, and its fit weight and expected noise
+// (weight_, sigma_). Counts the lit and rejected pixels into *stats.
+void Decoder::Coordinates(DecodeResult* result, DecodeStats* stats) {
   Stream& st = *stream_;
   const DecodeOptions& options = options_;
-  result->stats = DecodeStats();
-  result->status = st.status;
-  if (!st.status.ok()) return;
-  const int n = static_cast<int>(st.received.size());
-  if (st.count < n) {
-    int first = 0;
-    while (st.received[first]) ++first;
-    result->status = st.status = Status::Error(
-        "frame " + std::to_string(first) + " (pattern '" + Describe(st.sequence.patterns[first]) +
-        "') never came: " + std::to_string(st.count) + " of " + std::to_string(n) + " frames");
-    return;
-  }
-  Digest();
-  st.status = Status::Error("decode finished; begin the next");
   const cv::Size size = st.size;
   const int width = size.width, height = size.height;
   const AxisPlan& col = st.axes[0];
   const AxisPlan& row = st.axes[1];
   const cv::Mat& white = st.held[st.white];
   const cv::Mat& black = st.held[st.black];
-
   cv::Mat& out_x = result->projector_x;
   cv::Mat& out_y = result->projector_y;
   out_x.create(size, CV_32F);
@@ -1006,123 +1011,179 @@ void Decoder::Finish(DecodeResult* result) {
     bad_mod += count.modulation;
     bad_unwrap += count.unwrap;
   });
-  st.held.assign(n, cv::Mat());  // The white and black frames too: the stream is done.
+  stats->lit = lit;
+  stats->rejected_saturated = saturated;
+  stats->rejected_bits = bad_bits;
+  stats->rejected_modulation = bad_mod;
+  stats->rejected_unwrap = bad_unwrap;
+}
 
-  std::vector<cv::Mat> raw;
-  if (col.present) raw.push_back(out_x);
-  if (row.present) raw.push_back(out_y);
+// The coordinates (`raw`, one per encoded axis) fitted locally (LocalLinearFit, weighted by
+// weight_), with robust reweighting and the curvature put back; the fit kept where it agrees
+// with the pixel, else the raw decode. Returns the pixels that kept their raw decode.
+int Decoder::Smooth(std::vector<cv::Mat>* raw_inout) {
+  std::vector<cv::Mat>& raw = *raw_inout;
+  const DecodeOptions& options = options_;
+  const cv::Size size = stream_->size;
+  const int width = size.width, height = size.height;
   std::atomic<int> fallbacks{0};
-  if (options.smooth_radius_px > 0) {
-    const float cut = static_cast<float>(options.outlier_sigmas);
-    // Largest |raw - fit| over the axes, in units of the pixel's expected noise (NaN fit: inf).
-    // Row y's largest |raw - fit| over the axes, in units of each pixel's expected noise
-    // (a NaN fit counts as infinitely far).
-    auto residual_row = [&](int y, float* out) {
-      const float* sg = sigma_.ptr<float>(y);
-      std::fill(out, out + width, 0.0f);
-      for (size_t p = 0; p < raw.size(); ++p) {
-        const float* r = raw[p].ptr<float>(y);
-        const float* f = fit_[p].ptr<float>(y);
-        for (int x = 0; x < width; ++x) {
-          const float d = std::fabs(r[x] - f[x]);
-          out[x] = d == d ? std::max(out[x], d) : std::numeric_limits<float>::infinity();
-        }
+  const float cut = static_cast<float>(options.outlier_sigmas);
+  // Largest |raw - fit| over the axes, in units of the pixel's expected noise (NaN fit: inf).
+  // Row y's largest |raw - fit| over the axes, in units of each pixel's expected noise
+  // (a NaN fit counts as infinitely far).
+  auto residual_row = [&](int y, float* out) {
+    const float* sg = sigma_.ptr<float>(y);
+    std::fill(out, out + width, 0.0f);
+    for (size_t p = 0; p < raw.size(); ++p) {
+      const float* r = raw[p].ptr<float>(y);
+      const float* f = fit_[p].ptr<float>(y);
+      for (int x = 0; x < width; ++x) {
+        const float d = std::fabs(r[x] - f[x]);
+        out[x] = d == d ? std::max(out[x], d) : std::numeric_limits<float>::infinity();
       }
-      for (int x = 0; x < width; ++x) out[x] /= sg[x];
-    };
-    LocalLinearFit(raw, weight_, options.smooth_radius_px, &fit_);
-    // Robust reweighting: a pixel far from its own local fit (a depth step, a bad decode) loses
-    // its weight in its neighbours' fits (Tukey biweight).
-    for (int pass = 1; pass < options.smooth_passes; ++pass) {
-      robust_weight_.create(size, CV_32F);
-      cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
-        std::vector<float> res(width);
-        for (int y = range.start; y < range.end; ++y) {
-          residual_row(y, res.data());
-          const float* w = weight_.ptr<float>(y);
-          float* rw = robust_weight_.ptr<float>(y);
-          for (int x = 0; x < width; ++x) {
-            const float u = res[x] / cut;
-            const float t = u < 1.0f ? 1.0f - u * u : 0.0f;
-            rw[x] = w[x] > 0 ? w[x] * t * t : 0.0f;
-          }
-        }
-      });
-      LocalLinearFit(raw, robust_weight_, options.smooth_radius_px, &fit_);
     }
-    // With the phase only: a Gray code's coordinates step by its stripe, and what the fit leaves
-    // there is the staircase, not a curve.
-    const bool phase = (!col.present || col.steps > 0) && (!row.present || row.steps > 0);
-    if (options.correct_curvature && phase) {
-      // A plane fitted over the window is biased where the surface curves: it rounds a crease's
-      // apex and lowers a ripple's crests by the curvature times the window's second moment.
-      // The same fit of what it left (twicing) puts that back: the two together fit a
-      // quadratic's value, at some more noise.
-      const cv::Mat& w = options.smooth_passes > 1 ? robust_weight_ : weight_;
-      residual_.resize(raw.size());
-      for (size_t p = 0; p < raw.size(); ++p) residual_[p].create(size, CV_32F);
-      cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
-        for (int y = range.start; y < range.end; ++y) {
-          const float* wy = w.ptr<float>(y);
-          for (size_t p = 0; p < raw.size(); ++p) {
-            const float* r = raw[p].ptr<float>(y);
-            const float* f = fit_[p].ptr<float>(y);
-            float* out = residual_[p].ptr<float>(y);
-            for (int x = 0; x < width; ++x) {
-              const float d = r[x] - f[x];
-              out[x] = (wy[x] > 0) & (d == d) ? d : 0.0f;
-            }
-          }
-        }
-      });
-      LocalLinearFit(residual_, w, options.smooth_radius_px, &correction_);
-      // Only where the correction stands out of its own noise (the fit of a pixel's noise over
-      // the window: its expected noise over the window's side): on a flat or gently curved leaf
-      // it is that noise, and would only add it.
-      const float side = static_cast<float>(2 * options.smooth_radius_px + 1);
-      const float least = static_cast<float>(options.curvature_sigmas) / side;
-      cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
-        for (int y = range.start; y < range.end; ++y) {
-          const float* sg = sigma_.ptr<float>(y);
-          for (size_t p = 0; p < raw.size(); ++p) {
-            const float* c = correction_[p].ptr<float>(y);
-            float* f = fit_[p].ptr<float>(y);
-            for (int x = 0; x < width; ++x) f[x] += std::fabs(c[x]) > least * sg[x] ? c[x] : 0.0f;
-          }
-        }
-      });
-    }
-    // Keep the fit where it agrees with the pixel; where it does not (a depth step inside the
-    // window, or a pixel that lost its robust weight) keep the raw decode: unbiased, noisier.
+    for (int x = 0; x < width; ++x) out[x] /= sg[x];
+  };
+  LocalLinearFit(raw, weight_, options.smooth_radius_px, &fit_);
+  // Robust reweighting: a pixel far from its own local fit (a depth step, a bad decode) loses
+  // its weight in its neighbours' fits (Tukey biweight).
+  for (int pass = 1; pass < options.smooth_passes; ++pass) {
+    robust_weight_.create(size, CV_32F);
     cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
       std::vector<float> res(width);
-      int n = 0;
       for (int y = range.start; y < range.end; ++y) {
         residual_row(y, res.data());
         const float* w = weight_.ptr<float>(y);
-        for (int x = 0; x < width; ++x) n += (w[x] > 0) & (res[x] > cut);
-        for (size_t p = 0; p < raw.size(); ++p) {
-          float* r = raw[p].ptr<float>(y);
-          const float* f = fit_[p].ptr<float>(y);
-          for (int x = 0; x < width; ++x) r[x] = ((w[x] > 0) & (res[x] <= cut)) ? f[x] : r[x];
+        float* rw = robust_weight_.ptr<float>(y);
+        for (int x = 0; x < width; ++x) {
+          const float u = res[x] / cut;
+          const float t = u < 1.0f ? 1.0f - u * u : 0.0f;
+          rw[x] = w[x] > 0 ? w[x] * t * t : 0.0f;
         }
       }
-      fallbacks += n;
+    });
+    LocalLinearFit(raw, robust_weight_, options.smooth_radius_px, &fit_);
+  }
+  CorrectCurvature(raw);
+  // Keep the fit where it agrees with the pixel; where it does not (a depth step inside the
+  // window, or a pixel that lost its robust weight) keep the raw decode: unbiased, noisier.
+  cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+    std::vector<float> res(width);
+    int n = 0;
+    for (int y = range.start; y < range.end; ++y) {
+      residual_row(y, res.data());
+      const float* w = weight_.ptr<float>(y);
+      for (int x = 0; x < width; ++x) n += (w[x] > 0) & (res[x] > cut);
+      for (size_t p = 0; p < raw.size(); ++p) {
+        float* r = raw[p].ptr<float>(y);
+        const float* f = fit_[p].ptr<float>(y);
+        for (int x = 0; x < width; ++x) r[x] = ((w[x] > 0) & (res[x] <= cut)) ? f[x] : r[x];
+      }
+    }
+    fallbacks += n;
+  });
+  return fallbacks;
+}
+
+// Where the surface curves, a plane fitted over the window is biased: the same fit of what it
+// left (twicing) puts that back, where it stands out of its own noise (fit_ corrected in
+// place). With the phase only: a Gray code's coordinates step by its stripe, and what the fit
+// leaves there is the staircase, not a curve.
+void Decoder::CorrectCurvature(const std::vector<cv::Mat>& raw) {
+  const Stream& st = *stream_;
+  const DecodeOptions& options = options_;
+  const AxisPlan& col = st.axes[0];
+  const AxisPlan& row = st.axes[1];
+  const cv::Size size = st.size;
+  const int width = size.width, height = size.height;
+  // With the phase only: a Gray code's coordinates step by its stripe, and what the fit leaves
+  // there is the staircase, not a curve.
+  const bool phase = (!col.present || col.steps > 0) && (!row.present || row.steps > 0);
+  if (!options.correct_curvature || !phase) return;
+  {
+    // A plane fitted over the window is biased where the surface curves: it rounds a crease's
+    // apex and lowers a ripple's crests by the curvature times the window's second moment.
+    // The same fit of what it left (twicing) puts that back: the two together fit a
+    // quadratic's value, at some more noise.
+    const cv::Mat& w = options.smooth_passes > 1 ? robust_weight_ : weight_;
+    residual_.resize(raw.size());
+    for (size_t p = 0; p < raw.size(); ++p) residual_[p].create(size, CV_32F);
+    cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+      for (int y = range.start; y < range.end; ++y) {
+        const float* wy = w.ptr<float>(y);
+        for (size_t p = 0; p < raw.size(); ++p) {
+          const float* r = raw[p].ptr<float>(y);
+          const float* f = fit_[p].ptr<float>(y);
+          float* out = residual_[p].ptr<float>(y);
+          for (int x = 0; x < width; ++x) {
+            const float d = r[x] - f[x];
+            out[x] = (wy[x] > 0) & (d == d) ? d : 0.0f;
+          }
+        }
+      }
+    });
+    LocalLinearFit(residual_, w, options.smooth_radius_px, &correction_);
+    // Only where the correction stands out of its own noise (the fit of a pixel's noise over
+    // the window: its expected noise over the window's side): on a flat or gently curved leaf
+    // it is that noise, and would only add it.
+    const float side = static_cast<float>(2 * options.smooth_radius_px + 1);
+    const float least = static_cast<float>(options.curvature_sigmas) / side;
+    cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& range) {
+      for (int y = range.start; y < range.end; ++y) {
+        const float* sg = sigma_.ptr<float>(y);
+        for (size_t p = 0; p < raw.size(); ++p) {
+          const float* c = correction_[p].ptr<float>(y);
+          float* f = fit_[p].ptr<float>(y);
+          for (int x = 0; x < width; ++x) f[x] += std::fabs(c[x]) > least * sg[x] ? c[x] : 0.0f;
+        }
+      }
     });
   }
+}
+
+void Decoder::Finish(DecodeResult* result) {
+  Stream& st = *stream_;
+  const DecodeOptions& options = options_;
+  result->stats = DecodeStats();
+  result->status = st.status;
+  if (!st.status.ok()) return;
+  const int n = static_cast<int>(st.received.size());
+  if (st.count < n) {
+    int first = 0;
+    while (st.received[first]) ++first;
+    result->status = st.status = Status::Error(
+        "frame " + std::to_string(first) + " (pattern '" + Describe(st.sequence.patterns[first]) +
+        "') never came: " + std::to_string(st.count) + " of " + std::to_string(n) + " frames");
+    return;
+  }
+  Digest();
+  st.status = Status::Error("decode finished; begin the next");
+  const cv::Size size = st.size;
+  const int width = size.width, height = size.height;
+  const AxisPlan& col = st.axes[0];
+  const AxisPlan& row = st.axes[1];
+  DecodeStats counted;
+  Coordinates(result, &counted);
+  st.held.assign(n, cv::Mat());  // The white and black frames too: the stream is done.
+  cv::Mat& out_x = result->projector_x;
+  cv::Mat& out_y = result->projector_y;
+  std::vector<cv::Mat> raw;
+  if (col.present) raw.push_back(out_x);
+  if (row.present) raw.push_back(out_y);
+  const int fallbacks = options.smooth_radius_px > 0 ? Smooth(&raw) : 0;
   result->valid = weight_ > 0;
   result->has_columns = col.present;
   result->has_rows = row.present;
   DecodeStats& stats = result->stats;
   stats.pixels = width * height;
-  stats.lit = lit;
+  stats.lit = counted.lit;
   stats.valid = cv::countNonZero(result->valid);
-  stats.rejected_saturated = saturated;
-  stats.rejected_bits = bad_bits;
+  stats.rejected_saturated = counted.rejected_saturated;
+  stats.rejected_bits = counted.rejected_bits;
   stats.gray_stripe_px = 1 << std::max(col.first_bit, row.first_bit);
   stats.step_px = col.steps + row.steps == 0 ? stats.gray_stripe_px : 0;
-  stats.rejected_modulation = bad_mod;
-  stats.rejected_unwrap = bad_unwrap;
+  stats.rejected_modulation = counted.rejected_modulation;
+  stats.rejected_unwrap = counted.rejected_unwrap;
   stats.fit_fallbacks = fallbacks;
   stats.pairs = st.pairs;
   std::sort(stats.pairs.begin(), stats.pairs.end(), [](const auto& a, const auto& b) {

@@ -145,6 +145,12 @@ class Decoder {
   // The pair check's tolerance at the dimmest pixels for this scan (Stream::pair_floor_dn), from
   // the finest pairs held with the white and black frames.
   int16_t PairFloor(int16_t min_direct) const;
+  // Finish's steps: the final pass over the rows (coordinates, weights, counts into *stats),
+  // the local fit of the coordinates (returns the pixels that kept their raw decode), and the
+  // curvature the fit leaves put back.
+  void Coordinates(DecodeResult* result, DecodeStats* stats);
+  int Smooth(std::vector<cv::Mat>* raw);
+  void CorrectCurvature(const std::vector<cv::Mat>& raw);
 
   DecodeOptions options_;
   std::unique_ptr<Stream> stream_;

@@ -43,6 +43,142 @@ void AlignToOriginal(const Mesh& mesh, const Indexing& idx, std::vector<cv::Poin
   for (int k : idx.node) (*flat)[k] = r.Apply((*flat)[k]);
 }
 
+// The springs' energy at positions y (x, y of each variable): the sum of squared length errors.
+double SpringEnergy(const Mesh& mesh, const Indexing& idx, const Eigen::VectorXd& y) {
+  double e = 0;
+  for (const Spring& s : mesh.springs) {
+    const int a = idx.var[s.a], b = idx.var[s.b];
+    const double dx = y[2 * a] - y[2 * b], dy = y[2 * a + 1] - y[2 * b + 1];
+    const double r = std::sqrt(dx * dx + dy * dy) - s.rest_mm;
+    e += r * r;
+  }
+  return e;
+}
+
+constexpr double kProximal = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
+
+// The sheet's graph as a lower-triangular matrix: the pattern of both systems of GaussNewton,
+// with the Laplacian's values (and the proximal term on the diagonal). The storage slot of each
+// spring's off-diagonal entry and of each node's diagonal entry.
+struct SheetGraph {
+  Eigen::SparseMatrix<double> matrix;
+  std::vector<int> off_diagonal, diagonal;
+};
+SheetGraph GraphOf(const Mesh& mesh, const Indexing& idx) {
+  const int n = static_cast<int>(idx.node.size());
+  SheetGraph out;
+  Eigen::SparseMatrix<double>& graph = out.matrix;
+  graph.resize(n, n);
+  out.off_diagonal.resize(mesh.springs.size());
+  out.diagonal.resize(n);
+  std::vector<Eigen::Triplet<double>> lt;
+  lt.reserve(3 * mesh.springs.size() + n);
+  for (const Spring& s : mesh.springs) {
+    const int a = idx.var[s.a], b = idx.var[s.b];
+    lt.emplace_back(a, a, 1.0);
+    lt.emplace_back(b, b, 1.0);
+    lt.emplace_back(std::max(a, b), std::min(a, b), -1.0);
+  }
+  for (int v = 0; v < n; ++v) lt.emplace_back(v, v, kProximal);
+  graph.setFromTriplets(lt.begin(), lt.end());
+  graph.makeCompressed();
+  auto slot = [&](int r, int c) {
+    return static_cast<int>(&graph.coeffRef(r, c) - graph.valuePtr());
+  };
+  for (size_t k = 0; k < mesh.springs.size(); ++k) {
+    const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
+    out.off_diagonal[k] = slot(std::max(a, b), std::min(a, b));
+  }
+  for (int v = 0; v < n; ++v) out.diagonal[v] = slot(v, v);
+  return out;
+}
+
+// Local/global iterations (Liu et al. 2013) from x: each projects every spring onto its rest
+// length (local) and solves one fixed, pre-factored Laplacian system (global). The energy
+// falls monotonically, which carries the compressed height map out of the basins where a
+// bare Gauss-Newton from the same start can stall; Gauss-Newton then converges fast.
+Status LocalGlobal(const Mesh& mesh, const Indexing& idx, const SheetGraph& sheet,
+                   const FlattenOptions& options, Eigen::VectorXd* x_inout) {
+  const int n = static_cast<int>(idx.node.size());
+  const Eigen::SparseMatrix<double>& graph = sheet.matrix;
+  Eigen::VectorXd& x = *x_inout;
+  const double prox = kProximal;
+  FrontalCholesky lap_solver;
+  const Status analysed = lap_solver.Analyze(graph, idx.fronts, 1);
+  if (!analysed.ok()) return analysed;
+  if (!lap_solver.Factorize(
+          std::vector<double>(graph.valuePtr(), graph.valuePtr() + graph.nonZeros()))) {
+    return Status::Error("flattening: the sheet's Laplacian is singular");
+  }
+  // Both coordinates share the Laplacian: one two-column solve per iteration.
+  Eigen::MatrixXd pos(n, 2);
+  for (int v = 0; v < n; ++v) {
+    pos(v, 0) = x[2 * v];
+    pos(v, 1) = x[2 * v + 1];
+  }
+  double e_prev = std::numeric_limits<double>::infinity();
+  Eigen::MatrixXd rhs(n, 2);
+  for (int k = 0; k < options.local_global_iterations; ++k) {
+    rhs = prox * pos;
+    for (const Spring& s : mesh.springs) {
+      const int a = idx.var[s.a], b = idx.var[s.b];
+      const double dx = pos(a, 0) - pos(b, 0), dy = pos(a, 1) - pos(b, 1);
+      const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
+      const double fx = s.rest_mm * dx / len, fy = s.rest_mm * dy / len;
+      rhs(a, 0) += fx;
+      rhs(b, 0) -= fx;
+      rhs(a, 1) += fy;
+      rhs(b, 1) -= fy;
+    }
+    lap_solver.Solve(&rhs);
+    pos.swap(rhs);
+    for (int v = 0; v < n; ++v) {
+      x[2 * v] = pos(v, 0);
+      x[2 * v + 1] = pos(v, 1);
+    }
+    const double e_now = SpringEnergy(mesh, idx, x);
+    if (e_prev - e_now < 1e-3 * e_now) break;  // Slowing down: hand over to Gauss-Newton.
+    e_prev = e_now;
+  }
+  return Status::Ok();
+}
+
+// The gradient g of the springs' energy at x and, when `refactor`, J^T J into `blocks` (2 x 2
+// blocks in the sheet graph's slots): u u^T of each spring on both diagonal blocks, -u u^T
+// between them.
+void Linearize(const Mesh& mesh, const Indexing& idx, const SheetGraph& sheet,
+               const Eigen::VectorXd& x, bool refactor, Eigen::MatrixXd* g_out,
+               std::vector<double>* blocks_out) {
+  Eigen::MatrixXd& g = *g_out;
+  std::vector<double>& blocks = *blocks_out;
+  const std::vector<int>& off_diagonal = sheet.off_diagonal;
+  const std::vector<int>& diagonal = sheet.diagonal;
+  g.setZero();
+  if (refactor) std::fill(blocks.begin(), blocks.end(), 0.0);
+  for (size_t k = 0; k < mesh.springs.size(); ++k) {
+    const Spring& s = mesh.springs[k];
+    const int a = idx.var[s.a], b = idx.var[s.b];
+    const double dx = x[2 * a] - x[2 * b], dy = x[2 * a + 1] - x[2 * b + 1];
+    const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
+    const double ux = dx / len, uy = dy / len, r = len - s.rest_mm;
+    g(2 * a, 0) += ux * r;
+    g(2 * a + 1, 0) += uy * r;
+    g(2 * b, 0) -= ux * r;
+    g(2 * b + 1, 0) -= uy * r;
+    if (!refactor) continue;
+    // The spring's J^T J: u u^T on both diagonal blocks, -u u^T between them.
+    const double uu[4] = {ux * ux, ux * uy, ux * uy, uy * uy};
+    double* off = &blocks[4 * static_cast<size_t>(off_diagonal[k])];
+    double* da = &blocks[4 * static_cast<size_t>(diagonal[a])];
+    double* db = &blocks[4 * static_cast<size_t>(diagonal[b])];
+    for (int q = 0; q < 4; ++q) {
+      off[q] -= uu[q];
+      da[q] += uu[q];
+      db[q] += uu[q];
+    }
+  }
+}
+
 FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
   FlattenResult result;
   const Indexing idx(mesh);
@@ -53,90 +189,12 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
     x[2 * v] = mesh.point[idx.node[v]][0];
     x[2 * v + 1] = mesh.point[idx.node[v]][1];
   }
-  auto energy = [&](const Eigen::VectorXd& y) {
-    double e = 0;
-    for (const Spring& s : mesh.springs) {
-      const int a = idx.var[s.a], b = idx.var[s.b];
-      const double dx = y[2 * a] - y[2 * b], dy = y[2 * a + 1] - y[2 * b + 1];
-      const double r = std::sqrt(dx * dx + dy * dy) - s.rest_mm;
-      e += r * r;
-    }
-    return e;
-  };
-  // The sheet's graph as a lower-triangular matrix: the pattern of both systems below, with
-  // the Laplacian's values. The storage slot of each spring's off-diagonal entry and of each
-  // node's diagonal entry.
-  const double prox = 1e-6;  // Proximal term: fixes the rigid-motion gauge without bias.
-  Eigen::SparseMatrix<double> graph(n, n);
-  std::vector<int> off_diagonal(mesh.springs.size()), diagonal(n);
-  {
-    std::vector<Eigen::Triplet<double>> lt;
-    lt.reserve(3 * mesh.springs.size() + n);
-    for (const Spring& s : mesh.springs) {
-      const int a = idx.var[s.a], b = idx.var[s.b];
-      lt.emplace_back(a, a, 1.0);
-      lt.emplace_back(b, b, 1.0);
-      lt.emplace_back(std::max(a, b), std::min(a, b), -1.0);
-    }
-    for (int v = 0; v < n; ++v) lt.emplace_back(v, v, prox);
-    graph.setFromTriplets(lt.begin(), lt.end());
-    graph.makeCompressed();
-    auto slot = [&](int r, int c) {
-      return static_cast<int>(&graph.coeffRef(r, c) - graph.valuePtr());
-    };
-    for (size_t k = 0; k < mesh.springs.size(); ++k) {
-      const int a = idx.var[mesh.springs[k].a], b = idx.var[mesh.springs[k].b];
-      off_diagonal[k] = slot(std::max(a, b), std::min(a, b));
-    }
-    for (int v = 0; v < n; ++v) diagonal[v] = slot(v, v);
-  }
-  // Local/global iterations first (Liu et al. 2013): each projects every spring onto its rest
-  // length (local) and solves one fixed, pre-factored Laplacian system (global). The energy
-  // falls monotonically, which carries the compressed height map out of the basins where a
-  // bare Gauss-Newton from the same start can stall; Gauss-Newton then converges fast.
-  {
-    FrontalCholesky lap_solver;
-    const Status analysed = lap_solver.Analyze(graph, idx.fronts, 1);
-    if (!analysed.ok()) {
-      result.status = analysed;
-      return result;
-    }
-    if (!lap_solver.Factorize(
-            std::vector<double>(graph.valuePtr(), graph.valuePtr() + graph.nonZeros()))) {
-      result.status = Status::Error("flattening: the sheet's Laplacian is singular");
-      return result;
-    }
-    // Both coordinates share the Laplacian: one two-column solve per iteration.
-    Eigen::MatrixXd pos(n, 2);
-    for (int v = 0; v < n; ++v) {
-      pos(v, 0) = x[2 * v];
-      pos(v, 1) = x[2 * v + 1];
-    }
-    double e_prev = std::numeric_limits<double>::infinity();
-    Eigen::MatrixXd rhs(n, 2);
-    for (int k = 0; k < options.local_global_iterations; ++k) {
-      rhs = prox * pos;
-      for (const Spring& s : mesh.springs) {
-        const int a = idx.var[s.a], b = idx.var[s.b];
-        const double dx = pos(a, 0) - pos(b, 0), dy = pos(a, 1) - pos(b, 1);
-        const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
-        const double fx = s.rest_mm * dx / len, fy = s.rest_mm * dy / len;
-        rhs(a, 0) += fx;
-        rhs(b, 0) -= fx;
-        rhs(a, 1) += fy;
-        rhs(b, 1) -= fy;
-      }
-      lap_solver.Solve(&rhs);
-      pos.swap(rhs);
-      for (int v = 0; v < n; ++v) {
-        x[2 * v] = pos(v, 0);
-        x[2 * v + 1] = pos(v, 1);
-      }
-      const double e_now = energy(x);
-      if (e_prev - e_now < 1e-3 * e_now) break;  // Slowing down: hand over to Gauss-Newton.
-      e_prev = e_now;
-    }
-  }
+  auto energy = [&](const Eigen::VectorXd& y) { return SpringEnergy(mesh, idx, y); };
+  const SheetGraph sheet = GraphOf(mesh, idx);
+  const Eigen::SparseMatrix<double>& graph = sheet.matrix;
+  const std::vector<int>& diagonal = sheet.diagonal;
+  result.status = LocalGlobal(mesh, idx, sheet, options, &x);
+  if (!result.status.ok()) return result;
   // J^T J has the graph's pattern with a 2 x 2 block per entry: each refactorisation refills
   // the blocks through the slots. A tiny diagonal (Levenberg) term removes the
   // rigid-motion null space without moving the minimum.
@@ -158,30 +216,7 @@ FlattenResult GaussNewton(const Mesh& mesh, const FlattenOptions& options) {
   double last_step = std::numeric_limits<double>::infinity();
   Eigen::MatrixXd g(2 * n, 1);
   for (; it < options.max_iterations; ++it) {
-    g.setZero();
-    if (refactor) std::fill(blocks.begin(), blocks.end(), 0.0);
-    for (size_t k = 0; k < mesh.springs.size(); ++k) {
-      const Spring& s = mesh.springs[k];
-      const int a = idx.var[s.a], b = idx.var[s.b];
-      const double dx = x[2 * a] - x[2 * b], dy = x[2 * a + 1] - x[2 * b + 1];
-      const double len = std::max(std::sqrt(dx * dx + dy * dy), 1e-12);
-      const double ux = dx / len, uy = dy / len, r = len - s.rest_mm;
-      g(2 * a, 0) += ux * r;
-      g(2 * a + 1, 0) += uy * r;
-      g(2 * b, 0) -= ux * r;
-      g(2 * b + 1, 0) -= uy * r;
-      if (!refactor) continue;
-      // The spring's J^T J: u u^T on both diagonal blocks, -u u^T between them.
-      const double uu[4] = {ux * ux, ux * uy, ux * uy, uy * uy};
-      double* off = &blocks[4 * static_cast<size_t>(off_diagonal[k])];
-      double* da = &blocks[4 * static_cast<size_t>(diagonal[a])];
-      double* db = &blocks[4 * static_cast<size_t>(diagonal[b])];
-      for (int q = 0; q < 4; ++q) {
-        off[q] -= uu[q];
-        da[q] += uu[q];
-        db[q] += uu[q];
-      }
-    }
+    Linearize(mesh, idx, sheet, x, refactor, &g, &blocks);
     if (refactor) {
       for (int v = 0; v < n; ++v) {
         const size_t d = 4 * static_cast<size_t>(diagonal[v]);

@@ -86,16 +86,25 @@ bool Polyfit(const NormalSums& sums, int terms, Eigen::Matrix<double, 6, 3>* coe
 // The sums are separable: along a window row dv is fixed, so each row sums du^0..4 and x du^0..2
 // of its points, and the row's sums enter the normal equations with its powers of dv (14
 // products a point instead of 39; a window holds a few hundred points).
-Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
-            int min_points, cv::Vec3d* out, FitQuality* quality = nullptr) {
-  const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
-  const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
-  const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
-  const int v1 = std::min(points.rows - 1, static_cast<int>(std::ceil(at.y)) + hv);
-  auto offset_u = [&](int u) { return (u - at.x) / hu; };
-  auto offset_v = [&](int v) { return (v - at.y) / hv; };
-  auto usable = [&](const cv::Vec3f& x, uint8_t m) { return m && std::isfinite(x[2]); };
-  NormalSums sums;
+// A node's window of pixels, and each pixel's offset from the node in half-widths.
+struct Window {
+  int u0, u1, v0, v1, hu, hv;
+  cv::Point2d at;
+  double OffsetU(int u) const { return (u - at.x) / hu; }
+  double OffsetV(int v) const { return (v - at.y) / hv; }
+};
+
+inline bool Usable(const cv::Vec3f& x, uint8_t m) { return m && std::isfinite(x[2]); }
+
+// The normal equations' sums over the window's points (separable by rows: see FitNode), and
+// the sums of their offsets (*su, *sv); returns how many points there are.
+int SumWindow(const cv::Mat& points, const cv::Mat& mask, const Window& w, NormalSums* sums_out,
+              double* su_out, double* sv_out) {
+  NormalSums& sums = *sums_out;
+  const int u0 = w.u0, u1 = w.u1, v0 = w.v0, v1 = w.v1;
+  auto usable = Usable;
+  auto offset_u = [&](int u) { return w.OffsetU(u); };
+  auto offset_v = [&](int v) { return w.OffsetV(v); };
   int count = 0;
   double su = 0, sv = 0;
   for (int v = v0; v <= v1; ++v) {
@@ -131,9 +140,16 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
     su += pu[1];
     sv += n * dv;
   }
-  if (count < min_points) return Fit::kHole;
-  // Points on one side only (a node at the page's edge): a quadratic would extrapolate
-  // wildly, a plane does not. `own`: a point at the node's own pixel.
+  *su_out = su;
+  *sv_out = sv;
+  return count;
+}
+
+// Whether a point lies at the node's own pixel (within 1.5 px).
+bool OwnPoint(const cv::Mat& points, const cv::Mat& mask, const Window& w) {
+  const int u0 = w.u0, u1 = w.u1, v0 = w.v0, v1 = w.v1;
+  const cv::Point2d at = w.at;
+  auto usable = Usable;
   bool own = false;
   for (int v = std::max(v0, static_cast<int>(std::ceil(at.y - 1.5)));
        v <= std::min(v1, static_cast<int>(std::floor(at.y + 1.5))) && !own; ++v) {
@@ -142,18 +158,21 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
       own = own || usable(points.at<cv::Vec3f>(v, u), mask.at<uint8_t>(v, u));
     }
   }
-  const bool one_sided = std::hypot(su, sv) / count > 0.25;
-  if (one_sided && !own) return Fit::kEdge;
-  const int terms = (count >= 2 * min_points && !one_sided) ? 6 : 3;
-  Eigen::Matrix<double, 6, 3> c;
-  if (!Polyfit(sums, terms, &c)) return Fit::kHole;
-  // Points further than four times the median residual go, but never closer than 0.2 mm
-  // (compared squared). The median is sought only when it is over 0.05 mm (more than half the
-  // residuals are): below that the cut is 0.2 mm whatever it is.
-  constexpr double kFloor = 0.2;  // mm
-  thread_local std::vector<double> residual, sorted;
-  residual.clear();
-  int small = 0;
+  return own;
+}
+
+// Each usable point's squared distance from the fit `c`, in the window's order, and how many
+// are within a quarter of kFloor (*small).
+void FitResiduals(const cv::Mat& points, const cv::Mat& mask, const Window& w,
+                  const Eigen::Matrix<double, 6, 3>& c, double floor_mm,
+                  std::vector<double>* residual_out, int* small_out) {
+  const int u0 = w.u0, u1 = w.u1, v0 = w.v0, v1 = w.v1;
+  auto usable = Usable;
+  auto offset_u = [&](int u) { return w.OffsetU(u); };
+  auto offset_v = [&](int v) { return w.OffsetV(v); };
+  const double kFloor = floor_mm;
+  std::vector<double>& residual = *residual_out;
+  int& small = *small_out;
   for (int v = v0; v <= v1; ++v) {
     const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
     const uint8_t* m = mask.ptr<uint8_t>(v);
@@ -177,6 +196,67 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
       small += r2 <= kFloor * kFloor / 16;
     }
   }
+}
+
+// The kept points' squared scatter about the second fit `c` (those with residual at most `cut`).
+double RefitScatter(const cv::Mat& points, const cv::Mat& mask, const Window& w,
+                    const Eigen::Matrix<double, 6, 3>& c, const std::vector<double>& residual,
+                    double cut) {
+  const int u0 = w.u0, u1 = w.u1, v0 = w.v0, v1 = w.v1;
+  auto usable = Usable;
+  auto offset_u = [&](int u) { return w.OffsetU(u); };
+  auto offset_v = [&](int v) { return w.OffsetV(v); };
+  double refit_r2 = 0;
+  size_t at = 0;
+  for (int v = v0; v <= v1; ++v) {
+    const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
+    const uint8_t* m = mask.ptr<uint8_t>(v);
+    const double dv = offset_v(v);
+    for (int u = u0; u <= u1; ++u) {
+      if (!usable(row[u], m[u])) continue;
+      if (residual[at++] > cut) continue;
+      const double du = offset_u(u);
+      const double mono[6] = {1, du, dv, du * du, du * dv, dv * dv};
+      for (int k = 0; k < 3; ++k) {
+        double f = -row[u][k];
+        for (int t = 0; t < 6; ++t) f += mono[t] * c(t, k);
+        refit_r2 += f * f;
+      }
+    }
+  }
+  return refit_r2;
+}
+
+Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, int hv,
+            int min_points, cv::Vec3d* out, FitQuality* quality = nullptr) {
+  const int u0 = std::max(0, static_cast<int>(std::floor(at.x)) - hu);
+  const int u1 = std::min(points.cols - 1, static_cast<int>(std::ceil(at.x)) + hu);
+  const int v0 = std::max(0, static_cast<int>(std::floor(at.y)) - hv);
+  const int v1 = std::min(points.rows - 1, static_cast<int>(std::ceil(at.y)) + hv);
+  const Window w{u0, u1, v0, v1, hu, hv, at};
+  auto offset_u = [&](int u) { return w.OffsetU(u); };
+  auto offset_v = [&](int v) { return w.OffsetV(v); };
+  auto usable = Usable;
+  NormalSums sums;
+  double su = 0, sv = 0;
+  const int count = SumWindow(points, mask, w, &sums, &su, &sv);
+  if (count < min_points) return Fit::kHole;
+  // Points on one side only (a node at the page's edge): a quadratic would extrapolate
+  // wildly, a plane does not. `own`: a point at the node's own pixel.
+  const bool own = OwnPoint(points, mask, w);
+  const bool one_sided = std::hypot(su, sv) / count > 0.25;
+  if (one_sided && !own) return Fit::kEdge;
+  const int terms = (count >= 2 * min_points && !one_sided) ? 6 : 3;
+  Eigen::Matrix<double, 6, 3> c;
+  if (!Polyfit(sums, terms, &c)) return Fit::kHole;
+  // Points further than four times the median residual go, but never closer than 0.2 mm
+  // (compared squared). The median is sought only when it is over 0.05 mm (more than half the
+  // residuals are): below that the cut is 0.2 mm whatever it is.
+  constexpr double kFloor = 0.2;  // mm
+  thread_local std::vector<double> residual, sorted;
+  residual.clear();
+  int small = 0;
+  FitResiduals(points, mask, w, c, kFloor, &residual, &small);
   double cut = kFloor * kFloor;
   if (small < count / 2 + 1) {
     sorted = residual;
@@ -210,27 +290,8 @@ Fit FitNode(const cv::Mat& points, const cv::Mat& mask, cv::Point2d at, int hu, 
     quality->sigma_mm = std::sqrt(kept_r2 / std::max(1, kept - terms) * terms / kept);
     // The kept points' scatter about the second fit (the first, pulled by the points dropped,
     // overstates it).
-    double refit_r2 = kept_r2;
-    if (kept < count) {
-      refit_r2 = 0;
-      size_t at = 0;
-      for (int v = v0; v <= v1; ++v) {
-        const cv::Vec3f* row = points.ptr<cv::Vec3f>(v);
-        const uint8_t* m = mask.ptr<uint8_t>(v);
-        const double dv = offset_v(v);
-        for (int u = u0; u <= u1; ++u) {
-          if (!usable(row[u], m[u])) continue;
-          if (residual[at++] > cut) continue;
-          const double du = offset_u(u);
-          const double mono[6] = {1, du, dv, du * du, du * dv, dv * dv};
-          for (int k = 0; k < 3; ++k) {
-            double f = -row[u][k];
-            for (int t = 0; t < 6; ++t) f += mono[t] * c(t, k);
-            refit_r2 += f * f;
-          }
-        }
-      }
-    }
+    const double refit_r2 =
+        kept < count ? RefitScatter(points, mask, w, c, residual, cut) : kept_r2;
     quality->rms_mm = std::sqrt(refit_r2 / std::max(1, kept - terms));
     quality->surrounded = terms == 6;
     quality->coef = c;
@@ -522,47 +583,19 @@ void MeasureAlongSurface(const cv::Mat& points, const cv::Mat& mask,
 
 }  // namespace
 
-Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
-               const std::function<cv::Point2d(const cv::Vec3d&)>& project) {
-  Mesh mesh;
-  std::string why;
-  if (!options.Check(&why)) {
-    mesh.status = Status::Error("mesh options: " + why);
-    return mesh;
-  }
-  if (points.type() != CV_32FC3 || page_mask.type() != CV_8U || points.size() != page_mask.size()) {
-    mesh.status = Status::Error(
-        "mesh input: the point map must be CV_32FC3 and the page mask "
-        "CV_8U of the same size");
-    return mesh;
-  }
-  const cv::Rect box = cv::boundingRect(page_mask);
-  if (box.width < 2 || box.height < 2) {
-    mesh.status = Status::Error("no page found in the texture image (empty page mask)");
-    return mesh;
-  }
-  const int g = options.grid.width, h = options.grid.height;
-  mesh.cols = g;
-  mesh.rows = h;
-  const int n = g * h;
-  mesh.kind.assign(n, NodeKind::kOff);
-  mesh.point.assign(n, cv::Vec3d(0, 0, 0));
-  mesh.pixel.assign(n, cv::Point2d(0, 0));
-  const double step_u = (box.width - 1.0) / (g - 1), step_v = (box.height - 1.0) / (h - 1);
-  // Windows never shrink below 13 x 13 pixels, so fine grids keep smooth, well-averaged nodes.
-  const int hu = std::max(6, static_cast<int>(std::lround(options.fit_window * step_u)));
-  const int hv = std::max(6, static_cast<int>(std::lround(options.fit_window * step_v)));
-  std::vector<cv::Point2d> grid_px(n);
-  std::vector<uint8_t> on_page(n, 0);
-  std::vector<FitQuality> fits(options.rest_along_surface ? n : 0);
+namespace {
+
+// Each grid node on the page (`grid_px`, `on_page`) fitted to the points around it (FitNode):
+// measured, a hole (filled later), or off at the page's edge; a node whose points are strewn far
+// off one surface (the window straddling the leaf's silhouette) is a hole when measured nodes
+// hold it on all four sides, else off. `fits` (when sized) gets each fit's quality.
+void FitNodes(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
+              const std::vector<cv::Point2d>& grid_px, const std::vector<uint8_t>& on_page, int hu,
+              int hv, std::vector<FitQuality>* fits_out, Mesh* out) {
+  Mesh& mesh = *out;
+  std::vector<FitQuality>& fits = *fits_out;
+  const int g = mesh.cols, h = mesh.rows, n = g * h;
   std::vector<uint8_t> strewn(n, 0);
-  for (int j = 0; j < h; ++j) {
-    for (int i = 0; i < g; ++i) {
-      const cv::Point2d p(box.x + i * step_u, box.y + j * step_v);
-      grid_px[mesh.Index(i, j)] = p;
-      on_page[mesh.Index(i, j)] = page_mask.at<uint8_t>(cvRound(p.y), cvRound(p.x)) != 0;
-    }
-  }
   cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
     for (int k = range.start; k < range.end; ++k) {
       if (!on_page[k]) continue;
@@ -594,17 +627,16 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
                         held(k - g) && held(k + g);
     mesh.kind[k] = inside ? NodeKind::kFilled : NodeKind::kOff;
   }
-  mesh.measured =
-      static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
-  if (mesh.measured == 0) {
-    mesh.status = Status::Error("no valid 3D points on the page: nothing to flatten");
-    return mesh;
-  }
-  // A hole node held by fewer than two sheet nodes (a page's corner whose points are gone) has
-  // nothing to interpolate between: it would copy its one neighbour and the two coincide. Such
-  // nodes are peeled off until every hole node is held on two sides. The skirt does not
-  // extend over them either: extrapolated from a corner whose points are gone (a curl's corner
-  // seen edge on), it folds; the sheet loses the corner's cell instead.
+}
+
+// A hole node held by fewer than two sheet nodes (a page's corner whose points are gone) has
+// nothing to interpolate between: it would copy its one neighbour and the two coincide. Such
+// nodes are peeled off until every hole node is held on two sides. The skirt does not
+// extend over them either: extrapolated from a corner whose points are gone (a curl's corner
+// seen edge on), it folds; the sheet loses the corner's cell instead. Returns the nodes peeled.
+std::vector<uint8_t> PeelHeldByOne(Mesh* out) {
+  Mesh& mesh = *out;
+  const int g = mesh.cols, h = mesh.rows, n = g * h;
   std::vector<uint8_t> peeled_off(n, 0);
   for (bool peeled = true; peeled;) {
     peeled = false;
@@ -623,7 +655,14 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
       }
     }
   }
-  // Holes: harmonic interpolation (Jacobi) from the measured nodes around them.
+  return peeled_off;
+}
+
+// Holes: harmonic interpolation (Jacobi) from the measured nodes around them; a hole no
+// measured node reaches is off.
+void FillHoles(Mesh* out) {
+  Mesh& mesh = *out;
+  const int g = mesh.cols, h = mesh.rows, n = g * h;
   std::vector<int> holes;
   for (int k = 0; k < n; ++k) {
     if (mesh.kind[k] == NodeKind::kFilled) holes.push_back(k);
@@ -672,9 +711,14 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
   for (int k : holes) {
     if (!known[k]) mesh.kind[k] = NodeKind::kOff;  // Unreachable from any measured node.
   }
-  // Skirt: rings of nodes beyond the page edge, on the page surface extended linearly, so
-  // the quads that hold the page's edge exist. They never take a position from the table.
-  for (int ring = 0; ring < options.skirt_rings; ++ring) {
+}
+
+// Skirt: rings of nodes beyond the page edge, on the page surface extended linearly, so
+// the quads that hold the page's edge exist. They never take a position from the table.
+void AddSkirt(int rings, const std::vector<uint8_t>& peeled_off, Mesh* out) {
+  Mesh& mesh = *out;
+  const int g = mesh.cols, h = mesh.rows;
+  for (int ring = 0; ring < rings; ++ring) {
     std::vector<std::pair<int, cv::Vec3d>> added;
     for (int j = 0; j < h; ++j) {
       for (int i = 0; i < g; ++i) {
@@ -700,6 +744,60 @@ Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOption
       mesh.point[k] = p;
     }
   }
+}
+
+}  // namespace
+
+Mesh BuildMesh(const cv::Mat& points, const cv::Mat& page_mask, const MeshOptions& options,
+               const std::function<cv::Point2d(const cv::Vec3d&)>& project) {
+  Mesh mesh;
+  std::string why;
+  if (!options.Check(&why)) {
+    mesh.status = Status::Error("mesh options: " + why);
+    return mesh;
+  }
+  if (points.type() != CV_32FC3 || page_mask.type() != CV_8U || points.size() != page_mask.size()) {
+    mesh.status = Status::Error(
+        "mesh input: the point map must be CV_32FC3 and the page mask "
+        "CV_8U of the same size");
+    return mesh;
+  }
+  const cv::Rect box = cv::boundingRect(page_mask);
+  if (box.width < 2 || box.height < 2) {
+    mesh.status = Status::Error("no page found in the texture image (empty page mask)");
+    return mesh;
+  }
+  const int g = options.grid.width, h = options.grid.height;
+  mesh.cols = g;
+  mesh.rows = h;
+  const int n = g * h;
+  mesh.kind.assign(n, NodeKind::kOff);
+  mesh.point.assign(n, cv::Vec3d(0, 0, 0));
+  mesh.pixel.assign(n, cv::Point2d(0, 0));
+  const double step_u = (box.width - 1.0) / (g - 1), step_v = (box.height - 1.0) / (h - 1);
+  // Windows never shrink below 13 x 13 pixels, so fine grids keep smooth, well-averaged nodes.
+  const int hu = std::max(6, static_cast<int>(std::lround(options.fit_window * step_u)));
+  const int hv = std::max(6, static_cast<int>(std::lround(options.fit_window * step_v)));
+  std::vector<cv::Point2d> grid_px(n);
+  std::vector<uint8_t> on_page(n, 0);
+  std::vector<FitQuality> fits(options.rest_along_surface ? n : 0);
+  for (int j = 0; j < h; ++j) {
+    for (int i = 0; i < g; ++i) {
+      const cv::Point2d p(box.x + i * step_u, box.y + j * step_v);
+      grid_px[mesh.Index(i, j)] = p;
+      on_page[mesh.Index(i, j)] = page_mask.at<uint8_t>(cvRound(p.y), cvRound(p.x)) != 0;
+    }
+  }
+  FitNodes(points, page_mask, options, grid_px, on_page, hu, hv, &fits, &mesh);
+  mesh.measured =
+      static_cast<int>(std::count(mesh.kind.begin(), mesh.kind.end(), NodeKind::kMeasured));
+  if (mesh.measured == 0) {
+    mesh.status = Status::Error("no valid 3D points on the page: nothing to flatten");
+    return mesh;
+  }
+  const std::vector<uint8_t> peeled_off = PeelHeldByOne(&mesh);
+  FillHoles(&mesh);
+  AddSkirt(options.skirt_rings, peeled_off, &mesh);
   ConnectSheet(options.bend_springs, project, &mesh);
   if (mesh.status.ok() && options.rest_along_surface) {
     MeasureAlongSurface(points, page_mask, grid_px, fits, options.straight_mm, options.min_bend_deg,

@@ -45,16 +45,28 @@ cv::Mat OuterSurround(const Blocks& blocks, const cv::Mat& above) {
   return out;
 }
 
-Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
-            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options) {
+namespace {
+
+// The heights' costs, which do not change from round to round: (to call it leaf, to call it
+// surround) per block, weighted by the share of it measured; `on`: a block that lies on the
+// surround within twice its sigma; `bins`: each block's colour bin (Look::Bin).
+struct HeightCosts {
+  std::vector<float> leaf, surround;
+  std::vector<uint8_t> on;
+  std::vector<int> bins;
+};
+HeightCosts CostsOfHeight(const Blocks& blocks, const cv::Mat& above, const CutOptions& options) {
   const cv::Size g = blocks.grid;
   const int n = g.area();
-  // The heights' costs, which do not change from round to round: (to call it leaf, to call it
-  // surround) per block, weighted by the share of it measured. `on`: a block that lies on the
-  // surround within twice its sigma.
-  std::vector<float> height_leaf(n, 0), height_surround(n, 0);
-  std::vector<uint8_t> on(n, 0);
-  std::vector<int> bins(n);
+  HeightCosts c;
+  std::vector<float>& height_leaf = c.leaf;
+  std::vector<float>& height_surround = c.surround;
+  std::vector<uint8_t>& on = c.on;
+  std::vector<int>& bins = c.bins;
+  height_leaf.assign(n, 0);
+  height_surround.assign(n, 0);
+  on.assign(n, 0);
+  bins.resize(n);
   const double spread = (1 - options.flush_share) * 0.5 / options.thickness_mm;  // Per mm.
   for (int by = 0; by < g.height; ++by) {
     for (int bx = 0; bx < g.width; ++bx) {
@@ -78,14 +90,25 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
       on[i] = a <= 2 * sigma;
     }
   }
-  // The links between neighbouring blocks: cheap across a rim or a texture edge.
+  return c;
+}
+
+// The links between neighbouring blocks (to the right, and down): cheap across a rim or a
+// texture edge.
+void Links(const Blocks& blocks, const CutOptions& options, std::vector<float>* right_out,
+           std::vector<float>* down_out) {
+  const cv::Size g = blocks.grid;
+  const int n = g.area();
   auto link = [&](int by, int bx, int cy, int cx) {
     const float e = std::max({blocks.rim.at<float>(by, bx), blocks.rim.at<float>(cy, cx),
                               blocks.edge.at<float>(by, bx), blocks.edge.at<float>(cy, cx)});
     return static_cast<float>(options.smooth *
                               (options.smooth_floor + (1 - options.smooth_floor) * std::exp(-e)));
   };
-  std::vector<float> right(n, 0), down(n, 0);
+  std::vector<float>& right = *right_out;
+  std::vector<float>& down = *down_out;
+  right.assign(n, 0);
+  down.assign(n, 0);
   for (int by = 0; by < g.height; ++by) {
     for (int bx = 0; bx < g.width; ++bx) {
       const int i = by * g.width + bx;
@@ -93,6 +116,63 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
       if (by + 1 < g.height) down[i] = link(by, bx, by + 1, bx);
     }
   }
+}
+
+// One graph cut of the blocks into leaf (255 in *leaf) and surround: each block's costs of
+// height and, when both looks are known, of look, the view's border and the barred blocks
+// kept off the leaf, and the links.
+void CutOnce(const Blocks& blocks, const HeightCosts& costs, const Look& look_leaf,
+             const Look& look_surround, const std::vector<uint8_t>& barred,
+             const std::vector<float>& right, const std::vector<float>& down,
+             const CutOptions& options, cv::Mat* leaf_out) {
+  const cv::Size g = blocks.grid;
+  const int n = g.area();
+  const std::vector<float>& height_leaf = costs.leaf;
+  const std::vector<float>& height_surround = costs.surround;
+  const std::vector<int>& bins = costs.bins;
+  cv::Mat& leaf = *leaf_out;
+  const bool looks = !look_leaf.empty() && !look_surround.empty();
+  cv::detail::GCGraph<float> graph(n, 2 * n);
+  for (int by = 0; by < g.height; ++by) {
+    for (int bx = 0; bx < g.width; ++bx) {
+      const int i = by * g.width + bx;
+      double to_leaf = height_leaf[i], to_surround = height_surround[i];
+      if (looks) {
+        const double ratio = std::clamp(look_leaf.Log(bins[i]) - look_surround.Log(bins[i]),
+                                        -options.max_look, options.max_look);
+        (ratio > 0 ? to_surround : to_leaf) += options.look_weight * std::fabs(ratio);
+      }
+      if (bx == 0 || by == 0 || bx == g.width - 1 || by == g.height - 1) {
+        to_leaf += options.border_cost;
+      }
+      if (barred[i]) to_leaf = 1e6;
+      graph.addVtx();
+      // The source side is the leaf: a block left there pays its cost to call it leaf (the
+      // link to the sink, cut), one moved to the sink its cost to call it surround.
+      graph.addTermWeights(i, static_cast<float>(to_surround), static_cast<float>(to_leaf));
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    if (right[i] > 0) graph.addEdges(i, i + 1, right[i], right[i]);
+    if (down[i] > 0) graph.addEdges(i, i + g.width, down[i], down[i]);
+  }
+  graph.maxFlow();
+  for (int i = 0; i < n; ++i) {
+    leaf.at<uint8_t>(i / g.width, i % g.width) = graph.inSourceSegment(i) ? 255 : 0;
+  }
+}
+
+}  // namespace
+
+Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
+            const cv::Mat& surround, const cv::Mat& allowed, const CutOptions& options) {
+  const cv::Size g = blocks.grid;
+  const int n = g.area();
+  const HeightCosts costs = CostsOfHeight(blocks, above, options);
+  const std::vector<int>& bins = costs.bins;
+  const std::vector<uint8_t>& on = costs.on;
+  std::vector<float> right, down;
+  Links(blocks, options, &right, &down);
   // The first looks: the surround's from `surround`; the leaf's from the blocks well off the
   // surround and those of the seed that look unlike the surround (less likely under its look
   // than under an even one: the seed may hold some of the surround, and ink as dark as a dark
@@ -127,7 +207,7 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
   unlike_surround();
   for (int i = 0; i < n; ++i) {
     const int by = i / g.width, bx = i % g.width;
-    leafy[i] = !barred[i] && (height_surround[i] >= 0.5 * options.max_off ||
+    leafy[i] = !barred[i] && (costs.surround[i] >= 0.5 * options.max_off ||
                               (seed.at<uint8_t>(by, bx) && strange[i]));
     surroundish[i] = surroundish[i] && !leafy[i];
   }
@@ -140,35 +220,7 @@ Cut CutLeaf(const Blocks& blocks, const cv::Mat& above, const cv::Mat& seed,
     }
     look_leaf.Finish();
     look_surround.Finish();
-    const bool looks = !look_leaf.empty() && !look_surround.empty();
-    cv::detail::GCGraph<float> graph(n, 2 * n);
-    for (int by = 0; by < g.height; ++by) {
-      for (int bx = 0; bx < g.width; ++bx) {
-        const int i = by * g.width + bx;
-        double to_leaf = height_leaf[i], to_surround = height_surround[i];
-        if (looks) {
-          const double ratio = std::clamp(look_leaf.Log(bins[i]) - look_surround.Log(bins[i]),
-                                          -options.max_look, options.max_look);
-          (ratio > 0 ? to_surround : to_leaf) += options.look_weight * std::fabs(ratio);
-        }
-        if (bx == 0 || by == 0 || bx == g.width - 1 || by == g.height - 1) {
-          to_leaf += options.border_cost;
-        }
-        if (barred[i]) to_leaf = 1e6;
-        graph.addVtx();
-        // The source side is the leaf: a block left there pays its cost to call it leaf (the
-        // link to the sink, cut), one moved to the sink its cost to call it surround.
-        graph.addTermWeights(i, static_cast<float>(to_surround), static_cast<float>(to_leaf));
-      }
-    }
-    for (int i = 0; i < n; ++i) {
-      if (right[i] > 0) graph.addEdges(i, i + 1, right[i], right[i]);
-      if (down[i] > 0) graph.addEdges(i, i + g.width, down[i], down[i]);
-    }
-    graph.maxFlow();
-    for (int i = 0; i < n; ++i) {
-      leaf.at<uint8_t>(i / g.width, i % g.width) = graph.inSourceSegment(i) ? 255 : 0;
-    }
+    CutOnce(blocks, costs, look_leaf, look_surround, barred, right, down, options, &leaf);
     if (round == options.rounds) break;
     // The looks relearned from this cut: the surround's from what it left, the leaf's from what
     // it took but for what lies on the surround and looks like it (a support as bright as paper,

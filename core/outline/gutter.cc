@@ -8,118 +8,117 @@
 namespace vellum {
 namespace outline {
 
-bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
-                   const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
-                   GutterSigns* signs) {
-  const cv::Rect box = cv::boundingRect(leaf);
-  if (box.width < 20 || box.height < 20) return false;
-  std::vector<cv::Point2f> valley;
-  int apart = 0;  // Valley rows where the two sides do not meet (a gap, or a band out of view).
-  int level = 0;  // Valley rows where both sides level off beyond the bend.
+namespace {
+
+// The valley in one row `v` of the leaf, if it has one: its lowest point in the middle three
+// fifths of the row's leaf, each side rising gutter_rise_mm within gutter_reach_mm of it and
+// creased within gutter_width_mm of where that side begins; whether both sides level off
+// beyond the bend, and whether the pages part there (a gap within gutter_apart_px).
+struct ValleyRow {
+  bool found = false;
+  float u = 0;  // The valley's column (down a gap's middle where the pages part).
+  bool levels = false, gap = false;
+};
+ValleyRow ValleyInRow(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
+                      const cv::Rect& box, int v, const OutlineOptions& options) {
+  ValleyRow out;
   const int near_px = options.gutter_apart_px;  // Pixels either side of the valley's point.
-  for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
-    const float* row = z.ptr<float>(v);
-    const uint8_t* in = leaf.ptr<uint8_t>(v);
-    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
-    // The lowest leaf point in the middle three fifths of the row's leaf.
-    int first = -1, last = -1;
-    for (int u = box.x; u < box.x + box.width; ++u) {
-      if (!in[u]) continue;
-      if (first < 0) first = u;
-      last = u;
-    }
-    if (first < 0 || last - first < 20) continue;
-    int lowest = -1;
-    for (int u = first + (last - first) / 5; u <= last - (last - first) / 5; ++u) {
-      if (in[u] && Valid(row[u]) && (lowest < 0 || row[u] < row[lowest])) lowest = u;
-    }
-    if (lowest < 0 || !std::isfinite(p[lowest][0])) continue;
-    // Each side rises gutter_rise_mm within gutter_reach_mm of the bottom, and gutter_crease_mm
-    // within gutter_width_mm of where that side begins (across a gap between the pages, the far
-    // page begins at its first point; a side with no point that near is hidden in the gutter).
-    const cv::Point2f bottom(p[lowest][0], p[lowest][1]);
-    cv::Point2f begins[2] = {bottom, bottom};
-    for (int side = 0; side < 2; ++side) {
-      for (int u = lowest + (side ? 1 : -1); u >= first && u <= last; u += side ? 1 : -1) {
-        if (!in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
-        if (cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom) <= options.gutter_width_mm) {
-          begins[side] = cv::Point2f(p[u][0], p[u][1]);
-        }
-        break;
+  const float* row = z.ptr<float>(v);
+  const uint8_t* in = leaf.ptr<uint8_t>(v);
+  const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+  // The lowest leaf point in the middle three fifths of the row's leaf.
+  int first = -1, last = -1;
+  for (int u = box.x; u < box.x + box.width; ++u) {
+    if (!in[u]) continue;
+    if (first < 0) first = u;
+    last = u;
+  }
+  if (first < 0 || last - first < 20) return out;
+  int lowest = -1;
+  for (int u = first + (last - first) / 5; u <= last - (last - first) / 5; ++u) {
+    if (in[u] && Valid(row[u]) && (lowest < 0 || row[u] < row[lowest])) lowest = u;
+  }
+  if (lowest < 0 || !std::isfinite(p[lowest][0])) return out;
+  // Each side rises gutter_rise_mm within gutter_reach_mm of the bottom, and gutter_crease_mm
+  // within gutter_width_mm of where that side begins (across a gap between the pages, the far
+  // page begins at its first point; a side with no point that near is hidden in the gutter).
+  const cv::Point2f bottom(p[lowest][0], p[lowest][1]);
+  cv::Point2f begins[2] = {bottom, bottom};
+  for (int side = 0; side < 2; ++side) {
+    for (int u = lowest + (side ? 1 : -1); u >= first && u <= last; u += side ? 1 : -1) {
+      if (!in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
+      if (cv::norm(cv::Point2f(p[u][0], p[u][1]) - bottom) <= options.gutter_width_mm) {
+        begins[side] = cv::Point2f(p[u][0], p[u][1]);
       }
-    }
-    float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData},
-          beyond[2] = {kNoData, kNoData};
-    for (int u = first; u <= last; ++u) {
-      if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
-      const cv::Point2f at(p[u][0], p[u][1]);
-      const int side = u > lowest;
-      const double from_bottom = cv::norm(at - bottom);
-      if (from_bottom <= options.gutter_reach_mm) {
-        high[side] = std::max(high[side], row[u]);
-      } else if (from_bottom <= 2 * options.gutter_reach_mm) {
-        beyond[side] = std::max(beyond[side], row[u]);
-      }
-      if (cv::norm(at - begins[side]) <= options.gutter_width_mm) {
-        near[side] = std::max(near[side], row[u]);
-      }
-    }
-    bool valley_here = true;
-    for (int side = 0; side < 2; ++side) {
-      valley_here = valley_here && high[side] - row[lowest] >= options.gutter_rise_mm &&
-                    (near[side] == kNoData || near[side] - row[lowest] >= options.gutter_crease_mm);
-    }
-    if (!valley_here) continue;
-    // Where the pages part, the lowest point is the foot of either page's wall, a gap's width
-    // from the other: the valley runs down the gap's middle.
-    float valley_u = static_cast<float>(lowest);
-    for (int d = 1; d <= near_px && lowest - d >= first && lowest + d <= last; ++d) {
-      const int u = !in[lowest - d] ? lowest - d : (!in[lowest + d] ? lowest + d : -1);
-      if (u < 0) continue;
-      int a = u, b = u;
-      while (a > first && !in[a - 1]) --a;
-      while (b < last && !in[b + 1]) ++b;
-      if (b - a <= 2 * near_px) valley_u = 0.5f * (a + b);
       break;
     }
-    valley.emplace_back(valley_u, static_cast<float>(v));
-    bool levels = true;
-    for (int side = 0; side < 2; ++side) {
-      levels = levels && beyond[side] != kNoData &&
-               beyond[side] - high[side] < 0.5f * (high[side] - row[lowest]);
+  }
+  float high[2] = {kNoData, kNoData}, near[2] = {kNoData, kNoData}, beyond[2] = {kNoData, kNoData};
+  for (int u = first; u <= last; ++u) {
+    if (u == lowest || !in[u] || !Valid(row[u]) || !std::isfinite(p[u][0])) continue;
+    const cv::Point2f at(p[u][0], p[u][1]);
+    const int side = u > lowest;
+    const double from_bottom = cv::norm(at - bottom);
+    if (from_bottom <= options.gutter_reach_mm) {
+      high[side] = std::max(high[side], row[u]);
+    } else if (from_bottom <= 2 * options.gutter_reach_mm) {
+      beyond[side] = std::max(beyond[side], row[u]);
     }
-    level += levels;
-    bool gap = false;
-    for (int u = std::max(first, lowest - near_px); u <= std::min(last, lowest + near_px); ++u) {
-      gap = gap || !in[u];
+    if (cv::norm(at - begins[side]) <= options.gutter_width_mm) {
+      near[side] = std::max(near[side], row[u]);
     }
-    apart += gap;
   }
-  // Most rows must show the valley, on one straight line.
-  const int rows = (box.height * 8 / 10) / 4;
-  if (static_cast<int>(valley.size()) < rows * 2 / 3 || valley.size() < 5) return false;
-  cv::fitLine(valley, *line, cv::DIST_HUBER, 0, 0.01, 0.01);
-  const float vx = (*line)[0], vy = (*line)[1], x0 = (*line)[2], y0 = (*line)[3];
-  int off = 0;
-  for (const cv::Point2f& p : valley) {
-    off += std::fabs((p.x - x0) * vy - (p.y - y0) * vx) > 8;  // Pixels from the line.
+  bool valley_here = true;
+  for (int side = 0; side < 2; ++side) {
+    valley_here = valley_here && high[side] - row[lowest] >= options.gutter_rise_mm &&
+                  (near[side] == kNoData || near[side] - row[lowest] >= options.gutter_crease_mm);
   }
-  if (off > static_cast<int>(valley.size()) / 4) return false;
-  if (signs) {
-    signs->parted = 2 * apart >= static_cast<int>(valley.size());
-    signs->bound = 2 * level >= static_cast<int>(valley.size());
+  if (!valley_here) return out;
+  // Where the pages part, the lowest point is the foot of either page's wall, a gap's width
+  // from the other: the valley runs down the gap's middle.
+  float valley_u = static_cast<float>(lowest);
+  for (int d = 1; d <= near_px && lowest - d >= first && lowest + d <= last; ++d) {
+    const int u = !in[lowest - d] ? lowest - d : (!in[lowest + d] ? lowest + d : -1);
+    if (u < 0) continue;
+    int a = u, b = u;
+    while (a > first && !in[a - 1]) --a;
+    while (b < last && !in[b + 1]) ++b;
+    if (b - a <= 2 * near_px) valley_u = 0.5f * (a + b);
+    break;
   }
-  *left = cv::Mat::zeros(leaf.size(), CV_8U);
-  *right = cv::Mat::zeros(leaf.size(), CV_8U);
-  // Where the pages part in a row (a gap in the leaf within near_px pixels of the line), the
-  // split follows the gap nearest the line: the line runs through each row's lowest point, which
-  // can be the first pixels of the far page's wall, beyond the gap between the pages. A row with
-  // no gap of its own (noise closed it) takes the median gap of the rows around it.
-  constexpr float kNone = -1e9f;
-  std::vector<float> line_at(leaf.rows), gap_at(leaf.rows, kNone);
-  // Each page's last pixel before a gap: seen at a grazing angle down the gutter, its point mixes
-  // both walls, so it is left out of both pages.
-  std::vector<std::pair<int, int>> grazing(leaf.rows, {-1, -1});
+  out.found = true;
+  out.u = valley_u;
+  bool levels = true;
+  for (int side = 0; side < 2; ++side) {
+    levels = levels && beyond[side] != kNoData &&
+             beyond[side] - high[side] < 0.5f * (high[side] - row[lowest]);
+  }
+  out.levels = levels;
+  bool gap = false;
+  for (int u = std::max(first, lowest - near_px); u <= std::min(last, lowest + near_px); ++u) {
+    gap = gap || !in[u];
+  }
+  out.gap = gap;
+  return out;
+}
+
+// Where the pages part in each row along the valley's `line` (a gap in the leaf within near_px
+// pixels of it): the split follows the gap nearest the line, since the line runs through each
+// row's lowest point, which can be the first pixels of the far page's wall, beyond the gap
+// between the pages. `line_at` is the line's column in each row, `gap_at` the gap's middle
+// from it (kNoGap: none), `grazing` each page's last pixel before the gap: seen at a grazing
+// angle down the gutter, its point mixes both walls, so it is left out of both pages.
+constexpr float kNoGap = -1e9f;
+void GapsAlongLine(const cv::Mat& leaf, const cv::Vec4f& line, int near_px,
+                   std::vector<float>* line_at_out, std::vector<float>* gap_at_out,
+                   std::vector<std::pair<int, int>>* grazing_out) {
+  const float vx = line[0], vy = line[1], x0 = line[2], y0 = line[3];
+  std::vector<float>& line_at = *line_at_out;
+  std::vector<float>& gap_at = *gap_at_out;
+  std::vector<std::pair<int, int>>& grazing = *grazing_out;
+  line_at.assign(leaf.rows, 0);
+  gap_at.assign(leaf.rows, kNoGap);
+  grazing.assign(leaf.rows, {-1, -1});
   for (int v = 0; v < leaf.rows; ++v) {
     // The line's column at this row (the gutter runs down the image).
     line_at[v] = std::fabs(vy) > 1e-6f ? x0 + (v - y0) * vx / vy : x0;
@@ -141,17 +140,27 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
       grazing[v] = {a - 1, b + 1};
     }
   }
+}
+
+// The leaf's pixels either side of the split (each row's gap, or the line where the pages
+// meet; a row with no gap of its own, noise closed it, takes the median gap of the rows around
+// it): into *left and *right.
+void DividePages(const cv::Mat& leaf, const std::vector<float>& line_at,
+                 const std::vector<float>& gap_at, const std::vector<std::pair<int, int>>& grazing,
+                 const OutlineOptions& options, cv::Mat* left, cv::Mat* right) {
+  *left = cv::Mat::zeros(leaf.size(), CV_8U);
+  *right = cv::Mat::zeros(leaf.size(), CV_8U);
   const int borrow = options.gutter_borrow_rows;  // Rows either side a closed row borrows from.
   const float meet_px = static_cast<float>(options.gutter_meet_px);
   for (int v = 0; v < leaf.rows; ++v) {
     float at = line_at[v];
     bool meet = false;  // The pages meet at the line in this row.
-    if (gap_at[v] != kNone) {
+    if (gap_at[v] != kNoGap) {
       at += gap_at[v];
     } else {
       std::vector<float> near;
       for (int w = std::max(0, v - borrow); w <= std::min(leaf.rows - 1, v + borrow); ++w) {
-        if (gap_at[w] != kNone) near.push_back(gap_at[w]);
+        if (gap_at[w] != kNoGap) near.push_back(gap_at[w]);
       }
       if (near.size() >= static_cast<size_t>(borrow / 2)) {
         std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
@@ -169,6 +178,43 @@ bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
       (u < at ? left : right)->at<uint8_t>(v, u) = 255;
     }
   }
+}
+
+}  // namespace
+
+bool SplitAtGutter(const cv::Mat& points, const cv::Mat& z, const cv::Mat& leaf,
+                   const OutlineOptions& options, cv::Vec4f* line, cv::Mat* left, cv::Mat* right,
+                   GutterSigns* signs) {
+  const cv::Rect box = cv::boundingRect(leaf);
+  if (box.width < 20 || box.height < 20) return false;
+  std::vector<cv::Point2f> valley;
+  int apart = 0;  // Valley rows where the two sides do not meet (a gap, or a band out of view).
+  int level = 0;  // Valley rows where both sides level off beyond the bend.
+  for (int v = box.y + box.height / 10; v < box.y + box.height * 9 / 10; v += 4) {
+    const ValleyRow row = ValleyInRow(points, z, leaf, box, v, options);
+    if (!row.found) continue;
+    valley.emplace_back(row.u, static_cast<float>(v));
+    level += row.levels;
+    apart += row.gap;
+  }
+  // Most rows must show the valley, on one straight line.
+  const int rows = (box.height * 8 / 10) / 4;
+  if (static_cast<int>(valley.size()) < rows * 2 / 3 || valley.size() < 5) return false;
+  cv::fitLine(valley, *line, cv::DIST_HUBER, 0, 0.01, 0.01);
+  const float vx = (*line)[0], vy = (*line)[1], x0 = (*line)[2], y0 = (*line)[3];
+  int off = 0;
+  for (const cv::Point2f& p : valley) {
+    off += std::fabs((p.x - x0) * vy - (p.y - y0) * vx) > 8;  // Pixels from the line.
+  }
+  if (off > static_cast<int>(valley.size()) / 4) return false;
+  if (signs) {
+    signs->parted = 2 * apart >= static_cast<int>(valley.size());
+    signs->bound = 2 * level >= static_cast<int>(valley.size());
+  }
+  std::vector<float> line_at, gap_at;
+  std::vector<std::pair<int, int>> grazing;
+  GapsAlongLine(leaf, *line, options.gutter_apart_px, &line_at, &gap_at, &grazing);
+  DividePages(leaf, line_at, gap_at, grazing, options, left, right);
   return true;
 }
 

@@ -385,66 +385,71 @@ Status RestoreMore(const RestoreResult& restored, const std::vector<cv::Mat>& im
   return Status::Ok();
 }
 
-RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
-                      const std::vector<cv::Point2d>& flat, const CameraModel& camera,
-                      const RestoreOptions& options, const cv::Mat& leaf,
-                      const std::vector<cv::Mat>& extras) {
-  RestoreResult result;
+namespace {
+
+// What Restore refuses, by name: bad options, a texture or extra image it cannot restore, no
+// built mesh, a leaf mask of another size.
+Status CheckRestoreInputs(const cv::Mat& texture, const Mesh& mesh,
+                          const std::vector<cv::Point2d>& flat, const RestoreOptions& options,
+                          const cv::Mat& leaf, const std::vector<cv::Mat>& extras) {
   std::string why;
-  if (!options.Check(&why)) {
-    result.status = Status::Error("restore options: " + why);
-    return result;
-  }
+  if (!options.Check(&why)) return Status::Error("restore options: " + why);
   auto restorable = [](const cv::Mat& image) {
     return !image.empty() && (image.depth() == CV_8U || image.depth() == CV_16U) &&
            (image.channels() == 1 || image.channels() == 3);
   };
   if (!restorable(texture)) {
-    result.status = Status::Error("the texture must be an 8 or 16 bit gray or colour image");
-    return result;
+    return Status::Error("the texture must be an 8 or 16 bit gray or colour image");
   }
   for (size_t k = 0; k < extras.size(); ++k) {
     const cv::Mat& e = extras[k];
     if (!ExtraKind(e) || e.size() != texture.size()) {
-      result.status = Status::Error("extra image " + std::to_string(k) +
-                                    " must be an 8, 16 or 32-bit float gray or three-channel "
-                                    "image of the texture's size");
-      return result;
+      return Status::Error("extra image " + std::to_string(k) +
+                           " must be an 8, 16 or 32-bit float gray or three-channel "
+                           "image of the texture's size");
     }
   }
   if (!mesh.status.ok() || mesh.quads.empty() || flat.size() != mesh.kind.size()) {
-    result.status = Status::Error("restore needs a built mesh and its flattened positions");
-    return result;
+    return Status::Error("restore needs a built mesh and its flattened positions");
   }
   if (!leaf.empty() && (leaf.type() != CV_8U || leaf.size() != texture.size())) {
-    result.status = Status::Error("the leaf mask must be CV_8U of the texture's size");
-    return result;
+    return Status::Error("the leaf mask must be CV_8U of the texture's size");
   }
-  result.view = options.view;
-  // Destination pixel of every node.
-  std::vector<cv::Point2d> dest(flat.size());
-  cv::Size size;
-  // The camera's true sampling over each triangle, and the sheet's finest by flat area.
-  const std::vector<cv::Vec3i> triangles = SheetTriangles(mesh);
+  return Status::Ok();
+}
+
+// The camera's true sampling over each of the sheet's `triangles` (ppi, TrianglePpi), and the
+// sheet's finest by flat area (the 95th percentile) in *finest_ppi.
+std::vector<double> TriangleSampling(const std::vector<cv::Vec3i>& triangles, const Mesh& mesh,
+                                     const std::vector<cv::Point2d>& flat, double* finest_ppi) {
   std::vector<double> tri_ppi(triangles.size());
-  {
-    std::vector<std::pair<double, double>> by_ppi;  // (ppi, flat area)
-    double total = 0;
-    for (size_t k = 0; k < triangles.size(); ++k) {
-      double area = 0;
-      tri_ppi[k] = TrianglePpi(triangles[k], mesh, flat, &area);
-      if (tri_ppi[k] > 0) by_ppi.emplace_back(tri_ppi[k], area), total += area;
-    }
-    std::sort(by_ppi.begin(), by_ppi.end());
-    double below = 0;
-    for (const auto& [ppi, area] : by_ppi) {
-      below += area;
-      if (below >= 0.95 * total) {
-        result.finest_ppi = ppi;
-        break;
-      }
+  std::vector<std::pair<double, double>> by_ppi;  // (ppi, flat area)
+  double total = 0;
+  for (size_t k = 0; k < triangles.size(); ++k) {
+    double area = 0;
+    tri_ppi[k] = TrianglePpi(triangles[k], mesh, flat, &area);
+    if (tri_ppi[k] > 0) by_ppi.emplace_back(tri_ppi[k], area), total += area;
+  }
+  std::sort(by_ppi.begin(), by_ppi.end());
+  double below = 0;
+  for (const auto& [ppi, area] : by_ppi) {
+    below += area;
+    if (below >= 0.95 * total) {
+      *finest_ppi = ppi;
+      break;
     }
   }
+  return tri_ppi;
+}
+
+// Where each node lands in the restored image (`dest`) and the image's size: orthographic, at
+// result->dpi (the options', else the page's finest sampling), turned upright (deskew) and laid
+// out with the margin (result->pixel_from_flat); or as the camera would see the page flat.
+Status LayOut(const Mesh& mesh, const std::vector<cv::Point2d>& flat, const CameraModel& camera,
+              const RestoreOptions& options, const cv::Mat& leaf, RestoreResult* out,
+              std::vector<cv::Point2d>* dest, cv::Size* size_out) {
+  RestoreResult& result = *out;
+  cv::Size& size = *size_out;
   if (options.view == RestoreView::kOrthographic) {
     result.dpi = options.dpi > 0            ? options.dpi
                  : result.finest_ppi >= 0.5 ? std::round(result.finest_ppi)
@@ -479,22 +484,30 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     size = cv::Size(static_cast<int>(std::ceil(s * (x1 - x0 + 2 * m))) + 1,
                     static_cast<int>(std::ceil(s * (y1 - y0 + 2 * m))) + 1);
     if (static_cast<double>(size.width) * size.height > 400e6) {
-      result.status = Status::Error("the restored image would exceed 400 megapixels at " +
-                                    std::to_string(result.dpi) + " dpi");
-      return result;
+      return Status::Error("the restored image would exceed 400 megapixels at " +
+                           std::to_string(result.dpi) + " dpi");
     }
     for (size_t k = 0; k < flat.size(); ++k) {
       const cv::Matx23d& a = result.pixel_from_flat;
-      dest[k] = cv::Point2d(a(0, 0) * flat[k].x + a(0, 1) * flat[k].y + a(0, 2),
-                            a(1, 0) * flat[k].x + a(1, 1) * flat[k].y + a(1, 2));
+      (*dest)[k] = cv::Point2d(a(0, 0) * flat[k].x + a(0, 1) * flat[k].y + a(0, 2),
+                               a(1, 0) * flat[k].x + a(1, 1) * flat[k].y + a(1, 2));
     }
   } else {
     size = camera.size;
     for (size_t k = 0; k < flat.size(); ++k) {
       if (mesh.Active(static_cast<int>(k)))
-        dest[k] = camera.Project(cv::Vec3d(flat[k].x, flat[k].y, 0));
+        (*dest)[k] = camera.Project(cv::Vec3d(flat[k].x, flat[k].y, 0));
     }
   }
+  return Status::Ok();
+}
+
+// The triangles as the renderer takes them: each with its destination corners, its map back to
+// the source pixels and its supersampling (from its largest stretch).
+std::vector<Triangle> RenderTriangles(const std::vector<cv::Vec3i>& triangles, const Mesh& mesh,
+                                      const std::vector<double>& tri_ppi,
+                                      const std::vector<cv::Point2d>& dest,
+                                      const RestoreOptions& options) {
   std::vector<Triangle> tris;
   tris.reserve(triangles.size());
   for (size_t k = 0; k < triangles.size(); ++k) {
@@ -521,6 +534,16 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
         std::clamp(static_cast<int>(std::ceil(footprint - 1e-6)), 1, options.max_supersampling);
     tris.push_back(tri);
   }
+  return tris;
+}
+
+// The leaf's mask, the texture and the extras through the triangles, then (orthographic) the
+// sampling map, and the crop to the leaf with its margin (*crop: the part of the whole image
+// kept).
+void RenderAndCrop(const cv::Mat& texture, const cv::Mat& leaf, const std::vector<cv::Mat>& extras,
+                   const std::vector<Triangle>& tris, cv::Size size, const RestoreOptions& options,
+                   RestoreResult* out, cv::Rect* crop_out) {
+  RestoreResult& result = *out;
   if (!leaf.empty()) {
     // The mask is thresholded at half: one bilinear sample per pixel decides it (supersampling
     // would only smooth what the threshold takes away).
@@ -536,7 +559,8 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
   RenderImages(sources, tris, size, &result.extras);
   result.image = result.extras.front();
   result.extras.erase(result.extras.begin());
-  cv::Rect crop(0, 0, size.width, size.height);
+  cv::Rect& crop = *crop_out;
+  crop = cv::Rect(0, 0, size.width, size.height);
   if (options.view == RestoreView::kOrthographic) {
     // The sampling map: each triangle filled with its true sampling, in the renderer's order (the
     // last triangle covering a pixel gives it), subpixel corners (4 fractional bits).
@@ -564,6 +588,28 @@ RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
     result.pixel_from_flat(0, 2) -= box.x;
     result.pixel_from_flat(1, 2) -= box.y;
   }
+}
+
+}  // namespace
+
+RestoreResult Restore(const cv::Mat& texture, const Mesh& mesh,
+                      const std::vector<cv::Point2d>& flat, const CameraModel& camera,
+                      const RestoreOptions& options, const cv::Mat& leaf,
+                      const std::vector<cv::Mat>& extras) {
+  RestoreResult result;
+  result.status = CheckRestoreInputs(texture, mesh, flat, options, leaf, extras);
+  if (!result.status.ok()) return result;
+  result.view = options.view;
+  const std::vector<cv::Vec3i> triangles = SheetTriangles(mesh);
+  const std::vector<double> tri_ppi = TriangleSampling(triangles, mesh, flat, &result.finest_ppi);
+  // Destination pixel of every node.
+  std::vector<cv::Point2d> dest(flat.size());
+  cv::Size size;
+  result.status = LayOut(mesh, flat, camera, options, leaf, &result, &dest, &size);
+  if (!result.status.ok()) return result;
+  std::vector<Triangle> tris = RenderTriangles(triangles, mesh, tri_ppi, dest, options);
+  cv::Rect crop;
+  RenderAndCrop(texture, leaf, extras, tris, size, options, &result, &crop);
   auto plan = std::make_shared<RestorePlan>();
   plan->tris = std::move(tris);
   plan->source = texture.size();

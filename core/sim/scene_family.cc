@@ -104,12 +104,13 @@ bool InView(const FamilyScene& s, double margin_px) {
 
 }  // namespace
 
-FamilyScene DrawFamilyScene(uint64_t seed) {
-  FamilyScene s;
-  s.seed = seed;
-  cv::RNG rng(0x9E3779B97F4A7C15ULL ^ (seed * 0xBF58476D1CE4E5B9ULL + 12345));
-  auto chance = [&](double p) { return rng.uniform(0.0, 1.0) < p; };
-  // The shape.
+namespace {
+
+bool Chance(cv::RNG& rng, double p) { return rng.uniform(0.0, 1.0) < p; }
+
+// The shape, by its weight among the family's, and its size and parameters.
+void DrawShape(cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
   const struct {
     const char* name;
     double weight;
@@ -136,7 +137,7 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
     const bool crease = s.shape == "crease";
     page.fold_radius_mm = crease ? rng.uniform(0.5, 2.5) : rng.uniform(8.0, 25.0);
     page.fold_slope_deg = crease ? rng.uniform(10.0, 40.0) : rng.uniform(5.0, 20.0);
-    page.fold_valley = crease && chance(0.5);
+    page.fold_valley = crease && Chance(rng, 0.5);
   } else if (s.shape == "wave" || s.shape == "ripple") {
     page.shape = PageShape::kRipple;
     const bool wave = s.shape == "wave";
@@ -149,27 +150,39 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
   } else if (s.shape == "developable") {
     RandomProfile(&page, rng);
   }
-  // What it rests on, and how high its rim stands above that.
-  page.thickness_mm =
-      chance(0.3) ? std::vector<double>{0.0, 0.05, 0.1}[rng.uniform(0, 3)] : rng.uniform(0.0, 0.5);
+}
+
+// What it rests on (a table, support or frame, or a spread's other page), how high its rim
+// stands above that, and a burnt outline.
+void DrawSurround(uint64_t seed, cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
+  PageOptions& page = s.page;
+  const bool spread = s.shape == "spread";
+  page.thickness_mm = Chance(rng, 0.3) ? std::vector<double>{0.0, 0.05, 0.1}[rng.uniform(0, 3)]
+                                       : rng.uniform(0.0, 0.5);
   SceneOptions& scene = s.scene;
   scene.spread = spread;
   if (spread) {
     page.gutter_angle_deg = rng.uniform(20.0, 85.0);
     page.gutter_radius_mm = rng.uniform(20.0, 60.0);
-    scene.spread_gap_mm = chance(0.3) ? 0.0 : rng.uniform(0.5, 4.0);
+    scene.spread_gap_mm = Chance(rng, 0.3) ? 0.0 : rng.uniform(0.5, 4.0);
   } else {
     const double surround = rng.uniform(0.0, 1.0);
     scene.frame = surround < 0.15;
     scene.support = surround >= 0.15 && surround < 0.4;
   }
-  if (!spread && chance(0.25)) {
+  if (!spread && Chance(rng, 0.25)) {
     page.outline = OutlineKind::kBurnt;
     page.outline_seed = seed;
     page.burn_depth_mm = rng.uniform(4.0, 15.0);
     page.holes = rng.uniform(0, 5);
   }
-  // What is on the page.
+}
+
+// What is on the page.
+void DrawTexture(uint64_t seed, cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
+  const PageOptions& page = s.page;
   TextureOptions& texture = s.texture;
   const double kind = rng.uniform(0.0, 1.0);
   texture.kind = kind < 0.35  ? TextureKind::kText
@@ -182,25 +195,37 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
   texture.margin_mm = rng.uniform(6.0, 14.0);
   texture.seed = seed;
   if (texture.kind == TextureKind::kImage) texture.image = ColourPage(page.size_mm, rng);
-  // The renderer.
+}
+
+// The renderer: the light, the camera's noise and blur, and the surround's albedos.
+void DrawLight(uint64_t seed, cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
+  SceneOptions& scene = s.scene;
   LightOptions& light = s.light;
   light.noise_dn = rng.uniform(0.5, 3.0);
-  light.shot_noise_dn = chance(0.5) ? rng.uniform(0.5, 3.0) : 0.0;
-  light.camera_blur_px = chance(0.6) ? rng.uniform(0.2, 1.0) : 0.0;
+  light.shot_noise_dn = Chance(rng, 0.5) ? rng.uniform(0.5, 3.0) : 0.0;
+  light.camera_blur_px = Chance(rng, 0.6) ? rng.uniform(0.2, 1.0) : 0.0;
   light.defocus_sigma_px = rng.uniform(0.4, 1.4);
   light.ambient = rng.uniform(0.02, 0.15);
   light.projector_gain = rng.uniform(0.7, 0.98 - light.ambient);
   light.studio_light = rng.uniform(0.75, 0.95);
   light.table_albedo = rng.uniform(0.05, 0.9);
-  light.grain = chance(0.4) ? rng.uniform(0.02, 0.15) : 0.0;
+  light.grain = Chance(rng, 0.4) ? rng.uniform(0.02, 0.15) : 0.0;
   light.grain_seed = seed + 7;
   scene.support_albedo = rng.uniform(0.05, 0.9);
   scene.frame_albedo = rng.uniform(0.05, 0.9);
   scene.support_height_mm = rng.uniform(2.0, 20.0);
   scene.frame_thickness_mm = rng.uniform(0.3, 1.5);
-  scene.frame_window_margin_mm = chance(0.5) ? 0.0 : rng.uniform(1.0, 15.0);
-  // Where it lies and how it is turned (a frame's window stays square to the view): drawn until
-  // the leaf lies inside the view, smaller each time it does not.
+  scene.frame_window_margin_mm = Chance(rng, 0.5) ? 0.0 : rng.uniform(1.0, 15.0);
+}
+
+// Where it lies and how it is turned (a frame's window stays square to the view): drawn until
+// the leaf lies inside the view, smaller each time it does not.
+void PlaceInView(cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
+  PageOptions& page = s.page;
+  const bool spread = s.shape == "spread";
+  const SceneOptions& scene = s.scene;
   const double turn_limit = scene.frame ? 0.0 : spread ? 8.0 : 180.0;
   for (int attempt = 0;; ++attempt) {
     const double turn = rng.uniform(-turn_limit, turn_limit + 1e-9);
@@ -211,7 +236,13 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
     if (InView(s, 12)) break;
     if (attempt % 8 == 7) page.size_mm *= 0.92;
   }
-  // The support and the frame around the leaf where it came to lie.
+}
+
+// The support and the frame around the leaf where it came to lie.
+void DrawSupportAndFrame(cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
+  PageOptions& page = s.page;
+  SceneOptions& scene = s.scene;
   const double reach = 0.5 * std::hypot(page.size_mm.width, page.size_mm.height);
   auto around = [&](double least, double most) {
     const double l = rng.uniform(least, most), r = rng.uniform(least, most),
@@ -230,8 +261,24 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
     scene.frame_mm =
         cv::Rect2d(window.x - l, window.y - b, window.width + l + r, window.height + b + t);
   }
+}
+
+}  // namespace
+
+FamilyScene DrawFamilyScene(uint64_t seed) {
+  FamilyScene s;
+  s.seed = seed;
+  // One generator drawn from in a fixed order: the same seed gives the same scene.
+  cv::RNG rng(0x9E3779B97F4A7C15ULL ^ (seed * 0xBF58476D1CE4E5B9ULL + 12345));
+  DrawShape(rng, &s);
+  DrawSurround(seed, rng, &s);
+  DrawTexture(seed, rng, &s);
+  DrawLight(seed, rng, &s);
+  PlaceInView(rng, &s);
+  DrawSupportAndFrame(rng, &s);
   // What the operator says it is: half the time, nothing (auto).
-  s.said = chance(0.5) ? ObjectKind::kAuto : spread ? ObjectKind::kBook : ObjectKind::kLeaf;
+  const bool spread = s.shape == "spread";
+  s.said = Chance(rng, 0.5) ? ObjectKind::kAuto : spread ? ObjectKind::kBook : ObjectKind::kLeaf;
   return s;
 }
 
