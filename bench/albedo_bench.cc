@@ -130,7 +130,7 @@ void BM_Vellum_RestoreTextureAlbedoAndTwoLights(benchmark::State& state) {
   }
 }
 
-// The bar as the pipeline's report states stage times: the restore stage (the warp, and
+// Our bar as the pipeline's report states stage times: the restore stage (the warp, and
 // writing the page's masters, pyramid, sampling map and pictures) alone, and with the albedo
 // and lights stages for two raking lights (each image restored and written as its TIFF).
 std::string BenchDir() {
@@ -138,14 +138,28 @@ std::string BenchDir() {
       .string();
 }
 
+// The fixture as the pipeline holds a scan and its one page, with the lights given.
+ScanWork FixtureWork(const Fixture& f, const std::string& dir, PageResult* page,
+                     const std::vector<ScanLight>& lights = {}) {
+  ScanWork work;
+  work.scan.texture = f.texture;
+  work.scan.lights = lights;
+  work.calibration = DefaultRig();
+  work.amplitude = f.amplitude;
+  work.map.points = f.points;
+  work.results = dir;
+  page->mask = f.leaf;
+  page->mesh = f.mesh;
+  page->flat = f.flattened;
+  return work;
+}
+
 RestoreResult RunRestoreStage(const Fixture& f, const std::string& dir) {
-  RestoreResult restored;
-  PipelineOptions options;
-  const StageReport r =
-      RestoreStage(f.texture, f.leaf, f.mesh, f.flattened, DefaultRig().camera, options.restore,
-                   options.limits, IccProfile(), ScanContext(), {}, dir, "", &restored);
-  if (!r.status.ok()) restored.status = r.status;
-  return restored;
+  PageResult page;
+  const ScanWork work = FixtureWork(f, dir, &page);
+  const StageReport r = RestoreStage(work, PipelineOptions(), &page);
+  if (!r.status.ok()) page.restored.status = r.status;
+  return page.restored;
 }
 
 void BM_Baseline_RestoreStage(benchmark::State& state) {
@@ -169,13 +183,15 @@ void BM_Vellum_RestoreStageAlbedoAndTwoLights(benchmark::State& state) {
   double albedo_s = 0, lights_s = 0;
   int runs = 0;
   for (auto _ : state) {
-    const RestoreResult restored = RunRestoreStage(f, dir);
-    RestoreResult albedo;
-    LightsResult lit;
-    const StageReport a = AlbedoStage(f.amplitude, f.points, f.leaf, DefaultRig(), f.field,
-                                      restored, ScanContext(), dir, "", &albedo);
-    const StageReport l = LightsStage(lights, f.leaf, f.mesh, f.flat, IccProfile(), restored,
-                                      ScanContext(), dir, "", &lit);
+    PageResult page;
+    const ScanWork work = FixtureWork(f, dir, &page, lights);
+    PipelineOptions options;
+    options.flat_field = f.field;
+    const StageReport r = RestoreStage(work, options, &page);
+    const RestoreResult& restored = page.restored;
+    if (!r.status.ok()) state.SkipWithError(r.status.message().c_str());
+    const StageReport a = AlbedoStage(work, options, &page);
+    const StageReport l = LightsStage(work, options, &page);
     if (!restored.status.ok() || !a.status.ok() || !l.status.ok()) {
       state.SkipWithError("a stage failed");
     }

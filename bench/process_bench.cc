@@ -1,7 +1,7 @@
 // `vellum process` end to end on the default 1600 x 1200 scan (58 frames, a curled
 // leaf rendered by the virtual gantry and written as a scan directory of PNGs before the clock
 // runs), beside reading the scan alone (ReadScan: scan.yaml, texture and frames, PNG decoding in
-// parallel). The issue asks the whole within 1.5 times the reading. `vellum process` decodes
+// parallel). We ask the whole within 1.5 times the reading. `vellum process` decodes
 // each frame as it is read (ReadProcessInput reads the header; RunPipeline the frames). Both
 // also report their CPU time over every thread, beside the most the bar's wall time can hold
 // on this machine's cores.
@@ -27,9 +27,9 @@
 #include "bench/ratio_reporter.h"
 #include "core/sim/evaluate.h"
 #include "io/calibration_io.h"
-#include "io/memory.h"
 #include "io/scan_io.h"
 #include "pipeline/process.h"
+#include "runtime/memory.h"
 
 namespace {
 
@@ -203,12 +203,12 @@ int main(int argc, char** argv) {
     }
   }
   std::printf("camera %dx%d\n", BenchRig().camera.size.width, BenchRig().camera.size.height);
-  // As `vellum process` sets itself up (io/memory.h), for the reading as for the whole.
+  // As `vellum process` sets itself up (runtime/memory.h), for the reading as for the whole.
   UseMemoryForOneRun();
   vellum::RatioReporter reporter;
   ScanDir();  // Rendered and written before the clock runs.
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  constexpr double kBar = 1.5;  // The issue's: the whole within this many times the reading.
+  constexpr double kBar = 1.5;  // Ours: the whole within this many times the reading.
   const double read = reporter.Time("BM_Baseline_ReadFrames");
   const double all = reporter.Time("BM_Vellum_ProcessEndToEnd");
   if (read > 0 && all > 0) {

@@ -111,7 +111,7 @@ int main(int argc, char** argv) {
   const double peer = reporter.Time("BM_Peer_OpenCvRemap");
   if (t > 0 && peer > 0) {
     std::printf(
-        "restore 24 MP at 400 ppi: %.0f ms (the issue's bar: under 1000 ms), %.1f times "
+        "restore 24 MP at 400 ppi: %.0f ms (our bar: under 1000 ms), %.1f times "
         "cv::remap's %.0f ms for an output of the same size\n",
         t, t / peer, peer);
   }

@@ -137,7 +137,7 @@ TEST(Calibrate, RecoversTheVirtualGantrysCalibration) {
   EXPECT_LE(tilt, 0.1);
   // The scale it measures lengths at, from its own board (each pose by the solve without it):
   // the corners' noise (~0.05 camera px, ~0.02 mm at 0.25 mm per pixel) over a board 150 x
-  // 200 mm is a scale error of about 0.01%; the bar for a master is 0.1%.
+  // 200 mm is a scale error of about 0.01%; our bar for a master is 0.1%.
   std::printf("[calib] scale error %.4f%% RMS over the poses (worst %+.4f%%, %s)\n",
               s.solution.scale_error_percent, s.solution.worst_scale_error_percent,
               s.solution.worst_scale_pose.c_str());
@@ -270,7 +270,7 @@ TEST(Calibrate, BadPosesAreNamedAndTheRestAreUsed) {
 // transposed is detected and corrected. The same pose
 // given twice is refused (one folder given four times leaves one pose: no solve); a pose whose
 // projector corners are 2.3 px off is dropped by the outlier rule, so the solve equals the
-// clean solve (within 0.05 degrees and 0.3 mm, the bar); a solve whose errors are over
+// clean solve (within 0.05 degrees and 0.3 mm, our bar); a solve whose errors are over
 // the limit says so (the CLI then writes nothing without --force); the leave-one-pose-out check
 // is reported.
 TEST(Calibrate, DuplicateAndOutlierPosesAreRefusedOrDroppedAndNamed) {
@@ -294,7 +294,7 @@ TEST(Calibrate, DuplicateAndOutlierPosesAreRefusedOrDroppedAndNamed) {
   // The board size given transposed: the board is found either way, and would solve as well
   // with the world turned a quarter turn (every restored page with it). It is detected from the
   // table pose (its rows run down the camera's image), named, and corrected: the whole world
-  // frame equals the clean solve's (the same gauge: 0.05 degrees and 0.3 mm, the bar).
+  // frame equals the clean solve's (the same gauge: 0.05 degrees and 0.3 mm, our bar).
   const CalibrationSolution turned = SolveCalibration(transposed, 0, wrong_way);
   ASSERT_TRUE(turned.status.ok()) << turned.status.message();
   EXPECT_EQ(turned.board, cv::Size(16, 21));

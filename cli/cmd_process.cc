@@ -5,9 +5,9 @@
 #include "core/common/text.h"
 #include "flags/options.h"
 #include "io/calibration_io.h"
-#include "io/memory.h"
 #include "pipeline/process.h"
 #include "pipeline/qc.h"
+#include "runtime/memory.h"
 
 namespace vellum {
 

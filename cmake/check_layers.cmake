@@ -8,12 +8,13 @@
 set(allowed_core "core")
 set(allowed_calib "core")
 set(allowed_io "core")
+set(allowed_runtime "")
 set(allowed_flags "core;io;pipeline")
 set(allowed_pipeline "core;io")
 set(allowed_display "")
 set(allowed_station "core;io;flags;pipeline;vellum")
 set(allowed_daemons "core;io;flags;pipeline;station;display;vellum")
-set(allowed_cli "core;calib;io;flags;pipeline;station;vellum")
+set(allowed_cli "core;calib;io;runtime;flags;pipeline;station;vellum")
 # Tests, benchmarks and fuzzers sit above everything.
 set(unchecked tests bench fuzz)
 # The pure layers see no files, sockets, clocks, windows or devices (STYLE.md); their unit tests
@@ -25,7 +26,7 @@ set(impure_headers "lcm/" "SDL" "libv4l2" "linux/" "sys/" "opencv2/imgcodecs" "o
 if(NOT ROOT)
   message(FATAL_ERROR "check_layers: pass -DROOT=<source tree>")
 endif()
-set(layers core calib io flags pipeline display station daemons cli)
+set(layers core calib io runtime flags pipeline display station daemons cli)
 set(problems "")
 foreach(layer ${layers})
   file(GLOB_RECURSE files "${ROOT}/${layer}/*.h" "${ROOT}/${layer}/*.cc")

@@ -74,10 +74,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       Mesh mesh;
       FlattenResult flat;
       SheetPage page;
-      if (AddChunk(m, &mesh, &flat, &page).ok() && m.chunk_count == 1) {
+      SheetRests rests;
+      if (AddChunk(m, &mesh, &flat, &page, &rests).ok() && m.chunk_count == 1) {
         static const Calibration rig = DefaultRig();
         ConnectSheet(
             m.bend_springs, [](const cv::Vec3d& x) { return rig.camera.Project(x); }, &mesh);
+        if (mesh.status.ok()) (void)SetRestLengths(rests, &mesh);
       }
       break;
     }

@@ -89,8 +89,8 @@ Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid) {
   Status s = StartVips();
   if (!s.ok()) return s;
   // Made in memory and written by us: libvips 8.14's pyramid writer, failing to write (a full
-  // disk), crashes the process as it cleans up (libvips issue 3411's path); a buffer cannot
-  // fail so, and the file's write failure is an error like any other.
+  // disk), crashes the process as it cleans up (the path of libvips's GitHub issue 3411); a buffer
+  // cannot fail so, and the file's write failure is an error like any other.
   std::string bytes;
   try {
     vips::VImage image = vips::VImage::new_from_file(tif.c_str());

@@ -18,7 +18,6 @@
 #include "io/image_file.h"
 #include "io/json.h"
 #include "io/manifest.h"
-#include "io/memory.h"
 #include "io/ply.h"
 #include "io/products.h"
 #include "io/ptm.h"
@@ -677,35 +676,6 @@ TEST_F(IoTest, ImagesRoundTripWithoutOpenCvsCodecsAndOpenCvReadsThem) {
   EXPECT_NE(s.message().find("cut.png: not a readable image"), std::string::npos) << s.message();
   s = ReadImage(Path("none.png"), &back);
   EXPECT_NE(s.message().find("none.png: file is missing"), std::string::npos) << s.message();
-}
-
-// The huge-page allocator (set for every later Mat of this test program, which changes no
-// other test's result): a large Mat's block is 2 MB aligned, a freed one serves the next Mat of
-// its size, small Mats and Mats over memory they do not own are as before.
-TEST(HugePages, LargeImagesAreAlignedAndTheirBlocksReused) {
-  UseMemoryForOneRun();
-  constexpr uintptr_t kTwoMb = uintptr_t{2} << 20;
-  const uchar* first = nullptr;
-  {
-    cv::Mat big(1200, 1600, CV_32F, cv::Scalar(7));  // 7.3 MB.
-    EXPECT_EQ(reinterpret_cast<uintptr_t>(big.data) % kTwoMb, 0u);
-    EXPECT_EQ(big.at<float>(1199, 1599), 7.0f);
-    first = big.data;
-  }
-  cv::Mat again(1200, 1600, CV_32F);
-  EXPECT_EQ(again.data, first) << "a freed block serves the next image of its size";
-  cv::Mat other(1200, 1600, CV_32FC3);  // 22 MB: a block of its own.
-  EXPECT_NE(other.data, first);
-  EXPECT_EQ(reinterpret_cast<uintptr_t>(other.data) % kTwoMb, 0u);
-  other.setTo(cv::Scalar(1, 2, 3));
-  EXPECT_EQ(other.at<cv::Vec3f>(1199, 1599), cv::Vec3f(1, 2, 3));
-  cv::Mat roi = other(cv::Rect(10, 10, 100, 100)).clone();  // Small: OpenCV's own.
-  EXPECT_EQ(roi.at<cv::Vec3f>(0, 0), cv::Vec3f(1, 2, 3));
-  std::vector<float> owned(1600 * 1200, 5.0f);
-  cv::Mat wrapped(1200, 1600, CV_32F, owned.data());
-  EXPECT_EQ(wrapped.data, reinterpret_cast<uchar*>(owned.data()));
-  cv::Mat copy = wrapped.clone();
-  EXPECT_EQ(copy.at<float>(600, 800), 5.0f);
 }
 
 TEST_F(IoTest, TheManifestProvesAScanWholeAndNamesWhatChanged) {

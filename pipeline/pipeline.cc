@@ -220,28 +220,19 @@ StageReport Pipeline::RunStep(Step step, ScanWork* work) const {
 }
 
 StageReport Pipeline::RunPageStep(Step step, PageResult* page, ScanWork* work) const {
-  const PipelineOptions& o = options_;
-  const Calibration& calibration = work->calibration;
-  const cv::Mat& points = work->map.points;
   switch (step) {
     case Step::kMesh:
-      return MeshStage(points, page->mask, calibration.camera, o, page->name, &page->mesh);
+      return MeshStage(*work, options_, page);
     case Step::kFlatten:
-      return FlattenStage(page->mesh, o.flatten, o.limits, work->results, page->name, &page->flat);
+      return FlattenStage(*work, options_, page);
     case Step::kRestore:
-      return RestoreStage(work->scan.texture, page->mask, page->mesh, page->flat,
-                          calibration.camera, o.restore, o.limits, o.camera_icc, work->context,
-                          work->stages, work->results, page->name, &page->restored);
+      return RestoreStage(*work, options_, page);
     case Step::kAlbedo:
-      return AlbedoStage(work->amplitude, points, page->mask, calibration, o.flat_field,
-                         page->restored, work->context, work->results, page->name, &page->albedo);
+      return AlbedoStage(*work, options_, page);
     case Step::kReflectance:
-      return ReflectanceStage(work->scan.texture, points, page->mask, calibration, o.studio_field,
-                              page->restored, work->context, work->results, page->name,
-                              &page->reflectance);
+      return ReflectanceStage(*work, options_, page);
     case Step::kLights:
-      return LightsStage(work->scan.lights, page->mask, page->mesh, page->flat.flat, o.camera_icc,
-                         page->restored, work->context, work->results, page->name, &page->lights);
+      return LightsStage(*work, options_, page);
     default:
       break;
   }

@@ -14,7 +14,7 @@ std::string Percent(double share) {
 
 // FADGI's star levels for manuscripts as vellum reads them: sampling (ppi, met by 95% of the
 // page within the tolerance), bits per channel, and reproduction scale error (%); the 4-star
-// row is the one the issue quotes (400 ppi, 16 bits, 1%). Check against the edition in force.
+// row is the one we quote (400 ppi, 16 bits, 1%). Check against the edition in force.
 struct FadgiLevel {
   int stars;
   double ppi, ppi_tolerance, bits, scale_error_percent;

@@ -415,8 +415,12 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
   return stage.Finish(s);
 }
 
-StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const CameraModel& camera,
-                      const PipelineOptions& options, const std::string& page, Mesh* mesh) {
+StageReport MeshStage(const ScanWork& work, const PipelineOptions& options, PageResult* p) {
+  const cv::Mat& points = work.map.points;
+  const cv::Mat& page_mask = p->mask;
+  const CameraModel& camera = work.calibration.camera;
+  const std::string& page = p->name;
+  Mesh* mesh = &p->mesh;
   Stage stage("mesh", page);
   StageReport& r = stage.report();
   const auto project = [&](const cv::Vec3d& x) { return camera.Project(x); };
@@ -443,9 +447,13 @@ StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const Cam
   return stage.Finish(Status::Ok());
 }
 
-StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
-                         const WarningLimits& limits, const std::string& results,
-                         const std::string& page, FlattenResult* flat) {
+StageReport FlattenStage(const ScanWork& work, const PipelineOptions& o, PageResult* p) {
+  const Mesh& mesh = p->mesh;
+  const FlattenOptions& options = o.flatten;
+  const WarningLimits& limits = o.limits;
+  const std::string& results = work.results;
+  const std::string& page = p->name;
+  FlattenResult* flat = &p->flat;
   Stage stage("flatten", page);
   StageReport& r = stage.report();
   r.Text("options", "solver", ToString(options.solver));
@@ -533,12 +541,20 @@ StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
       stage.Output("archival.tif", WriteArchivalMaster(results, texture, identity, camera_icc)));
 }
 
-StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
-                         const FlattenResult& flattened, const CameraModel& camera,
-                         const RestoreOptions& options, const WarningLimits& limits,
-                         const IccProfile& camera_icc, const ScanContext& context,
-                         const std::vector<StageReport>& earlier, const std::string& results,
-                         const std::string& page, RestoreResult* restored) {
+StageReport RestoreStage(const ScanWork& work, const PipelineOptions& o, PageResult* p) {
+  const cv::Mat& texture = work.scan.texture;
+  const cv::Mat& page_mask = p->mask;
+  const Mesh& mesh = p->mesh;
+  const FlattenResult& flattened = p->flat;
+  const CameraModel& camera = work.calibration.camera;
+  const RestoreOptions& options = o.restore;
+  const WarningLimits& limits = o.limits;
+  const IccProfile& camera_icc = o.camera_icc;
+  const ScanContext& context = work.context;
+  const std::vector<StageReport>& earlier = work.stages;
+  const std::string& results = work.results;
+  const std::string& page = p->name;
+  RestoreResult* restored = &p->restored;
   Stage stage("restore", page);
   StageReport& r = stage.report();
   const std::vector<cv::Point2d>& flat = flattened.flat;
@@ -711,38 +727,38 @@ StageReport RestoreReflectance(const char* stage_name, const AlbedoResult& a,
 
 }  // namespace
 
-StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
-                        const Calibration& calibration, const FlatField& flat_field,
-                        const RestoreResult& restored, const ScanContext& context,
-                        const std::string& results, const std::string& page,
-                        RestoreResult* albedo) {
+StageReport AlbedoStage(const ScanWork& work, const PipelineOptions& o, PageResult* p) {
   return RestoreReflectance(
-      "albedo", EstimateAlbedo(amplitude, points, page_mask, calibration, flat_field), page_mask,
-      restored, context, results, page, "restored_albedo.tif",
+      "albedo",
+      EstimateAlbedo(work.amplitude, work.map.points, p->mask, work.calibration, o.flat_field),
+      p->mask, p->restored, work.context, work.results, p->name, "restored_albedo.tif",
       "Lambertian, lit by the projector alone (white less black), its flat field from a white "
       "target on the table; interreflection and gloss not modelled",
-      "marked_grazing_share", albedo);
+      "marked_grazing_share", &p->albedo);
 }
 
-StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
-                             const cv::Mat& page_mask, const Calibration& calibration,
-                             const StudioField& studio_field, const RestoreResult& restored,
-                             const ScanContext& context, const std::string& results,
-                             const std::string& page, RestoreResult* reflectance) {
+StageReport ReflectanceStage(const ScanWork& work, const PipelineOptions& o, PageResult* p) {
   return RestoreReflectance(
-      "reflectance", CorrectTexture(texture, points, page_mask, calibration, studio_field),
-      page_mask, restored, context, results, page, "restored_reflectance.tif",
+      "reflectance",
+      CorrectTexture(work.scan.texture, work.map.points, p->mask, work.calibration, o.studio_field),
+      p->mask, p->restored, work.context, work.results, p->name, "restored_reflectance.tif",
       "Lambertian, lit by the described studio lamps (point sources of equal strength), their "
       "field from a white target on the table; shadows the page casts on itself, "
       "interreflection and gloss not modelled",
-      "marked_dim_share", reflectance);
+      "marked_dim_share", &p->reflectance);
 }
 
-StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
-                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                        const IccProfile& camera_icc, const RestoreResult& restored,
-                        const ScanContext& context, const std::string& results,
-                        const std::string& page, LightsResult* out) {
+StageReport LightsStage(const ScanWork& work, const PipelineOptions& o, PageResult* p) {
+  const std::vector<ScanLight>& lights = work.scan.lights;
+  const cv::Mat& page_mask = p->mask;
+  const Mesh& mesh = p->mesh;
+  const std::vector<cv::Point2d>& flat = p->flat.flat;
+  const IccProfile& camera_icc = o.camera_icc;
+  const RestoreResult& restored = p->restored;
+  const ScanContext& context = work.context;
+  const std::string& results = work.results;
+  const std::string& page = p->name;
+  LightsResult* out = &p->lights;
   Stage stage("lights", page);
   StageReport& r = stage.report();
   *out = LightsResult();

@@ -25,6 +25,7 @@
 #include "io/xmp.h"
 #include "pipeline/context.h"
 #include "pipeline/report.h"
+#include "pipeline/work.h"
 
 namespace vellum {
 
@@ -135,17 +136,19 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
                          const ScanContext& context, const OutlineOptions& options,
                          const WarningLimits& limits, const std::string& results, Outline* outline);
 
-// Mesh (3.5-3.6): the sheet over one page (`page_mask`, camera pixels) of the point map, its
-// grid chosen from the page's shape when `options.auto_grid`. Writes nothing (the sheet is
-// written with its flattened twin).
-StageReport MeshStage(const cv::Mat& points, const cv::Mat& page_mask, const CameraModel& camera,
-                      const PipelineOptions& options, const std::string& page, Mesh* mesh);
+// The stages that run once for each page take the scan as the pipeline holds it (`work`: its
+// texture, lights, calibration, context, point map, the stages' reports so far and the results
+// folder) and the page (`page`: its name and mask, and the products of its earlier stages), and
+// write their product into the page.
 
-// Flatten (3.7-3.8): the sheet onto the plane. Writes mesh.ply and flat.ply in the page's
-// folder. Warns of strain and fold-over above the limits.
-StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
-                         const WarningLimits& limits, const std::string& results,
-                         const std::string& page, FlattenResult* flat);
+// Mesh (3.5-3.6): page->mesh, the sheet over the page (its mask, camera pixels) of the point
+// map, its grid chosen from the page's shape when `options.auto_grid`. Writes nothing (the sheet
+// is written with its flattened twin).
+StageReport MeshStage(const ScanWork& work, const PipelineOptions& options, PageResult* page);
+
+// Flatten (3.7-3.8): page->flat, the sheet onto the plane. Writes mesh.ply and flat.ply in the
+// page's folder. Warns of strain and fold-over above the limits.
+StageReport FlattenStage(const ScanWork& work, const PipelineOptions& options, PageResult* page);
 
 // The archival master of the scan: the texture as captured, as archival.tif in `results`, with
 // the scan's identity and the camera's ICC profile (`camera_icc`; empty: sRGB)
@@ -153,62 +156,43 @@ StageReport FlattenStage(const Mesh& mesh, const FlattenOptions& options,
 StageReport ArchiveStage(const cv::Mat& texture, const ScanIdentity& identity,
                          const IccProfile& camera_icc, const std::string& results);
 
-// Restore (3.10): the texture through the flattened sheet, with the page's mask (cropped to the
-// leaf and set upright when options ask it). Writes restored.tif, restored_mask.png and
-// restored.json in the page's folder and the report's pictures of the page (grid, strain,
+// Restore (3.10): page->restored, the texture through the flattened sheet, with the page's mask
+// (cropped to the leaf and set upright when options ask it). Writes restored.tif, restored_mask.png
+// and restored.json in the page's folder and the report's pictures of the page (grid, strain,
 // before/after), and the camera's true sampling of the page (sampling_ppi.tif, its summary and
 // picture). Warns of a leaf whose size is not the one expected, and of a dpi asked above the
 // true sampling. The scan's identity (a spread's page gets its own, PageIdentity) and its
-// calibration's checksum and scale error (`context`), the page's flattening residual (`flat`, the
-// page's FlattenResult: its flat positions and strains) and the options every stage so far
-// recorded in its report (`earlier`) go into restored.json and the TIFF's XMP. The TIFF embeds the
-// camera's ICC profile `camera_icc` (empty: sRGB), named in the report.
-StageReport RestoreStage(const cv::Mat& texture, const cv::Mat& page_mask, const Mesh& mesh,
-                         const FlattenResult& flat, const CameraModel& camera,
-                         const RestoreOptions& options, const WarningLimits& limits,
-                         const IccProfile& camera_icc, const ScanContext& context,
-                         const std::vector<StageReport>& earlier, const std::string& results,
-                         const std::string& page, RestoreResult* restored);
+// calibration's checksum and scale error (work.context), the page's flattening residual
+// (page->flat: its flat positions and strains) and the options every stage so far recorded in
+// its report (work.stages) go into restored.json and the TIFF's XMP. The TIFF embeds the
+// camera's ICC profile (options.camera_icc; empty: sRGB), named in the report.
+StageReport RestoreStage(const ScanWork& work, const PipelineOptions& options, PageResult* page);
 
-// Albedo: the page's reflectance from the projector's light (core/shading/albedo.h:
-// `amplitude` is the decoder's, `points` the point map), restored through the page's own warp
-// (RestoreMore of `restored`: the same triangles, samples and crop): restored_albedo.tif in the
+// Albedo: page->albedo, the page's reflectance from the projector's light (core/shading/albedo.h,
+// from work.amplitude, the decoder's, and the point map, with options.flat_field), restored
+// through the page's own warp (RestoreMore of page->restored: the same triangles, samples and
+// crop): restored_albedo.tif in the
 // page's folder, 16-bit gray, linear (65535 = albedo 1), 0 where the model does not hold (marked:
 // the projector's shadow, the page's rim, grazing light, outside the flat field).
-StageReport AlbedoStage(const cv::Mat& amplitude, const cv::Mat& points, const cv::Mat& page_mask,
-                        const Calibration& calibration, const FlatField& flat_field,
-                        const RestoreResult& restored, const ScanContext& context,
-                        const std::string& results, const std::string& page, RestoreResult* albedo);
+StageReport AlbedoStage(const ScanWork& work, const PipelineOptions& options, PageResult* page);
 
-// Reflectance from the studio light: the texture's shading by the studio lamps taken
-// out by the page's measured shape (core/shading/albedo.h, CorrectTexture, with `studio_field`),
+// Reflectance from the studio light: page->reflectance, the texture's shading by the studio
+// lamps taken out by the page's measured shape (core/shading/albedo.h, CorrectTexture, with
+// options.studio_field),
 // restored as AlbedoStage restores the albedo: restored_reflectance.tif in the page's folder,
 // 16-bit, one channel per texture channel, linear (65535 = reflectance 1), 0 where marked (not
 // measured, the page's rim, too little of the lamps' light, outside the studio field).
-StageReport ReflectanceStage(const cv::Mat& texture, const cv::Mat& points,
-                             const cv::Mat& page_mask, const Calibration& calibration,
-                             const StudioField& studio_field, const RestoreResult& restored,
-                             const ScanContext& context, const std::string& results,
-                             const std::string& page, RestoreResult* reflectance);
+StageReport ReflectanceStage(const ScanWork& work, const PipelineOptions& options,
+                             PageResult* page);
 
-// Lights: the scan's extra images (`lights`, Scan::lights) restored through the page's
-// own warp (RestoreMore of `restored`), so they register to it and to
-// each other pixel for pixel: lights/<name>.tif in the page's folder (as captured, with the
-// camera's ICC profile `camera_icc`). With three or more lights of known direction, the page's
+// Lights: page->lights, the scan's extra images (work.scan.lights) restored through the page's
+// own warp (RestoreMore of page->restored), so they register to it and to each other pixel for
+// pixel: lights/<name>.tif in the page's folder (as captured, with the camera's ICC profile
+// options.camera_icc). With three or more lights of known direction, the page's
 // photometric normals (core/shading/photometric.h) on the flat page in its own frame:
 // normals.tif (WriteNormalMap) and a picture of the relief lit from the top left. With six or
 // more, at two or more elevations, a polynomial texture map of the flat page for RTI viewers:
 // lights.ptm (FitPtm, WritePtm).
-struct LightsResult {
-  std::vector<std::string> names;  // The lights restored, in the scan's order.
-  std::vector<cv::Mat> images;     // Each restored, registered to the restored page.
-  cv::Mat normals;  // CV_32FC3 on the restored page (x right, y up, z out); empty without.
-  PtmResult ptm;    // With six or more directed lights at two elevations: lights.ptm.
-};
-StageReport LightsStage(const std::vector<ScanLight>& lights, const cv::Mat& page_mask,
-                        const Mesh& mesh, const std::vector<cv::Point2d>& flat,
-                        const IccProfile& camera_icc, const RestoreResult& restored,
-                        const ScanContext& context, const std::string& results,
-                        const std::string& page, LightsResult* out);
+StageReport LightsStage(const ScanWork& work, const PipelineOptions& options, PageResult* page);
 
 }  // namespace vellum

@@ -678,8 +678,12 @@ std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_spri
       runs.insert(runs.end(), {v, first, u - first});
     }
   }
-  const auto chunks = RowChunks(mesh.rows, static_cast<size_t>(mesh.cols) * 41);
+  // Up to six springs a node (two structural, two shear, two bend), each with its rest length.
+  const auto chunks = RowChunks(mesh.rows, static_cast<size_t>(mesh.cols) * (41 + 6 * 8));
   std::vector<mesh_t> out(chunks.size());
+  // The springs come in the order of their first node's row (ConnectSheet's): each chunk takes
+  // those whose first node lies in its rows.
+  size_t spring = 0;
   for (size_t c = 0; c < chunks.size(); ++c) {
     mesh_t& m = out[c];
     m.utime = 0;
@@ -711,6 +715,11 @@ std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_spri
     m.mask_height = page.mask.rows;
     if (c == 0) m.runs = runs;
     m.nruns = static_cast<int32_t>(m.runs.size());
+    const int row_end = m.row_begin + m.row_count;
+    while (spring < mesh.springs.size() && mesh.springs[spring].a / mesh.cols < row_end) {
+      m.rest_mm.push_back(mesh.springs[spring++].rest_mm);
+    }
+    m.nrest = static_cast<int32_t>(m.rest_mm.size());
     m.mean_strain = flattened.mean_strain;
     m.max_strain = flattened.max_strain;
     m.context = context_message;
@@ -719,7 +728,8 @@ std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_spri
   return out;
 }
 
-Status AddChunk(const mesh_t& m, Mesh* mesh, FlattenResult* flattened, SheetPage* page) {
+Status AddChunk(const mesh_t& m, Mesh* mesh, FlattenResult* flattened, SheetPage* page,
+                SheetRests* rests) {
   std::vector<cv::Point2d>* flat = &flattened->flat;
   Status s = CheckRows("FLAT_MESH", m.cols, m.rows, m.row_begin, m.row_count, m.n, m.chunk_index,
                        m.chunk_count);
@@ -729,6 +739,13 @@ Status AddChunk(const mesh_t& m, Mesh* mesh, FlattenResult* flattened, SheetPage
     return Status::Error("FLAT_MESH: strains mean " + std::to_string(m.mean_strain) + " and max " +
                          std::to_string(m.max_strain) + " are not a flattening's");
   }
+  for (double rest : m.rest_mm) {
+    if (!(rest > 0 && std::isfinite(rest))) {
+      return Status::Error("FLAT_MESH: chunk " + std::to_string(m.chunk_index) +
+                           " holds a spring rest length of " + std::to_string(rest) + " mm");
+    }
+  }
+  if (rests) rests->by_first_row[m.row_begin] = m.rest_mm;
   flattened->mean_strain = m.mean_strain;
   flattened->max_strain = m.max_strain;
   flattened->status = Status::Ok();
@@ -790,6 +807,35 @@ Status AddChunk(const mesh_t& m, Mesh* mesh, FlattenResult* flattened, SheetPage
                            std::to_string(m.mask_height) + " mask");
     }
     page->mask(cv::Rect(first, v, length, 1)).setTo(255);
+  }
+  return Status::Ok();
+}
+
+Status SetRestLengths(const SheetRests& rests, Mesh* mesh) {
+  // Each chunk's rest lengths in turn, as the springs reach its rows.
+  std::map<int, size_t> used;
+  for (Spring& s : mesh->springs) {
+    const int row = s.a / mesh->cols;
+    auto chunk = rests.by_first_row.upper_bound(row);
+    if (chunk == rests.by_first_row.begin()) {
+      return Status::Error("FLAT_MESH: no chunk carried the rest lengths of row " +
+                           std::to_string(row) + "'s springs");
+    }
+    --chunk;
+    size_t& next = used[chunk->first];
+    if (next >= chunk->second.size()) {
+      return Status::Error("FLAT_MESH: the chunk from row " + std::to_string(chunk->first) +
+                           " carried " + std::to_string(chunk->second.size()) +
+                           " rest lengths, fewer than the sheet's springs there");
+    }
+    s.rest_mm = chunk->second[next++];
+  }
+  for (const auto& [row, values] : rests.by_first_row) {
+    if (used[row] != values.size()) {
+      return Status::Error("FLAT_MESH: the chunk from row " + std::to_string(row) + " carried " +
+                           std::to_string(values.size()) + " rest lengths for " +
+                           std::to_string(used[row]) + " springs");
+    }
   }
   return Status::Ok();
 }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <chrono>
+#include <map>
 #include <opencv2/core.hpp>
 #include <string>
 #include <utility>
@@ -145,8 +146,20 @@ struct SheetPage {
 std::vector<mesh_t> ToMessages(int64_t scan_id, const Mesh& mesh, bool bend_springs,
                                const FlattenResult& flat, const ScanContext& context,
                                const std::vector<StageReport>& stages, const SheetPage& page);
+// The springs' rest lengths as a sheet's chunks carried them (each chunk those of the springs
+// whose first node lies in its rows), by the chunk's first row: measured along the surface
+// (MeshOptions::rest_along_surface), they are not the nodes' straight distances that
+// ConnectSheet gives the springs it rebuilds.
+struct SheetRests {
+  std::map<int, std::vector<double>> by_first_row;
+};
 // Copies a chunk's nodes into *mesh (cols, rows, kind, point) and *flat (its flat positions and
-// strains; status ok), and its page (the mask from chunk 0) into *page.
-Status AddChunk(const mesh_t& msg, Mesh* mesh, FlattenResult* flat, SheetPage* page);
+// strains; status ok), its page (the mask from chunk 0) into *page, and its springs' rest
+// lengths into *rests.
+Status AddChunk(const mesh_t& msg, Mesh* mesh, FlattenResult* flat, SheetPage* page,
+                SheetRests* rests = nullptr);
+// Sets the rest lengths of the springs ConnectSheet rebuilt (mesh->springs, in its order) to
+// those the sheet's chunks carried; an error when they do not number the springs.
+Status SetRestLengths(const SheetRests& rests, Mesh* mesh);
 
 }  // namespace vellum::station

@@ -211,6 +211,8 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   auto project = [&](const cv::Vec3d& x) { return rig.camera.Project(x); };
   ConnectSheet(true, project, &mesh);
   ASSERT_TRUE(mesh.status.ok()) << mesh.status.message();
+  // Rest lengths measured along the surface, not the nodes' straight distances: they travel.
+  for (size_t k = 0; k < mesh.springs.size(); k += 3) mesh.springs[k].rest_mm *= 1.01;
   SheetPage page;
   page.name = "right";
   page.index = 1;
@@ -221,8 +223,9 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   Mesh received;
   FlattenResult received_flat;
   SheetPage received_page;
+  SheetRests rests;
   for (const mesh_t& m : ToMessages(9, mesh, true, flattened, ScanContext(), {}, page)) {
-    ASSERT_TRUE(AddChunk(m, &received, &received_flat, &received_page).ok());
+    ASSERT_TRUE(AddChunk(m, &received, &received_flat, &received_page, &rests).ok());
   }
   EXPECT_EQ(received_page.name, "right");
   EXPECT_EQ(received_page.index, 1);
@@ -230,6 +233,16 @@ TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
   EXPECT_TRUE(SameBits(received_page.mask, page.mask));
   ConnectSheet(true, project, &received);
   ASSERT_TRUE(received.status.ok());
+  ASSERT_TRUE(SetRestLengths(rests, &received).ok());
+  ASSERT_EQ(received.springs.size(), mesh.springs.size());
+  for (size_t k = 0; k < mesh.springs.size(); ++k) {
+    EXPECT_EQ(received.springs[k].rest_mm, mesh.springs[k].rest_mm) << k;
+  }
+  // Rest lengths that do not number the springs are named.
+  SheetRests short_of = rests;
+  short_of.by_first_row.begin()->second.pop_back();
+  EXPECT_NE(SetRestLengths(short_of, &received).message().find("fewer than the sheet's springs"),
+            std::string::npos);
   EXPECT_EQ(received.springs.size(), mesh.springs.size());
   EXPECT_EQ(received.quads, mesh.quads);
   EXPECT_EQ(received.pixel, mesh.pixel);

@@ -23,6 +23,7 @@
 
 #include "core/patterns/scan.h"
 #include "core/sim/evaluate.h"
+#include "pipeline/pipeline.h"
 #include "pipeline/stages.h"
 #include "station/node.h"
 #include "station/scan_log.h"
@@ -172,20 +173,23 @@ inline const SmallProducts& SmallScanProducts() {
                     .string();
     std::filesystem::create_directories(p.results);
     RemoveAtExit(p.results);
-    const Calibration rig = QuickRig();
-    const PipelineOptions o;
-    Decoder decoder;
-    p.stages.push_back(DecodeStage(SmallScan(), &decoder, o.limits, &p.decoded));
-    p.stages.push_back(
-        TriangulateStage(p.decoded, Triangulator(rig), o.triangulate, o.limits, p.results, &p.map));
-    const ScanContext context = SmallScanContext();
-    p.stages.push_back(OutlineStage(p.map.points, SmallScan().texture, rig, context, o.outline,
-                                    o.limits, p.results, &p.outline));
-    p.stages.push_back(MeshStage(p.map.points, p.outline.pages[0], rig.camera, o, "", &p.mesh));
-    p.stages.push_back(FlattenStage(p.mesh, o.flatten, o.limits, p.results, "", &p.flat));
-    p.stages.push_back(RestoreStage(SmallScan().texture, p.outline.pages[0], p.mesh, p.flat,
-                                    rig.camera, o.restore, o.limits, o.camera_icc, context,
-                                    p.stages, p.results, "", &p.restored));
+    // The pipeline's steps from the decode to the restore, as `vellum process` runs them.
+    const Pipeline pipeline{PipelineOptions()};
+    ScanWork work;
+    work.scan = SmallScan();
+    work.calibration = QuickRig();
+    work.context = SmallScanContext();
+    work.results = p.results;
+    Status ran = pipeline.Run(Step::kDecode, Step::kDecode, &work);
+    p.decoded = work.decoded;  // The triangulation lets it go.
+    if (ran.ok()) ran = pipeline.Run(Step::kTriangulate, Step::kRestore, &work);
+    if (!ran.ok()) throw std::runtime_error(ran.message());
+    p.stages = work.stages;
+    p.map = work.map;
+    p.outline = work.outline;
+    p.mesh = work.pages[0].mesh;
+    p.flat = work.pages[0].flat;
+    p.restored = work.pages[0].restored;
     for (const StageReport& stage : p.stages) {
       if (!stage.status.ok()) throw std::runtime_error(stage.stage + ": " + stage.status.message());
     }

@@ -7,7 +7,7 @@
 // angle one projector pixel is ~1.1 mm of depth. The noise-weighted local fit over a 7x7
 // window averages ~49 pixels (ink next to paper borrows the paper's precision), so the median
 // error is ~0.01 mm and the RMS is dominated by the page's edges and ink interiors. The bounds
-// (median 0.03, RMS 0.06, p99 0.2 mm) are the issue's; they leave a factor 2-4 of margin.
+// (median 0.03, RMS 0.06, p99 0.2 mm) are our bars; they leave a factor 2-4 of margin.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -202,7 +202,7 @@ TEST(CurvatureBias, TwicingBringsARipplesCrestsBackAndLeavesAFlatPageAsItWas) {
   EXPECT_LE(flat.median_mm, 1.05 * flat_plain.median_mm);
 }
 
-// The hard case as the issue states it: a board to the page's edges, half the page dark ink.
+// The hard case as we state it: a board to the page's edges, half the page dark ink.
 TEST(FullBleedBoard, HalfThePageInkStillMeetsTheBar) {
   TextureOptions texture;
   texture.margin_mm = 0;

@@ -37,13 +37,15 @@ nlohmann::json ReadJson(const std::string& path) {
 }
 
 // A scene on the quick rig: a leaf on the dark table (the station tests' scan), an open book,
-// a leaf in a paper frame; `lit`: under studio lamps and a projector whose light falls off as a
-// real one's, with extra raking lights, processed with the projector's flat field and the
-// lamps' studio field (the albedo and the reflectance).
+// a leaf in a paper frame; lit (under studio lamps and a projector whose light falls off as a
+// real one's), with extra raking lights, processed with the projector's flat field (the
+// albedo) and the lamps' studio field (the reflectance).
 struct Scene {
   const char* name;
   bool spread, frame;
-  int raking = 0;  // Extra raking lights (with the fields).
+  int raking = 0;  // Extra raking lights.
+  bool flat_field = false, studio_field = false;
+  bool Lit() const { return raking > 0 || flat_field || studio_field; }
 };
 
 // The light of the lit scenes.
@@ -60,7 +62,7 @@ LightOptions StudioLight() {
 // `vellum calibrate studio` measure them.
 PipelineOptions SceneOptionsFor(const Scene& scene) {
   PipelineOptions options;
-  if (scene.raking == 0) return options;
+  if (!scene.flat_field && !scene.studio_field) return options;
   static const PipelineOptions lit = [] {
     TextureOptions plain;
     plain.kind = TextureKind::kPlain;
@@ -83,11 +85,13 @@ PipelineOptions SceneOptionsFor(const Scene& scene) {
     if (!s.ok()) throw std::runtime_error("the fields: " + s.message());
     return o;
   }();
-  return lit;
+  if (scene.flat_field) options.flat_field = lit.flat_field;
+  if (scene.studio_field) options.studio_field = lit.studio_field;
+  return options;
 }
 
 Scan SceneScan(const Scene& scene) {
-  if (!scene.spread && !scene.frame && scene.raking == 0) return SmallScan();
+  if (!scene.spread && !scene.frame && !scene.Lit()) return SmallScan();
   PageOptions page;
   page.shape = scene.spread ? PageShape::kFlat : PageShape::kCurl;
   if (scene.spread) page.size_mm = {170.0, 230.0};
@@ -95,8 +99,8 @@ Scan SceneScan(const Scene& scene) {
   options.spread = scene.spread;
   options.frame = scene.frame;
   TextureOptions texture;
-  if (scene.raking > 0) texture.kind = TextureKind::kText;  // Ink: the albedo is not even.
-  const LightOptions light = scene.raking > 0 ? StudioLight() : LightOptions();
+  if (scene.Lit()) texture.kind = TextureKind::kText;  // Ink: the albedo is not even.
+  const LightOptions light = scene.Lit() ? StudioLight() : LightOptions();
   const SimulatedScan sim = SimulateScan(QuickRig(), page, texture, options, 7, light);
   Scan scan = AsScan(sim);
   if (scene.raking > 0) scan.lights = RenderLights(*sim.gantry, RakingLights(scene.raking), 7);
@@ -190,11 +194,11 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   EXPECT_EQ(Files(folder.results()), files);
   const bool spread = GetParam().spread;
   std::vector<std::string> expected = {"restored.tif", "restored.json", "mesh.ply", "flat.ply"};
-  if (GetParam().raking > 0) {
-    // Every product of the lit scan: the albedo, the reflectance, each light, the normals.
-    expected.insert(expected.end(), {"restored_albedo.tif", "restored_reflectance.tif",
-                                     "lights/raking-000.tif", "normals.tif"});
-  }
+  // Every product of a lit scan: the albedo, the reflectance, each light, the normals.
+  if (GetParam().flat_field) expected.push_back("restored_albedo.tif");
+  if (GetParam().studio_field) expected.push_back("restored_reflectance.tif");
+  if (GetParam().raking > 0) expected.push_back("lights/raking-000.tif");
+  if (GetParam().raking >= 3) expected.push_back("normals.tif");
   for (const std::string& file : expected) {
     const std::string page = spread ? "pages/left/" + file : file;
     EXPECT_EQ(files.count(page), 1u) << page;
@@ -243,8 +247,10 @@ INSTANTIATE_TEST_SUITE_P(Scenes, Chain,
                          ::testing::Values(Scene{"leaf", false, false},
                                            Scene{"spread", true, false},
                                            Scene{"frame", false, true},
-                                           Scene{"lit", false, false, 6},
-                                           Scene{"lit_spread", true, false, 3}),
+                                           Scene{"flat_field", false, false, 0, true, false},
+                                           Scene{"studio_field", false, true, 0, false, true},
+                                           Scene{"lights", false, false, 6, false, false},
+                                           Scene{"lit_spread", true, false, 3, true, true}),
                          [](const auto& info) { return std::string(info.param.name); });
 
 }  // namespace

@@ -8,7 +8,7 @@
 //
 // Why the bounds hold: the same as restoration_test (nodes good to ~0.01 mm, the warp's error
 // below 0.05 px where the sheet's grid is chosen from the shape), so 0.15 px and 0.04 mm against
-// the control and 0.08 mm RMS against the true page (the bars) leave a margin; corners
+// the control and 0.08 mm RMS against the true page (our bars) leave a margin; corners
 // are measured where the control's are (sub-pixel refinement from the page's true layout), so a
 // hole in the leaf costs the corners it covers, not the measurement.
 #include <gtest/gtest.h>
@@ -585,7 +585,7 @@ TEST(Masters, ACurledLeafFromThe24MpCameraAt400PpiMeetsTheBars) {
 // the restoration takes 2 x 2 samples a restored pixel at the page's own sampling, which
 // halves it where the page faces the projector; the normals come from 9 x 9 pixel windows of
 // points good to ~0.02 mm, a few hundredths of a degree. The residue is the noise where the
-// page turns from the projector (less light, more noise), under 1% (the bar) over the
+// page turns from the projector (less light, more noise), under 1% (our bar) over the
 // leaf. The texture's unevenness is the lamps' shading, 10-20%.
 TEST(Shading, TheRestoredAlbedoOfAPlainLeafIsEvenWhereItsTextureIsShaded) {
   LightOptions light;

@@ -6,7 +6,7 @@
 // points whose own noise is ~0.01-0.03 mm, so each node is good to ~0.01 mm; chords of the
 // curved page are shorter than its arcs by h^2 / (24 R^2) (0.02% at R = 60 mm, 0.4% at the
 // fold's 15 mm ridge over ~1.5 cells), a few hundredths of a mm over the page. RMS <= 0.08 mm
-// and mean edge error <= 0.3% (the issue's bars) leave a factor 3 or more.
+// and mean edge error <= 0.3% (our bars) leave a factor 3 or more.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -78,7 +78,7 @@ INSTANTIATE_TEST_SUITE_P(Developable, FlattenAccuracy,
                                            PageShape::kCone),
                          [](const auto& info) { return std::string(ToString(info.param)); });
 
-// Fine sheets (the issue asks for up to at least 300 x 300): 200 x 150 (cells of about 1 mm)
+// Fine sheets (we ask for up to at least 300 x 300): 200 x 150 (cells of about 1 mm)
 // and 300 x 300, each with most of its nodes on the page.
 struct FineSheet {
   cv::Size grid;

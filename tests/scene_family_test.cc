@@ -200,7 +200,7 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
   return finish();
 }
 
-// The scenes the issue names, each to meet every bar with no warning: a curled, folded, waved and
+// The scenes we name, each to meet every bar with no warning: a curled, folded, waved and
 // coned leaf lying with its rim 0, 0.05 and 0.1 mm above a dark table (albedo 0.15: the rim's
 // step at 0 mm is nothing, at 0.05 mm a tenth of a millimetre's noise on the table; the leaf's
 // look sets it apart), a 0.1 mm leaf on a support as bright as paper (0.8) and in a paper frame

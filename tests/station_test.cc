@@ -683,7 +683,7 @@ TEST_F(StationTest, StaleAndUnknownCapturesAreRefusedAndTheArchiveIsUnchanged) {
 
 // Poisoned input. A scan whose scan.yaml claims a projector 2^31 pixels wide, left
 // pending from before a restart, and a CAPTURE claiming a projector 2^30 pixels wide: each ends
-// in a clear error within 5 s (the bar; before, both hung the decoder for good). The
+// in a clear error within 5 s (our bar; before, both hung the decoder for good). The
 // poisoned pending scan is parked, the scan of the poisoned capture fails at once (each marked
 // in raw/failed.txt; the capture is never recorded); a restarted decoder takes neither up again.
 // Then a capture with a pattern index beyond the count, and a CALIBRATION of another rig, each

@@ -33,7 +33,7 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
       sheets_(
           node, channel::kFlatMesh,
           [](const mesh_t& m, Sheet* sheet) {
-            return AddChunk(m, &sheet->mesh, &sheet->flat, &sheet->page);
+            return AddChunk(m, &sheet->mesh, &sheet->flat, &sheet->page, &sheet->rests);
           },
           [this](int64_t id, Sheet* sheet, const mesh_t& last) {
             std::swap(sheet_, *sheet);
@@ -121,6 +121,9 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   if (!sheet_.mesh.status.ok()) {
     return node_->FailScan(id, "FLAT_MESH: " + sheet_.mesh.status.message());
   }
+  // The springs' rest lengths as the flattener measured them (along the surface).
+  s = SetRestLengths(sheet_.rests, &sheet_.mesh);
+  if (!s.ok()) return node_->FailScan(id, s.message());
   if (NeedsCloud()) {
     const Cloud& cloud = clouds_.at(id);
     if (cloud.points.size() != texture.size()) {

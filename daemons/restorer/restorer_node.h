@@ -49,6 +49,7 @@ class RestorerNode {
     Mesh mesh;
     FlattenResult flat;  // Its flat positions and strains.
     SheetPage page;
+    SheetRests rests;  // Its springs' rest lengths.
   };
   // The pages of a scan restored so far.
   struct Pages {

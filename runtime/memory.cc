@@ -1,4 +1,4 @@
-#include "io/memory.h"
+#include "runtime/memory.h"
 
 #include <malloc.h>
 #include <sys/mman.h>
