@@ -69,6 +69,14 @@ double PageShare(Step step, bool slow) {
   }
 }
 
+// The report of a step asked of the wrong runner: it runs once per `kind` ("page", "scan").
+StageReport Misplaced(Step step, const char* kind) {
+  StageReport report;
+  report.stage = ToString(step);
+  report.status = Status::Error(std::string("the ") + ToString(step) + " step runs per " + kind);
+  return report;
+}
+
 // The pages of the outline, named, with their masks, when there are none yet.
 void MakePages(ScanWork* work) {
   if (!work->pages.empty()) return;
@@ -213,10 +221,7 @@ StageReport Pipeline::RunStep(Step step, ScanWork* work) const {
     default:
       break;
   }
-  StageReport report;
-  report.stage = ToString(step);
-  report.status = Status::Error(std::string("the ") + ToString(step) + " step runs per page");
-  return report;
+  return Misplaced(step, "page");
 }
 
 StageReport Pipeline::RunPageStep(Step step, PageResult* page, ScanWork* work) const {
@@ -236,10 +241,7 @@ StageReport Pipeline::RunPageStep(Step step, PageResult* page, ScanWork* work) c
     default:
       break;
   }
-  StageReport report;
-  report.stage = ToString(step);
-  report.status = Status::Error(std::string("the ") + ToString(step) + " step runs per scan");
-  return report;
+  return Misplaced(step, "scan");
 }
 
 }  // namespace vellum

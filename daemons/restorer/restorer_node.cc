@@ -140,7 +140,6 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   }
   const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
   work.results = folder.results();
-  work.name = "";
   s = MakeDirectories(work.results);
   if (!s.ok()) return node_->FailScan(id, s.message());
   // The pipeline's page steps from the restore on: the page through its sheet, then its albedo,
