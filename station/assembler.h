@@ -4,8 +4,8 @@
 // daemon paused), the missing ones are asked again on RESEND, every ask_after_s, and the
 // publisher sends them again ("products recovered"). It is given up, with an error naming the
 // missing chunks ("products lost"), when the next scan's chunks begin, when nothing came for
-// timeout_s, or when its chunks start again unasked (a re-send: the product is then built from
-// the new send alone, never from two).
+// timeout_s (by the node's clock), or when its chunks start again unasked (a re-send: the product
+// is then built from the new send alone, never from two).
 #pragma once
 
 #include <algorithm>
@@ -61,17 +61,16 @@ class Assembler {
   void Tick() {
     node_->Post([this] {
       AskAwaited();
-      if (chunks_.Stale(timeout_s_)) {
+      const Clock::time_point now = node_->Now();
+      if (chunks_.Stale(timeout_s_, now)) {
         GiveUp("after " + std::to_string(static_cast<int>(timeout_s_)) + " s");
-      } else if (chunks_.Stale(ask_after_s_) && std::chrono::steady_clock::now() - asked_ >
-                                                    std::chrono::duration<double>(ask_after_s_)) {
+      } else if (chunks_.Stale(ask_after_s_, now) && now - asked_ > Seconds(ask_after_s_)) {
         Ask();
       }
     });
   }
 
  private:
-  using Clock = std::chrono::steady_clock;
   // A product announced by its sender of which no chunk came.
   struct Awaited {
     int64_t scan_id = 0;
@@ -84,13 +83,14 @@ class Assembler {
         std::find(seen_.begin(), seen_.end(), scan_id) != seen_.end()) {
       return;  // It came, or is coming.
     }
-    awaited_.push_back({scan_id, Clock::now(), Clock::now(), 0});
+    const Clock::time_point now = node_->Now();
+    awaited_.push_back({scan_id, now, now, 0});
   }
 
   void AskAwaited() {
-    const auto now = Clock::now();
+    const Clock::time_point now = node_->Now();
     for (auto it = awaited_.begin(); it != awaited_.end();) {
-      if (now - it->since > std::chrono::duration<double>(timeout_s_)) {
+      if (now - it->since > Seconds(timeout_s_)) {
         node_->Count(counter::kProductsLost);
         node_->Error("scan " + std::to_string(it->scan_id) + ": " + channel_ +
                          " announced by its sender and never came, asked again " +
@@ -99,7 +99,7 @@ class Assembler {
         it = awaited_.erase(it);
         continue;
       }
-      if (now - it->asked > std::chrono::duration<double>(ask_after_s_)) {
+      if (now - it->asked > Seconds(ask_after_s_)) {
         Request(it->scan_id, 0, {});  // All of it.
         node_->Count("products asked again");
         it->asked = now;
@@ -126,7 +126,7 @@ class Assembler {
     std::vector<int32_t> missing = chunks_.MissingIndices();
     node_->Count("chunks asked again", static_cast<int64_t>(missing.size()));
     Request(chunks_.scan_id(), known_seq_, std::move(missing));
-    asked_ = std::chrono::steady_clock::now();
+    asked_ = node_->Now();
     ++asks_;
   }
 
@@ -180,7 +180,7 @@ class Assembler {
       if (!chunks_.Complete()) GiveUp("when scan " + std::to_string(msg.scan_id) + " began");
       StartOver();
     }
-    Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count);
+    Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count, node_->Now());
     if (s.ok() && chunks_.received() == 1) Began(msg);
     if (s.ok()) s = add_(msg, &product_);
     if (!s.ok()) {

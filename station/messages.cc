@@ -325,7 +325,7 @@ std::vector<std::pair<int, int>> RowChunks(int rows, size_t bytes_per_row, size_
   return chunks;
 }
 
-Status ChunkSet::Add(int64_t scan_id, int index, int count) {
+Status ChunkSet::Add(int64_t scan_id, int index, int count, Clock::time_point now) {
   if (count <= 0 || index < 0 || index >= count) {
     return Status::Error("chunk " + std::to_string(index) + " of " + std::to_string(count) +
                          " is not a valid chunk number");
@@ -340,15 +340,14 @@ Status ChunkSet::Add(int64_t scan_id, int index, int count) {
                          std::to_string(count_) + " chunks");
   }
   if (have_[index]) return Status::Error("chunk " + std::to_string(index) + " came twice");
-  last_add_ = std::chrono::steady_clock::now();
+  last_add_ = now;
   have_[index] = true;
   ++received_;
   return Status::Ok();
 }
 
-bool ChunkSet::Stale(double seconds) const {
-  return Started() && !Complete() &&
-         std::chrono::steady_clock::now() - last_add_ > std::chrono::duration<double>(seconds);
+bool ChunkSet::Stale(double seconds, Clock::time_point now) const {
+  return Started() && !Complete() && now - last_add_ > Seconds(seconds);
 }
 
 std::string ChunkSet::Missing() const {

@@ -20,6 +20,7 @@
 #include "core/patterns/scan.h"
 #include "pipeline/context.h"
 #include "pipeline/report.h"
+#include "station/clock.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
 #include "vellum/correspondence_t.hpp"
@@ -79,10 +80,11 @@ std::vector<std::pair<int, int>> RowChunks(int rows, size_t bytes_per_row,
 class ChunkSet {
  public:
   // Starts on the first chunk; later chunks must agree on the count. Duplicates are errors.
-  Status Add(int64_t scan_id, int index, int count);
+  // `now`: when it came (the receiving node's clock).
+  Status Add(int64_t scan_id, int index, int count, Clock::time_point now);
   bool Started() const { return count_ > 0; }
-  // Started, incomplete, and no chunk for longer than `seconds`.
-  bool Stale(double seconds) const;
+  // Started, incomplete, and no chunk for longer than `seconds` before `now`.
+  bool Stale(double seconds, Clock::time_point now) const;
   bool Complete() const { return Started() && received_ == count_; }
   int64_t scan_id() const { return scan_id_; }
   // Whether chunk `index` of this scan came already.
@@ -99,7 +101,7 @@ class ChunkSet {
   int64_t scan_id_ = 0;
   int count_ = 0, received_ = 0;
   std::vector<bool> have_;
-  std::chrono::steady_clock::time_point last_add_;
+  Clock::time_point last_add_;
 };
 
 // A stage's report as it travels with the products (only the reports of stages that

@@ -84,8 +84,11 @@ Node::Node(std::string process, const std::string& url)
   worker_ = std::thread([this] { WorkerLoop(); });
 }
 
-Node::Node(std::string process, lcm::LCM* lcm)
-    : process_(std::move(process)), lcm_(lcm), seq_start_(RandomSeqStart()) {
+Node::Node(std::string process, lcm::LCM* lcm, const Clock* clock)
+    : process_(std::move(process)),
+      clock_(clock ? clock : &Clock::Steady()),
+      lcm_(lcm),
+      seq_start_(RandomSeqStart()) {
   Subscribe<resend_request_t>(channel::kResend,
                               [this](const resend_request_t& msg) { OnResend(msg); });
   worker_ = std::thread([this] { WorkerLoop(); });

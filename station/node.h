@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "station/clock.h"
 #include "station/message_versions.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
@@ -112,7 +113,9 @@ class Node {
   Node(std::string process, const std::string& url);
   // Shares `lcm` (not owned; it outlives the node): several nodes in one process on one bus,
   // as the in-process tests drive them on memq://.
-  Node(std::string process, lcm::LCM* lcm);
+  // `clock` (not owned; it outlives the node) is the time its timeouts go by: a test's
+  // SteppedClock, or the steady clock when null.
+  Node(std::string process, lcm::LCM* lcm, const Clock* clock = nullptr);
   ~Node();
   Node(const Node&) = delete;
   Node& operator=(const Node&) = delete;
@@ -124,6 +127,9 @@ class Node {
   const std::string& station() const { return station_; }
   void SetStation(const std::string& station) { station_ = station; }
   lcm::LCM& lcm() { return *lcm_; }
+  // The present by the node's clock (station/clock.h): what every timeout of a daemon's node
+  // measures from.
+  Clock::time_point Now() const { return clock_->Now(); }
 
   // Calls handler with each decoded message of `channel`, on the LCM thread. Messages that do
   // not decode as Msg are reported as errors (with their size) and dropped; a jump in a
@@ -262,6 +268,7 @@ class Node {
   void WorkerLoop();
 
   std::string process_;
+  const Clock* clock_ = &Clock::Steady();
   std::string station_ = kDefaultStation;
   std::unique_ptr<lcm::LCM> own_lcm_;  // Null when the bus is shared.
   lcm::LCM* lcm_;

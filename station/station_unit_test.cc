@@ -120,7 +120,7 @@ TEST(Messages, CorrespondenceChunksStayUnderTheLimitAndReassembleBitExactly) {
     EXPECT_EQ(carried.object, ObjectKind::kBook);
     EXPECT_EQ(carried.calibration_sha256, context.calibration_sha256);
     EXPECT_EQ(carried.scale_error_percent, 0.03);
-    ASSERT_TRUE(set.Add(c.scan_id, c.chunk_index, c.chunk_count).ok());
+    ASSERT_TRUE(set.Add(c.scan_id, c.chunk_index, c.chunk_count, Clock::time_point()).ok());
     ASSERT_TRUE(AddChunk(c, &back, &projector).ok());
   }
   EXPECT_EQ(back.stats.lit, 1500000);
@@ -155,16 +155,23 @@ TEST(Messages, ALengthFieldLargerThanTheMessageIsRefusedBeforeAllocating) {
   EXPECT_LT(back.xyz.capacity(), 1000u);  // Refused before sizing the array.
 }
 
-TEST(Messages, ChunkSetNamesMissingAndDuplicateChunks) {
+TEST(Messages, ChunkSetNamesMissingAndDuplicateChunksAndGoesStaleByTheClockItIsGiven) {
+  SteppedClock clock;
   ChunkSet set;
-  ASSERT_TRUE(set.Add(3, 0, 5).ok());
-  ASSERT_TRUE(set.Add(3, 4, 5).ok());
+  ASSERT_TRUE(set.Add(3, 0, 5, clock.Now()).ok());
+  clock.Advance(2);
+  ASSERT_TRUE(set.Add(3, 4, 5, clock.Now()).ok());
   EXPECT_FALSE(set.Complete());
   EXPECT_EQ(set.Missing(), "chunks 1, 2, 3 of 5 missing");
-  EXPECT_NE(set.Add(3, 4, 5).message().find("came twice"), std::string::npos);
-  EXPECT_FALSE(set.Add(3, 1, 6).ok());  // Another count.
-  EXPECT_FALSE(set.Add(4, 1, 5).ok());  // Another scan.
-  EXPECT_FALSE(set.Add(3, 5, 5).ok());  // Out of range.
+  EXPECT_NE(set.Add(3, 4, 5, clock.Now()).message().find("came twice"), std::string::npos);
+  EXPECT_FALSE(set.Add(3, 1, 6, clock.Now()).ok());  // Another count.
+  EXPECT_FALSE(set.Add(4, 1, 5, clock.Now()).ok());  // Another scan.
+  EXPECT_FALSE(set.Add(3, 5, 5, clock.Now()).ok());  // Out of range.
+  // Stale counts from the last chunk that came, not the first.
+  clock.Advance(0.9);
+  EXPECT_FALSE(set.Stale(1, clock.Now()));
+  clock.Advance(0.2);
+  EXPECT_TRUE(set.Stale(1, clock.Now()));
 }
 
 TEST(Messages, PointCloudAndFlatMeshRoundTripToTheSameSheet) {
@@ -722,24 +729,28 @@ TEST(Assembler, AProductSentAgainMidwayIsBuiltFromTheNewSendAlone) {
       << statuses.back().last_error;
 }
 
-// A daemon receiving TEXTURE on `bus` (asking again after 50 ms, giving up after 30 s), and
-// the products it made whole.
+// A daemon receiving TEXTURE on `bus` (asking again after 1 s, giving up after 10 s, by a clock
+// the test steps), and the products it made whole.
 struct TextureReceiver {
   explicit TextureReceiver(lcm::LCM* bus)
-      : node("vellum-unit", bus),
+      : node("vellum-unit", bus, &clock),
         assembler(
             &node, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
             [this](int64_t, cv::Mat* image, const texture_t&) {
               const std::lock_guard<std::mutex> lock(mutex);
               products.push_back(image->clone());
             },
-            /*timeout_s=*/30, /*ask_after_s=*/0.05) {}
-  // Handles the bus and ticks until a product is whole (30 s at most); the products.
-  std::vector<cv::Mat> TickUntilWhole(lcm::LCM* bus) {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (Products().empty() && std::chrono::steady_clock::now() < deadline) {
-      bus->handleTimeout(10);
+            /*timeout_s=*/10, /*ask_after_s=*/1) {}
+  // Handles the bus and ticks until a product is whole or `seconds` have passed on the clock,
+  // which moves a quarter of a second whenever the bus and the worker are quiet (so that what
+  // was asked again comes before the next ask, however slow the machine); the products.
+  std::vector<cv::Mat> TickUntilWhole(lcm::LCM* bus, double seconds = 30) {
+    const Clock::time_point end = clock.Now() + Seconds(seconds);
+    while (Products().empty() && clock.Now() < end) {
+      const int handled = bus->handleTimeout(10);
       assembler.Tick();
+      node.Drain();
+      if (handled == 0) clock.Advance(0.25);
     }
     node.Drain();
     return Products();
@@ -749,6 +760,7 @@ struct TextureReceiver {
     return products;
   }
 
+  SteppedClock clock;
   Node node;
   std::mutex mutex;
   std::vector<cv::Mat> products;  // Guarded by mutex (the worker adds).
@@ -774,7 +786,7 @@ TEST(Assembler, ChunksTheBusLostAreAskedAgainAndTheProductIsRecovered) {
   bus.publish("TEXTURE", &chunks[0]);  // Two chunks came through, as sent (their seq too).
   bus.publish("TEXTURE", &chunks[2]);
   const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
-  ASSERT_EQ(products.size(), 1u) << "not recovered within 30 s";
+  ASSERT_EQ(products.size(), 1u) << "not recovered";
   EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
   EXPECT_EQ(r.node.Counter("products recovered"), 1);
   EXPECT_EQ(r.node.Counter("products lost"), 0);
@@ -800,11 +812,52 @@ TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
   r.assembler.AwaitAnnounced("TEXTURE");
   AnnounceHandedOn(&sender, 12, "TEXTURE");
   const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
-  ASSERT_EQ(products.size(), 1u) << "not recovered within 30 s";
+  ASSERT_EQ(products.size(), 1u) << "not recovered";
   EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
   EXPECT_GE(r.node.Counter("products asked again"), 1);
   EXPECT_EQ(r.node.Counter("products recovered"), 1);
   EXPECT_EQ(sender.Counter("chunks sent again"), static_cast<int64_t>(chunks.size()));
+}
+
+// What no one can send again (its sender forgot it, or is gone) is given up after the timeout
+// by the receiver's clock, with the chunks it missed and the times it asked named, and counted
+// as lost: a product whose chunks stopped, and a product announced of which none came. Before
+// the timeout, neither is given up, however long the machine took to get there.
+TEST(Assembler, WhatNoOneSendsAgainIsGivenUpAfterTheTimeoutNamingWhatIsMissing) {
+  lcm::LCM bus("memq://");
+  cv::Mat texture(1200, 1600, CV_8UC3, cv::Scalar(1, 2, 3));
+  std::vector<texture_t> chunks = TextureMessages(14, texture);
+  ASSERT_GE(chunks.size(), 3u);
+  TextureReceiver r(&bus);
+  r.assembler.AwaitAnnounced("TEXTURE");
+  std::vector<status_t> statuses;
+  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
+  auto last_error = [&] { return statuses.empty() ? std::string() : statuses.back().last_error; };
+  chunks[0].station = kDefaultStation;
+  bus.publish("TEXTURE", &chunks[0]);  // One chunk of scan 14; no sender holds it.
+  EXPECT_TRUE(r.TickUntilWhole(&bus, 9.5).empty());
+  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 0) << last_error();
+  // Asked again about every second (each ask waits a second, the clock moves in quarters).
+  EXPECT_GE(r.node.Counter("chunks asked again"), 6 * static_cast<int64_t>(chunks.size() - 1));
+  EXPECT_TRUE(r.TickUntilWhole(&bus, 1).empty());
+  for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
+  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 1);
+  EXPECT_NE(last_error().find("scan 14: TEXTURE incomplete (chunks 1, "), std::string::npos)
+      << last_error();
+  EXPECT_NE(last_error().find("after 10 s, asked again"), std::string::npos) << last_error();
+
+  // Scan 15 announced by its sender; not a chunk comes.
+  Node sender("vellum-sender", &bus);
+  AnnounceHandedOn(&sender, 15, "TEXTURE");
+  EXPECT_TRUE(r.TickUntilWhole(&bus, 9.5).empty());
+  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 1) << last_error();
+  EXPECT_GE(r.node.Counter("products asked again"), 6);
+  EXPECT_TRUE(r.TickUntilWhole(&bus, 1).empty());
+  for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
+  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 2);
+  EXPECT_NE(last_error().find("scan 15: TEXTURE announced by its sender and never came"),
+            std::string::npos)
+      << last_error();
 }
 
 // A hung job on the worker (a stage that never returns) is reported as stuck and

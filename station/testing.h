@@ -1,6 +1,7 @@
 // The station on one in-process bus, for unit tests of the daemons' nodes: LCM's memq://
 // provider, nodes that share it (station::Node over a shared handle), a probe that records what
-// they publish, and a pump that handles messages until a condition holds.
+// they publish, a clock the test steps (its nodes' timeouts), and a pump that handles messages
+// until a condition holds.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -36,6 +37,10 @@ class MemqBus {
   MemqBus() : lcm_("memq://"), probe_("vellum-test", &lcm_) {}
 
   lcm::LCM& lcm() { return lcm_; }
+  // The time the test's nodes go by, when made as Node(process, &bus.lcm(), &bus.clock()): it
+  // stands still unless the test moves it (StepUntil), so that a timeout fires when the test
+  // says and never because a loaded machine was slow.
+  SteppedClock& clock() { return clock_; }
   // The test's own node: publishes as "vellum-test".
   Node& probe() { return probe_; }
 
@@ -52,6 +57,24 @@ class MemqBus {
       for (const auto& tick : ticks_) tick();
     }
     return true;
+  }
+
+  // As RunUntil, and the clock moves `step_s` whenever no message came for 5 ms (what was sent
+  // has been handled), up to `most_s` in all; false if `done` does not hold by then.
+  bool StepUntil(const std::function<bool()>& done, double step_s, double most_s) {
+    const Clock::time_point end = clock_.Now() + Seconds(most_s);
+    const auto real_end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!done()) {
+      if (clock_.Now() > end || std::chrono::steady_clock::now() > real_end) return false;
+      const bool quiet = lcm_.handleTimeout(5) == 0;
+      for (const auto& tick : ticks_) tick();
+      if (quiet) clock_.Advance(step_s);
+    }
+    return true;
+  }
+  // Lets `seconds` pass on the clock, handling messages and ticking, as StepUntil does.
+  void StepFor(double seconds, double step_s = 0.1) {
+    StepUntil([] { return false; }, step_s, seconds);
   }
 
   // Records every message of `channel` (decoded as Msg) from now on.
@@ -83,6 +106,7 @@ class MemqBus {
   }
 
  private:
+  SteppedClock clock_;
   lcm::LCM lcm_;
   Node probe_;
   std::vector<std::function<void()>> ticks_;

@@ -19,16 +19,15 @@ CameraNode::CameraNode(Node* node, std::unique_ptr<Camera> camera, const CameraN
     : node_(node), camera_(std::move(camera)), preview_period_(1.0 / options.preview_hz) {
   node->Log(camera_->Describe());
   node->Subscribe<pattern_shown_t>(channel::kPatternShown, [this](const pattern_shown_t& m) {
-    busy_until_ = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+    busy_until_ = node_->Now() + std::chrono::seconds(2);
     node_->Post([this, m] { OnShown(m); }, "a PATTERN_SHOWN");
   });
 }
 
 void CameraNode::Tick() {
-  const auto now = std::chrono::steady_clock::now();
+  const auto now = node_->Now();
   if (now < busy_until_ || now < next_preview_ || node_->Pending() > 0) return;
-  next_preview_ =
-      now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(preview_period_);
+  next_preview_ = now + std::chrono::duration_cast<Clock::duration>(preview_period_);
   node_->Post([this] {
     cv::Mat image;
     int64_t exposure = 0;

@@ -34,7 +34,7 @@ class CameraNode {
   std::unique_ptr<Camera> camera_;  // Worker thread only (after construction).
   std::chrono::duration<double> preview_period_;
   // LCM thread only:
-  std::chrono::steady_clock::time_point busy_until_, next_preview_;
+  Clock::time_point busy_until_, next_preview_;
 };
 
 }  // namespace vellum::station

@@ -44,7 +44,7 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
   node->Subscribe<scan_started_t>(channel::kScanStarted, [this](const scan_started_t& msg) {
     if (!Admitted(gate_.Start(msg), msg.scan_id)) return;  // That scan cannot be recorded.
     node_->Count("scans started");
-    last_capture_ = std::chrono::steady_clock::now();  // The texture is awaited from now.
+    last_capture_ = node_->Now();  // The texture is awaited from now.
     // The scan's folder, named after what is scanned; found by its id from here on. A retake of
     // a folio sets the earlier attempts aside (kept whole).
     const std::string slug = IdentitySlug(FromMessage(msg.identity));
@@ -98,14 +98,14 @@ DecoderNode::DecoderNode(Node* node, const DecoderNodeOptions& options)
       node_->Log("scan " + std::to_string(msg.scan_id) + ": taken up again after a restart");
     if (!Log(channel::kCapture, msg.scan_id, msg.utime, Encode(msg))) return;
     auto copy = std::make_shared<capture_t>(msg);
-    last_capture_ = std::chrono::steady_clock::now();
+    last_capture_ = node_->Now();
     awaiting_light_ = false;
     node_->Post([this, copy] { OnCapture(*copy); }, "a CAPTURE");
   });
   node->Subscribe<light_t>(channel::kLightRequest, [this](const light_t& msg) {
     if (!gate_.Holds(msg.scan_id, msg.session)) return;
     awaiting_light_ = msg.index >= 0;
-    last_capture_ = std::chrono::steady_clock::now();
+    last_capture_ = node_->Now();
   });
   node->Subscribe<calibration_t>(channel::kCalibration, [this](const calibration_t& msg) {
     if (!Admitted(gate_.AdmitCalibration(msg), 0)) return;
@@ -120,9 +120,9 @@ bool DecoderNode::Admitted(const ScanGate::Decision& d, int64_t error_scan_id) {
   if (d.why.empty()) return false;  // Nothing to record, nothing wrong.
   node_->Count(d.counter);
   // A flood of refusals is counted, and reported at most once a second per reason.
-  const auto now = std::chrono::steady_clock::now();
+  const auto now = node_->Now();
   auto& last = refusal_reported_[d.counter];
-  if (last == std::chrono::steady_clock::time_point() || now - last >= std::chrono::seconds(1)) {
+  if (last == Clock::time_point() || now - last >= std::chrono::seconds(1)) {
     last = now;
     node_->Error(d.why, error_scan_id);
   }
@@ -131,8 +131,7 @@ bool DecoderNode::Admitted(const ScanGate::Decision& d, int64_t error_scan_id) {
 
 void DecoderNode::Tick() {
   if (!waiting_ || awaiting_light_ ||
-      std::chrono::steady_clock::now() - last_capture_ <
-          std::chrono::duration<double>(options_.scan_timeout_s)) {
+      node_->Now() - last_capture_ < std::chrono::duration<double>(options_.scan_timeout_s)) {
     return;
   }
   waiting_ = false;

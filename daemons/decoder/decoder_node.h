@@ -86,8 +86,8 @@ class DecoderNode {
   ScanGate gate_;  // Decides on the LCM thread; the worker closes scans it gives up.
   // LCM thread only:
   CaptureLog log_;
-  std::map<std::string, std::chrono::steady_clock::time_point> refusal_reported_;  // By reason.
-  std::chrono::steady_clock::time_point last_capture_;
+  std::map<std::string, Clock::time_point> refusal_reported_;  // By reason.
+  Clock::time_point last_capture_;
   // The scan's projector waits for an extra light (LIGHT_REQUEST; an operator switching by hand
   // may take minutes): no timeout until the light's capture, or the lights off (the projector's
   // own light timeout fails the scan then, and this one runs again).

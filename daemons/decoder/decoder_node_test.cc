@@ -79,7 +79,7 @@ class DecoderNodeTest : public ::testing::Test {
 };
 
 TEST_F(DecoderNodeTest, RecordsAScanAndSendsItDownTheChain) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   auto texture = bus_.Record<texture_t>(channel::kTexture);
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
@@ -134,7 +134,7 @@ TEST_F(DecoderNodeTest, RecordsAScanAndSendsItDownTheChain) {
 // exactly, and the log keeps it (a replay or an export finds the same); so does what the operator
 // says the object is.
 TEST_F(DecoderNodeTest, TheOperatorsLeafHintIsRecordedInCameraPixels) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
   Scan hinted = SmallScan();
@@ -177,7 +177,7 @@ TEST_F(DecoderNodeTest, TheOperatorsLeafHintIsRecordedInCameraPixels) {
 }
 
 TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   bus_.Watch("vellum-decoder");
   Start(21, 7);
@@ -214,13 +214,22 @@ TEST_F(DecoderNodeTest, BadCapturesAreReportedAndTheNodeGoesOn) {
 }
 
 TEST_F(DecoderNodeTest, AnIncompleteScanIsGivenUpNamingWhatIsMissingAndTheNextIsWhole) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   bus_.AddTick([&] { decoder.Tick(); });
   bus_.Watch("vellum-decoder");
   PublishScan(31, /*skip=*/4);
   const int total = static_cast<int>(SmallScan().frames.size()) + 1;
-  ASSERT_TRUE(bus_.WaitForError("vellum-decoder", "scan 31 failed: no capture for 1 s", 30))
+  // Not given up before its timeout (1 s) has passed on the node's clock...
+  bus_.StepFor(0.9);
+  EXPECT_EQ(node.Counter("scans failed"), 0) << bus_.Status("vellum-decoder").last_error;
+  // ...and given up once it has.
+  ASSERT_TRUE(bus_.StepUntil(
+      [&] {
+        return bus_.Status("vellum-decoder")
+                   .last_error.find("scan 31 failed: no capture for 1 s") != std::string::npos;
+      },
+      0.1, 1))
       << bus_.Status("vellum-decoder").last_error;
   const std::string error = bus_.Status("vellum-decoder").last_error;
   EXPECT_NE(error.find("1 of " + std::to_string(total) + " captures missing (4)"),
@@ -241,7 +250,7 @@ TEST_F(DecoderNodeTest, AnIncompleteScanIsGivenUpNamingWhatIsMissingAndTheNextIs
 // complete it, recorded as light_<name>.png and named in scan.yaml. After the lights are turned
 // off (LIGHT_REQUEST -1) with a light's capture still missing, the timeout runs again.
 TEST_F(DecoderNodeTest, AScanWaitingForALightIsNotGivenUpAndItsLightsAreRecorded) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   bus_.AddTick([&] { decoder.Tick(); });
   bus_.Watch("vellum-decoder");
@@ -274,9 +283,8 @@ TEST_F(DecoderNodeTest, AScanWaitingForALightIsNotGivenUpAndItsLightsAreRecorded
   };
   publish_scan(41, 4141, 0);
   request(41, 4141, 0);
-  // Three times the decoder's timeout (1 s) in silence: the scan waits for its light.
-  const auto start = std::chrono::steady_clock::now();
-  bus_.RunUntil([&] { return std::chrono::steady_clock::now() - start > std::chrono::seconds(3); });
+  // A minute, sixty times the decoder's timeout (1 s), in silence: the scan waits for its light.
+  bus_.StepFor(60, 1);
   EXPECT_EQ(node.Counter("scans failed"), 0) << bus_.Status("vellum-decoder").last_error;
   for (int k = 0; k < 2; ++k) {
     capture_t c = MakeCapture(scan, 41, patterns + k, NowUtime());
@@ -295,7 +303,12 @@ TEST_F(DecoderNodeTest, AScanWaitingForALightIsNotGivenUpAndItsLightsAreRecorded
   publish_scan(42, 4242, 1);
   request(42, 4242, 1);
   request(42, 4242, -1);
-  ASSERT_TRUE(bus_.WaitForError("vellum-decoder", "scan 42 failed: no capture for 1 s", 30))
+  ASSERT_TRUE(bus_.StepUntil(
+      [&] {
+        return bus_.Status("vellum-decoder")
+                   .last_error.find("scan 42 failed: no capture for 1 s") != std::string::npos;
+      },
+      0.1, 2))
       << bus_.Status("vellum-decoder").last_error;
   EXPECT_NE(bus_.Status("vellum-decoder").last_error.find("(light 1)"), std::string::npos)
       << bus_.Status("vellum-decoder").last_error;
@@ -304,7 +317,7 @@ TEST_F(DecoderNodeTest, AScanWaitingForALightIsNotGivenUpAndItsLightsAreRecorded
 // The supervisor in the decoder: a restarted daemon (a new pid in its heartbeat) is sent again
 // only the scans it held; a scan already past it is not processed twice.
 TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
   auto heartbeat = [&](const std::string& process, int32_t pid) { Heartbeat(process, pid); };
@@ -377,7 +390,7 @@ TEST_F(DecoderNodeTest, AScanThatLosesItsDaemonTwiceIsParked) {
   const ScanFolder folder = ScanFolder::For(data_, 42);
   bus_.Watch("vellum-decoder");
   {
-    Node node("vellum-decoder", &bus_.lcm());
+    Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
     DecoderNode decoder(&node, options_);
     heartbeat("vellum-triangulator", 100);
     heartbeat("vellum-flattener", 200);
@@ -405,7 +418,7 @@ TEST_F(DecoderNodeTest, AScanThatLosesItsDaemonTwiceIsParked) {
     EXPECT_EQ(sent(42), 2);
   }
   // The decoder restarts: nothing is pending, so nothing goes down the chain.
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   heartbeat("vellum-triangulator", 104);
   heartbeat("vellum-flattener", 201);
@@ -419,7 +432,7 @@ TEST_F(DecoderNodeTest, AScanThatLosesItsDaemonTwiceIsParked) {
 // counter rises with the error) does not fail the scan: it is made again from its captures on
 // disk. Another error about a scan fails it, as before.
 TEST_F(DecoderNodeTest, AScanWhoseProductTheBusLostIsSentAgainAndOtherErrorsFailIt) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
   auto sent = [&](int64_t id) { return Sent(*correspondence, id); };
@@ -468,7 +481,7 @@ std::map<std::string, std::string> Snapshot(const std::string& dir) {
 // Scan identity: a capture is recorded only for a scan this station's projector
 // started, with its session; a finished scan is never reopened; unknown scans leave no folder.
 TEST_F(DecoderNodeTest, RecordsOnlyTheScansItsProjectorStartedAndNeverReopensOne) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   bus_.Watch("vellum-decoder");
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
@@ -516,7 +529,7 @@ TEST_F(DecoderNodeTest, RecordsOnlyTheScansItsProjectorStartedAndNeverReopensOne
 }
 
 TEST_F(DecoderNodeTest, ACaptureTwiceOrOfAnotherSessionIsNeverASilentChoice) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   bus_.Watch("vellum-decoder");
   // Scan 61 in progress: a capture of another session (another projector, a stale one) is
@@ -545,7 +558,7 @@ TEST_F(DecoderNodeTest, ACaptureTwiceOrOfAnotherSessionIsNeverASilentChoice) {
                                   &calibration, &id);
   EXPECT_NE(read.message().find("incomplete"), std::string::npos) << read.message();
   // A second decoder on the same data folder refuses to start, naming the first.
-  Node second_node("vellum-decoder", &bus_.lcm());
+  Node second_node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   try {
     DecoderNode two(&second_node, options_);
     ADD_FAILURE() << "a second decoder started on " << data_;
@@ -559,7 +572,7 @@ TEST_F(DecoderNodeTest, ACaptureTwiceOrOfAnotherSessionIsNeverASilentChoice) {
 // A CALIBRATION arriving in the middle of a scan never applies to it; the scan's
 // raw/calibration.yaml is the one it started with.
 TEST_F(DecoderNodeTest, ACalibrationMidScanIsRefusedAndTheScanKeepsItsOwn) {
-  Node node("vellum-decoder", &bus_.lcm());
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
   DecoderNode decoder(&node, options_);
   bus_.Watch("vellum-decoder");
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);

@@ -50,7 +50,7 @@ class FlattenerNodeTest : public ::testing::Test {
 };
 
 TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
-  Node node("vellum-flattener", &bus_.lcm());
+  Node node("vellum-flattener", &bus_.lcm(), &bus_.clock());
   FlattenerNode flattener(&node, options_);
   auto sheets = bus_.Record<mesh_t>(channel::kFlatMesh);
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
@@ -83,7 +83,7 @@ TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
 }
 
 TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
-  Node node("vellum-flattener", &bus_.lcm());
+  Node node("vellum-flattener", &bus_.lcm(), &bus_.clock());
   FlattenerNode flattener(&node, options_);
   bus_.Watch("vellum-flattener");
   PublishPoints(6);  // No TEXTURE for scan 6, and none on disk.

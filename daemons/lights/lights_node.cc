@@ -31,8 +31,7 @@ LightsNode::LightsNode(Node* node, std::unique_ptr<Lights> lights, const LightsN
 
 void LightsNode::Tick() {
   // The operator's lights are theirs to switch.
-  if (on_ >= 0 && !lights_->Source().empty() &&
-      std::chrono::steady_clock::now() - on_since_ > options_.max_on) {
+  if (on_ >= 0 && !lights_->Source().empty() && node_->Now() - on_since_ > options_.max_on) {
     const std::string name = options_.lights.lights[on_].name;
     const int64_t scan = scan_id_;
     AllOff("");
@@ -95,7 +94,7 @@ void LightsNode::OnRequest(const light_t& m) {
                         m.scan_id);
   }
   on_ = m.index;
-  on_since_ = std::chrono::steady_clock::now();
+  on_since_ = node_->Now();
   node_->Count("lights switched");
   light_t reply = m;
   reply.utime = 0;

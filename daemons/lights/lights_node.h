@@ -43,7 +43,7 @@ class LightsNode {
   int on_ = -1;
   bool by_hand_ = false;  // The operator switched a light of this scan (asked to end it).
   int64_t scan_id_ = 0, session_ = 0;
-  std::chrono::steady_clock::time_point on_since_;
+  Clock::time_point on_since_;
 };
 
 }  // namespace vellum::station

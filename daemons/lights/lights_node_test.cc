@@ -108,7 +108,7 @@ TEST(LightsNodeTest, ARelaySwitchesEachLightOnAloneAndOffWhenItsCaptureComes) {
       std::make_unique<RelayLights>(options.lights.channels, options.lights.studio_channel);
   ASSERT_TRUE(relay->Open(board.device()).ok());
   EXPECT_EQ(board.On(), (std::set<int>{0})) << "at start: the studio lamps on, the others off";
-  Node node("vellum-lights", &bus.lcm());
+  Node node("vellum-lights", &bus.lcm(), &bus.clock());
   LightsNode lights(&node, std::move(relay), options);
   bus.AddTick([&] { lights.Tick(); });
   auto on = bus.Record<light_t>(channel::kLightOn);
@@ -133,11 +133,10 @@ TEST(LightsNodeTest, ALightNoCaptureComesForGoesOffAndAStrangeRequestIsRefused) 
   MemqBus bus;
   Board board;
   LightsNodeOptions options = StationWithThreeLights();
-  options.max_on = std::chrono::duration<double>(0.2);
   auto relay =
       std::make_unique<RelayLights>(options.lights.channels, options.lights.studio_channel);
   ASSERT_TRUE(relay->Open(board.device()).ok());
-  Node node("vellum-lights", &bus.lcm());
+  Node node("vellum-lights", &bus.lcm(), &bus.clock());
   LightsNode lights(&node, std::move(relay), options);
   bus.AddTick([&] { lights.Tick(); });
   bus.Watch("vellum-lights");
@@ -149,14 +148,24 @@ TEST(LightsNodeTest, ALightNoCaptureComesForGoesOffAndAStrangeRequestIsRefused) 
   light_t uv = Request(options, 2);
   bus.probe().Publish(channel::kLightRequest, &uv);
   ASSERT_TRUE(bus.RunUntil([&] { return board.On() == std::set<int>{3}; }));
-  EXPECT_TRUE(bus.WaitForError("vellum-lights", "the light 'uv' was on for 0.2 s with no capture"));
+  // On for its longest (max_on, a minute) by the node's clock, and no longer.
+  bus.StepFor(59);
+  EXPECT_EQ(board.On(), (std::set<int>{3}));
+  EXPECT_TRUE(bus.StepUntil(
+      [&] {
+        return bus.Status("vellum-lights")
+                   .last_error.find("the light 'uv' was on for 60.0 s with no capture") !=
+               std::string::npos;
+      },
+      0.5, 2))
+      << bus.Status("vellum-lights").last_error;
   EXPECT_EQ(board.On(), (std::set<int>{0}));
 }
 
 TEST(LightsNodeTest, TheManualBackendPromptsTheOperator) {
   MemqBus bus;
   LightsNodeOptions options = StationWithThreeLights();
-  Node node("vellum-lights", &bus.lcm());
+  Node node("vellum-lights", &bus.lcm(), &bus.clock());
   LightsNode lights(&node, std::make_unique<ManualLights>(), options);
   auto prompts = bus.Record<light_t>(channel::kLightPrompt);
   auto on = bus.Record<light_t>(channel::kLightOn);

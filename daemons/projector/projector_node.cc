@@ -45,7 +45,7 @@ ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
 void ProjectorNode::Tick() {
   if (!projector_->Poll()) node_->Stop();
   if (scan_id_ == 0) return;
-  const auto waited = std::chrono::steady_clock::now() - shown_at_;
+  const auto waited = node_->Now() - shown_at_;
   if (awaiting_light_ && waited > options_.light_timeout) {
     Fail("no LIGHT_ON for " + What(index_) + " within " + Fixed(options_.light_timeout.count(), 1) +
          " s (is vellum-lights running and on the same bus? with its manual backend the operator "
@@ -102,7 +102,7 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
     ToMessage(*options_.calibration, &c);
     node_->Publish(channel::kCalibration, &c);
   }
-  started_ = std::chrono::steady_clock::now();
+  started_ = std::chrono::steady_clock::now();  // For the log: the real time it took.
   ShowPattern(-1);
 }
 
@@ -158,7 +158,7 @@ void ProjectorNode::RequestLight(int k) {
     projector_->Show(black_);
     m.light = ToMessage(options_.lights[k]);
     awaiting_light_ = true;
-    shown_at_ = std::chrono::steady_clock::now();
+    shown_at_ = node_->Now();
     node_->SetState("scanning", scan_id_, "waiting for " + What(index_));
   }
   node_->Publish(channel::kLightRequest, &m);
@@ -194,7 +194,7 @@ void ProjectorNode::ShowPattern(int index) {
   m.light_count = static_cast<int32_t>(options_.lights.size());
   if (index >= Patterns()) m.light = ToMessage(options_.lights[index - Patterns()]);
   node_->Publish(channel::kPatternShown, &m);
-  shown_at_ = std::chrono::steady_clock::now();
+  shown_at_ = node_->Now();
   node_->SetState("scanning", scan_id_, "showing " + What(index));
 }
 

@@ -77,7 +77,8 @@ class ProjectorNode {
   int64_t session_ = 0;  // Its session (SCAN_STARTED): captures of other sessions are not its.
   int index_ = -1;       // What is on screen: -1 the texture, k pattern k, Patterns() + k light k.
   bool awaiting_light_ = false;  // LIGHT_REQUEST sent, LIGHT_ON not yet come.
-  std::chrono::steady_clock::time_point shown_at_, started_;
+  Clock::time_point shown_at_;   // By the node's clock.
+  std::chrono::steady_clock::time_point started_;
   int64_t decoder_failed_ = -1;  // The decoder's "scans failed" (-1: no status yet).
 };
 

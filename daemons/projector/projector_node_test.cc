@@ -79,7 +79,7 @@ class ProjectorNodeTest : public ::testing::Test {
 };
 
 TEST_F(ProjectorNodeTest, RunsTheWholeSequenceOnePatternPerCaptureWithTheMirrorFlipOnScreen) {
-  Node node("vellum-projector", &bus_.lcm());
+  Node node("vellum-projector", &bus_.lcm(), &bus_.clock());
   auto projector = std::make_unique<WatchedProjector>(screen_);
   WatchedProjector* screen = projector.get();
   ProjectorNode conductor(&node, std::move(projector), options_);
@@ -122,8 +122,7 @@ TEST_F(ProjectorNodeTest, RunsTheWholeSequenceOnePatternPerCaptureWithTheMirrorF
 }
 
 TEST_F(ProjectorNodeTest, BadRequestsAndAMissingCaptureAreReportedAndTheNextScanRuns) {
-  Node node("vellum-projector", &bus_.lcm());
-  options_.capture_timeout = std::chrono::duration<double>(0.3);
+  Node node("vellum-projector", &bus_.lcm(), &bus_.clock());
   ProjectorNode conductor(&node, std::make_unique<SdlProjector>(screen_), options_);
   bus_.AddTick([&] { conductor.Tick(); });
   bus_.Watch("vellum-projector");
@@ -132,8 +131,18 @@ TEST_F(ProjectorNodeTest, BadRequestsAndAMissingCaptureAreReportedAndTheNextScan
   Request(5);
   Request(6);
   EXPECT_TRUE(bus_.WaitForError("vellum-projector", "scan 6 refused: scan 5 is in progress"));
-  EXPECT_TRUE(bus_.WaitForError("vellum-projector",
-                                "scan 5 failed: no CAPTURE of the texture within 300 ms"));
+  // No capture comes: the scan waits out its capture timeout (5 s) on the node's clock, then
+  // fails.
+  bus_.StepFor(4.9);
+  EXPECT_EQ(conductor.scan_id(), 5);
+  EXPECT_TRUE(bus_.StepUntil(
+      [&] {
+        return bus_.Status("vellum-projector")
+                   .last_error.find("scan 5 failed: no CAPTURE of the texture within 5000 ms") !=
+               std::string::npos;
+      },
+      0.1, 1))
+      << bus_.Status("vellum-projector").last_error;
   EXPECT_EQ(conductor.scan_id(), 0);
   auto shown = bus_.Record<pattern_shown_t>(channel::kPatternShown);
   size_t answered = 0;
@@ -148,7 +157,7 @@ TEST_F(ProjectorNodeTest, BadRequestsAndAMissingCaptureAreReportedAndTheNextScan
 // request is taken. An error of the decoder about another scan, or with no failure counted,
 // does not stop it.
 TEST_F(ProjectorNodeTest, AScanTheDecoderFailsStopsAtOnceAndTheNextRequestIsTaken) {
-  Node node("vellum-projector", &bus_.lcm());
+  Node node("vellum-projector", &bus_.lcm(), &bus_.clock());
   auto projector = std::make_unique<WatchedProjector>(screen_);
   WatchedProjector* screen = projector.get();
   ProjectorNode conductor(&node, std::move(projector), options_);
@@ -189,7 +198,7 @@ TEST_F(ProjectorNodeTest, AScanTheDecoderFailsStopsAtOnceAndTheNextRequestIsTake
 // A capture of another session (a stale one, another projector's) does not advance
 // the scan; a station calibration (scan_id 0) published mid-scan applies from the next scan.
 TEST_F(ProjectorNodeTest, OnlyItsSessionsCapturesAdvanceItAndANewCalibrationWaitsForTheNextScan) {
-  Node node("vellum-projector", &bus_.lcm());
+  Node node("vellum-projector", &bus_.lcm(), &bus_.clock());
   ProjectorNode conductor(&node, std::make_unique<SdlProjector>(screen_), options_);
   bus_.AddTick([&] { conductor.Tick(); });
   auto calibrations = bus_.Record<calibration_t>(channel::kCalibration);
@@ -233,8 +242,7 @@ TEST_F(ProjectorNodeTest, EachExtraLightIsAskedForAndCapturedAfterThePatterns) {
     if (name[0] == 'r') light.direction = cv::Vec3d(0.8, 0, 0.6);
     options_.lights.push_back(light);
   }
-  options_.light_timeout = std::chrono::duration<double>(0.3);
-  Node node("vellum-projector", &bus_.lcm());
+  Node node("vellum-projector", &bus_.lcm(), &bus_.clock());
   auto projector = std::make_unique<WatchedProjector>(screen_);
   WatchedProjector* screen = projector.get();
   ProjectorNode conductor(&node, std::move(projector), options_);
@@ -284,8 +292,19 @@ TEST_F(ProjectorNodeTest, EachExtraLightIsAskedForAndCapturedAfterThePatterns) {
   // No LIGHT_ON: the scan fails naming the light, and the lights are turned off.
   answer_lights = false;
   Request(91);
-  EXPECT_TRUE(bus_.WaitForError("vellum-projector",
-                                "scan 91 failed: no LIGHT_ON for the light 'raking-000' within"));
+  // An operator may take a while to switch a light: the scan waits the light timeout (120 s).
+  ASSERT_TRUE(bus_.RunUntil([&] { return requests->back().scan_id == 91; }));
+  bus_.StepFor(119);
+  EXPECT_EQ(node.Counter("scans failed"), 0) << bus_.Status("vellum-projector").last_error;
+  EXPECT_TRUE(bus_.StepUntil(
+      [&] {
+        return bus_.Status("vellum-projector")
+                   .last_error.find(
+                       "scan 91 failed: no LIGHT_ON for the light 'raking-000' within "
+                       "120.0 s") != std::string::npos;
+      },
+      0.5, 2))
+      << bus_.Status("vellum-projector").last_error;
   EXPECT_TRUE(bus_.RunUntil([&] { return requests->back().index == -1; }));
   EXPECT_EQ(requests->back().scan_id, 91);
   EXPECT_EQ(node.Counter("scans failed"), 1);

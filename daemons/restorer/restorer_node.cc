@@ -70,7 +70,7 @@ void RestorerNode::CloudDone(int64_t id, Cloud* cloud) {
 }
 
 void RestorerNode::GiveUpWaiting() {
-  const auto now = std::chrono::steady_clock::now();
+  const auto now = node_->Now();
   for (auto it = waiting_.begin(); it != waiting_.end();) {
     if (now - it->second.since < std::chrono::seconds(30)) {
       ++it;
@@ -79,10 +79,11 @@ void RestorerNode::GiveUpWaiting() {
     const int64_t id = it->first;
     it = waiting_.erase(it);
     scans_.erase(id);
-    node_->FailScan(id,
-                    "POINT_CLOUD never came whole: the albedo and reflectance are made from the "
-                    "point map and the projector's light (the restorer has a flat field or a "
-                    "studio field), so the page was not restored");
+    node_->FailScan(
+        id,
+        "POINT_CLOUD never came whole within 30 s: the albedo and reflectance are made from the "
+        "point map and the projector's light (the restorer has a flat field or a "
+        "studio field), so the page was not restored");
   }
 }
 
@@ -93,7 +94,7 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   if (NeedsCloud() && !clouds_.count(id)) {
     // The point map is still on its way (or was asked again): the page waits for it.
     WaitingScan& w = waiting_[id];
-    if (w.sheets.empty()) w.since = std::chrono::steady_clock::now();
+    if (w.sheets.empty()) w.since = node_->Now();
     w.sheets.push_back({std::move(sheet_), last});
     sheet_ = Sheet();
     node_->SetState("busy", id, "waiting for the point map to restore" + which);

@@ -69,7 +69,7 @@ class RestorerNode {
     mesh_t last;
   };
   struct WaitingScan {
-    std::chrono::steady_clock::time_point since;
+    Clock::time_point since;
     std::vector<Waiting> sheets;
   };
   bool NeedsCloud() const;                       // With a flat field or a studio field.

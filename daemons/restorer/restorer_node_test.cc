@@ -57,7 +57,7 @@ class RestorerNodeTest : public ::testing::Test {
 };
 
 TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
-  Node node("vellum-restorer", &bus_.lcm());
+  Node node("vellum-restorer", &bus_.lcm(), &bus_.clock());
   RestorerNode restorer(&node, options_);
   auto restored = bus_.Record<restored_t>(channel::kRestored);
   Publish(5, Sheet(5));
@@ -96,7 +96,7 @@ TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
 }
 
 TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
-  Node node("vellum-restorer", &bus_.lcm());
+  Node node("vellum-restorer", &bus_.lcm(), &bus_.clock());
   RestorerNode restorer(&node, options_);
   bus_.Watch("vellum-restorer");
   std::vector<mesh_t> bad = Sheet(6);
@@ -126,7 +126,7 @@ TEST_F(RestorerNodeTest, WithAFieldAPageWaitsForItsPointMapAndIsRestoredWhenItCo
                         CV_32FC(SmallScan().texture.channels()), cv::Scalar::all(250.0));
   studio.lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
   options_.pipeline.studio_field = studio;
-  Node node("vellum-restorer", &bus_.lcm());
+  Node node("vellum-restorer", &bus_.lcm(), &bus_.clock());
   RestorerNode restorer(&node, options_);
   bus_.Watch("vellum-restorer");
   auto restored = bus_.Record<restored_t>(channel::kRestored);
@@ -152,7 +152,7 @@ TEST_F(RestorerNodeTest, WithAFieldAPageWaitsForItsPointMapAndIsRestoredWhenItCo
   with_flat.pipeline.flat_field.projector_size = rig.projector.size;
   with_flat.pipeline.flat_field.gain = cv::Mat(8, 8, CV_32F, cv::Scalar(100.0));
   with_flat.data_dir = options_.data_dir + "/flat";
-  Node flat_node("vellum-restorer-flat", &bus_.lcm());
+  Node flat_node("vellum-restorer-flat", &bus_.lcm(), &bus_.clock());
   RestorerNode flat_restorer(&flat_node, with_flat);
   bus_.Watch("vellum-restorer-flat");
   for (point_cloud_t& m : ToMessages(10, SmallScanProducts().map.points, cv::Mat(),
@@ -162,6 +162,45 @@ TEST_F(RestorerNodeTest, WithAFieldAPageWaitsForItsPointMapAndIsRestoredWhenItCo
   Publish(10, Sheet(10));
   EXPECT_TRUE(bus_.WaitForError("vellum-restorer-flat", "came without the projector's light"))
       << bus_.Status("vellum-restorer-flat").last_error;
+}
+
+// A page whose point map never comes (the bus lost it, the triangulator died) waits 30 s by the
+// node's clock, no longer: the scan fails naming POINT_CLOUD, and the next is restored.
+TEST_F(RestorerNodeTest, APageWhosePointMapNeverComesFailsItsScanAfterThirtySeconds) {
+  StudioField studio;
+  studio.camera_size = QuickRig().camera.size;
+  studio.gain = cv::Mat(8, 8, CV_32FC(SmallScan().texture.channels()), cv::Scalar::all(250.0));
+  studio.lamps = {cv::Vec3d(-450, -250, 500), cv::Vec3d(450, -250, 500)};
+  options_.pipeline.studio_field = studio;
+  Node node("vellum-restorer", &bus_.lcm(), &bus_.clock());
+  RestorerNode restorer(&node, options_);
+  bus_.AddTick([&] { restorer.Tick(); });
+  bus_.Watch("vellum-restorer");
+  auto restored = bus_.Record<restored_t>(channel::kRestored);
+  Publish(11, Sheet(11));
+  ASSERT_TRUE(bus_.RunUntil([&] {
+    return bus_.Status("vellum-restorer").detail.find("waiting for the point map") !=
+           std::string::npos;
+  })) << bus_.Status("vellum-restorer").detail;
+  bus_.StepFor(29, 0.5);
+  EXPECT_EQ(bus_.Status("vellum-restorer").last_error, "");
+  ASSERT_TRUE(bus_.StepUntil(
+      [&] {
+        return bus_.Status("vellum-restorer")
+                   .last_error.find("scan 11: POINT_CLOUD never came whole") != std::string::npos;
+      },
+      0.5, 3))
+      << bus_.Status("vellum-restorer").last_error;
+  EXPECT_TRUE(restored->empty());
+  // The next scan, its point map first, is restored.
+  for (point_cloud_t& m : ToMessages(12, SmallScanProducts().map.points, cv::Mat(),
+                                     SmallScanContext(), FirstStages(2))) {
+    bus_.probe().Publish(channel::kPointCloud, &m);
+  }
+  Publish(12, Sheet(12));
+  ASSERT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }))
+      << bus_.Status("vellum-restorer").last_error;
+  EXPECT_EQ(restored->back().scan_id, 12);
 }
 
 TEST(RestorerNodeOptions, NonsenseIsRefusedByName) {

@@ -52,7 +52,7 @@ class TriangulatorNodeTest : public ::testing::Test {
 };
 
 TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
-  Node node("vellum-triangulator", &bus_.lcm());
+  Node node("vellum-triangulator", &bus_.lcm(), &bus_.clock());
   TriangulatorNode triangulator(&node, options_);
   auto clouds = bus_.Record<point_cloud_t>(channel::kPointCloud);
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
@@ -86,7 +86,7 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
 }
 
 TEST_F(TriangulatorNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
-  Node node("vellum-triangulator", &bus_.lcm());
+  Node node("vellum-triangulator", &bus_.lcm(), &bus_.clock());
   TriangulatorNode triangulator(&node, options_);
   bus_.Watch("vellum-triangulator");
   // A chunk whose values do not fill its rows.
