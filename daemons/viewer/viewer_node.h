@@ -1,4 +1,6 @@
-// vellum-viewer's node: what the operator at the gantry watches. A window with the live camera
+// vellum-viewer's node: what the operator at the gantry watches. The node is the glue: the bus
+// and the window's keys and mouse go into a ViewerState (viewer_state.h), which DrawViewer
+// (viewer_draw.h) draws at most ten times a second. A window with the live camera
 // preview (PREVIEW, never full frames), the scan's progress, every daemon's status from its
 // heartbeat (alive, state, last error), and for each finished scan its texture, depth map,
 // strain map and the restored page side by side, with the leaf's outline over the texture and
@@ -28,21 +30,18 @@
 // goes when the light is on. vellum-lights' status is listed once it is heard.
 #pragma once
 
-#include <chrono>
-#include <deque>
-#include <map>
 #include <memory>
-#include <string>
-#include <vector>
 
-#include "core/patterns/scan.h"
+#include "daemons/viewer/viewer_draw.h"
+#include "daemons/viewer/viewer_state.h"
 #include "display/window.h"
 #include "station/node.h"
-#include "vellum/light_t.hpp"
-#include "vellum/restored_t.hpp"
-#include "vellum/status_t.hpp"
 
 namespace vellum::station {
+
+// The operator's action for a key (SDL's), with the identity form open or not; false for a key
+// that does nothing.
+bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action);
 
 class ViewerNode {
  public:
@@ -51,83 +50,22 @@ class ViewerNode {
 
   // On the LCM thread, often: handles keys and redraws (at most ten times a second).
   void Tick();
-  // Scans restored this session (the last 50 are kept).
-  int results() const { return static_cast<int>(results_.size()); }
-  const std::string& progress() const { return progress_; }
-  // The warnings of the scan shown (code: message each), empty for a clean one.
-  std::vector<std::string> warnings() const;
-  // The quality verdict of the scan shown ("" when none is shown).
-  std::string quality() const;
-  // The identity the next scan will carry.
-  const ScanIdentity& next_identity() const { return next_; }
-  bool editing() const { return editing_ >= 0; }
-  bool sheet() const { return sheet_; }
-  bool zoomed() const { return zoom_; }
-  // The live preview's leaf: "in view", "off the view" (it touches the border), or why none
-  // is outlined; "" before any preview.
-  const std::string& preview_leaf() const { return preview_leaf_; }
-  // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
-  const std::string& failure() const { return failure_; }
-  // The operator's prompt shown ("" when none): LIGHT_PROMPT's text.
-  const std::string& light_prompt() const { return prompt_.text; }
-  // The leaf hint the next scan carries, as fractions of the camera's view; empty when none.
-  const cv::Rect2d& leaf_hint() const { return hint_; }
-  // What the operator says the scans of this sequence are ('o' turns it: auto, leaf, book).
-  ObjectKind object() const { return object_; }
+  const ViewerState& state() const { return state_; }
   // Where the preview was last drawn on the window (its pixels); empty before any.
-  cv::Rect preview_area() const { return preview_at_; }
+  cv::Rect preview_area() const { return layout_.preview; }
 
  private:
-  struct Result {
-    int64_t scan_id = 0;
-    std::string summary, results, quality;
-    std::string title;  // The identity from its report ("MS 12, 3 recto"), or the scan id.
-    cv::Mat texture, depth, strain, restored;  // texture: with the leaf's outline drawn.
-    std::vector<std::string> warnings;
-  };
   void OnKey(SDL_Keycode key);
-  void OnText(const std::string& text);
   void OnMouse(const display::Window::Input& in);
-  void ClearHint();  // h, or a click without a drag.
-  void OnStatus(const status_t& m);
-  void OnRestored(const restored_t& m);
-  void Started(int64_t scan_id);  // A scan began: a failure shown before is over.
-  cv::Mat Draw() const;
-  void DrawSheet(cv::Mat& canvas, cv::Rect area) const;
-  void DrawLeft(cv::Mat& canvas, int top, int width) const;
+  // Publishes what an action asked, and follows the form opening and closing.
+  void Do(ViewerState::Action action);
 
-  using Clock = std::chrono::steady_clock;
   Node* node_;
   std::unique_ptr<display::Window> window_;
-  cv::Mat preview_;
-  cv::Mat preview_shown_, preview_hist_;  // As shown (clipped pixels red), and its histogram.
-  double preview_clipped_ = 0;            // Share of its pixels clipped.
-  std::string preview_leaf_;              // See preview_leaf().
-  std::string progress_ = "waiting for the station";
-  std::map<std::string, status_t> statuses_;
-  std::map<std::string, Clock::time_point> seen_;
-  Clock::time_point last_preview_;
-  std::deque<Result> results_;
-  int shown_ = -1;
-  Clock::time_point next_draw_;
-  ScanIdentity next_;
-  ObjectKind object_ = ObjectKind::kAuto;  // The sequence's object, sent with each request.
-  std::vector<ScanIdentity> history_;      // The identities of the scans asked for, for undo.
-  int editing_ = -1;                       // The field being edited, or -1.
-  bool sheet_ = false;                     // The contact sheet is shown.
-  bool zoom_ = false;                      // The preview at 100%: the focus crop.
-  cv::Mat focus_;               // PREVIEW_FOCUS: the view's centre, full resolution, BGR.
-  double focus_sharpness_ = 0;  // Its Laplacian's variance.
-  int64_t scan_ = 0;            // The scan in progress (or last asked for).
-  int64_t failed_scan_ = 0;
-  std::string failure_;
-  std::map<std::string, int64_t> error_utime_;  // Each process's last error seen.
-  light_t prompt_{};                            // The operator's prompt (text "" when none).
-  cv::Rect2d hint_;                             // See leaf_hint().
-  cv::Point drag_from_{-1, -1};                 // Where a drag on the preview began (window).
-  cv::Point drag_to_;
-  // Set by each draw (Draw is const: the layout is its own), read by the mouse.
-  mutable cv::Rect preview_at_;
+  ViewerState state_;
+  ViewerLayout layout_;          // Of the last draw (the mouse reads it).
+  cv::Point drag_from_{-1, -1};  // Where a drag on the preview began (window pixels).
+  std::chrono::steady_clock::time_point next_draw_;  // Real time: the drawing's pace.
 };
 
 }  // namespace vellum::station

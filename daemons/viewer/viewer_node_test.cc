@@ -49,7 +49,7 @@ class ViewerNodeTest : public ::testing::Test {
 };
 
 TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   display::Window* window = nullptr;
   auto owned = Window();
   window = owned.get();
@@ -58,9 +58,9 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
   auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
   restored_t r = Restored(12);
   bus_.probe().Publish(channel::kRestored, &r);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.results() == 1; }));
-  EXPECT_NE(viewer.progress().find("scan 12: 300x400 41 dpi restored"), std::string::npos)
-      << viewer.progress();
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 1u; }));
+  EXPECT_NE(viewer.state().progress().find("scan 12: 300x400 41 dpi restored"), std::string::npos)
+      << viewer.state().progress();
   // The restored page is drawn in the right third: its dark letter shows there.
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
@@ -84,7 +84,7 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
 // A doubtful result looks doubtful: its warnings are kept, the header says so, and they are
 // written in amber (B 0, G 170, R 255) under the restored page.
 TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   auto owned = Window();
   display::Window* window = owned.get();
   ViewerNode viewer(&node, std::move(owned));
@@ -93,10 +93,11 @@ TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
   r.warnings = {"page_cut_off: the leaf runs off the camera's view"};
   r.nwarnings = 1;
   bus_.probe().Publish(channel::kRestored, &r);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.results() == 1; }));
-  ASSERT_EQ(viewer.warnings().size(), 1u);
-  EXPECT_EQ(viewer.warnings()[0].rfind("page_cut_off", 0), 0u);
-  EXPECT_NE(viewer.progress().find("with 1 warning(s)"), std::string::npos) << viewer.progress();
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 1u; }));
+  ASSERT_EQ(viewer.state().warnings().size(), 1u);
+  EXPECT_EQ(viewer.state().warnings()[0].rfind("page_cut_off", 0), 0u);
+  EXPECT_NE(viewer.state().progress().find("with 1 warning(s)"), std::string::npos)
+      << viewer.state().progress();
   auto amber = [](const cv::Mat& area) {
     cv::Mat mask;
     cv::inRange(area, cv::Scalar(0, 120, 200), cv::Scalar(60, 200, 255), mask);
@@ -115,8 +116,8 @@ TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
   // A clean result afterwards shows none.
   restored_t clean = Restored(22);
   bus_.probe().Publish(channel::kRestored, &clean);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.results() == 2; }));
-  EXPECT_TRUE(viewer.warnings().empty());
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 2u; }));
+  EXPECT_TRUE(viewer.state().warnings().empty());
 }
 
 // Pixels of `area` near `colour` (BGR, within 40 each way).
@@ -144,12 +145,12 @@ void PushText(const std::string& text) {
 // for carries it and advances the folio (recto, verso, the next recto); u takes the last
 // advance back, so the next scan retakes that folio.
 TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   ViewerNode viewer(&node, Window());
   bus_.AddTick([&] { viewer.Tick(); });
   auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
   PushKey(SDLK_e);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.editing(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().editing(); }, 10));
   PushText("MS 12");
   PushKey(SDLK_TAB);
   PushText("3");
@@ -161,11 +162,11 @@ TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
   PushText("e");
   PushKey(SDLK_s);  // A letter while the form is open: text, not a scan (as SDL sends both).
   PushKey(SDLK_RETURN);
-  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.editing(); }, 10));
-  EXPECT_EQ(viewer.next_identity().shelfmark, "MS 12");
-  EXPECT_EQ(viewer.next_identity().folio, "3");
-  EXPECT_EQ(viewer.next_identity().side, "recto");  // Sanitised when the form closes.
-  EXPECT_EQ(viewer.next_identity().operator_name, "A. Scribe");
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.state().editing(); }, 10));
+  EXPECT_EQ(viewer.state().next_identity().shelfmark, "MS 12");
+  EXPECT_EQ(viewer.state().next_identity().folio, "3");
+  EXPECT_EQ(viewer.state().next_identity().side, "recto");  // Sanitised when the form closes.
+  EXPECT_EQ(viewer.state().next_identity().operator_name, "A. Scribe");
   EXPECT_TRUE(requests->empty());
   auto scan = [&](size_t n) {
     PushKey(SDLK_s);
@@ -178,10 +179,10 @@ TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
   EXPECT_EQ(requests->back().identity.operator_name, "A. Scribe");
   scan(2);
   EXPECT_EQ(requests->back().identity.side, "verso");
-  EXPECT_EQ(viewer.next_identity().folio, "4");
-  EXPECT_EQ(viewer.next_identity().side, "recto");
+  EXPECT_EQ(viewer.state().next_identity().folio, "4");
+  EXPECT_EQ(viewer.state().next_identity().side, "recto");
   PushKey(SDLK_u);  // 3 verso again.
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.next_identity().folio == "3"; }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().next_identity().folio == "3"; }, 10));
   scan(3);
   EXPECT_EQ(requests->back().identity.folio, "3");
   EXPECT_EQ(requests->back().identity.side, "verso");
@@ -191,7 +192,7 @@ TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
 // kept (not cut at 70 characters); the next scan clears it. A result's quality verdict shows in
 // its colour above the restored page.
 TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   auto owned = Window();
   display::Window* window = owned.get();
   ViewerNode viewer(&node, std::move(owned));
@@ -214,9 +215,10 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
   st.last_error_scan_id = 31;
   st.errors = 1;
   bus_.probe().Publish(StatusChannel(st.process), &st);
-  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.failure().empty(); }, 10));
-  EXPECT_EQ(viewer.failure(), "vellum-projector: " + message);
-  EXPECT_NE(viewer.progress().find("scan 31 FAILED"), std::string::npos) << viewer.progress();
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.state().failure().empty(); }, 10));
+  EXPECT_EQ(viewer.state().failure(), "vellum-projector: " + message);
+  EXPECT_NE(viewer.state().progress().find("scan 31 FAILED"), std::string::npos)
+      << viewer.state().progress();
   const cv::Scalar red(40, 40, 220);
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
@@ -228,13 +230,14 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
   // The next scan: the failure is over.
   shown.scan_id = 32;
   bus_.probe().Publish(channel::kPatternShown, &shown);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.failure().empty(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().failure().empty(); }, 10));
   // A result that failed quality control: a red badge over the restored page.
   restored_t r = Restored(32);
   r.qc = "fail";
   bus_.probe().Publish(channel::kRestored, &r);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.quality() == "fail"; }, 10));
-  EXPECT_NE(viewer.progress().find("quality fail"), std::string::npos) << viewer.progress();
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().quality() == "fail"; }, 10));
+  EXPECT_NE(viewer.state().progress().find("quality fail"), std::string::npos)
+      << viewer.state().progress();
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
         const cv::Mat screen = window->Screen();
@@ -246,7 +249,7 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
   // The session's contact sheet (c): the result in a red frame over the middle third, where the
   // texture panel was grey.
   PushKey(SDLK_c);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.sheet(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().sheet(); }, 10));
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
         const cv::Mat screen = window->Screen();
@@ -262,7 +265,7 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
 // runs off the view the outline and a warning turn red; a surround as bright as the leaf gets
 // no outline (only the scan can tell them apart), and says so.
 TEST_F(ViewerNodeTest, ThePreviewOutlinesTheLeafAndWarnsWhenItRunsOffTheView) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   auto owned = Window();
   display::Window* window = owned.get();
   ViewerNode viewer(&node, std::move(owned));
@@ -282,28 +285,28 @@ TEST_F(ViewerNodeTest, ThePreviewOutlinesTheLeafAndWarnsWhenItRunsOffTheView) {
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
         const cv::Mat screen = window->Screen();
-        return viewer.preview_leaf() == "in view" && !screen.empty() &&
+        return viewer.state().preview_leaf() == "in view" && !screen.empty() &&
                Near(screen(panel), green) > 300 && Near(screen(panel), red) < 20;
       },
       10))
-      << viewer.preview_leaf();
+      << viewer.state().preview_leaf();
   show(cv::Rect(200, 50, 150, 140), 40);  // Past the right edge.
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
         const cv::Mat screen = window->Screen();
-        return viewer.preview_leaf() == "off the view" && !screen.empty() &&
+        return viewer.state().preview_leaf() == "off the view" && !screen.empty() &&
                Near(screen(panel), red) > 300 && Near(screen(panel), green) < 20;
       },
       10))
-      << viewer.preview_leaf();
+      << viewer.state().preview_leaf();
   show(cv::Rect(80, 50, 150, 140), 195);  // A support as bright as the leaf.
-  ASSERT_TRUE(
-      bus_.RunUntil([&] { return viewer.preview_leaf() == "leaf as bright as its surround"; }, 10))
-      << viewer.preview_leaf();
+  ASSERT_TRUE(bus_.RunUntil(
+      [&] { return viewer.state().preview_leaf() == "leaf as bright as its surround"; }, 10))
+      << viewer.state().preview_leaf();
 }
 
 TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   auto owned = Window();
   display::Window* window = owned.get();
   ViewerNode viewer(&node, std::move(owned));
@@ -329,7 +332,7 @@ TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
   ToMessage(crop, &focus);
   bus_.probe().Publish(channel::kPreviewFocus, &focus);
   PushKey(SDLK_z);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.zoomed(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().zoomed(); }, 10));
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
         const cv::Mat screen = window->Screen();
@@ -342,20 +345,22 @@ TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
       },
       10));
   PushKey(SDLK_z);
-  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.zoomed(); }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.state().zoomed(); }, 10));
   ASSERT_TRUE(bus_.RunUntil(  // The preview again, its clipped half red.
       [&] {
         const cv::Mat screen = window->Screen();
         return !screen.empty() && Near(screen(panel), red) > 2000;
       },
       10));
-  // Silent for more than 2 s: NO SIGNAL, written in red over the panel's middle.
+  // Silent for more than 2 s (by the node's clock): NO SIGNAL, written in red over the panel's
+  // middle.
   const cv::Scalar text_red(40, 40, 220);
   int before = 0;
   {
     const cv::Mat screen = window->Screen();
     before = Near(screen(panel), text_red);
   }
+  bus_.clock().Advance(2.5);
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
         const cv::Mat screen = window->Screen();
@@ -365,7 +370,7 @@ TEST_F(ViewerNodeTest, ThePreviewShowsClippingAndNoSignal) {
 }
 
 TEST_F(ViewerNodeTest, AnUndecodablePreviewIsReportedAndTheViewerGoesOn) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   ViewerNode viewer(&node, Window());
   bus_.AddTick([&] { viewer.Tick(); });
   bus_.Watch("vellum-viewer");
@@ -387,13 +392,13 @@ TEST_F(ViewerNodeTest, AnUndecodablePreviewIsReportedAndTheViewerGoesOn) {
       << bus_.Status("vellum-viewer").last_error;
   restored_t good = Restored(14);
   bus_.probe().Publish(channel::kRestored, &good);
-  EXPECT_TRUE(bus_.RunUntil([&] { return viewer.results() == 2; }));
+  EXPECT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 2u; }));
 }
 
 // Lights switched by hand. vellum-lights' LIGHT_PROMPT shows as a blue box with its
 // words; L answers LIGHT_ON for the scan (its session, the light, "operator"), and the box goes.
 TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   auto owned = Window();
   display::Window* window = owned.get();
   ViewerNode viewer(&node, std::move(owned));
@@ -407,8 +412,8 @@ TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
   prompt.light.name = "raking-120";
   prompt.text = "Switch on the light 'raking-120' and nothing else; then press L in the viewer.";
   bus_.probe().Publish(channel::kLightPrompt, &prompt);
-  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.light_prompt().empty(); }));
-  EXPECT_NE(viewer.light_prompt().find("'raking-120'"), std::string::npos);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.state().light_prompt().empty(); }));
+  EXPECT_NE(viewer.state().light_prompt().find("'raking-120'"), std::string::npos);
   // The box's fill (B 90, G 40, R 10) over the middle of the window.
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
@@ -429,7 +434,7 @@ TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
   EXPECT_EQ(on->back().index, 1);
   EXPECT_EQ(on->back().light.name, "raking-120");
   EXPECT_EQ(on->back().source, "operator");
-  EXPECT_TRUE(viewer.light_prompt().empty());
+  EXPECT_TRUE(viewer.state().light_prompt().empty());
 }
 
 // The operator drags a box over the leaf in the preview: it is drawn in cyan, and the next scan
@@ -437,7 +442,7 @@ TEST_F(ViewerNodeTest, AnOperatorPromptedToSwitchALightAnswersWithL) {
 // The preview is not square and not placed at the window's corner, so a mapping that forgets
 // the panel's offset or its scale fails.
 TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   auto owned = Window();
   display::Window* window = owned.get();
   ViewerNode viewer(&node, std::move(owned));
@@ -470,13 +475,13 @@ TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
   mouse(SDL_MOUSEBUTTONDOWN, point(0.2, 0.25));
   mouse(SDL_MOUSEMOTION, point(0.5, 0.5));
   mouse(SDL_MOUSEBUTTONUP, point(0.7, 0.9));
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.leaf_hint().area() > 0; }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().leaf_hint().area() > 0; }, 10));
   // Within a screen pixel of the preview (the panel shows 320 px in about 200).
   const double px = 1.0 / at.width, py = 1.0 / at.height;
-  EXPECT_NEAR(viewer.leaf_hint().x, 0.2, px);
-  EXPECT_NEAR(viewer.leaf_hint().y, 0.25, py);
-  EXPECT_NEAR(viewer.leaf_hint().width, 0.5, 2 * px);
-  EXPECT_NEAR(viewer.leaf_hint().height, 0.65, 2 * py);
+  EXPECT_NEAR(viewer.state().leaf_hint().x, 0.2, px);
+  EXPECT_NEAR(viewer.state().leaf_hint().y, 0.25, py);
+  EXPECT_NEAR(viewer.state().leaf_hint().width, 0.5, 2 * px);
+  EXPECT_NEAR(viewer.state().leaf_hint().height, 0.65, 2 * py);
   // Drawn in cyan over the preview.
   ASSERT_TRUE(bus_.RunUntil(
       [&] {
@@ -500,7 +505,7 @@ TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
   EXPECT_NEAR(pixels.br().y, 1080, 1200 * py + 1);
   // The hint stays for the scans after (a book stays where it lies), until h clears it.
   PushKey(SDLK_h);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.leaf_hint().area() == 0; }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().leaf_hint().area() == 0; }, 10));
   PushKey(SDLK_s);
   ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 2; }, 10));
   EXPECT_EQ(requests->back().leaf_hint[2], 0.0f);
@@ -510,25 +515,26 @@ TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
 // What the sequence's scans are, as the operator says it: 'o' turns it from auto to a leaf, to
 // an open book and back, it stays for the scans after, and every request carries it.
 TEST_F(ViewerNodeTest, OSaysWhetherTheScansAreLeavesOrABookAndEachRequestCarriesIt) {
-  Node node("vellum-viewer", &bus_.lcm());
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   ViewerNode viewer(&node, Window());
   bus_.AddTick([&] { viewer.Tick(); });
   auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
-  EXPECT_EQ(viewer.object(), ObjectKind::kAuto);
+  EXPECT_EQ(viewer.state().object(), ObjectKind::kAuto);
   PushKey(SDLK_s);
   ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 1; }, 10));
   EXPECT_EQ(requests->back().object, "auto");
   PushKey(SDLK_o);
   PushKey(SDLK_o);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.object() == ObjectKind::kBook; }, 10));
-  EXPECT_NE(viewer.progress().find("open book"), std::string::npos) << viewer.progress();
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().object() == ObjectKind::kBook; }, 10));
+  EXPECT_NE(viewer.state().progress().find("open book"), std::string::npos)
+      << viewer.state().progress();
   for (size_t k = 2; k <= 3; ++k) {
     PushKey(SDLK_s);
     ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == k; }, 10));
     EXPECT_EQ(requests->back().object, "book");
   }
   PushKey(SDLK_o);
-  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.object() == ObjectKind::kAuto; }, 10));
+  ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().object() == ObjectKind::kAuto; }, 10));
 }
 
 TEST(WindowOptions, NonsenseIsRefusedByName) {

@@ -1,0 +1,392 @@
+#include "daemons/viewer/viewer_draw.h"
+
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <iterator>
+#include <opencv2/imgproc.hpp>
+#include <string>
+#include <vector>
+
+#include "station/chain.h"
+
+namespace vellum::station {
+namespace {
+
+const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60), kCyan(255, 220, 0);
+const int kFormFields = static_cast<int>(IdentityForm().size());
+
+// Draws `image` scaled to fit `box` of `canvas` (centred), with a caption above.
+// Returns where the image went on the canvas (empty when there is none).
+cv::Rect Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::string& caption) {
+  cv::rectangle(canvas, box, cv::Scalar(70, 70, 70), 1);
+  cv::putText(canvas, caption, box.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
+  const cv::Rect inner(box.x + 2, box.y + 22, box.width - 4, box.height - 24);
+  if (image.empty()) {
+    cv::putText(canvas, "(none yet)", inner.tl() + cv::Point(8, 24), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
+    return cv::Rect();
+  }
+  cv::Mat bgr = image;
+  if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
+  const double s = std::min(static_cast<double>(inner.width) / bgr.cols,
+                            static_cast<double>(inner.height) / bgr.rows);
+  cv::Mat scaled;
+  cv::resize(bgr, scaled, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+  const cv::Rect at(inner.x + (inner.width - scaled.cols) / 2,
+                    inner.y + (inner.height - scaled.rows) / 2, scaled.cols, scaled.rows);
+  const cv::Rect shown = at & cv::Rect(0, 0, canvas.cols, canvas.rows);
+  scaled(shown - at.tl()).copyTo(canvas(shown));
+  return shown;
+}
+
+// Splits `text` into lines of at most `chars` characters, at spaces where it can.
+std::vector<std::string> Wrap(const std::string& text, size_t chars) {
+  std::vector<std::string> lines;
+  size_t at = 0;
+  while (at < text.size()) {
+    size_t end = std::min(text.size(), at + chars);
+    if (end < text.size()) {
+      const size_t space = text.rfind(' ', end);
+      if (space != std::string::npos && space > at) end = space;
+    }
+    lines.push_back(text.substr(at, end - at));
+    at = end;
+    while (at < text.size() && text[at] == ' ') ++at;
+  }
+  return lines;
+}
+
+cv::Scalar VerdictColour(const std::string& verdict) {
+  return verdict == "pass" ? kGreen : verdict == "warn" ? kAmber : kRed;
+}
+
+// The view's centre at the camera's own resolution, pixel for pixel (never scaled up), and how
+// sharp it is.
+void DrawFocus(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
+  cv::rectangle(canvas, box, cv::Scalar(70, 70, 70), 1);
+  char caption[96];
+  std::snprintf(caption, sizeof(caption), "100%% of the view's centre (z: back), focus %.0f",
+                s.focus_sharpness());
+  cv::putText(canvas, caption, box.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.45,
+              cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
+  const cv::Rect inner(box.x + 2, box.y + 22, box.width - 4, box.height - 24);
+  if (!s.focus().empty()) {
+    const cv::Mat& bgr = s.focus();
+    const cv::Rect part(0, 0, std::min(bgr.cols, inner.width), std::min(bgr.rows, inner.height));
+    const cv::Rect at(inner.x + (inner.width - part.width) / 2,
+                      inner.y + (inner.height - part.height) / 2, part.width, part.height);
+    bgr(part + cv::Point((bgr.cols - part.width) / 2, (bgr.rows - part.height) / 2))
+        .copyTo(canvas(at));
+  } else {
+    cv::putText(canvas, "(no full-resolution view yet)", inner.tl() + cv::Point(8, 24),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
+  }
+}
+
+// The live preview, its clipped pixels in red and the leaf outlined, the leaf hint in cyan, the
+// box being dragged, and a line on the leaf; returns where the preview's pixels went.
+cv::Rect DrawPreview(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
+  const cv::Rect at = Panel(canvas, box, s.preview_shown(), "camera preview (clipped in red)");
+  if (!at.empty() && s.leaf_hint().area() > 0) {
+    const cv::Rect hint(
+        at.x + cvRound(s.leaf_hint().x * at.width), at.y + cvRound(s.leaf_hint().y * at.height),
+        cvRound(s.leaf_hint().width * at.width), cvRound(s.leaf_hint().height * at.height));
+    cv::rectangle(canvas, hint, kCyan, 2);
+    cv::putText(canvas, "leaf hint (h: clear)", hint.tl() + cv::Point(4, 14),
+                cv::FONT_HERSHEY_SIMPLEX, 0.4, kCyan, 1, cv::LINE_AA);
+  }
+  const cv::Rect2d& drag = s.dragging();
+  if (!at.empty() && drag.area() > 0) {
+    cv::rectangle(canvas,
+                  cv::Rect(at.x + cvRound(drag.x * at.width), at.y + cvRound(drag.y * at.height),
+                           cvRound(drag.width * at.width), cvRound(drag.height * at.height)),
+                  kCyan, 1);
+  }
+  if (!s.preview_leaf().empty()) {
+    const bool off = s.preview_leaf() == "off the view", in = s.preview_leaf() == "in view";
+    const std::string line = off  ? "LEAF RUNS OFF THE VIEW"
+                             : in ? "leaf in view"
+                                  : "no outline: " + s.preview_leaf();  // 45 characters at most.
+    cv::putText(canvas, line, cv::Point(box.x + 6, box.y + box.height - 8),
+                cv::FONT_HERSHEY_SIMPLEX, off ? 0.5 : 0.4,
+                off  ? kRed
+                : in ? kGreen
+                     : cv::Scalar(170, 170, 170),
+                off ? 2 : 1, cv::LINE_AA);
+  }
+  return at;
+}
+
+// "NO SIGNAL" over the preview when the camera fell silent for more than 2 s by `now`.
+void DrawNoSignal(const ViewerState& s, cv::Mat& canvas, cv::Rect box, Clock::time_point now) {
+  const double silent = std::chrono::duration<double>(now - s.preview_at()).count();
+  if (!s.has_preview() || silent > 2) {
+    const std::string what = !s.has_preview() ? "NO SIGNAL: no camera preview yet"
+                                              : "NO SIGNAL: no camera preview for " +
+                                                    std::to_string(static_cast<int>(silent)) + " s";
+    cv::putText(canvas, what, cv::Point(box.x + 8, box.y + box.height / 2),
+                cv::FONT_HERSHEY_SIMPLEX, 0.6, kRed, 2, cv::LINE_AA);
+  }
+}
+
+// The preview's histogram in `strip`, its top bin red when pixels clip.
+void DrawHistogram(const ViewerState& s, cv::Mat& canvas, cv::Rect strip) {
+  cv::rectangle(canvas, strip, cv::Scalar(70, 70, 70), 1);
+  const cv::Mat& hist = s.preview_histogram();
+  const double clipped = s.preview_clipped();
+  if (hist.empty()) return;
+  double most = 0;
+  cv::minMaxLoc(hist, nullptr, &most);
+  const double bin_w = static_cast<double>(strip.width - 2) / hist.rows;
+  for (int b = 0; b < hist.rows; ++b) {
+    const int bar = static_cast<int>((strip.height - 4) * hist.at<float>(b) / std::max(1.0, most));
+    const cv::Scalar colour = b == hist.rows - 1 && clipped > 0 ? kRed : cv::Scalar(200, 200, 200);
+    cv::rectangle(
+        canvas,
+        cv::Rect(strip.x + 1 + static_cast<int>(b * bin_w), strip.y + strip.height - 2 - bar,
+                 std::max(1, static_cast<int>(bin_w)), bar),
+        colour, cv::FILLED);
+  }
+  char line[64];
+  std::snprintf(line, sizeof(line), "clipped %.2f%%", 100 * clipped);
+  cv::putText(canvas, line, cv::Point(strip.x + 4, strip.y + 14), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+              clipped > 0.005 ? kRed : cv::Scalar(200, 200, 200), 1, cv::LINE_AA);
+}
+
+// Each daemon's state and last error from its heartbeat, a line each from `y`, red when silent
+// for 3 s; returns the y under them.
+int DrawDaemons(const ViewerState& s, cv::Mat& canvas, int y, Clock::time_point now) {
+  std::vector<const char*> processes(std::begin(kGantry), std::end(kGantry));
+  if (s.statuses().count("vellum-lights")) processes.push_back("vellum-lights");  // Once heard.
+  for (const ChainLink& link : kChain) processes.push_back(link.process);
+  for (const char* process : processes) {
+    auto it = s.statuses().find(process);
+    const bool alive = it != s.statuses().end() && now - s.heard(process) < std::chrono::seconds(3);
+    std::string line = std::string(process + 7) + ": ";
+    if (it == s.statuses().end()) {
+      line += "not seen";
+    } else {
+      line += alive ? it->second.state : "silent (" + it->second.state + ")";
+      if (!it->second.last_error.empty()) line += " | " + it->second.last_error;
+    }
+    if (line.size() > 70) line = line.substr(0, 67) + "...";
+    const cv::Scalar colour = !alive                          ? cv::Scalar(80, 80, 230)
+                              : it->second.last_error.empty() ? cv::Scalar(120, 230, 120)
+                                                              : cv::Scalar(80, 190, 240);
+    cv::circle(canvas, cv::Point(18, y - 5), 5, colour, cv::FILLED, cv::LINE_AA);
+    cv::putText(canvas, line, cv::Point(30, y), cv::FONT_HERSHEY_SIMPLEX, 0.42,
+                cv::Scalar(220, 220, 220), 1, cv::LINE_AA);
+    y += 18;
+  }
+  return y;
+}
+
+// The next scan's identity from `y` on, or its form while it is edited.
+void DrawIdentity(const ViewerState& s, cv::Mat& canvas, int y, int width) {
+  if (!s.editing()) {
+    cv::putText(
+        canvas,
+        "next scan: " + DescribeIdentity(s.next_identity()) + "  (" + ToString(s.object()) + ")",
+        cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1,
+        cv::LINE_AA);
+    cv::putText(canvas, "e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom",
+                cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160), 1,
+                cv::LINE_AA);
+    return;
+  }
+  cv::putText(canvas, "identity of the next scan (Tab: next field, Return: done)",
+              cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(255, 255, 255), 1,
+              cv::LINE_AA);
+  for (int k = 0; k < kFormFields; ++k) {
+    const int line_y = y + 18 * (k + 2);
+    const bool current = k == s.editing_field();
+    if (current) {
+      cv::rectangle(canvas, cv::Rect(10, line_y - 14, width - 16, 18), cv::Scalar(90, 60, 20),
+                    cv::FILLED);
+    }
+    const std::string value = s.next_identity().*IdentityForm()[k].field + (current ? "_" : "");
+    cv::putText(canvas, std::string(IdentityForm()[k].name) + ": " + value, cv::Point(14, line_y),
+                cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(240, 240, 240), 1, cv::LINE_AA);
+  }
+}
+
+// The left third: the preview (or the focus view), its histogram, the daemons, the identity;
+// returns where the preview's pixels went.
+cv::Rect DrawLeft(const ViewerState& s, cv::Mat& canvas, int top, int width,
+                  Clock::time_point now) {
+  const int h = canvas.rows;
+  const int preview_h = (h - top) * 2 / 5;
+  const cv::Rect box(8, top, width - 12, preview_h);
+  cv::Rect preview_at;
+  if (s.zoomed()) {
+    DrawFocus(s, canvas, box);
+  } else {
+    preview_at = DrawPreview(s, canvas, box);
+  }
+  DrawNoSignal(s, canvas, box, now);
+  const cv::Rect strip(8, top + preview_h + 2, width - 12, 36);
+  DrawHistogram(s, canvas, strip);
+  const int y = DrawDaemons(s, canvas, strip.y + strip.height + 18, now);
+  const int form_lines = s.editing() ? kFormFields + 1 : 2;
+  DrawIdentity(s, canvas, std::max(y + 6, h - 8 - 18 * form_lines), width);
+  return preview_at;
+}
+
+void DrawSheet(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
+  const auto& results = s.results();
+  cv::rectangle(canvas, area, cv::Scalar(30, 30, 30), cv::FILLED);
+  cv::putText(canvas, "this session: " + std::to_string(results.size()) + " scan(s) (c: back)",
+              area.tl() + cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.55,
+              cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  const int n = static_cast<int>(results.size());
+  if (n == 0) return;
+  // Columns for about 4:3 cells, newest first.
+  int cols = 1;
+  while (cols * cols * 3 < n * 4) ++cols;
+  const int rows = (n + cols - 1) / cols;
+  const int cell_w = (area.width - 8) / cols, cell_h = std::min((area.height - 30) / rows, cell_w);
+  for (int k = 0; k < n; ++k) {
+    const ViewerState::Result& r = results[n - 1 - k];
+    const cv::Rect cell(area.x + 4 + (k % cols) * cell_w, area.y + 26 + (k / cols) * cell_h,
+                        cell_w - 6, cell_h - 6);
+    const cv::Scalar colour =
+        r.quality.empty() ? cv::Scalar(120, 120, 120) : VerdictColour(r.quality);
+    Panel(canvas, cell, r.restored, r.title);
+    cv::rectangle(canvas, cell, colour, 3);
+    if (k == n - 1 - s.shown_index()) cv::rectangle(canvas, cell, cv::Scalar(255, 255, 255), 1);
+  }
+}
+
+// The header: the progress line (red with a failure, amber for a doubtful result) and the keys.
+void DrawHeader(const ViewerState& s, cv::Mat& canvas, int top) {
+  const int w = canvas.cols;
+  const bool failed = !s.failure().empty();
+  if (failed) cv::rectangle(canvas, cv::Rect(0, 0, w, top - 4), kRed, cv::FILLED);
+  cv::putText(canvas, "vellum station", cv::Point(12, 28), cv::FONT_HERSHEY_SIMPLEX, 0.8,
+              cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
+  const bool doubtful = s.progress().find("warning(s)") != std::string::npos;
+  // The progress line, cut to end before the keys' help.
+  const int help_x = w - 390;
+  std::string progress = s.progress();
+  int baseline = 0;
+  while (progress.size() > 4 &&
+         230 + cv::getTextSize(progress, cv::FONT_HERSHEY_SIMPLEX, 0.6, failed ? 2 : 1, &baseline)
+                     .width >
+             help_x - 10) {
+    progress = progress.substr(0, progress.size() - 4) + "...";
+  }
+  cv::putText(canvas, progress, cv::Point(230, 28), cv::FONT_HERSHEY_SIMPLEX, 0.6,
+              failed     ? cv::Scalar(255, 255, 255)
+              : doubtful ? kAmber
+                         : cv::Scalar(120, 220, 255),
+              failed ? 2 : 1, cv::LINE_AA);
+  cv::putText(canvas, "s: scan  e: identity  c: sheet  drag: leaf hint  q: quit",
+              cv::Point(help_x, 28), cv::FONT_HERSHEY_SIMPLEX, 0.45,
+              failed ? cv::Scalar(255, 255, 255) : cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
+}
+
+// The restored page in `area`, its quality verdict above it in its colour, and under it a
+// doubtful result's warnings in amber, a line each.
+void DrawPage(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
+  const ViewerState::Result* r = s.shown();
+  static const ViewerState::Result kEmpty;
+  const ViewerState::Result& show = r ? *r : kEmpty;
+  const bool failed = !s.failure().empty();
+  const int top = area.y;
+  const int lines = std::min<int>(static_cast<int>(show.warnings.size()), 6);
+  const int warn_h = lines > 0 ? 18 * lines + 8 : 0;
+  const int badge_h = show.quality.empty() ? 0 : 24;
+  const cv::Rect page(area.x, top + badge_h, area.width, area.height - badge_h - warn_h);
+  if (!show.quality.empty()) {
+    const cv::Rect badge(page.x, top, page.width, badge_h - 4);
+    cv::rectangle(canvas, badge, VerdictColour(show.quality), cv::FILLED);
+    std::string verdict = show.quality;
+    for (char& c : verdict) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    cv::putText(canvas, "quality: " + verdict, badge.tl() + cv::Point(6, 15),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  }
+  std::string caption =
+      show.warnings.empty() ? "restored page" : "restored page: DOUBTFUL, see the warnings";
+  if (failed && r && r->scan_id != s.failed_scan()) {
+    caption = "an earlier scan (" + std::to_string(r->scan_id) + "); scan " +
+              std::to_string(s.failed_scan()) + " failed";
+  }
+  Panel(canvas, page, show.restored, caption);
+  const size_t chars = static_cast<size_t>(std::max(20, page.width / 8));
+  for (int k = 0; k < lines; ++k) {
+    std::string line = "! " + show.warnings[k];
+    if (line.size() > chars) line = line.substr(0, chars - 3) + "...";
+    cv::putText(canvas, line, cv::Point(page.x + 4, page.y + page.height + 18 * (k + 1)),
+                cv::FONT_HERSHEY_SIMPLEX, 0.42, kAmber, 1, cv::LINE_AA);
+  }
+}
+
+// The operator's prompt to switch a light, in blue, in `area`'s width.
+void DrawPrompt(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
+  const std::vector<std::string> wrapped =
+      Wrap(s.light_prompt(), static_cast<size_t>(std::max(30, (area.width - 32) / 11)));
+  const int n = std::min<int>(static_cast<int>(wrapped.size()), 6);
+  const cv::Rect box(area.x, area.y, area.width, 30 * n + 60);
+  cv::rectangle(canvas, box, cv::Scalar(90, 40, 10), cv::FILLED);
+  cv::rectangle(canvas, box, cv::Scalar(255, 160, 60), 3);
+  cv::putText(canvas,
+              s.prompt().index >= 0 ? "LIGHTS: switch by hand, then press L" : "LIGHTS (L: done)",
+              box.tl() + cv::Point(12, 28), cv::FONT_HERSHEY_SIMPLEX, 0.7,
+              cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
+  for (int k = 0; k < n; ++k) {
+    cv::putText(canvas, wrapped[k], box.tl() + cv::Point(12, 58 + 30 * k), cv::FONT_HERSHEY_SIMPLEX,
+                0.65, cv::Scalar(255, 230, 200), 1, cv::LINE_AA);
+  }
+}
+
+// The failure's whole message, in red, in `area`'s width.
+void DrawFailure(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
+  const std::vector<std::string> wrapped =
+      Wrap(s.failure(), static_cast<size_t>(std::max(30, (area.width - 32) / 9)));
+  const int n = std::min<int>(static_cast<int>(wrapped.size()), 8);
+  const cv::Rect box(area.x, area.y, area.width, 22 * n + 30);
+  cv::rectangle(canvas, box, cv::Scalar(20, 20, 60), cv::FILLED);
+  cv::rectangle(canvas, box, kRed, 2);
+  cv::putText(canvas,
+              "scan " + std::to_string(s.failed_scan()) + " failed:", box.tl() + cv::Point(10, 20),
+              cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  for (int k = 0; k < n; ++k) {
+    cv::putText(canvas, wrapped[k], box.tl() + cv::Point(10, 42 + 22 * k), cv::FONT_HERSHEY_SIMPLEX,
+                0.5, cv::Scalar(200, 200, 255), 1, cv::LINE_AA);
+  }
+}
+
+}  // namespace
+
+cv::Mat DrawViewer(const ViewerState& s, cv::Size size, Clock::time_point now,
+                   ViewerLayout* layout) {
+  cv::Mat canvas(size, CV_8UC3, cv::Scalar(30, 30, 30));
+  const int w = size.width, h = size.height, top = 44;
+  DrawHeader(s, canvas, top);
+  // Left: live preview, histogram, the daemons, the next scan's identity.
+  const int left_w = w / 3;
+  layout->preview = DrawLeft(s, canvas, top, left_w, now);
+  // Middle: texture, depth, strain; right: the restored page, large.
+  const ViewerState::Result* r = s.shown();
+  const int mid_x = left_w, mid_w = w / 3, third = (h - top) / 3;
+  static const ViewerState::Result kEmpty;
+  const ViewerState::Result& show = r ? *r : kEmpty;
+  Panel(canvas, cv::Rect(mid_x, top, mid_w - 8, third - 4), show.texture,
+        "texture and the leaf's outline");
+  Panel(canvas, cv::Rect(mid_x, top + third, mid_w - 8, third - 4), show.depth, "depth (mm)");
+  Panel(canvas, cv::Rect(mid_x, top + 2 * third, mid_w - 8, third - 4), show.strain,
+        "flattening strain");
+  DrawPage(s, canvas, cv::Rect(mid_x + mid_w, top, w - mid_x - mid_w - 8, h - top - 8));
+  // Over the middle and the right: the contact sheet, a light prompt, a failure.
+  const cv::Rect over(mid_x, top, w - mid_x - 8, h - top - 8);
+  if (s.sheet()) DrawSheet(s, canvas, over);
+  if (!s.light_prompt().empty()) {
+    DrawPrompt(s, canvas, cv::Rect(over.x, top + h / 4, over.width, over.height - h / 4));
+  }
+  if (!s.failure().empty()) DrawFailure(s, canvas, over);
+  return canvas;
+}
+
+}  // namespace vellum::station

@@ -1,0 +1,346 @@
+#include "daemons/viewer/viewer_state.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/common/text.h"
+#include "core/outline/outline.h"
+#include "io/image_file.h"
+#include "station/messages.h"
+
+namespace vellum::station {
+namespace {
+
+namespace fs = std::filesystem;
+
+const cv::Scalar kRed(40, 40, 220), kGreen(60, 190, 60);
+
+// The preview as the viewer shows it (8-bit BGR, the pixels at the camera's maximum in any
+// channel painted red) and its histogram (64 bins of gray); returns the share clipped. Worked
+// out once per preview, not at each redraw.
+double ClippingView(const cv::Mat& preview, cv::Mat* shown, cv::Mat* hist) {
+  cv::Mat eight = preview;
+  if (eight.depth() != CV_8U) preview.convertTo(eight, CV_8U, 1.0 / 257);
+  cv::Mat top = eight.reshape(1, eight.rows * eight.cols);
+  cv::reduce(top, top, 1, cv::REDUCE_MAX);
+  const cv::Mat clipped = top.reshape(1, eight.rows) >= 255;
+  cv::Mat gray = eight;
+  if (eight.channels() == 3) {
+    cv::cvtColor(eight, gray, cv::COLOR_BGR2GRAY);
+    *shown = eight.clone();
+  } else {
+    cv::cvtColor(eight, *shown, cv::COLOR_GRAY2BGR);
+  }
+  shown->setTo(cv::Scalar(0, 0, 255), clipped);
+  const int channels[] = {0};
+  const int bins[] = {64};
+  const float range[] = {0, 256};
+  const float* ranges[] = {range};
+  cv::calcHist(&gray, 1, channels, cv::Mat(), *hist, 1, bins, ranges);
+  return static_cast<double>(cv::countNonZero(clipped)) / clipped.total();
+}
+
+// How sharp an 8-bit image is: the variance of its Laplacian (higher is sharper; compared
+// while focusing).
+double Sharpness(const cv::Mat& image) {
+  cv::Mat gray = image;
+  if (gray.channels() == 3) cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+  cv::Mat laplacian;
+  cv::Laplacian(gray, laplacian, CV_64F);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(laplacian, mean, stddev);
+  return stddev[0] * stddev[0];
+}
+
+// A picture of the scan's report (the first of `names` there), or none.
+cv::Mat ReportPicture(const std::string& results, std::initializer_list<const char*> names) {
+  for (const char* name : names) {
+    const fs::path p = fs::path(results) / "report" / name;
+    cv::Mat picture;
+    if (fs::exists(p) && ReadColourImage(p.string(), &picture).ok()) return picture;
+  }
+  return cv::Mat();
+}
+
+// The identity in a scan's report.json, as its title; "scan <id>" when it has none.
+std::string ReportTitle(const std::string& results, int64_t scan_id) {
+  std::ifstream report(fs::path(results) / "report.json");
+  const nlohmann::json j = nlohmann::json::parse(report, nullptr, false);
+  if (j.is_object() && j.contains("identity") && j["identity"].is_object()) {
+    ScanIdentity id;
+    ForEachIdentityField(id, [&](const char* key, std::string& value) {
+      if (j["identity"].contains(key) && j["identity"][key].is_string()) value = j["identity"][key];
+    });
+    if (!(id == ScanIdentity())) return DescribeIdentity(id);
+  }
+  return "scan " + std::to_string(scan_id);
+}
+
+}  // namespace
+
+const std::vector<FormField>& IdentityForm() {
+  static const std::vector<FormField> form = {{"shelfmark", &ScanIdentity::shelfmark},
+                                              {"folio", &ScanIdentity::folio},
+                                              {"side", &ScanIdentity::side},
+                                              {"operator", &ScanIdentity::operator_name},
+                                              {"note", &ScanIdentity::note}};
+  return form;
+}
+
+std::string DescribeIdentity(const ScanIdentity& id) {
+  std::string out = IdentityTitle(id);
+  if (!id.operator_name.empty()) out += " (" + id.operator_name + ")";
+  return out.empty() ? "(no identity: press e)" : out;
+}
+
+void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now) {
+  last_preview_ = now;
+  preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
+  // The leaf as it is being placed: outlined green, red once it runs off the view.
+  const Outline leaf = LeafInPreview(image);
+  if (!leaf.status.ok()) {
+    preview_leaf_ = leaf.status.message();
+    return;
+  }
+  preview_leaf_ = leaf.touches_border ? "off the view" : "in view";
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(leaf.mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
+  cv::drawContours(preview_shown_, contours, -1, leaf.touches_border ? kRed : kGreen,
+                   std::max(1, image.cols / 160), cv::LINE_AA);
+}
+
+void ViewerState::OnFocus(cv::Mat image) {
+  if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 257);
+  focus_sharpness_ = Sharpness(image);
+  if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
+  focus_ = image;
+}
+
+void ViewerState::OnPatternShown(const pattern_shown_t& m) {
+  Started(m.scan_id);
+  progress_ = "scan " + std::to_string(m.scan_id) + ": " +
+              (m.pattern_index < 0 ? std::string("texture")
+               : m.pattern_index >= m.pattern_count
+                   ? "under the light '" + Printable(m.light.name, 40) + "'"
+                   : "pattern " + std::to_string(m.pattern_index + 1) + " of " +
+                         std::to_string(m.pattern_count));
+}
+
+void ViewerState::OnLightPrompt(const light_t& m) {
+  prompt_ = m;
+  prompt_.text = Printable(m.text, 300);
+  if (prompt_.text.empty()) prompt_.text = "(vellum-lights asks, with no words)";
+}
+
+void ViewerState::OnLightOn(const light_t& m) {
+  if (m.scan_id == prompt_.scan_id && m.index == prompt_.index) prompt_.text.clear();
+}
+
+void ViewerState::Started(int64_t scan_id) {
+  if (scan_id == scan_) return;
+  scan_ = scan_id;
+  if (failed_scan_ != scan_id) failure_.clear();
+}
+
+void ViewerState::OnStatus(const status_t& m, Clock::time_point now) {
+  statuses_[m.process] = m;
+  seen_[m.process] = now;
+  if (m.state == "busy") {
+    progress_ = "scan " + std::to_string(m.scan_id) + ": " + m.process.substr(7) + " " + m.detail;
+  }
+  // A new error about a scan (an old one, from before this viewer listened, is not news): the
+  // scan failed. The header turns red with the whole message.
+  auto known = error_utime_.find(m.process);
+  const bool news = known != error_utime_.end() && m.last_error_utime > known->second;
+  error_utime_[m.process] = m.last_error_utime;
+  if (!news || m.last_error_scan_id <= 0 || m.last_error.empty()) return;
+  if (scan_ != 0 && m.last_error_scan_id != scan_) return;  // Not the scan in progress.
+  scan_ = failed_scan_ = m.last_error_scan_id;
+  failure_ = m.process + ": " + m.last_error;
+  progress_ = "scan " + std::to_string(m.last_error_scan_id) + " FAILED";
+}
+
+Clock::time_point ViewerState::heard(const std::string& process) const {
+  auto it = seen_.find(process);
+  return it == seen_.end() ? Clock::time_point() : it->second;
+}
+
+void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
+  Result r;
+  r.scan_id = m.scan_id;
+  r.results = m.results;
+  char summary[160];
+  std::snprintf(summary, sizeof(summary), "scan %lld: %dx%d %s", static_cast<long long>(m.scan_id),
+                m.width, m.height,
+                m.view == "orthographic"
+                    ? (std::to_string(static_cast<int>(m.dpi)) + " dpi").c_str()
+                    : "camera view");
+  r.summary = summary;
+  r.restored = preview;
+  r.warnings = m.warnings;
+  r.quality = m.qc;
+  // The other pictures from the scan's report (the restorer writes it before RESTORED): the
+  // texture with the leaf's outline, and a spread's left page for its strain.
+  r.texture = ReportPicture(m.results, {"outline.png", "texture.png"});
+  r.depth = ReportPicture(m.results, {"depth.png"});
+  r.strain = ReportPicture(m.results, {"strain.png", "strain-left.png"});
+  r.title = ReportTitle(m.results, m.scan_id);
+  results_.push_back(r);
+  if (results_.size() > kMaxResults) results_.pop_front();
+  shown_ = static_cast<int>(results_.size()) - 1;
+  progress_ =
+      r.summary + " restored" + (r.quality.empty() ? std::string() : ", quality " + r.quality) +
+      (r.warnings.empty()
+           ? std::string()
+           : " with " + std::to_string(r.warnings.size()) + " warning(s): check before delivering");
+}
+
+const ViewerState::Result* ViewerState::shown() const {
+  return shown_ >= 0 && shown_ < static_cast<int>(results_.size()) ? &results_[shown_] : nullptr;
+}
+
+std::vector<std::string> ViewerState::warnings() const {
+  const Result* r = shown();
+  return r ? r->warnings : std::vector<std::string>();
+}
+
+std::string ViewerState::quality() const {
+  const Result* r = shown();
+  return r ? r->quality : std::string();
+}
+
+void ViewerState::Type(const std::string& text) {
+  if (editing_ < 0) return;
+  std::string& field = next_.*IdentityForm()[editing_].field;
+  for (const char c : text) {
+    if (static_cast<unsigned char>(c) >= 0x20 && field.size() < kMaxIdentityField) field += c;
+  }
+}
+
+void ViewerState::SetHint(const cv::Rect2d& box) {
+  drag_ = cv::Rect2d();
+  hint_ = box & cv::Rect2d(0, 0, 1, 1);
+  progress_ = "leaf hint drawn: every scan from now on looks for the leaf there (h clears it)";
+}
+
+void ViewerState::ActInForm(Action action) {
+  const int fields = static_cast<int>(IdentityForm().size());
+  std::string& field = next_.*IdentityForm()[editing_].field;
+  switch (action) {
+    case Action::kFieldNext:
+      editing_ = (editing_ + 1) % fields;
+      break;
+    case Action::kFieldBack:
+      editing_ = (editing_ + fields - 1) % fields;
+      break;
+    case Action::kBackspace:  // One character (UTF-8: its continuation bytes too).
+      while (!field.empty() && (static_cast<unsigned char>(field.back()) & 0xc0) == 0x80) {
+        field.pop_back();
+      }
+      if (!field.empty()) field.pop_back();
+      break;
+    case Action::kFormDone: {
+      std::string why;
+      next_ = SanitizedIdentity(next_, &why);
+      if (!why.empty()) progress_ = "identity: " + why;
+      editing_ = -1;
+      break;
+    }
+    default:  // The form has the keyboard: nothing else acts while it is open.
+      break;
+  }
+}
+
+ViewerState::Command ViewerState::RequestScan(int64_t scan_id) {
+  Command c;
+  c.kind = Command::Kind::kRequestScan;
+  scan_request_t& r = c.request;
+  r.scan_id = scan_id;
+  r.identity = ToMessage(next_);
+  if (next_ == ScanIdentity()) r.identity.label = "from vellum-viewer";
+  ToLeafHint(hint_, r.leaf_hint);
+  r.object = ToString(object_);
+  progress_ = "scan " + std::to_string(r.scan_id) + " requested: " + DescribeIdentity(next_);
+  Started(r.scan_id);
+  history_.push_back(next_);
+  if (history_.size() > 1000) history_.erase(history_.begin());
+  next_ = NextFolio(next_);
+  return c;
+}
+
+ViewerState::Command ViewerState::LightDone() {
+  Command c;
+  if (prompt_.text.empty()) return c;
+  if (prompt_.index >= 0) {  // The light asked for is on (not the lights off, at the end).
+    c.kind = Command::Kind::kLightOn;
+    c.light = prompt_;
+    c.light.utime = 0;
+    c.light.text.clear();
+    c.light.source = "operator";
+    progress_ = "scan " + std::to_string(c.light.scan_id) + ": the light '" + c.light.light.name +
+                "' is on (the operator)";
+  }
+  prompt_.text.clear();
+  return c;
+}
+
+ViewerState::Command ViewerState::Act(Action action, int64_t new_scan_id) {
+  if (editing_ >= 0) {
+    ActInForm(action);
+    return Command();
+  }
+  switch (action) {
+    case Action::kQuit: {
+      Command c;
+      c.kind = Command::Kind::kQuit;
+      return c;
+    }
+    case Action::kScan:
+      return RequestScan(new_scan_id);
+    case Action::kLightDone:
+      return LightDone();
+    case Action::kSheet:
+      sheet_ = !sheet_;
+      break;
+    case Action::kObject:  // What the sequence's scans are: auto, then a leaf, then an open book.
+      object_ = object_ == ObjectKind::kAuto   ? ObjectKind::kLeaf
+                : object_ == ObjectKind::kLeaf ? ObjectKind::kBook
+                                               : ObjectKind::kAuto;
+      progress_ = std::string("the next scans are ") +
+                  (object_ == ObjectKind::kLeaf   ? "a single leaf each (never split)"
+                   : object_ == ObjectKind::kBook ? "an open book each (two pages)"
+                                                  : "leaf or book, as vellum finds (auto)");
+      break;
+    case Action::kClearHint:
+      if (hint_.area() > 0) progress_ = "leaf hint cleared";
+      hint_ = drag_ = cv::Rect2d();
+      break;
+    case Action::kZoom:
+      zoom_ = !zoom_;
+      break;
+    case Action::kEdit:
+      editing_ = 0;
+      break;
+    case Action::kUndo:  // The last advance taken back: the next scan is of that folio again.
+      if (!history_.empty()) {
+        next_ = history_.back();
+        history_.pop_back();
+        progress_ = "next scan again: " + DescribeIdentity(next_);
+      }
+      break;
+    case Action::kPrevious:
+      if (shown_ > 0) --shown_;
+      break;
+    case Action::kNext:
+      if (shown_ + 1 < static_cast<int>(results_.size())) ++shown_;
+      break;
+    default:  // The form's actions, with the form closed.
+      break;
+  }
+  return Command();
+}
+
+}  // namespace vellum::station

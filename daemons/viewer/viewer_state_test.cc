@@ -1,0 +1,206 @@
+// The viewer's state and its picture without a window or a bus: the operator's actions and what
+// they ask of the bus, the identity form, a failure and what clears it, the light prompt, the
+// results stepped through, and the picture's layout and its NO SIGNAL, at times the test gives.
+#include "daemons/viewer/viewer_state.h"
+
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "daemons/viewer/viewer_draw.h"
+
+namespace vellum::station {
+namespace {
+
+using Action = ViewerState::Action;
+using Kind = ViewerState::Command::Kind;
+
+// A heartbeat of `process`, with its last error (about scan `scan`, at `utime`).
+status_t Status(const std::string& process, const std::string& error = "", int64_t scan = 0,
+                int64_t utime = 0) {
+  status_t m{};
+  m.process = process;
+  m.state = "idle";
+  m.last_error = error;
+  m.last_error_scan_id = scan;
+  m.last_error_utime = utime;
+  return m;
+}
+
+restored_t Restored(int64_t id, const std::string& qc) {
+  restored_t m{};
+  m.scan_id = id;
+  m.view = "orthographic";
+  m.dpi = 300;
+  m.width = 30;
+  m.height = 40;
+  m.qc = qc;
+  m.results = "/nowhere/scan-" + std::to_string(id) + "/results";
+  return m;
+}
+
+TEST(ViewerState, TheFormSetsTheIdentityEachScanAdvancesItAndUndoTakesTheAdvanceBack) {
+  ViewerState v;
+  EXPECT_EQ(v.Act(Action::kEdit).kind, Kind::kNone);
+  ASSERT_TRUE(v.editing());
+  v.Type("MS 12");
+  v.Act(Action::kFieldNext);
+  v.Type("3");
+  v.Act(Action::kFieldNext);
+  v.Type("Recto");
+  v.Act(Action::kFieldNext);
+  v.Type("A. Scribé");
+  v.Act(Action::kBackspace);  // One character: both bytes of the é.
+  v.Type("e");
+  EXPECT_EQ(v.Act(Action::kScan, 7).kind, Kind::kNone) << "the form has the keyboard";
+  EXPECT_EQ(v.Act(Action::kQuit).kind, Kind::kNone) << "Esc closes the form, never the viewer";
+  v.Act(Action::kFormDone);
+  ASSERT_FALSE(v.editing());
+  EXPECT_EQ(v.next_identity().side, "recto");  // Sanitised as the form closes.
+  EXPECT_EQ(v.next_identity().operator_name, "A. Scribe");
+
+  v.Act(Action::kObject);  // auto -> leaf
+  const ViewerState::Command first = v.Act(Action::kScan, 101);
+  ASSERT_EQ(first.kind, Kind::kRequestScan);
+  EXPECT_EQ(first.request.scan_id, 101);
+  EXPECT_EQ(first.request.identity.shelfmark, "MS 12");
+  EXPECT_EQ(first.request.identity.folio, "3");
+  EXPECT_EQ(first.request.identity.side, "recto");
+  EXPECT_EQ(first.request.object, "leaf");
+  EXPECT_EQ(v.next_identity().side, "verso");
+  EXPECT_EQ(v.Act(Action::kScan, 102).request.identity.side, "verso");
+  EXPECT_EQ(v.next_identity().folio, "4");
+  v.Act(Action::kUndo);
+  EXPECT_EQ(v.next_identity().folio, "3");
+  EXPECT_EQ(v.next_identity().side, "verso");
+  EXPECT_NE(v.progress().find("next scan again: MS 12, 3 verso"), std::string::npos)
+      << v.progress();
+  EXPECT_EQ(v.Act(Action::kQuit).kind, Kind::kQuit);
+}
+
+// A leaf hint dragged on the preview travels with every scan asked for, until it is cleared.
+TEST(ViewerState, TheLeafHintRidesEveryRequestUntilCleared) {
+  ViewerState v;
+  v.SetHint(cv::Rect2d(0.2, 0.25, 0.5, 0.9));  // Beyond the view's bottom: cut to it.
+  const ViewerState::Command c = v.Act(Action::kScan, 5);
+  EXPECT_FLOAT_EQ(c.request.leaf_hint[0], 0.2f);
+  EXPECT_FLOAT_EQ(c.request.leaf_hint[1], 0.25f);
+  EXPECT_FLOAT_EQ(c.request.leaf_hint[2], 0.5f);
+  EXPECT_FLOAT_EQ(c.request.leaf_hint[3], 0.75f);
+  v.Act(Action::kClearHint);
+  EXPECT_EQ(v.Act(Action::kScan, 6).request.leaf_hint[2], 0);
+}
+
+// A new error about the scan in progress is its failure; an old error (heard first), an error
+// about another scan, or one without a scan is not; the next scan's first pattern clears it.
+TEST(ViewerState, AFailureIsTheScanInProgressesAndTheNextScanClearsIt) {
+  ViewerState v;
+  const Clock::time_point t0;
+  v.OnStatus(Status("vellum-decoder", "scan 3: old news", 3, 100), t0);
+  EXPECT_EQ(v.failure(), "");
+  v.Act(Action::kScan, 10);
+  v.OnStatus(Status("vellum-decoder", "scan 9: another scan", 9, 200), t0);
+  EXPECT_EQ(v.failure(), "");
+  v.OnStatus(Status("vellum-decoder", "no scan named", 0, 300), t0);
+  EXPECT_EQ(v.failure(), "");
+  v.OnStatus(Status("vellum-decoder", "scan 10 failed: no capture for 30 s", 10, 400), t0);
+  EXPECT_EQ(v.failure(), "vellum-decoder: scan 10 failed: no capture for 30 s");
+  EXPECT_EQ(v.failed_scan(), 10);
+  EXPECT_NE(v.progress().find("scan 10 FAILED"), std::string::npos) << v.progress();
+  pattern_shown_t next{};
+  next.scan_id = 11;
+  next.pattern_index = -1;
+  v.OnPatternShown(next);
+  EXPECT_EQ(v.failure(), "");
+  EXPECT_EQ(v.progress(), "scan 11: texture");
+}
+
+TEST(ViewerState, APromptedLightIsAnsweredOnceAndTheLightsOffPromptIsOnlyDismissed) {
+  ViewerState v;
+  EXPECT_EQ(v.Act(Action::kLightDone).kind, Kind::kNone);  // Nothing asked.
+  light_t prompt{};
+  prompt.scan_id = 4;
+  prompt.index = 1;
+  prompt.light.name = "raking-120";
+  prompt.text = "Switch on the light 'raking-120'";
+  v.OnLightPrompt(prompt);
+  const ViewerState::Command on = v.Act(Action::kLightDone);
+  ASSERT_EQ(on.kind, Kind::kLightOn);
+  EXPECT_EQ(on.light.scan_id, 4);
+  EXPECT_EQ(on.light.index, 1);
+  EXPECT_EQ(on.light.source, "operator");
+  EXPECT_EQ(on.light.text, "");
+  EXPECT_EQ(v.light_prompt(), "");
+  EXPECT_EQ(v.Act(Action::kLightDone).kind, Kind::kNone);
+  prompt.index = -1;  // All off, at the end.
+  prompt.text = "";
+  v.OnLightPrompt(prompt);
+  EXPECT_EQ(v.light_prompt(), "(vellum-lights asks, with no words)");
+  EXPECT_EQ(v.Act(Action::kLightDone).kind, Kind::kNone);
+  EXPECT_EQ(v.light_prompt(), "");
+}
+
+TEST(ViewerState, ResultsAreSteppedThroughAndTheNewestIsShown) {
+  ViewerState v;
+  for (int k = 1; k <= 3; ++k) v.OnRestored(Restored(k, k == 2 ? "fail" : "pass"), cv::Mat());
+  EXPECT_EQ(v.shown()->scan_id, 3);
+  EXPECT_EQ(v.results().front().title, "scan 1");  // No report on disk: the scan id.
+  v.Act(Action::kPrevious);
+  EXPECT_EQ(v.quality(), "fail");
+  v.Act(Action::kPrevious);
+  v.Act(Action::kPrevious);
+  EXPECT_EQ(v.shown()->scan_id, 1);
+  v.Act(Action::kNext);
+  v.Act(Action::kNext);
+  v.Act(Action::kNext);
+  EXPECT_EQ(v.shown()->scan_id, 3);
+  for (int k = 4; k <= 60; ++k) v.OnRestored(Restored(k, "pass"), cv::Mat());
+  EXPECT_EQ(v.results().size(), ViewerState::kMaxResults);
+  EXPECT_EQ(v.results().front().scan_id, 60 - static_cast<int>(ViewerState::kMaxResults) + 1);
+}
+
+// The picture: the preview in the left third, where the layout says, with the leaf hint drawn
+// over it where it lies; NO SIGNAL once the camera was silent for more than 2 s by the time
+// given, not before.
+TEST(ViewerDraw, ThePreviewIsWhereTheLayoutSaysAndNoSignalFollowsTheTimeGiven) {
+  ViewerState v;
+  const Clock::time_point t0 = Clock::Steady().Now();
+  cv::Mat preview(240, 320, CV_8UC3, cv::Scalar(60, 60, 60));
+  v.OnPreview(preview, t0);
+  v.SetHint(cv::Rect2d(0.5, 0.5, 0.25, 0.25));  // The lower right quarter's corner only.
+  const cv::Size size(960, 540);
+  ViewerLayout layout;
+  const cv::Mat fresh = DrawViewer(v, size, t0 + Seconds(1), &layout);
+  ASSERT_EQ(fresh.size(), size);
+  ASSERT_FALSE(layout.preview.empty());
+  EXPECT_LE(layout.preview.br().x, size.width / 3);
+  EXPECT_NEAR(static_cast<double>(layout.preview.width) / layout.preview.height, 320.0 / 240, 0.02);
+  // The hint's cyan in the preview's lower right, none in its upper left.
+  auto cyan = [&](const cv::Mat& image, cv::Rect r) {
+    cv::Mat near;
+    cv::inRange(image(r), cv::Scalar(235, 200, 0), cv::Scalar(255, 240, 30), near);
+    return cv::countNonZero(near);
+  };
+  const cv::Rect at = layout.preview;
+  const cv::Rect upper_left(at.x, at.y, at.width / 2 - 2, at.height / 2 - 2);
+  const cv::Rect lower_right(at.x + at.width / 2 - 2, at.y + at.height / 2 - 2, at.width / 2 + 2,
+                             at.height / 2 + 2);
+  EXPECT_EQ(cyan(fresh, upper_left), 0);
+  EXPECT_GT(cyan(fresh, lower_right), at.width / 4);
+  // NO SIGNAL (red text over the preview) 3 s after the preview, not 1 s after.
+  auto red = [&](const cv::Mat& image) {
+    cv::Mat near;
+    cv::inRange(image(at), cv::Scalar(30, 30, 200), cv::Scalar(50, 50, 240), near);
+    return cv::countNonZero(near);
+  };
+  const cv::Mat silent = DrawViewer(v, size, t0 + Seconds(3), &layout);
+  EXPECT_EQ(red(fresh), 0);
+  EXPECT_GT(red(silent), 200);
+  // Zoomed, the preview is not drawn (and a drag cannot begin on it).
+  v.Act(Action::kZoom);
+  DrawViewer(v, size, t0 + Seconds(1), &layout);
+  EXPECT_TRUE(layout.preview.empty());
+}
+
+}  // namespace
+}  // namespace vellum::station
