@@ -7,6 +7,7 @@
 #include <cmath>
 #include <filesystem>
 #include <future>
+#include <limits>
 #include <map>
 #include <opencv2/imgproc.hpp>
 
@@ -495,12 +496,24 @@ StageReport FlattenStage(const ScanWork& work, const PipelineOptions& o, PageRes
 
 namespace {
 
+// The restored page's figures, worked out once: the report records them and the page's files
+// carry them (Provenance).
+struct RestoreFigures {
+  bool sampled = false;      // The camera's true sampling of the page was measured:
+  SamplingSummary sampling;  // what it is.
+  double scale_error_percent = std::numeric_limits<double>::quiet_NaN();  // NaN: not a scale.
+  std::string icc_profile;  // The colour profile the page is written in.
+};
+
 // What the restored page's files say of how it was made (restored.json's `provenance` and the
-// TIFF's XMP): its scale and measured error, its true sampling, its flattening's strain
-// (`flat`), the calibration's checksum (`context`) and the options every stage recorded in its
-// report (`earlier`, the scan's stages so far, and the restore stage's own, `own`).
+// TIFF's XMP): its scale, measured error, true sampling and colour profile (`figures`), its
+// flattening's strain (`flat`), the calibration's checksum (`context`), all typed; and the
+// options as run, as every stage recorded them in its report's "options" section (`earlier`,
+// the scan's stages so far, which travel with the products, and the restore stage's own,
+// `own`): a whole section, never a value looked up by its key.
 std::map<std::string, std::string> Provenance(const RestoreResult& restored,
                                               const FlattenResult& flat, const ScanContext& context,
+                                              const RestoreFigures& figures,
                                               const std::vector<StageReport>& earlier,
                                               const StageReport& own, const std::string& page) {
   std::map<std::string, std::string> out;
@@ -509,13 +522,14 @@ std::map<std::string, std::string> Provenance(const RestoreResult& restored,
   }
   out["flattening_mean_strain"] = JsonNumber(flat.mean_strain).dump();
   out["flattening_max_strain"] = JsonNumber(flat.max_strain).dump();
-  for (const ReportValue& v : own.values) {
-    if (v.section == "sampling" && (v.key == "median_ppi" || v.key == "p5_ppi"))
-      out["true_" + v.key] = JsonNumber(v.number).dump();
-    if (v.section == "restored" && v.key == "scale_error_percent")
-      out[v.key] = JsonNumber(v.number).dump();
-    if (v.section == "restored" && v.key == "icc_profile") out[v.key] = v.text;
+  if (figures.sampled) {
+    out["true_median_ppi"] = JsonNumber(figures.sampling.median_ppi).dump();
+    out["true_p5_ppi"] = JsonNumber(figures.sampling.p5_ppi).dump();
   }
+  if (std::isfinite(figures.scale_error_percent)) {
+    out["scale_error_percent"] = JsonNumber(figures.scale_error_percent).dump();
+  }
+  out["icc_profile"] = figures.icc_profile;
   if (!context.calibration_sha256.empty()) {
     out["calibration_sha256"] = context.calibration_sha256;
   }
@@ -567,11 +581,12 @@ StageReport RestoreStage(const ScanWork& work, const PipelineOptions& o, PageRes
   r.Number("restored", "dpi", restored->dpi);
   r.Number("restored", "rotation_deg", restored->rotation_deg);
   r.Number("restored", "bits_per_channel", texture.depth() == CV_16U ? 16 : 8);
-  r.Text("restored", "icc_profile",
-         camera_icc.empty()
-             ? std::string(texture.channels() == 3 ? "sRGB" : "gray, sRGB tone curve") +
-                   " (no camera profile configured)"
-             : camera_icc.description);
+  RestoreFigures figures;
+  figures.icc_profile =
+      camera_icc.empty() ? std::string(texture.channels() == 3 ? "sRGB" : "gray, sRGB tone curve") +
+                               " (no camera profile configured)"
+                         : camera_icc.description;
+  r.Text("restored", "icc_profile", figures.icc_profile);
   if (restored->view == RestoreView::kOrthographic) {
     // The reproduction scale error: the flat page's lengths against the measured surface's
     // (the flattening's mean strain) plus the calibration's measured error of every length
@@ -582,11 +597,14 @@ StageReport RestoreStage(const ScanWork& work, const PipelineOptions& o, PageRes
     const bool measured = std::isfinite(calibration);
     r.Number("restored", "scale_error_flattening_percent", flattening);
     if (measured) r.Number("restored", "scale_error_calibration_percent", calibration);
-    r.Number("restored", "scale_error_percent", flattening + (measured ? calibration : 0));
+    figures.scale_error_percent = flattening + (measured ? calibration : 0);
+    r.Number("restored", "scale_error_percent", figures.scale_error_percent);
   }
   if (!restored->sampling.empty()) {
     // What the camera truly saw of the page, beside the dpi it is written at.
-    const SamplingSummary sampling = SummarizeSampling(restored->sampling);
+    figures.sampled = true;
+    figures.sampling = SummarizeSampling(restored->sampling);
+    const SamplingSummary& sampling = figures.sampling;
     r.Number("sampling", "median_ppi", sampling.median_ppi);
     r.Number("sampling", "p5_ppi", sampling.p5_ppi);
     r.Number("sampling", "p95_ppi", sampling.p95_ppi);
@@ -604,7 +622,7 @@ StageReport RestoreStage(const ScanWork& work, const PipelineOptions& o, PageRes
     }
   }
   const std::map<std::string, std::string> provenance =
-      Provenance(*restored, flattened, context, earlier, r, page);
+      Provenance(*restored, flattened, context, figures, earlier, r, page);
   if (restored->view == RestoreView::kOrthographic && !restored->mask.empty()) {
     const cv::Rect leaf = cv::boundingRect(restored->mask);
     const double mm = 25.4 / restored->dpi;
