@@ -64,25 +64,10 @@ PipelineOptions SceneOptionsFor(const Scene& scene) {
   PipelineOptions options;
   if (!scene.flat_field && !scene.studio_field) return options;
   static const PipelineOptions lit = [] {
-    TextureOptions plain;
-    plain.kind = TextureKind::kPlain;
-    plain.paper_albedo = 0.85;
-    PageOptions target;
-    target.size_mm = {420, 320};
-    const LightOptions light = StudioLight();
-    const SimulatedScan white = SimulateScan(QuickRig(), target, plain, SceneOptions(), 41, light);
-    const DecodeResult decoded = Decode(white.sequence, white.frames);
-    const PointMap map = Triangulator(QuickRig()).Triangulate(decoded);
-    FlatFieldOptions field;
-    field.target_albedo = plain.paper_albedo;
-    Status s = Status::Ok();
     PipelineOptions o;
-    o.flat_field = MeasureFlatField(decoded.amplitude, map.points, QuickRig(), field, &s);
-    if (s.ok()) {
-      o.studio_field = MeasureStudioField(white.texture, QuickRig().camera, light.studio_lamps,
-                                          plain.paper_albedo, &s);
-    }
-    if (!s.ok()) throw std::runtime_error("the fields: " + s.message());
+    const Status s = MeasureFieldsOnWhiteTarget(QuickRig(), StudioLight(), 0.85, 41, &o.flat_field,
+                                                &o.studio_field);
+    if (!s.ok()) throw std::runtime_error(s.message());
     return o;
   }();
   if (scene.flat_field) options.flat_field = lit.flat_field;

@@ -594,21 +594,11 @@ TEST(Shading, TheRestoredAlbedoOfAPlainLeafIsEvenWhereItsTextureIsShaded) {
   TextureOptions plain;
   plain.kind = TextureKind::kPlain;
   plain.paper_albedo = 0.85;
-  PageOptions target;
-  target.size_mm = {420, 320};  // More than the camera's view.
-  const SimulatedScan white = SimulateScan(DefaultRig(), target, plain, SceneOptions(), 41, light);
-  const DecodeResult decoded = Decode(white.sequence, white.frames);
-  const PointMap map = Triangulator(DefaultRig()).Triangulate(decoded);
-  FlatFieldOptions field_options;
-  field_options.target_albedo = plain.paper_albedo;
-  Status s = Status::Ok();
+  // The fields measured on a white target under the same light, as `vellum calibrate
+  // flatfield` and `vellum calibrate studio` measure them.
   PipelineOptions options;
-  options.flat_field =
-      MeasureFlatField(decoded.amplitude, map.points, DefaultRig(), field_options, &s);
-  ASSERT_TRUE(s.ok()) << s.message();
-  // The studio lamps' field from the same target's texture: the texture's reflectance too.
-  options.studio_field = MeasureStudioField(white.texture, DefaultRig().camera, light.studio_lamps,
-                                            plain.paper_albedo, &s);
+  const Status s = MeasureFieldsOnWhiteTarget(DefaultRig(), light, plain.paper_albedo, 41,
+                                              &options.flat_field, &options.studio_field);
   ASSERT_TRUE(s.ok()) << s.message();
   for (PageShape shape : {PageShape::kCurl, PageShape::kFold, PageShape::kCone}) {
     SCOPED_TRACE(ToString(shape));

@@ -289,7 +289,7 @@ TEST_P(MustShowScenes, MeetTheBarsWithNoWarning) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(Issue, MustShowScenes, ::testing::ValuesIn(MustShow()),
+INSTANTIATE_TEST_SUITE_P(Named, MustShowScenes, ::testing::ValuesIn(MustShow()),
                          [](const ::testing::TestParamInfo<Named>& info) {
                            return info.param.name;
                          });

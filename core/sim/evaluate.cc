@@ -4,7 +4,9 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "core/decode/decode.h"
 #include "core/geometry/rigid2d.h"
+#include "core/geometry/triangulate.h"
 
 namespace vellum {
 
@@ -203,6 +205,26 @@ std::vector<double> TrueSampling(const VirtualGantry& gantry, double step_mm) {
     }
   }
   return out;
+}
+
+Status MeasureFieldsOnWhiteTarget(const Calibration& rig, const LightOptions& light, double albedo,
+                                  uint64_t seed, FlatField* flat, StudioField* studio) {
+  TextureOptions plain;
+  plain.kind = TextureKind::kPlain;
+  plain.paper_albedo = albedo;
+  PageOptions target;
+  target.size_mm = {420, 320};  // More than the camera's view.
+  const SimulatedScan white = SimulateScan(rig, target, plain, SceneOptions(), seed, light);
+  const DecodeResult decoded = Decode(white.sequence, white.frames);
+  const PointMap map = Triangulator(rig).Triangulate(decoded);
+  FlatFieldOptions options;
+  options.target_albedo = albedo;
+  Status s = Status::Ok();
+  *flat = MeasureFlatField(decoded.amplitude, map.points, rig, options, &s);
+  if (!s.ok()) return Status::Error("the flat field: " + s.message());
+  *studio = MeasureStudioField(white.texture, rig.camera, light.studio_lamps, albedo, &s);
+  if (!s.ok()) return Status::Error("the studio field: " + s.message());
+  return Status::Ok();
 }
 
 }  // namespace vellum

@@ -6,9 +6,11 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
+#include "core/common/status.h"
 #include "core/mesh/mesh.h"
 #include "core/patterns/patterns.h"
 #include "core/patterns/scan.h"
+#include "core/shading/albedo.h"
 #include "core/sim/gantry.h"
 
 namespace vellum {
@@ -73,6 +75,14 @@ Scan AsScan(const SimulatedScan& sim);
 // are in flat area), 25.4 times the smallest singular value of d(camera pixel) / d(s, t), by
 // central differences.
 std::vector<double> TrueSampling(const VirtualGantry& gantry, double step_mm);
+
+// The projector's flat field and the studio lamps' field measured on the virtual gantry as
+// `vellum calibrate flatfield` and `vellum calibrate studio` measure them at a real one: a plain
+// target of `albedo` larger than the view (420 x 320 mm) scanned under `light` (noise seed
+// `seed`), decoded, triangulated and measured (MeasureFlatField, MeasureStudioField). An error
+// names the field that could not be measured.
+Status MeasureFieldsOnWhiteTarget(const Calibration& rig, const LightOptions& light, double albedo,
+                                  uint64_t seed, FlatField* flat, StudioField* studio);
 
 // Intersection over union of two masks (CV_8U, nonzero = in); 0 if both are empty.
 double MaskIoU(const cv::Mat& a, const cv::Mat& b);
