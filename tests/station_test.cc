@@ -225,7 +225,8 @@ class StationTest : public ::testing::Test {
                                    const std::vector<std::string>& decoder_flags = {}) {
     ViewedStation v;
     v.display = StartXvfb(&v.screen);
-    v.viewer = Start(Daemon("vellum-viewer"), {}, {"DISPLAY=" + v.display, "SDL_VIDEODRIVER=x11"});
+    v.viewer = Start(Daemon("vellum-viewer"), {"--data", dir_ + "/scans"},
+                     {"DISPLAY=" + v.display, "SDL_VIDEODRIVER=x11"});
     std::vector<std::string> camera = {"--backend", "sim", "--rig", rig, "--page", "curl"};
     camera.insert(camera.end(), camera_flags.begin(), camera_flags.end());
     v.camera = Start(Daemon("vellum-camera"), camera);
@@ -1130,16 +1131,19 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
   ASSERT_TRUE(Xdotool(
       display, {"search", "--sync", "--name", "vellum station", "windowfocus", "--sync", "%1"}));
   // The form opens (its state on the viewer's status), then the operator types.
-  std::string viewer_state;
-  Listener<status_t> on_viewer(*lcm_, "STATUS_VIEWER",
-                               [&](const status_t& m) { viewer_state = m.state; });
+  std::string viewer_state, viewer_detail;
+  Listener<status_t> on_viewer(*lcm_, "STATUS_VIEWER", [&](const status_t& m) {
+    viewer_state = m.state;
+    viewer_detail = m.detail;
+  });
   ASSERT_TRUE(Xdotool(display, {"key", "e"}));
   ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return viewer_state == "editing"; }));
   ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "MS 7"}));
   ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
   ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "1"}));
   ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
-  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "recto"}));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "rceto"}));  // Not typed: chosen...
+  ASSERT_TRUE(Xdotool(display, {"key", "space"}));                    // ...recto.
   ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
   ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "B. Binder"}));
   ASSERT_TRUE(Xdotool(display, {"key", "Return"}));
@@ -1147,6 +1151,9 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
   // One scan from the viewer's s key: asked for with `folio` and `side`, and restored.
   auto scan = [&](const std::string& folio, const std::string& side) {
     const size_t n = requests.size();
+    // The viewer takes a scan once it hears the whole station (it says so on its status).
+    ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return viewer_detail == "ready to scan"; }))
+        << "the viewer: " << viewer_state << ", " << viewer_detail;
     ASSERT_TRUE(Xdotool(display, {"key", "s"}));
     ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return requests.size() > n; }))
         << "no SCAN_REQUEST from the viewer's s key";

@@ -184,16 +184,37 @@ int DrawDaemons(const ViewerState& s, cv::Mat& canvas, int y, Clock::time_point 
 }
 
 // The next scan's identity from `y` on, or its form while it is edited.
-void DrawIdentity(const ViewerState& s, cv::Mat& canvas, int y, int width) {
+void DrawIdentity(const ViewerState& s, cv::Mat& canvas, int y, int width, Clock::time_point now) {
   if (!s.editing()) {
-    cv::putText(
-        canvas,
-        "next scan: " + DescribeIdentity(s.next_identity()) + "  (" + ToString(s.object()) + ")",
-        cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1,
-        cv::LINE_AA);
-    cv::putText(canvas, "e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom",
-                cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160), 1,
-                cv::LINE_AA);
+    const ScanIdentity& next = s.next_identity();
+    const std::string title =
+        AttemptTitle(next, s.NextAttempt(next)) +
+        (next.operator_name.empty() ? std::string() : " (" + next.operator_name + ")");
+    const size_t chars = static_cast<size_t>(std::max(20, (width - 16) / 8));
+    if (s.retake()) {
+      cv::putText(canvas, "RETAKE (Enter): " + title, cv::Point(12, y + 12),
+                  cv::FONT_HERSHEY_SIMPLEX, 0.45, kAmber, 2, cv::LINE_AA);
+      const std::vector<std::string> why =
+          Wrap(s.retake_why() + "; u: go on without it, to " + DescribeIdentity(s.sequence_next()),
+               chars);
+      cv::putText(canvas, why[0], cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, kAmber, 1,
+                  cv::LINE_AA);
+    } else {
+      cv::putText(canvas, "next scan (Enter): " + title + "  (" + ToString(s.object()) + ")",
+                  cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(255, 255, 255),
+                  1, cv::LINE_AA);
+      cv::putText(canvas, "e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom",
+                  cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160),
+                  1, cv::LINE_AA);
+    }
+    const std::string refused = s.Refusal(now);
+    if (!refused.empty()) {  // In full: two lines.
+      const std::vector<std::string> lines = Wrap("cannot scan: " + refused, chars);
+      for (size_t k = 0; k < std::min<size_t>(2, lines.size()); ++k) {
+        cv::putText(canvas, lines[k], cv::Point(12, y + 48 + 16 * static_cast<int>(k)),
+                    cv::FONT_HERSHEY_SIMPLEX, 0.42, kRed, 1, cv::LINE_AA);
+      }
+    }
     return;
   }
   cv::putText(canvas, "identity of the next scan (Tab: next field, Return: done)",
@@ -206,7 +227,12 @@ void DrawIdentity(const ViewerState& s, cv::Mat& canvas, int y, int width) {
       cv::rectangle(canvas, cv::Rect(10, line_y - 14, width - 16, 18), cv::Scalar(90, 60, 20),
                     cv::FILLED);
     }
-    const std::string value = s.next_identity().*IdentityForm()[k].field + (current ? "_" : "");
+    const std::string& text = s.sequence_next().*IdentityForm()[k].field;
+    std::string value = text + (current ? "_" : "");
+    if (IdentityForm()[k].field == &ScanIdentity::side) {  // Chosen, not typed.
+      value = "< " + (text.empty() ? std::string("none: pages") : text) + " >" +
+              (current ? "  Space: choose" : "");
+    }
     cv::putText(canvas, std::string(IdentityForm()[k].name) + ": " + value, cv::Point(14, line_y),
                 cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(240, 240, 240), 1, cv::LINE_AA);
   }
@@ -229,8 +255,8 @@ cv::Rect DrawLeft(const ViewerState& s, cv::Mat& canvas, int top, int width,
   const cv::Rect strip(8, top + preview_h + 2, width - 12, 36);
   DrawHistogram(s, canvas, strip);
   const int y = DrawDaemons(s, canvas, strip.y + strip.height + 18, now);
-  const int form_lines = s.editing() ? kFormFields + 1 : 2;
-  DrawIdentity(s, canvas, std::max(y + 6, h - 8 - 18 * form_lines), width);
+  const int form_lines = s.editing() ? kFormFields + 1 : 4;
+  DrawIdentity(s, canvas, std::max(y + 6, h - 8 - 18 * form_lines), width, now);
   return preview_at;
 }
 
@@ -307,13 +333,23 @@ void DrawPage(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
     cv::putText(canvas, "quality: " + verdict, badge.tl() + cv::Point(6, 15),
                 cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   }
-  std::string caption =
-      show.warnings.empty() ? "restored page" : "restored page: DOUBTFUL, see the warnings";
-  if (failed && r && r->scan_id != s.failed_scan()) {
-    caption = "an earlier scan (" + std::to_string(r->scan_id) + "); scan " +
-              std::to_string(s.failed_scan()) + " failed";
+  std::string caption = "restored page";
+  if (r) {
+    caption = r->title + " (" + std::to_string(s.shown_index() + 1) + " of " +
+              std::to_string(s.results().size()) + ")" +
+              (show.warnings.empty() ? "" : ": see the warnings");
+    if (failed && r->scan_id != s.failed_scan()) caption = "an earlier scan: " + caption;
+  } else if (const ViewerState::Asked* a = s.asked(s.scan())) {
+    caption = (failed ? "failed: " : "scanning: ") + AttemptTitle(a->identity, a->attempt);
   }
   Panel(canvas, page, show.restored, caption);
+  if (r) {  // Where its files are.
+    std::string path = r->results;
+    const size_t chars = static_cast<size_t>(std::max(20, page.width / 7));
+    if (path.size() > chars) path = "..." + path.substr(path.size() - chars + 3);
+    cv::putText(canvas, path, cv::Point(page.x + 4, page.y + page.height - 4),
+                cv::FONT_HERSHEY_SIMPLEX, 0.38, cv::Scalar(170, 170, 170), 1, cv::LINE_AA);
+  }
   const size_t chars = static_cast<size_t>(std::max(20, page.width / 8));
   for (int k = 0; k < lines; ++k) {
     std::string line = "! " + show.warnings[k];
@@ -346,15 +382,21 @@ void DrawFailure(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
   const std::vector<std::string> wrapped =
       Wrap(s.failure(), static_cast<size_t>(std::max(30, (area.width - 32) / 9)));
   const int n = std::min<int>(static_cast<int>(wrapped.size()), 8);
-  const cv::Rect box(area.x, area.y, area.width, 22 * n + 30);
+  const cv::Rect box(area.x, area.y, area.width, 22 * n + 30 + 22 * 3);
   cv::rectangle(canvas, box, cv::Scalar(20, 20, 60), cv::FILLED);
   cv::rectangle(canvas, box, kRed, 2);
-  cv::putText(canvas,
-              "scan " + std::to_string(s.failed_scan()) + " failed:", box.tl() + cv::Point(10, 20),
-              cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+  cv::putText(canvas, s.FailedTitle() + " (scan " + std::to_string(s.failed_scan()) + ") failed:",
+              box.tl() + cv::Point(10, 20), cv::FONT_HERSHEY_SIMPLEX, 0.55,
+              cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
   for (int k = 0; k < n; ++k) {
     cv::putText(canvas, wrapped[k], box.tl() + cv::Point(10, 42 + 22 * k), cv::FONT_HERSHEY_SIMPLEX,
                 0.5, cv::Scalar(200, 200, 255), 1, cv::LINE_AA);
+  }
+  const std::vector<std::string> next = Wrap(
+      "next: " + s.FailureNextStep(), static_cast<size_t>(std::max(30, (area.width - 32) / 9)));
+  for (size_t k = 0; k < std::min<size_t>(next.size(), 3); ++k) {
+    cv::putText(canvas, next[k], box.tl() + cv::Point(10, 42 + 22 * (n + static_cast<int>(k))),
+                cv::FONT_HERSHEY_SIMPLEX, 0.5, kAmber, 1, cv::LINE_AA);
   }
 }
 
@@ -386,6 +428,15 @@ cv::Mat DrawViewer(const ViewerState& s, cv::Size size, Clock::time_point now,
     DrawPrompt(s, canvas, cv::Rect(over.x, top + h / 4, over.width, over.height - h / 4));
   }
   if (!s.failure().empty()) DrawFailure(s, canvas, over);
+  if (s.quitting()) {
+    const cv::Rect box(w / 2 - 220, h / 2 - 40, 440, 80);
+    cv::rectangle(canvas, box, cv::Scalar(60, 60, 60), cv::FILLED);
+    cv::rectangle(canvas, box, cv::Scalar(255, 255, 255), 2);
+    cv::putText(canvas, "Quit the viewer?", box.tl() + cv::Point(16, 32), cv::FONT_HERSHEY_SIMPLEX,
+                0.8, cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
+    cv::putText(canvas, "y: quit    any other key: stay", box.tl() + cv::Point(16, 62),
+                cv::FONT_HERSHEY_SIMPLEX, 0.55, cv::Scalar(220, 220, 220), 1, cv::LINE_AA);
+  }
   return canvas;
 }
 

@@ -1,12 +1,23 @@
 #include "daemons/viewer/viewer_node.h"
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <utility>
 
 #include "station/chain.h"
 #include "station/messages.h"
 
 namespace vellum::station {
+
+bool ViewerNodeOptions::Check(std::string* why) const {
+  if (!session_file.empty() && std::filesystem::is_directory(session_file)) {
+    *why = "viewer: session_file " + session_file + " is a folder";
+    return false;
+  }
+  return true;
+}
 
 bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action) {
   using A = ViewerState::Action;
@@ -27,6 +38,11 @@ bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action) 
       case SDLK_ESCAPE:
         *action = A::kFormDone;
         return true;
+      case SDLK_SPACE:
+      case SDLK_LEFT:
+      case SDLK_RIGHT:
+        *action = A::kChoose;
+        return true;
       default:
         return false;
     }
@@ -37,7 +53,12 @@ bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action) 
       *action = A::kQuit;
       return true;
     case SDLK_s:
+    case SDLK_RETURN:
+    case SDLK_KP_ENTER:
       *action = A::kScan;
+      return true;
+    case SDLK_y:
+      *action = A::kConfirm;
       return true;
     case SDLK_c:
       *action = A::kSheet;
@@ -71,8 +92,10 @@ bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action) 
   }
 }
 
-ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window)
-    : node_(node), window_(std::move(window)) {
+ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window,
+                       const ViewerNodeOptions& options)
+    : node_(node), window_(std::move(window)), options_(options) {
+  LoadSession();
   // Text input only while the form is open: a key that opens it (e) must not also type itself
   // into it, as SDL sends both a key and its text while text input is on.
   window_->TextInput(false);
@@ -128,6 +151,53 @@ void ViewerNode::Tick() {
   if (real < next_draw_) return;
   next_draw_ = real + std::chrono::milliseconds(100);
   window_->Show(DrawViewer(state_, window_->size(), node_->Now(), &layout_));
+  SaveSessionAndReadiness();
+}
+
+void ViewerNode::LoadSession() {
+  saved_session_ = state_.SessionJson();
+  const std::string& file = options_.session_file;
+  if (file.empty() || !std::filesystem::exists(file)) return;
+  std::ifstream in(file);
+  std::stringstream text;
+  text << in.rdbuf();
+  std::string why;
+  if (!in || !state_.LoadSession(text.str(), &why)) {
+    std::error_code ec;
+    std::filesystem::rename(file, file + ".bad", ec);
+    node_->Error("session " + file + " not taken up (" + (in ? why : "cannot be read") +
+                 "); set aside as " + file + ".bad, starting afresh");
+    return;
+  }
+  saved_session_ = state_.SessionJson();
+  node_->Log("session taken up from " + file + ": next scan " +
+             DescribeIdentity(state_.next_identity()));
+}
+
+void ViewerNode::SaveSessionAndReadiness() {
+  const std::string refused = state_.Refusal(node_->Now());
+  const std::string readiness = refused.empty() ? "ready to scan" : "cannot scan: " + refused;
+  if (readiness != readiness_ && !state_.editing()) {
+    readiness_ = readiness;
+    node_->SetState("idle", 0, readiness);
+  }
+  const std::string& file = options_.session_file;
+  if (file.empty()) return;
+  const std::string session = state_.SessionJson();
+  if (session == saved_session_) return;
+  const std::string part = file + ".part";
+  {
+    std::ofstream out(part, std::ios::trunc);
+    out << session;
+    if (!out.flush()) {
+      node_->Error("cannot write the session to " + part);
+      return;
+    }
+  }
+  std::error_code ec;
+  std::filesystem::rename(part, file, ec);
+  if (ec) return node_->Error("cannot write the session to " + file + ": " + ec.message());
+  saved_session_ = session;
 }
 
 void ViewerNode::OnKey(SDL_Keycode key) {
@@ -137,7 +207,7 @@ void ViewerNode::OnKey(SDL_Keycode key) {
 
 void ViewerNode::Do(ViewerState::Action action) {
   const bool was_editing = state_.editing();
-  ViewerState::Command c = state_.Act(action, NowUtime());
+  ViewerState::Command c = state_.Act(action, NowUtime(), node_->Now());
   switch (c.kind) {
     case ViewerState::Command::Kind::kQuit:
       node_->Stop();
@@ -156,6 +226,7 @@ void ViewerNode::Do(ViewerState::Action action) {
   if (state_.editing()) {
     node_->SetState("editing", 0, "the next scan's identity");  // The form has the keyboard.
   } else {
+    readiness_.clear();  // Said again at the next draw.
     node_->SetState("idle");
   }
 }

@@ -39,6 +39,13 @@
 
 namespace vellum::station {
 
+struct ViewerNodeOptions {
+  // Where the operator's sequence is kept across restarts (ViewerState::SessionJson); "" for
+  // nowhere. vellum-viewer keeps it beside the data: <data>/viewer-session.json.
+  std::string session_file;
+  bool Check(std::string* why) const;
+};
+
 // The operator's action for a key (SDL's), with the identity form open or not; false for a key
 // that does nothing.
 bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action);
@@ -46,7 +53,10 @@ bool ActionForKey(SDL_Keycode key, bool form_open, ViewerState::Action* action);
 class ViewerNode {
  public:
   // Everything runs on the LCM thread (the window's events, drawing and the messages).
-  ViewerNode(Node* node, std::unique_ptr<display::Window> window);
+  // Takes up the session in options.session_file if there is one (one that does not read is
+  // reported and set aside as <file>.bad, never lost).
+  ViewerNode(Node* node, std::unique_ptr<display::Window> window,
+             const ViewerNodeOptions& options = ViewerNodeOptions());
 
   // On the LCM thread, often: handles keys and redraws (at most ten times a second).
   void Tick();
@@ -59,10 +69,17 @@ class ViewerNode {
   void OnMouse(const display::Window::Input& in);
   // Publishes what an action asked, and follows the form opening and closing.
   void Do(ViewerState::Action action);
+  void LoadSession();
+  // Writes the session when it changed (whole: a new file renamed over the old), and says on
+  // the status whether a scan can be asked for, and if not why.
+  void SaveSessionAndReadiness();
 
   Node* node_;
   std::unique_ptr<display::Window> window_;
+  ViewerNodeOptions options_;
   ViewerState state_;
+  std::string saved_session_;    // As last written.
+  std::string readiness_;        // As last said on the status.
   ViewerLayout layout_;          // Of the last draw (the mouse reads it).
   cv::Point drag_from_{-1, -1};  // Where a drag on the preview began (window pixels).
   std::chrono::steady_clock::time_point next_draw_;  // Real time: the drawing's pace.

@@ -1,15 +1,18 @@
 // The viewer's node on an in-process bus with a real SDL window (SDL's dummy video driver): a
 // restored scan is listed and drawn, the operator's `s` asks for a scan, the daemons' statuses
 // and errors are drawn; a RESTORED whose preview does not decode is reported, and the viewer
-// goes on.
+// goes on; the operator's sequence is kept in its session file across a restart.
 #include "daemons/viewer/viewer_node.h"
 
 #include <gtest/gtest.h>
 
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <opencv2/imgproc.hpp>
 
+#include "station/chain.h"
 #include "station/daemon.h"
 #include "station/messages.h"
 #include "station/testing.h"
@@ -21,6 +24,7 @@
 namespace vellum::station {
 namespace {
 
+namespace fs = std::filesystem;
 using testing::MemqBus;
 
 class ViewerNodeTest : public ::testing::Test {
@@ -44,6 +48,26 @@ class ViewerNodeTest : public ::testing::Test {
                 20);
     ToMessage(page, &m.preview);
     return m;
+  }
+  // The station as the viewer hears it when all is well: every daemon's heartbeat and (unless
+  // the test sends its own) a camera preview; waits until the viewer would take a scan. The
+  // viewer's clock is the bus's, which stands still: they stay heard.
+  void StationAlive(const ViewerNode& viewer, bool with_preview = true) {
+    auto beat = [&](const char* process) {
+      status_t m{};
+      m.process = process;
+      m.state = "idle";
+      bus_.probe().Publish(StatusChannel(process), &m);
+    };
+    for (const char* p : kGantry) beat(p);
+    for (const ChainLink& link : kChain) beat(link.process);
+    if (with_preview) {
+      image_t preview{};
+      ToMessage(cv::Mat(120, 160, CV_8UC3, cv::Scalar(80, 80, 80)), &preview);
+      bus_.probe().Publish(channel::kPreview, &preview);
+    }
+    ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().Refusal(bus_.clock().Now()).empty(); }))
+        << viewer.state().Refusal(bus_.clock().Now());
   }
   MemqBus bus_;
 };
@@ -73,6 +97,7 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
         return low < 30;
       },
       10));
+  StationAlive(viewer);
   SDL_Event key{};
   key.type = SDL_KEYDOWN;
   key.key.keysym.sym = SDLK_s;
@@ -149,13 +174,15 @@ TEST_F(ViewerNodeTest, TheFormSetsTheIdentityAndEachScanAdvancesTheFolio) {
   ViewerNode viewer(&node, Window());
   bus_.AddTick([&] { viewer.Tick(); });
   auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  StationAlive(viewer);
   PushKey(SDLK_e);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().editing(); }, 10));
   PushText("MS 12");
   PushKey(SDLK_TAB);
   PushText("3");
   PushKey(SDLK_TAB);
-  PushText("Recto");
+  PushText("Recto");    // The side is chosen, not typed: ignored...
+  PushKey(SDLK_SPACE);  // ...and chosen: recto.
   PushKey(SDLK_TAB);
   PushText("A. Scribé");    // UTF-8 kept.
   PushKey(SDLK_BACKSPACE);  // One character, both of its bytes.
@@ -452,6 +479,7 @@ TEST_F(ViewerNodeTest, ABoxDraggedOnThePreviewIsTheNextScansLeafHint) {
   ToMessage(cv::Mat(240, 320, CV_8UC1, cv::Scalar(60)), &preview);
   bus_.probe().Publish(channel::kPreview, &preview);
   ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.preview_area().empty(); }, 10));
+  StationAlive(viewer, /*with_preview=*/false);
   const cv::Rect at = viewer.preview_area();
   EXPECT_NEAR(static_cast<double>(at.width) / at.height, 320.0 / 240.0, 0.02);
   // From a fifth across and a quarter down to 70% across and 90% down of the camera's view.
@@ -519,6 +547,7 @@ TEST_F(ViewerNodeTest, OSaysWhetherTheScansAreLeavesOrABookAndEachRequestCarries
   ViewerNode viewer(&node, Window());
   bus_.AddTick([&] { viewer.Tick(); });
   auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  StationAlive(viewer);
   EXPECT_EQ(viewer.state().object(), ObjectKind::kAuto);
   PushKey(SDLK_s);
   ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 1; }, 10));
@@ -535,6 +564,89 @@ TEST_F(ViewerNodeTest, OSaysWhetherTheScansAreLeavesOrABookAndEachRequestCarries
   }
   PushKey(SDLK_o);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().object() == ObjectKind::kAuto; }, 10));
+}
+
+// The operator's sequence outlives the viewer: restarted, it offers the same folio (here the
+// retake of one that failed); a session file that does not read is set aside, never lost, and
+// the viewer starts afresh.
+TEST_F(ViewerNodeTest, ARestartedViewerResumesTheSequenceFromItsSessionFile) {
+  const std::string dir = testing::TestDir("viewer_session");
+  fs::create_directories(dir);
+  ViewerNodeOptions options;
+  options.session_file = dir + "/viewer-session.json";
+  auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  bus_.Watch("vellum-viewer");
+  ViewerNode* current = nullptr;  // The viewer running now.
+  bus_.AddTick([&] {
+    if (current) current->Tick();
+  });
+  {
+    Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
+    ViewerNode viewer(&node, Window(), options);
+    current = &viewer;
+    StationAlive(viewer);
+    PushKey(SDLK_e);
+    ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().editing(); }, 10));
+    PushText("MS 12");
+    PushKey(SDLK_TAB);
+    PushText("4");
+    PushKey(SDLK_TAB);
+    PushKey(SDLK_SPACE);
+    PushKey(SDLK_SPACE);  // verso
+    PushKey(SDLK_RETURN);
+    ASSERT_TRUE(bus_.RunUntil([&] { return !viewer.state().editing(); }, 10));
+    PushKey(SDLK_RETURN);  // Enter scans.
+    ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 1; }, 10));
+    EXPECT_EQ(requests->back().identity.side, "verso");
+    // The projector fails it.
+    status_t failed{};
+    failed.process = "vellum-projector";
+    failed.state = "idle";
+    failed.last_error = "scan " + std::to_string(requests->back().scan_id) +
+                        " failed: no CAPTURE of pattern 3 of 40 within 5000 ms";
+    failed.last_error_scan_id = requests->back().scan_id;
+    failed.last_error_utime = 1;
+    bus_.probe().Publish(StatusChannel("vellum-projector"), &failed);
+    ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().retake() != nullptr; }, 10));
+    EXPECT_NE(viewer.state().FailureNextStep().find("restart vellum-camera"), std::string::npos)
+        << viewer.state().FailureNextStep();
+    ASSERT_TRUE(bus_.RunUntil(
+        [&] {
+          return testing::ReadBytes(options.session_file).find("retake") != std::string::npos;
+        },
+        10));
+    PushKey(SDLK_q);  // Quitting asks first...
+    ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().quitting(); }, 10));
+    EXPECT_FALSE(node.Stopping());
+    PushKey(SDLK_y);  // ...and y quits.
+    ASSERT_TRUE(bus_.RunUntil([&] { return node.Stopping(); }, 10));
+    current = nullptr;
+  }
+  {  // Restarted: the retake of 4 verso is offered, as its second attempt.
+    Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
+    ViewerNode viewer(&node, Window(), options);
+    current = &viewer;
+    ASSERT_NE(viewer.state().retake(), nullptr);
+    EXPECT_EQ(viewer.state().next_identity().folio, "4");
+    EXPECT_EQ(viewer.state().next_identity().side, "verso");
+    EXPECT_EQ(viewer.state().NextAttempt(viewer.state().next_identity()), 2);
+    StationAlive(viewer);
+    PushKey(SDLK_RETURN);
+    ASSERT_TRUE(bus_.RunUntil([&] { return requests->size() == 2; }, 10));
+    EXPECT_EQ(requests->back().identity.folio, "4");
+    EXPECT_EQ(requests->back().identity.side, "verso");
+    current = nullptr;
+  }
+  {  // A session file that does not read: set aside, reported, a fresh sequence.
+    std::ofstream(options.session_file) << "{ half a session";
+    Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
+    ViewerNode viewer(&node, Window(), options);
+    EXPECT_EQ(viewer.state().retake(), nullptr);
+    EXPECT_EQ(viewer.state().next_identity(), ScanIdentity());
+    EXPECT_EQ(testing::ReadBytes(options.session_file + ".bad"), "{ half a session");
+    EXPECT_TRUE(bus_.WaitForError("vellum-viewer", "not taken up"))
+        << bus_.Status("vellum-viewer").last_error;
+  }
 }
 
 TEST(WindowOptions, NonsenseIsRefusedByName) {

@@ -9,6 +9,7 @@
 #include "core/common/text.h"
 #include "core/outline/outline.h"
 #include "io/image_file.h"
+#include "station/chain.h"
 #include "station/messages.h"
 
 namespace vellum::station {
@@ -79,6 +80,26 @@ std::string ReportTitle(const std::string& results, int64_t scan_id) {
   return "scan " + std::to_string(scan_id);
 }
 
+// The sides a folio is scanned on, in the order the form offers them; "" is none (pages).
+const char* const kSides[] = {"recto", "verso", ""};
+
+nlohmann::json IdentityJson(const ScanIdentity& id) {
+  nlohmann::json j = nlohmann::json::object();
+  ForEachIdentityField(id, [&](const char* key, const std::string& value) {
+    if (!value.empty()) j[key] = value;
+  });
+  return j;
+}
+
+ScanIdentity IdentityFromJson(const nlohmann::json& j) {
+  ScanIdentity id;
+  if (!j.is_object()) return id;
+  ForEachIdentityField(id, [&](const char* key, std::string& value) {
+    if (j.contains(key) && j[key].is_string()) value = j[key];
+  });
+  return SanitizedIdentity(id);
+}
+
 }  // namespace
 
 const std::vector<FormField>& IdentityForm() {
@@ -94,6 +115,32 @@ std::string DescribeIdentity(const ScanIdentity& id) {
   std::string out = IdentityTitle(id);
   if (!id.operator_name.empty()) out += " (" + id.operator_name + ")";
   return out.empty() ? "(no identity: press e)" : out;
+}
+
+std::string AttemptTitle(const ScanIdentity& id, int attempt) {
+  const std::string title = IdentityTitle(id);
+  return (title.empty() ? std::string("(no identity: press e)") : title) +
+         (attempt > 1 ? ", attempt " + std::to_string(attempt) + " (retake)" : std::string());
+}
+
+std::string ViewerState::FailedTitle() const {
+  const Asked* a = asked(failed_scan_);
+  return a ? AttemptTitle(a->identity, a->attempt) : "scan " + std::to_string(failed_scan_);
+}
+
+std::string ViewerState::FailureNextStep() const {
+  if (failure_.empty()) return "";
+  std::string remedy = "mend what the message names";
+  if (failure_.rfind("vellum-camera", 0) == 0 || failure_.find("no CAPTURE") != std::string::npos) {
+    remedy = "the camera stopped: restart vellum-camera";
+  } else if (failure_.find("no LIGHT_ON") != std::string::npos) {
+    remedy = "no light came on: check vellum-lights (or answer its prompt with l)";
+  } else if (failure_.find("disk") != std::string::npos ||
+             failure_.find("No space") != std::string::npos) {
+    remedy = "the data disk: free space or mend it";
+  }
+  if (!retake_) return remedy;
+  return remedy + ", then Enter to retake " + DescribeIdentity(*retake_);
 }
 
 void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now) {
@@ -142,7 +189,47 @@ void ViewerState::OnLightOn(const light_t& m) {
 void ViewerState::Started(int64_t scan_id) {
   if (scan_id == scan_) return;
   scan_ = scan_id;
+  shown_ = -1;  // The last result is not this scan's: it goes (Left shows it again).
   if (failed_scan_ != scan_id) failure_.clear();
+}
+
+void ViewerState::OfferRetake(int64_t scan_id, const std::string& why) {
+  const Asked* a = asked(scan_id);
+  if (!a) return;  // Not asked for by this viewer: not its sequence's.
+  retake_ = a->identity;
+  retake_why_ = why;
+}
+
+const ViewerState::Asked* ViewerState::asked(int64_t scan_id) const {
+  auto it = asked_.find(scan_id);
+  return it == asked_.end() ? nullptr : &it->second;
+}
+
+int ViewerState::NextAttempt(const ScanIdentity& identity) const {
+  auto it = attempts_.find(IdentitySlug(identity));
+  return it == attempts_.end() ? 1 : it->second + 1;
+}
+
+std::string ViewerState::Refusal(Clock::time_point now) const {
+  if (!has_preview()) return "the camera sends nothing (no preview yet): is vellum-camera running?";
+  const double silent = std::chrono::duration<double>(now - last_preview_).count();
+  if (silent > 2) {
+    return "the camera sends nothing (no preview for " + std::to_string(static_cast<int>(silent)) +
+           " s): restart vellum-camera";
+  }
+  std::vector<const char*> processes(std::begin(kGantry), std::end(kGantry));
+  if (statuses_.count("vellum-lights")) processes.push_back("vellum-lights");
+  for (const ChainLink& link : kChain) processes.push_back(link.process);
+  for (const char* process : processes) {
+    auto it = seen_.find(process);
+    if (it == seen_.end()) return std::string(process) + " is not heard: is it running?";
+    const double quiet = std::chrono::duration<double>(now - it->second).count();
+    if (quiet > 3) {
+      return std::string(process) + " is silent (" + std::to_string(static_cast<int>(quiet)) +
+             " s): restart it";
+    }
+  }
+  return "";
 }
 
 void ViewerState::OnStatus(const status_t& m, Clock::time_point now) {
@@ -161,6 +248,7 @@ void ViewerState::OnStatus(const status_t& m, Clock::time_point now) {
   scan_ = failed_scan_ = m.last_error_scan_id;
   failure_ = m.process + ": " + m.last_error;
   progress_ = "scan " + std::to_string(m.last_error_scan_id) + " FAILED";
+  OfferRetake(m.last_error_scan_id, "it failed");
 }
 
 Clock::time_point ViewerState::heard(const std::string& process) const {
@@ -188,6 +276,8 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
   r.depth = ReportPicture(m.results, {"depth.png"});
   r.strain = ReportPicture(m.results, {"strain.png", "strain-left.png"});
   r.title = ReportTitle(m.results, m.scan_id);
+  if (const Asked* a = asked(m.scan_id)) r.title = AttemptTitle(a->identity, a->attempt);
+  if (r.quality == "fail") OfferRetake(m.scan_id, "its verdict is FAIL");
   results_.push_back(r);
   if (results_.size() > kMaxResults) results_.pop_front();
   shown_ = static_cast<int>(results_.size()) - 1;
@@ -213,7 +303,7 @@ std::string ViewerState::quality() const {
 }
 
 void ViewerState::Type(const std::string& text) {
-  if (editing_ < 0) return;
+  if (editing_ < 0 || IdentityForm()[editing_].field == &ScanIdentity::side) return;  // Chosen.
   std::string& field = next_.*IdentityForm()[editing_].field;
   for (const char c : text) {
     if (static_cast<unsigned char>(c) >= 0x20 && field.size() < kMaxIdentityField) field += c;
@@ -242,6 +332,13 @@ void ViewerState::ActInForm(Action action) {
       }
       if (!field.empty()) field.pop_back();
       break;
+    case Action::kChoose:  // The side: recto, verso, none (pages), round again.
+      if (IdentityForm()[editing_].field == &ScanIdentity::side) {
+        size_t k = 0;
+        while (k < std::size(kSides) && field != kSides[k]) ++k;
+        field = kSides[(k + 1) % std::size(kSides)];
+      }
+      break;
     case Action::kFormDone: {
       std::string why;
       next_ = SanitizedIdentity(next_, &why);
@@ -254,17 +351,34 @@ void ViewerState::ActInForm(Action action) {
   }
 }
 
-ViewerState::Command ViewerState::RequestScan(int64_t scan_id) {
+ViewerState::Command ViewerState::RequestScan(int64_t scan_id, Clock::time_point now) {
   Command c;
+  const std::string refused = Refusal(now);
+  if (!refused.empty()) {
+    progress_ = "scan refused: " + refused;
+    return c;
+  }
+  const ScanIdentity identity = next_identity();
   c.kind = Command::Kind::kRequestScan;
   scan_request_t& r = c.request;
   r.scan_id = scan_id;
-  r.identity = ToMessage(next_);
-  if (next_ == ScanIdentity()) r.identity.label = "from vellum-viewer";
+  r.identity = ToMessage(identity);
+  if (identity == ScanIdentity()) r.identity.label = "from vellum-viewer";
   ToLeafHint(hint_, r.leaf_hint);
   r.object = ToString(object_);
-  progress_ = "scan " + std::to_string(r.scan_id) + " requested: " + DescribeIdentity(next_);
+  Asked asked{identity, 1};
+  const std::string slug = IdentitySlug(identity);
+  if (!slug.empty()) asked.attempt = ++attempts_[slug];
+  asked_[scan_id] = asked;
+  while (asked_.size() > 4 * kMaxResults) asked_.erase(asked_.begin());
+  progress_ =
+      "scan " + std::to_string(r.scan_id) + " requested: " + AttemptTitle(identity, asked.attempt);
   Started(r.scan_id);
+  if (retake_) {  // The retake, then the sequence goes on where it was.
+    retake_.reset();
+    retake_why_.clear();
+    return c;
+  }
   history_.push_back(next_);
   if (history_.size() > 1000) history_.erase(history_.begin());
   next_ = NextFolio(next_);
@@ -287,19 +401,29 @@ ViewerState::Command ViewerState::LightDone() {
   return c;
 }
 
-ViewerState::Command ViewerState::Act(Action action, int64_t new_scan_id) {
+ViewerState::Command ViewerState::Act(Action action, int64_t new_scan_id, Clock::time_point now) {
   if (editing_ >= 0) {
     ActInForm(action);
     return Command();
   }
+  if (quitting_) {  // Quit? y quits; any other key stays (and does nothing else).
+    quitting_ = false;
+    Command c;
+    if (action == Action::kConfirm) c.kind = Command::Kind::kQuit;
+    progress_ = c.kind == Command::Kind::kQuit ? "quitting" : "the viewer stays";
+    return c;
+  }
   switch (action) {
-    case Action::kQuit: {
-      Command c;
-      c.kind = Command::Kind::kQuit;
-      return c;
-    }
+    case Action::kQuit:
+      if (sheet_) {  // Esc leaves the contact sheet, not the viewer.
+        sheet_ = false;
+        break;
+      }
+      quitting_ = true;
+      progress_ = "quit the viewer? y: quit, any other key: stay";
+      break;
     case Action::kScan:
-      return RequestScan(new_scan_id);
+      return RequestScan(new_scan_id, now);
     case Action::kLightDone:
       return LightDone();
     case Action::kSheet:
@@ -324,8 +448,13 @@ ViewerState::Command ViewerState::Act(Action action, int64_t new_scan_id) {
     case Action::kEdit:
       editing_ = 0;
       break;
-    case Action::kUndo:  // The last advance taken back: the next scan is of that folio again.
-      if (!history_.empty()) {
+    case Action::kUndo:  // The retake offered declined, or else the last advance taken back.
+      if (retake_) {
+        progress_ = "retake of " + DescribeIdentity(*retake_) +
+                    " dropped; next scan: " + DescribeIdentity(next_);
+        retake_.reset();
+        retake_why_.clear();
+      } else if (!history_.empty()) {
         next_ = history_.back();
         history_.pop_back();
         progress_ = "next scan again: " + DescribeIdentity(next_);
@@ -341,6 +470,79 @@ ViewerState::Command ViewerState::Act(Action action, int64_t new_scan_id) {
       break;
   }
   return Command();
+}
+
+std::string ViewerState::SessionJson() const {
+  nlohmann::json j;
+  j["version"] = 1;
+  j["next"] = IdentityJson(next_);
+  if (retake_) {
+    j["retake"] = IdentityJson(*retake_);
+    j["retake_why"] = retake_why_;
+  }
+  j["object"] = ToString(object_);
+  j["attempts"] = attempts_;
+  nlohmann::json history = nlohmann::json::array();
+  const size_t from = history_.size() > 100 ? history_.size() - 100 : 0;
+  for (size_t k = from; k < history_.size(); ++k) history.push_back(IdentityJson(history_[k]));
+  j["history"] = history;
+  if (hint_.area() > 0) j["leaf_hint"] = {hint_.x, hint_.y, hint_.width, hint_.height};
+  return j.dump(2) + "\n";
+}
+
+bool ViewerState::LoadSession(const std::string& text, std::string* why) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (!j.is_object() || !j.contains("version") || j["version"] != 1) {
+    *why = "not a vellum-viewer session (version 1)";
+    return false;
+  }
+  ObjectKind object = ObjectKind::kAuto;
+  if (j.contains("object") &&
+      (!j["object"].is_string() || !ParseObjectKind(j["object"], &object))) {
+    *why = "object: not auto, leaf or book";
+    return false;
+  }
+  std::map<std::string, int> attempts;
+  if (j.contains("attempts")) {
+    if (!j["attempts"].is_object()) {
+      *why = "attempts: not an object of counts";
+      return false;
+    }
+    for (const auto& [slug, n] : j["attempts"].items()) {
+      if (!n.is_number_integer() || n.get<int>() < 0) {
+        *why = "attempts: " + slug + " is not a count";
+        return false;
+      }
+      attempts[slug] = n.get<int>();
+    }
+  }
+  cv::Rect2d hint;
+  if (j.contains("leaf_hint")) {
+    const nlohmann::json& h = j["leaf_hint"];
+    if (!h.is_array() || h.size() != 4 || !h[0].is_number() || !h[1].is_number() ||
+        !h[2].is_number() || !h[3].is_number()) {
+      *why = "leaf_hint: not four numbers";
+      return false;
+    }
+    hint =
+        cv::Rect2d(h[0].get<double>(), h[1].get<double>(), h[2].get<double>(), h[3].get<double>()) &
+        cv::Rect2d(0, 0, 1, 1);
+  }
+  next_ = IdentityFromJson(j.value("next", nlohmann::json::object()));
+  retake_.reset();
+  retake_why_.clear();
+  if (j.contains("retake")) {
+    retake_ = IdentityFromJson(j["retake"]);
+    retake_why_ = j.value("retake_why", std::string());
+  }
+  object_ = object;
+  attempts_ = attempts;
+  history_.clear();
+  if (j.contains("history") && j["history"].is_array()) {
+    for (const nlohmann::json& h : j["history"]) history_.push_back(IdentityFromJson(h));
+  }
+  hint_ = hint;
+  return true;
 }
 
 }  // namespace vellum::station

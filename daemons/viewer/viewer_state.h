@@ -5,12 +5,20 @@
 // leaf hint, which result is shown, the contact sheet, the zoom). ViewerNode feeds it from the
 // bus and the window's keys and mouse; DrawViewer (viewer_draw.h) draws it. It holds no SDL, no
 // bus and no clock (the times are given), so that a test drives it alone.
+//
+// The sequence protects itself: a scan that failed, or whose verdict is FAIL, is offered again
+// (a retake of its folio, "attempt 2") before the sequence goes on; a scan is refused, with the
+// reason, while the camera sends nothing or a daemon of the station is silent; the side is
+// chosen (recto, verso, none: pages), never typed; quitting asks first. The sequence (the next
+// identity, the retake offered, the attempts, the object and the leaf hint) is the session:
+// SessionJson / LoadSession keep it across restarts (the node writes it beside the data).
 #pragma once
 
 #include <cstdint>
 #include <deque>
 #include <map>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -35,26 +43,31 @@ const std::vector<FormField>& IdentityForm();
 
 // "MS 12, 3 recto (A. Scribe)"; "(no identity: press e)".
 std::string DescribeIdentity(const ScanIdentity& id);
+// The folio and the attempt at it: "MS 12, 4 verso, attempt 2 (retake)" (the first attempt has
+// no suffix); "(no identity: press e)".
+std::string AttemptTitle(const ScanIdentity& id, int attempt);
 
 class ViewerState {
  public:
   // What the operator can do (ViewerNode maps the keys to these).
   enum class Action {
-    kScan,       // s: ask for a scan of the next identity; the folio advances.
+    kScan,       // s, Enter: ask for a scan of the next identity (a retake offered first).
     kEdit,       // e: open the identity form.
     kSheet,      // c: the session's contact sheet, on or off.
     kObject,     // o: the sequence's object: auto, leaf, book.
     kClearHint,  // h (or a click on the preview): no leaf hint.
     kLightDone,  // l: the light asked for is on (or the lights are off).
     kZoom,       // z: the preview's centre at 100%.
-    kUndo,       // u: take the last advance back.
+    kUndo,       // u: decline the retake offered, else take the last advance back.
     kPrevious,   // Left: an earlier result.
     kNext,       // Right: a later result.
-    kQuit,       // q, Esc.
+    kQuit,       // q, Esc: asks first (Esc leaves the contact sheet when it is open).
+    kConfirm,    // y: yes, to the question asked (quit).
     kFieldNext,  // In the form: Tab, Down.
     kFieldBack,  // In the form: Up.
     kBackspace,  // In the form: one character off the field.
     kFormDone,   // In the form: Return, Esc.
+    kChoose,     // In the form: Space, Left, Right on a field chosen from a list (the side).
   };
   // What an action asks of the bus.
   struct Command {
@@ -63,11 +76,18 @@ class ViewerState {
     scan_request_t request{};  // kRequestScan: publish on SCAN_REQUEST.
     light_t light{};           // kLightOn: publish on LIGHT_ON.
   };
+  // A scan asked for: its identity and which attempt at it this is (1, 2 for the first retake).
+  struct Asked {
+    ScanIdentity identity;
+    int attempt = 1;
+  };
   // A scan restored this session, as shown.
   struct Result {
     int64_t scan_id = 0;
     std::string summary, results, quality;
-    std::string title;  // The identity from its report ("MS 12, 3 recto"), or the scan id.
+    // The identity from its report with the attempt ("MS 12, 3 recto, attempt 2 (retake)"), or
+    // the scan id.
+    std::string title;
     cv::Mat texture, depth, strain, restored;  // texture: with the leaf's outline drawn.
     std::vector<std::string> warnings;
   };
@@ -86,10 +106,18 @@ class ViewerState {
   // pictures and its identity from its report on disk.
   void OnRestored(const restored_t& m, const cv::Mat& preview);
 
-  // From the operator. `new_scan_id` names the scan a kScan asks for (the caller's clock: the
-  // station's ids are microseconds since the epoch).
-  Command Act(Action action, int64_t new_scan_id = 0);
-  // Text typed into the form's field (ignored when the form is closed).
+  // From the operator, at `now` (what the station was last heard to be then). `new_scan_id`
+  // names the scan a kScan asks for (the station's ids are microseconds since the epoch).
+  Command Act(Action action, int64_t new_scan_id = 0, Clock::time_point now = {});
+  // Why a scan cannot be asked for at `now` ("" when it can): the camera sends nothing (no
+  // preview for 2 s), or a daemon of the station is silent (not heard for 3 s).
+  std::string Refusal(Clock::time_point now) const;
+  // The sequence as JSON (the session file), and back; false (with *why) for a session that
+  // does not read, which leaves the state as it was.
+  std::string SessionJson() const;
+  bool LoadSession(const std::string& json, std::string* why);
+  // Text typed into the form's field (ignored when the form is closed, and in a field chosen
+  // from a list).
   void Type(const std::string& text);
   // A box being dragged over the preview, in fractions of it (drawn; empty when none), and a
   // box dragged to the end: the leaf hint.
@@ -105,8 +133,21 @@ class ViewerState {
   // The warnings and quality verdict of the scan shown (empty when none is shown).
   std::vector<std::string> warnings() const;
   std::string quality() const;
-  // The identity the next scan will carry.
-  const ScanIdentity& next_identity() const { return next_; }
+  // The identity the next scan will carry: the folio to retake when one is offered, else the
+  // sequence's next.
+  const ScanIdentity& next_identity() const { return retake_ ? *retake_ : next_; }
+  // The sequence's next identity (what the form edits; after a retake, the sequence goes on here).
+  const ScanIdentity& sequence_next() const { return next_; }
+  // The retake offered (null when none), and why.
+  const ScanIdentity* retake() const { return retake_ ? &*retake_ : nullptr; }
+  const std::string& retake_why() const { return retake_why_; }
+  // Which attempt at `identity` the next scan of it will be (1 for the first).
+  int NextAttempt(const ScanIdentity& identity) const;
+  // The scan in progress or last asked for, and what was asked (null when not this session's).
+  int64_t scan() const { return scan_; }
+  const Asked* asked(int64_t scan_id) const;
+  // Quitting was asked and awaits y.
+  bool quitting() const { return quitting_; }
   // The form's field being edited, or -1 when the form is closed.
   int editing_field() const { return editing_; }
   bool editing() const { return editing_ >= 0; }
@@ -128,6 +169,11 @@ class ViewerState {
   // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
   const std::string& failure() const { return failure_; }
   int64_t failed_scan() const { return failed_scan_; }
+  // What the failed scan is ("MS 12, 4 verso, attempt 2 (retake)", or "scan <id>"), and what
+  // the operator does next ("the camera stopped: restart vellum-camera, then Enter to retake
+  // MS 12, 4 verso").
+  std::string FailedTitle() const;
+  std::string FailureNextStep() const;
   // The operator's prompt (text "" when none): LIGHT_PROMPT.
   const light_t& prompt() const { return prompt_; }
   const std::string& light_prompt() const { return prompt_.text; }
@@ -142,8 +188,10 @@ class ViewerState {
   Clock::time_point heard(const std::string& process) const;
 
  private:
-  void Started(int64_t scan_id);  // A scan began: a failure shown before is over.
-  Command RequestScan(int64_t scan_id);
+  void Started(int64_t scan_id);  // A scan began: a failure and the result shown before go.
+  // A scan of this session failed (or FAILed): its folio is offered again first.
+  void OfferRetake(int64_t scan_id, const std::string& why);
+  Command RequestScan(int64_t scan_id, Clock::time_point now);
   Command LightDone();
   void ActInForm(Action action);
 
@@ -161,6 +209,11 @@ class ViewerState {
   ScanIdentity next_;
   ObjectKind object_ = ObjectKind::kAuto;  // The sequence's object, sent with each request.
   std::vector<ScanIdentity> history_;      // The identities of the scans asked for, for undo.
+  std::optional<ScanIdentity> retake_;     // A folio to scan again before the sequence goes on.
+  std::string retake_why_;
+  std::map<std::string, int> attempts_;  // Scans asked of each identity (by IdentitySlug).
+  std::map<int64_t, Asked> asked_;       // The session's scans (the last kMaxResults * 4).
+  bool quitting_ = false;
   int editing_ = -1;
   bool sheet_ = false;
   bool zoom_ = false;

@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "daemons/viewer/viewer_draw.h"
+#include "station/chain.h"
 
 namespace vellum::station {
 namespace {
@@ -27,6 +28,22 @@ status_t Status(const std::string& process, const std::string& error = "", int64
   return m;
 }
 
+// The station heard at `now`: a camera preview and every daemon's heartbeat.
+void Alive(ViewerState* v, Clock::time_point now) {
+  v->OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(90, 90, 90)), now);
+  for (const char* p : kGantry) v->OnStatus(Status(p), now);
+  for (const ChainLink& link : kChain) v->OnStatus(Status(link.process), now);
+}
+
+// An identity of MS 12: folio and side.
+ScanIdentity Folio(const std::string& folio, const std::string& side) {
+  ScanIdentity id;
+  id.shelfmark = "MS 12";
+  id.folio = folio;
+  id.side = side;
+  return id;
+}
+
 restored_t Restored(int64_t id, const std::string& qc) {
   restored_t m{};
   m.scan_id = id;
@@ -41,26 +58,35 @@ restored_t Restored(int64_t id, const std::string& qc) {
 
 TEST(ViewerState, TheFormSetsTheIdentityEachScanAdvancesItAndUndoTakesTheAdvanceBack) {
   ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
   EXPECT_EQ(v.Act(Action::kEdit).kind, Kind::kNone);
   ASSERT_TRUE(v.editing());
   v.Type("MS 12");
   v.Act(Action::kFieldNext);
   v.Type("3");
   v.Act(Action::kFieldNext);
-  v.Type("Recto");
+  v.Type("rceto");  // The side is chosen, not typed: a typo cannot switch the numbering.
+  EXPECT_EQ(v.sequence_next().side, "");
+  v.Act(Action::kChoose);
+  EXPECT_EQ(v.sequence_next().side, "recto");
+  v.Act(Action::kChoose);
+  v.Act(Action::kChoose);
+  EXPECT_EQ(v.sequence_next().side, "");  // None: pages.
+  v.Act(Action::kChoose);
   v.Act(Action::kFieldNext);
   v.Type("A. Scribé");
   v.Act(Action::kBackspace);  // One character: both bytes of the é.
   v.Type("e");
-  EXPECT_EQ(v.Act(Action::kScan, 7).kind, Kind::kNone) << "the form has the keyboard";
+  EXPECT_EQ(v.Act(Action::kScan, 7, now).kind, Kind::kNone) << "the form has the keyboard";
   EXPECT_EQ(v.Act(Action::kQuit).kind, Kind::kNone) << "Esc closes the form, never the viewer";
   v.Act(Action::kFormDone);
   ASSERT_FALSE(v.editing());
-  EXPECT_EQ(v.next_identity().side, "recto");  // Sanitised as the form closes.
+  EXPECT_EQ(v.next_identity().side, "recto");
   EXPECT_EQ(v.next_identity().operator_name, "A. Scribe");
 
   v.Act(Action::kObject);  // auto -> leaf
-  const ViewerState::Command first = v.Act(Action::kScan, 101);
+  const ViewerState::Command first = v.Act(Action::kScan, 101, now);
   ASSERT_EQ(first.kind, Kind::kRequestScan);
   EXPECT_EQ(first.request.scan_id, 101);
   EXPECT_EQ(first.request.identity.shelfmark, "MS 12");
@@ -68,37 +94,183 @@ TEST(ViewerState, TheFormSetsTheIdentityEachScanAdvancesItAndUndoTakesTheAdvance
   EXPECT_EQ(first.request.identity.side, "recto");
   EXPECT_EQ(first.request.object, "leaf");
   EXPECT_EQ(v.next_identity().side, "verso");
-  EXPECT_EQ(v.Act(Action::kScan, 102).request.identity.side, "verso");
+  EXPECT_EQ(v.Act(Action::kScan, 102, now).request.identity.side, "verso");
   EXPECT_EQ(v.next_identity().folio, "4");
   v.Act(Action::kUndo);
   EXPECT_EQ(v.next_identity().folio, "3");
   EXPECT_EQ(v.next_identity().side, "verso");
+  EXPECT_EQ(v.NextAttempt(v.next_identity()), 2);
   EXPECT_NE(v.progress().find("next scan again: MS 12, 3 verso"), std::string::npos)
       << v.progress();
-  EXPECT_EQ(v.Act(Action::kQuit).kind, Kind::kQuit);
+  EXPECT_EQ(v.Act(Action::kScan, 103, now).kind, Kind::kRequestScan);
+  EXPECT_NE(v.progress().find("MS 12, 3 verso, attempt 2 (retake)"), std::string::npos)
+      << v.progress();
+}
+
+// After a failure or a FAIL, the next scan offered is the retake of that folio, never the next
+// folio; after the retake the sequence goes on where it was. u goes on without it.
+TEST(ViewerState, AFolioThatFailedIsOfferedAgainBeforeTheSequenceGoesOn) {
+  ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
+  v.Act(Action::kEdit);
+  v.Type("MS 12");
+  v.Act(Action::kFieldNext);
+  v.Type("4");
+  v.Act(Action::kFieldNext);
+  v.Act(Action::kChoose);
+  v.Act(Action::kFormDone);
+  ASSERT_EQ(v.Act(Action::kScan, 41, now).request.identity.side, "recto");
+  ASSERT_EQ(v.Act(Action::kScan, 42, now).request.identity.side, "verso");  // 4v: it fails.
+  v.OnStatus(Status("vellum-decoder", "", 0, 10), now);  // Heard before: its errors from now on.
+  v.OnStatus(Status("vellum-decoder", "scan 42 failed: no capture for 30 s", 42, 20), now);
+  ASSERT_NE(v.retake(), nullptr);
+  EXPECT_EQ(v.next_identity().folio, "4");
+  EXPECT_EQ(v.next_identity().side, "verso");
+  EXPECT_EQ(v.FailedTitle(), "MS 12, 4 verso");
+  EXPECT_NE(v.FailureNextStep().find("Enter to retake MS 12, 4 verso"), std::string::npos)
+      << v.FailureNextStep();
+  const ViewerState::Command retake = v.Act(Action::kScan, 43, now);
+  ASSERT_EQ(retake.kind, Kind::kRequestScan);
+  EXPECT_EQ(retake.request.identity.folio, "4");
+  EXPECT_EQ(retake.request.identity.side, "verso");
+  EXPECT_EQ(v.asked(43)->attempt, 2);
+  EXPECT_EQ(v.failure(), "") << "the retake began";
+  EXPECT_EQ(v.next_identity().folio, "5");
+  EXPECT_EQ(v.next_identity().side, "recto");
+  // 5r restored with the verdict FAIL: 5r offered again; u goes on without it, to 5v.
+  EXPECT_EQ(v.Act(Action::kScan, 51, now).request.identity.folio, "5");
+  v.OnRestored(Restored(51, "fail"), cv::Mat());
+  ASSERT_NE(v.retake(), nullptr);
+  EXPECT_EQ(v.retake()->side, "recto");
+  EXPECT_EQ(v.results().back().title, "MS 12, 5 recto");
+  v.Act(Action::kUndo);
+  EXPECT_EQ(v.retake(), nullptr);
+  EXPECT_EQ(v.next_identity().side, "verso");
+  EXPECT_EQ(v.next_identity().folio, "5");
+}
+
+// s is refused, with the reason, while the camera sends nothing or a daemon is silent.
+TEST(ViewerState, AScanIsRefusedWhileTheCameraSendsNothingOrADaemonIsSilent) {
+  ViewerState v;
+  const Clock::time_point t0 = Clock::Steady().Now();
+  EXPECT_EQ(v.Act(Action::kScan, 1, t0).kind, Kind::kNone);
+  EXPECT_NE(v.progress().find("scan refused: the camera sends nothing"), std::string::npos)
+      << v.progress();
+  Alive(&v, t0);
+  EXPECT_EQ(v.Refusal(t0 + Seconds(1.5)), "");
+  EXPECT_NE(v.Refusal(t0 + Seconds(2.5)).find("no preview for 2 s"), std::string::npos);
+  // The camera goes on; the restorer falls silent.
+  v.OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(90, 90, 90)), t0 + Seconds(4));
+  for (const char* p : kGantry) v.OnStatus(Status(p), t0 + Seconds(4));
+  for (const ChainLink& link : kChain) {
+    if (std::string(link.process) != "vellum-restorer")
+      v.OnStatus(Status(link.process), t0 + Seconds(4));
+  }
+  EXPECT_EQ(v.Act(Action::kScan, 2, t0 + Seconds(4)).kind, Kind::kNone);
+  EXPECT_NE(v.progress().find("vellum-restorer is silent (4 s): restart it"), std::string::npos)
+      << v.progress();
+  v.OnStatus(Status("vellum-restorer"), t0 + Seconds(4));
+  EXPECT_EQ(v.Act(Action::kScan, 3, t0 + Seconds(4)).kind, Kind::kRequestScan);
+}
+
+TEST(ViewerState, QuittingAsksFirstAndEscLeavesTheContactSheet) {
+  ViewerState v;
+  v.Act(Action::kSheet);
+  EXPECT_EQ(v.Act(Action::kQuit).kind, Kind::kNone);
+  EXPECT_FALSE(v.sheet());
+  EXPECT_FALSE(v.quitting());
+  EXPECT_EQ(v.Act(Action::kQuit).kind, Kind::kNone);
+  EXPECT_TRUE(v.quitting());
+  EXPECT_EQ(v.Act(Action::kSheet).kind, Kind::kNone) << "any other key stays";
+  EXPECT_FALSE(v.quitting());
+  EXPECT_FALSE(v.sheet()) << "and does nothing else";
+  v.Act(Action::kQuit);
+  EXPECT_EQ(v.Act(Action::kConfirm).kind, Kind::kQuit);
+}
+
+// The sequence (next folio, the retake offered, the attempts, the object, the hint) read back
+// from its session is the same sequence; a session that does not read changes nothing.
+TEST(ViewerState, TheSessionCarriesTheSequenceAcrossARestart) {
+  ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
+  v.Act(Action::kEdit);
+  v.Type("MS 12");
+  v.Act(Action::kFieldNext);
+  v.Type("4");
+  v.Act(Action::kFieldNext);
+  v.Act(Action::kChoose);
+  v.Act(Action::kFormDone);
+  v.Act(Action::kObject);
+  v.SetHint(cv::Rect2d(0.1, 0.2, 0.3, 0.4));
+  v.Act(Action::kScan, 41, now);
+  v.Act(Action::kScan, 42, now);
+  v.OnStatus(Status("vellum-decoder", "", 0, 10), now);
+  v.OnStatus(Status("vellum-decoder", "scan 42 failed: disk full", 42, 20), now);
+  ASSERT_NE(v.retake(), nullptr);
+
+  ViewerState restarted;
+  std::string why;
+  ASSERT_TRUE(restarted.LoadSession(v.SessionJson(), &why)) << why;
+  EXPECT_EQ(restarted.next_identity(), v.next_identity());
+  ASSERT_NE(restarted.retake(), nullptr);
+  EXPECT_EQ(restarted.retake_why(), v.retake_why());
+  EXPECT_EQ(restarted.sequence_next(), Folio("5", "recto"));
+  EXPECT_EQ(restarted.NextAttempt(Folio("4", "verso")), 2);
+  EXPECT_EQ(restarted.object(), ObjectKind::kLeaf);
+  EXPECT_EQ(restarted.leaf_hint(), cv::Rect2d(0.1, 0.2, 0.3, 0.4));
+  EXPECT_EQ(restarted.SessionJson(), v.SessionJson());
+
+  for (const std::string& bad : {std::string("{"), std::string("{\"version\": 2}"),
+                                 std::string("{\"version\": 1, \"object\": \"scroll\"}"),
+                                 std::string("{\"version\": 1, \"leaf_hint\": [1, 2]}")}) {
+    ViewerState fresh;
+    const std::string before = fresh.SessionJson();
+    EXPECT_FALSE(fresh.LoadSession(bad, &why)) << bad;
+    EXPECT_FALSE(why.empty());
+    EXPECT_EQ(fresh.SessionJson(), before) << bad;
+  }
+}
+
+// A new scan clears the result shown (it is not this scan's); Left shows it again.
+TEST(ViewerState, ANewScanClearsTheResultShown) {
+  ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
+  v.OnRestored(Restored(1, "pass"), cv::Mat());
+  ASSERT_NE(v.shown(), nullptr);
+  v.Act(Action::kScan, 2, now);
+  EXPECT_EQ(v.shown(), nullptr);
+  v.Act(Action::kPrevious);  // Nothing shown: stays.
+  v.Act(Action::kNext);
+  EXPECT_EQ(v.shown()->scan_id, 1);
 }
 
 // A leaf hint dragged on the preview travels with every scan asked for, until it is cleared.
 TEST(ViewerState, TheLeafHintRidesEveryRequestUntilCleared) {
   ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
   v.SetHint(cv::Rect2d(0.2, 0.25, 0.5, 0.9));  // Beyond the view's bottom: cut to it.
-  const ViewerState::Command c = v.Act(Action::kScan, 5);
+  const ViewerState::Command c = v.Act(Action::kScan, 5, now);
   EXPECT_FLOAT_EQ(c.request.leaf_hint[0], 0.2f);
   EXPECT_FLOAT_EQ(c.request.leaf_hint[1], 0.25f);
   EXPECT_FLOAT_EQ(c.request.leaf_hint[2], 0.5f);
   EXPECT_FLOAT_EQ(c.request.leaf_hint[3], 0.75f);
   v.Act(Action::kClearHint);
-  EXPECT_EQ(v.Act(Action::kScan, 6).request.leaf_hint[2], 0);
+  EXPECT_EQ(v.Act(Action::kScan, 6, now).request.leaf_hint[2], 0);
 }
 
 // A new error about the scan in progress is its failure; an old error (heard first), an error
 // about another scan, or one without a scan is not; the next scan's first pattern clears it.
 TEST(ViewerState, AFailureIsTheScanInProgressesAndTheNextScanClearsIt) {
   ViewerState v;
-  const Clock::time_point t0;
+  const Clock::time_point t0 = Clock::Steady().Now();
   v.OnStatus(Status("vellum-decoder", "scan 3: old news", 3, 100), t0);
   EXPECT_EQ(v.failure(), "");
-  v.Act(Action::kScan, 10);
+  Alive(&v, t0);
+  v.Act(Action::kScan, 10, t0);
   v.OnStatus(Status("vellum-decoder", "scan 9: another scan", 9, 200), t0);
   EXPECT_EQ(v.failure(), "");
   v.OnStatus(Status("vellum-decoder", "no scan named", 0, 300), t0);
