@@ -100,7 +100,7 @@ int RunProcess(const std::vector<std::string>& args) {
   for (const Warning& w : warnings) {
     std::fprintf(stderr, "vellum process: warning %s: %s\n", w.code.c_str(), w.message.c_str());
   }
-  if (!warnings.empty()) return kExitDoubtful;
+  if (!warnings.empty() || qc.verdict != QcVerdict::kPass) return kExitDoubtful;
   return 0;
 }
 

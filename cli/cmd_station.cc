@@ -76,13 +76,14 @@ class Follower {
       }
       std::fflush(stdout);
       ++restored_;
-      warned_ += m.nwarnings > 0;
+      warned_ += m.nwarnings > 0 || (!m.qc.empty() && m.qc != "pass");
       results_ = m.results;
     });
   }
 
   int restored() const { return restored_; }
-  int warned() const { return warned_; }  // Scans restored with warnings.
+  // Scans restored doubtful: with warnings, or a verdict other than pass.
+  int warned() const { return warned_; }
   const std::string& failure() const { return failure_; }
   const std::string& results() const { return results_; }
   bool Heard(const std::string& process) const { return heard_.count(process) > 0; }

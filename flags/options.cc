@@ -227,6 +227,19 @@ std::vector<Flags::Spec> RestoreFlagSpecs() {
        "the studio lamps' field (vellum calibrate studio): also writes each page's texture "
        "without the lamps' shading, as restored_reflectance.tif",
        ""},
+      {"target-fadgi", "STARS",
+       "the collection's target, a FADGI star level for manuscripts (1-4): a page whose "
+       "sampling, bit depth or scale error falls short of it fails quality control, the figure "
+       "named (0: no target)",
+       "0"},
+      {"target-ppi", "PPI",
+       "the collection's least true sampling: a page sampled more coarsely at 5% of it fails "
+       "quality control on sampling (0: no target)",
+       "0"},
+      {"target-bits", "BITS",
+       "the collection's bits per channel, 8 or 16: a master with fewer fails quality control "
+       "(0: no target)",
+       "0"},
   };
 }
 
@@ -310,6 +323,13 @@ void RestoreGroupFromFlags(const Flags& flags, PipelineOptions* options) {
   if (!flags.Get("studio-field").empty()) {
     const Status read = ReadStudioField(flags.Get("studio-field"), &options->studio_field);
     if (!read.ok()) throw UsageError("--studio-field: " + read.message());
+  }
+  options->target.fadgi_stars = flags.GetInt("target-fadgi", 0, 4);
+  options->target.ppi = flags.GetDouble("target-ppi", 0, 10000);
+  options->target.bits = flags.GetInt("target-bits", 0, 16);
+  if (options->target.bits != 0 && options->target.bits != 8 && options->target.bits != 16) {
+    throw UsageError("--target-bits must be 0 (none), 8 or 16, got " +
+                     std::to_string(options->target.bits));
   }
 }
 

@@ -42,6 +42,7 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
   ProcessReport& report = out.report;
   report.scan = input.scan_dir;
   report.calibration = input.calibration_path;
+  report.target = options.target;
   out.status = MakeDirectories(results);
   if (!out.status.ok()) return out;
   ScanWork work;

@@ -1,6 +1,7 @@
 #include "pipeline/qc.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 
 namespace vellum {
@@ -28,6 +29,82 @@ int Stars(Meets meets) {
   for (const FadgiLevel& level : kFadgiLevels)
     if (meets(level)) return level.stars;
   return 0;
+}
+
+const FadgiLevel* LevelOf(int stars) {
+  for (const FadgiLevel& level : kFadgiLevels)
+    if (level.stars == stars) return &level;
+  return nullptr;
+}
+
+// The check named `name` of `qc`, added (passing, with `detail`) if it is not there.
+QcCheck& CheckNamed(QcResult* qc, const std::string& name, const std::string& detail) {
+  for (QcCheck& c : qc->checks)
+    if (c.name == name) return c;
+  qc->checks.push_back({name, QcVerdict::kPass, detail});
+  return qc->checks.back();
+}
+
+// A figure short of the target: its check fails, saying by how much.
+void FallsShort(QcResult* qc, const std::string& check, const std::string& why) {
+  QcCheck& c = CheckNamed(qc, check, "");
+  c.verdict = QcVerdict::kFail;
+  c.detail += (c.detail.empty() ? "" : "; ") + why;
+  qc->verdict = QcVerdict::kFail;
+}
+
+// The station's target (report.target): each page's true sampling, bit depth and (for a FADGI
+// level) scale error against it. A figure short of it fails the check named after it
+// ("sampling", "bit depth", "scale error"), saying what the target asks; one that meets it says
+// so.
+void JudgeTarget(const ProcessReport& report, QcResult* qc) {
+  const QcTarget& t = report.target;
+  const FadgiLevel* level = LevelOf(t.fadgi_stars);
+  const std::string target = "the target (" + t.Describe() + ")";
+  char text[200];
+  for (const std::string& page : report.Pages()) {
+    if (!report.Find("restored", "dpi", page)) continue;
+    const std::string which = page.empty() ? "" : page + " page: ";
+    // Sampling: the page's true sampling at 95% of it.
+    const double want_ppi = std::max(t.ppi, level ? level->ppi * (1 - level->ppi_tolerance) : 0.0);
+    if (want_ppi > 0) {
+      if (!report.Find("sampling", "p5_ppi", page)) {
+        FallsShort(qc, "sampling",
+                   which + target + " asks " +
+                       std::to_string(static_cast<int>(std::lround(want_ppi))) +
+                       " ppi at a true scale");
+      } else if (const double p5 = report.Number("sampling", "p5_ppi", page); p5 < want_ppi) {
+        std::snprintf(text, sizeof(text), "%s%.0f ppi at 95%% of the page; %s asks %.0f",
+                      which.c_str(), p5, target.c_str(), want_ppi);
+        FallsShort(qc, "sampling", text);
+      }
+    }
+    // Bit depth: the master's samples.
+    const int want_bits = std::max(t.bits, level ? static_cast<int>(level->bits) : 0);
+    if (want_bits > 0) {
+      const double bits = report.Number("restored", "bits_per_channel", page);
+      std::snprintf(text, sizeof(text), "%.0f bits per channel", bits);
+      QcCheck& c = CheckNamed(qc, "bit depth", std::string(text) + ", as " + target + " asks");
+      if (bits < want_bits) {
+        c.detail = text;
+        FallsShort(qc, "bit depth", which + target + " asks " + std::to_string(want_bits));
+      }
+    }
+    // Scale error, for a FADGI level.
+    if (level) {
+      QcCheck& c = CheckNamed(qc, "scale error", "within " + target);
+      if (!report.Find("restored", "scale_error_percent", page)) {
+        c.detail.clear();
+        FallsShort(qc, "scale error", which + "no true scale (camera view)");
+      } else if (const double e = report.Number("restored", "scale_error_percent", page);
+                 e > level->scale_error_percent) {
+        std::snprintf(text, sizeof(text), "%s%.3f%%; %s asks %.0f%% at most", which.c_str(), e,
+                      target.c_str(), level->scale_error_percent);
+        c.detail.clear();
+        FallsShort(qc, "scale error", text);
+      }
+    }
+  }
 }
 
 }  // namespace
@@ -163,6 +240,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
     }
   }
   check("sampling", {"dpi_above_sampling"}, {}, false, sampling);
+  if (report.target.any()) JudgeTarget(report, &qc);
   // Whatever the run wrote (`--until points` too): the point cloud's own soundness.
   if (report.Find("pixels", "points_of_lit")) {
     check("points", {"decode_low", "frame_contradicts"}, {}, false,

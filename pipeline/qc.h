@@ -14,7 +14,10 @@
 //    QcLimits::fail_clipped;
 //  - scale: warn when the leaf is not the size expected (size_unexpected);
 //  - sampling: warn when the page is written at a dpi above what the camera truly sampled
-//    (dpi_above_sampling).
+//    (dpi_above_sampling);
+//  - with a target (ProcessReport::target, the station's `--target-*`): fail a page whose true
+//    sampling ("sampling"), bit depth ("bit depth") or, for a FADGI level, scale error ("scale
+//    error") falls short of it, naming the figure and what the target asks.
 #pragma once
 
 #include <string>

@@ -112,7 +112,12 @@ void HtmlIdentityAndQuality(const ProcessReport& r, std::ostringstream* out) {
   // Quality control first: the verdict in its colour, and each check.
   const QcResult qc = AssessQuality(r);
   h << "<div class=\"qc qc-" << VerdictName(qc.verdict)
-    << "\"><h2>Quality: " << VerdictName(qc.verdict) << "</h2>\n<table>\n";
+    << "\"><h2>Quality: " << VerdictName(qc.verdict) << "</h2>\n";
+  if (r.target.any()) {
+    h << "<p>Judged against the collection's target: " << HtmlEscape(r.target.Describe())
+      << ".</p>\n";
+  }
+  h << "<table>\n";
   for (const QcCheck& c : qc.checks) {
     h << "<tr class=\"qc-" << VerdictName(c.verdict) << "\"><th>" << HtmlEscape(c.name)
       << "</th><td>" << VerdictName(c.verdict) << "</td><td>" << HtmlEscape(c.detail)
@@ -362,6 +367,7 @@ Status WriteJson(const std::string& dir, const ProcessReport& r) {
     checks.push_back({{"name", c.name}, {"verdict", VerdictName(c.verdict)}, {"detail", c.detail}});
   }
   j["qc"] = {{"verdict", VerdictName(qc.verdict)}, {"checks", checks}};
+  if (r.target.any()) j["qc"]["target"] = r.target.Describe();
   Json fadgi = Json::array();
   for (const FadgiPage& page : AssessFadgi(r)) {
     Json figures = Json::array();
@@ -414,6 +420,31 @@ void StageReport::Number(const std::string& section, const std::string& key, dou
 
 void StageReport::Warn(const std::string& code, const std::string& message) {
   warnings.push_back({code, message});
+}
+
+std::string QcTarget::Describe() const {
+  std::string out;
+  auto add = [&](const std::string& part) { out += (out.empty() ? "" : ", ") + part; };
+  if (fadgi_stars > 0) add("FADGI " + std::to_string(fadgi_stars) + "-star");
+  if (ppi > 0) add(std::to_string(static_cast<int>(std::lround(ppi))) + " ppi");
+  if (bits > 0) add(std::to_string(bits) + " bits");
+  return out;
+}
+
+bool QcTarget::Check(std::string* why) const {
+  if (fadgi_stars < 0 || fadgi_stars > 4) {
+    *why = "target: fadgi_stars must be 0 (none) to 4, got " + std::to_string(fadgi_stars);
+    return false;
+  }
+  if (!(ppi >= 0 && ppi <= 10000)) {
+    *why = "target: ppi must be 0 (none) to 10000";
+    return false;
+  }
+  if (bits != 0 && bits != 8 && bits != 16) {
+    *why = "target: bits must be 0 (none), 8 or 16, got " + std::to_string(bits);
+    return false;
+  }
+  return true;
 }
 
 const ReportValue* ProcessReport::Find(const std::string& section, const std::string& key,

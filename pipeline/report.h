@@ -46,8 +46,21 @@ struct StageReport {
   void Warn(const std::string& code, const std::string& message);
 };
 
+// The collection's target a scan is judged against (the station's config, `--target-*`): a
+// FADGI star level for manuscripts, and/or a least true sampling and bit depth. None by default.
+struct QcTarget {
+  int fadgi_stars = 0;  // 1 to 4; 0: none.
+  double ppi = 0;       // The page's true sampling at 95% of it; 0: none.
+  int bits = 0;         // Bits per channel of the master; 0: none.
+  bool any() const { return fadgi_stars > 0 || ppi > 0 || bits > 0; }
+  // "FADGI 3-star, 300 ppi, 16 bits"; "" for none.
+  std::string Describe() const;
+  bool Check(std::string* why) const;
+};
+
 struct ProcessReport {
   std::string scan, calibration;     // Where the input came from.
+  QcTarget target;                   // What the scan is judged against besides its own checks.
   std::vector<StageReport> stages;   // In pipeline order.
   std::vector<std::string> outputs;  // The report's own files (report.html, report.json).
 

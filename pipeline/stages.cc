@@ -80,7 +80,7 @@ bool PipelineOptions::Check(std::string* why) const {
     return false;
   }
   return decode.Check(why) && triangulate.Check(why) && outline.Check(why) && mesh.Check(why) &&
-         flatten.Check(why) && restore.Check(why);
+         flatten.Check(why) && restore.Check(why) && target.Check(why);
 }
 
 std::string PageName(const Outline& outline, size_t page) {

@@ -101,6 +101,9 @@ struct PipelineOptions {
   // The studio lamps' field (--studio-field); with it, each page's reflectance from the texture
   // (ReflectanceStage).
   StudioField studio_field;
+  // The collection's target (--target-fadgi, --target-ppi, --target-bits): a page short of it
+  // cannot pass (AssessQuality names the figure).
+  QcTarget target;
 
   bool Check(std::string* why) const;
 };

@@ -132,6 +132,38 @@ TEST_F(CliTest, ADoubtfulResultExitsThreeWithItsWarning) {
   EXPECT_NE(page.find("<div class=\"qc qc-warn\"><h2>Quality: warn</h2>"), std::string::npos);
 }
 
+// The collection's target: a scan short of it fails quality control on the figure that falls
+// short, named with what the target asks, and exits 3 (doubtful); one that meets it passes.
+// The test rig samples the table at about 25 ppi.
+TEST_F(CliTest, ACollectionTargetFailsAScanShortOfItOnTheFigureNamed) {
+  const std::string base = Process((root_ / "scan").string(), Rig());
+  const Result met = RunVellum(base + " --target-ppi 10");
+  EXPECT_EQ(met.exit_code, 0) << met.output;
+  EXPECT_NE(met.output.find("quality: pass"), std::string::npos) << met.output;
+  const Result short_of = RunVellum(base + " --target-ppi 300");
+  EXPECT_EQ(short_of.exit_code, 3) << short_of.output;
+  EXPECT_NE(short_of.output.find("quality: fail"), std::string::npos) << short_of.output;
+  EXPECT_NE(short_of.output.find("sampling: fail:"), std::string::npos) << short_of.output;
+  EXPECT_NE(short_of.output.find("the target (300 ppi) asks 300"), std::string::npos)
+      << short_of.output;
+  std::ifstream report(root_ / "out" / "report.json");
+  const nlohmann::json j = nlohmann::json::parse(report);
+  EXPECT_EQ(j["qc"]["target"], "300 ppi");
+  bool named = false;
+  for (const auto& c : j["qc"]["checks"])
+    named |= c["name"] == "sampling" && c["verdict"] == "fail";
+  EXPECT_TRUE(named) << j["qc"].dump();
+  const Result bits = RunVellum(base + " --target-bits 16");
+  EXPECT_EQ(bits.exit_code, 3) << bits.output;
+  EXPECT_NE(bits.output.find("bit depth: fail: 8 bits per channel; the target (16 bits) asks 16"),
+            std::string::npos)
+      << bits.output;
+  const Result odd = RunVellum(base + " --target-bits 12");
+  EXPECT_EQ(odd.exit_code, 2) << odd.output;
+  EXPECT_NE(odd.output.find("--target-bits must be 0 (none), 8 or 16"), std::string::npos)
+      << odd.output;
+}
+
 // An object that is not a page: --until points writes the point cloud and the report, and no
 // sheet or restored page.
 TEST_F(CliTest, UntilPointsStopsAfterThePointCloud) {

@@ -191,6 +191,7 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   }
   report.scan = folder.raw();
   report.calibration = folder.calibration();
+  report.target = options_.pipeline.target;
   // The archival master, once the pages are restored: the pipeline's last step.
   ScanWork work;
   work.context = pages->context;

@@ -203,6 +203,26 @@ TEST_F(RestorerNodeTest, APageWhosePointMapNeverComesFailsItsScanAfterThirtySeco
   EXPECT_EQ(restored->back().scan_id, 12);
 }
 
+// A station's target (its restorer's --target-ppi) judges every scan: the small rig's 41 ppi
+// fails a target of 300 on "sampling", named on RESTORED and in report.json.
+TEST_F(RestorerNodeTest, AStationTargetFailsAScanShortOfItOnSampling) {
+  options_.pipeline.target.ppi = 300;
+  Node node("vellum-restorer", &bus_.lcm(), &bus_.clock());
+  RestorerNode restorer(&node, options_);
+  auto restored = bus_.Record<restored_t>(channel::kRestored);
+  Publish(14, Sheet(14));
+  ASSERT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
+  EXPECT_EQ(restored->back().qc, "fail");
+  std::ifstream in(ScanFolder::For(options_.data_dir, 14).results() + "/report.json");
+  const nlohmann::json j = nlohmann::json::parse(in);
+  EXPECT_EQ(j["qc"]["target"], "300 ppi");
+  std::string sampling;
+  for (const auto& c : j["qc"]["checks"]) {
+    if (c["name"] == "sampling" && c["verdict"] == "fail") sampling = c["detail"];
+  }
+  EXPECT_NE(sampling.find("the target (300 ppi) asks 300"), std::string::npos) << j["qc"].dump();
+}
+
 TEST(RestorerNodeOptions, NonsenseIsRefusedByName) {
   RestorerNodeOptions o;
   std::string why;

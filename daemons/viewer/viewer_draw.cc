@@ -88,7 +88,11 @@ void DrawFocus(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
 // The live preview, its clipped pixels in red and the leaf outlined, the leaf hint in cyan, the
 // box being dragged, and a line on the leaf; returns where the preview's pixels went.
 cv::Rect DrawPreview(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
-  const cv::Rect at = Panel(canvas, box, s.preview_shown(), "camera preview (clipped in red)");
+  cv::Mat shown = s.preview_shown();
+  if (s.capturing() && !shown.empty()) shown = shown * 0.45;  // Held: dimmed.
+  const cv::Rect at = Panel(canvas, box, shown,
+                            s.capturing() ? "camera preview: held while the patterns run"
+                                          : "camera preview (clipped in red)");
   if (!at.empty() && s.leaf_hint().area() > 0) {
     const cv::Rect hint(
         at.x + cvRound(s.leaf_hint().x * at.width), at.y + cvRound(s.leaf_hint().y * at.height),
@@ -321,7 +325,17 @@ void DrawPage(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
   const ViewerState::Result& show = r ? *r : kEmpty;
   const bool failed = !s.failure().empty();
   const int top = area.y;
-  const int lines = std::min<int>(static_cast<int>(show.warnings.size()), 6);
+  // The warnings in full, wrapped (8 lines at most, the rest counted).
+  const size_t chars = static_cast<size_t>(std::max(20, (area.width - 8) / 8));
+  std::vector<std::string> wrapped;
+  for (const std::string& w : show.warnings) {
+    for (const std::string& line : Wrap("! " + w, chars)) wrapped.push_back(line);
+  }
+  if (wrapped.size() > 8) {
+    wrapped.resize(7);
+    wrapped.push_back("(more in the report)");
+  }
+  const int lines = static_cast<int>(wrapped.size());
   const int warn_h = lines > 0 ? 18 * lines + 8 : 0;
   const int badge_h = show.quality.empty() ? 0 : 24;
   const cv::Rect page(area.x, top + badge_h, area.width, area.height - badge_h - warn_h);
@@ -345,16 +359,13 @@ void DrawPage(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
   Panel(canvas, page, show.restored, caption);
   if (r) {  // Where its files are.
     std::string path = r->results;
-    const size_t chars = static_cast<size_t>(std::max(20, page.width / 7));
-    if (path.size() > chars) path = "..." + path.substr(path.size() - chars + 3);
+    const size_t path_chars = static_cast<size_t>(std::max(20, page.width / 7));
+    if (path.size() > path_chars) path = "..." + path.substr(path.size() - path_chars + 3);
     cv::putText(canvas, path, cv::Point(page.x + 4, page.y + page.height - 4),
                 cv::FONT_HERSHEY_SIMPLEX, 0.38, cv::Scalar(170, 170, 170), 1, cv::LINE_AA);
   }
-  const size_t chars = static_cast<size_t>(std::max(20, page.width / 8));
   for (int k = 0; k < lines; ++k) {
-    std::string line = "! " + show.warnings[k];
-    if (line.size() > chars) line = line.substr(0, chars - 3) + "...";
-    cv::putText(canvas, line, cv::Point(page.x + 4, page.y + page.height + 18 * (k + 1)),
+    cv::putText(canvas, wrapped[k], cv::Point(page.x + 4, page.y + page.height + 18 * (k + 1)),
                 cv::FONT_HERSHEY_SIMPLEX, 0.42, kAmber, 1, cv::LINE_AA);
   }
 }

@@ -144,7 +144,8 @@ std::string ViewerState::FailureNextStep() const {
 }
 
 void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now) {
-  last_preview_ = now;
+  last_preview_ = now;     // The camera is alive...
+  if (capturing_) return;  // ...but shows the patterns: the last live frame is held.
   preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
   // The leaf as it is being placed: outlined green, red once it runs off the view.
   const Outline leaf = LeafInPreview(image);
@@ -168,6 +169,7 @@ void ViewerState::OnFocus(cv::Mat image) {
 
 void ViewerState::OnPatternShown(const pattern_shown_t& m) {
   Started(m.scan_id);
+  capturing_ = true;
   progress_ = "scan " + std::to_string(m.scan_id) + ": " +
               (m.pattern_index < 0 ? std::string("texture")
                : m.pattern_index >= m.pattern_count
@@ -235,6 +237,8 @@ std::string ViewerState::Refusal(Clock::time_point now) const {
 void ViewerState::OnStatus(const status_t& m, Clock::time_point now) {
   statuses_[m.process] = m;
   seen_[m.process] = now;
+  // The projector no longer scanning: the patterns are off the page, the live view goes on.
+  if (m.process == "vellum-projector" && m.state != "scanning") capturing_ = false;
   if (m.state == "busy") {
     progress_ = "scan " + std::to_string(m.scan_id) + ": " + m.process.substr(7) + " " + m.detail;
   }

@@ -163,6 +163,9 @@ class ViewerState {
   double preview_clipped() const { return preview_clipped_; }
   Clock::time_point preview_at() const { return last_preview_; }
   bool has_preview() const { return !preview_shown_.empty(); }
+  // The projector is running a scan's patterns: the live view is held at its last frame from
+  // before them (the camera's frames show the patterns, not the leaf as it lies).
+  bool capturing() const { return capturing_; }
   // PREVIEW_FOCUS: the view's centre at full resolution (BGR), and its sharpness.
   const cv::Mat& focus() const { return focus_; }
   double focus_sharpness() const { return focus_sharpness_; }
@@ -197,6 +200,7 @@ class ViewerState {
 
   cv::Mat preview_shown_, preview_hist_;
   double preview_clipped_ = 0;
+  bool capturing_ = false;
   std::string preview_leaf_;
   Clock::time_point last_preview_;
   cv::Mat focus_;

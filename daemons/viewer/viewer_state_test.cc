@@ -312,6 +312,33 @@ TEST(ViewerState, APromptedLightIsAnsweredOnceAndTheLightsOffPromptIsOnlyDismiss
   EXPECT_EQ(v.light_prompt(), "");
 }
 
+// While the projector runs a scan's patterns the live view holds its last frame from before
+// them (the camera's frames show stripes, not the leaf); the camera still counts as alive; once
+// the projector is no longer scanning, the live view goes on.
+TEST(ViewerState, TheLiveViewIsHeldWhileThePatternsRun) {
+  ViewerState v;
+  const Clock::time_point t0 = Clock::Steady().Now();
+  v.OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(90, 90, 90)), t0);
+  const cv::Mat before = v.preview_shown().clone();
+  pattern_shown_t shown{};
+  shown.scan_id = 7;
+  shown.pattern_index = 3;
+  shown.pattern_count = 40;
+  v.OnPatternShown(shown);
+  ASSERT_TRUE(v.capturing());
+  v.OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(255, 255, 255)), t0 + Seconds(3));  // Stripes.
+  EXPECT_EQ(cv::norm(v.preview_shown(), before, cv::NORM_INF), 0) << "the live frame is held";
+  EXPECT_EQ(v.preview_at(), t0 + Seconds(3)) << "and the camera is alive";
+  status_t scanning = Status("vellum-projector");
+  scanning.state = "scanning";
+  v.OnStatus(scanning, t0 + Seconds(3));
+  EXPECT_TRUE(v.capturing());
+  v.OnStatus(Status("vellum-projector"), t0 + Seconds(4));  // Idle: the scan is captured.
+  EXPECT_FALSE(v.capturing());
+  v.OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(30, 30, 30)), t0 + Seconds(5));
+  EXPECT_GT(cv::norm(v.preview_shown(), before, cv::NORM_INF), 0);
+}
+
 TEST(ViewerState, ResultsAreSteppedThroughAndTheNewestIsShown) {
   ViewerState v;
   for (int k = 1; k <= 3; ++k) v.OnRestored(Restored(k, k == 2 ? "fail" : "pass"), cv::Mat());
