@@ -505,6 +505,56 @@ struct RestoreFigures {
   std::string icc_profile;  // The colour profile the page is written in.
 };
 
+// The restored page's figures (true sampling, scale error, colour profile), recorded in its
+// report `r` (with dpi_above_sampling when it is written finer than it was sampled), for its
+// files' provenance.
+RestoreFigures MeasureFigures(const RestoreResult& restored, int channels,
+                              const IccProfile& camera_icc, const FlattenResult& flattened,
+                              const ScanContext& context, const WarningLimits& limits,
+                              StageReport* r) {
+  RestoreFigures figures;
+  figures.icc_profile = camera_icc.empty()
+                            ? std::string(channels == 3 ? "sRGB" : "gray, sRGB tone curve") +
+                                  " (no camera profile configured)"
+                            : camera_icc.description;
+  r->Text("restored", "icc_profile", figures.icc_profile);
+  if (restored.view == RestoreView::kOrthographic) {
+    // The reproduction scale error: the flat page's lengths against the measured surface's
+    // (the flattening's mean strain) plus the calibration's measured error of every length
+    // (`vellum calibrate`), when its file carries one. They add: the one is a bias of every
+    // length, the other a mean departure from it.
+    const double flattening = 100 * flattened.mean_strain;
+    const double calibration = context.scale_error_percent;
+    const bool measured = std::isfinite(calibration);
+    r->Number("restored", "scale_error_flattening_percent", flattening);
+    if (measured) r->Number("restored", "scale_error_calibration_percent", calibration);
+    figures.scale_error_percent = flattening + (measured ? calibration : 0);
+    r->Number("restored", "scale_error_percent", figures.scale_error_percent);
+  }
+  if (!restored.sampling.empty()) {
+    // What the camera truly saw of the page, beside the dpi it is written at.
+    figures.sampled = true;
+    figures.sampling = SummarizeSampling(restored.sampling);
+    const SamplingSummary& sampling = figures.sampling;
+    r->Number("sampling", "median_ppi", sampling.median_ppi);
+    r->Number("sampling", "p5_ppi", sampling.p5_ppi);
+    r->Number("sampling", "p95_ppi", sampling.p95_ppi);
+    r->Number("sampling", "share_400", sampling.share_400);
+    r->Number("sampling", "share_300", sampling.share_300);
+    r->Number("sampling", "share_200", sampling.share_200);
+    if (sampling.p95_ppi > 0 && restored.dpi > (1 + limits.max_upsampling) * sampling.p95_ppi) {
+      r->Warn("dpi_above_sampling",
+              "the page is written at " + Fixed(restored.dpi, 0) +
+                  " dpi, but the camera truly sampled it at " + Fixed(sampling.p95_ppi, 0) +
+                  " ppi at the finest (median " + Fixed(sampling.median_ppi, 0) +
+                  "): it is upsampled " + Fixed(restored.dpi / sampling.p95_ppi, 1) +
+                  " times and holds no finer detail than that; leave the dpi unset (0) to write "
+                  "the true sampling");
+    }
+  }
+  return figures;
+}
+
 // What the restored page's files say of how it was made (restored.json's `provenance` and the
 // TIFF's XMP): its scale, measured error, true sampling and colour profile (`figures`), its
 // flattening's strain (`flat`), the calibration's checksum (`context`), all typed; and the
@@ -581,46 +631,8 @@ StageReport RestoreStage(const ScanWork& work, const PipelineOptions& o, PageRes
   r.Number("restored", "dpi", restored->dpi);
   r.Number("restored", "rotation_deg", restored->rotation_deg);
   r.Number("restored", "bits_per_channel", texture.depth() == CV_16U ? 16 : 8);
-  RestoreFigures figures;
-  figures.icc_profile =
-      camera_icc.empty() ? std::string(texture.channels() == 3 ? "sRGB" : "gray, sRGB tone curve") +
-                               " (no camera profile configured)"
-                         : camera_icc.description;
-  r.Text("restored", "icc_profile", figures.icc_profile);
-  if (restored->view == RestoreView::kOrthographic) {
-    // The reproduction scale error: the flat page's lengths against the measured surface's
-    // (the flattening's mean strain) plus the calibration's measured error of every length
-    // (`vellum calibrate`), when its file carries one. They add: the one is a bias of every
-    // length, the other a mean departure from it.
-    const double flattening = 100 * flattened.mean_strain;
-    const double calibration = context.scale_error_percent;
-    const bool measured = std::isfinite(calibration);
-    r.Number("restored", "scale_error_flattening_percent", flattening);
-    if (measured) r.Number("restored", "scale_error_calibration_percent", calibration);
-    figures.scale_error_percent = flattening + (measured ? calibration : 0);
-    r.Number("restored", "scale_error_percent", figures.scale_error_percent);
-  }
-  if (!restored->sampling.empty()) {
-    // What the camera truly saw of the page, beside the dpi it is written at.
-    figures.sampled = true;
-    figures.sampling = SummarizeSampling(restored->sampling);
-    const SamplingSummary& sampling = figures.sampling;
-    r.Number("sampling", "median_ppi", sampling.median_ppi);
-    r.Number("sampling", "p5_ppi", sampling.p5_ppi);
-    r.Number("sampling", "p95_ppi", sampling.p95_ppi);
-    r.Number("sampling", "share_400", sampling.share_400);
-    r.Number("sampling", "share_300", sampling.share_300);
-    r.Number("sampling", "share_200", sampling.share_200);
-    if (sampling.p95_ppi > 0 && restored->dpi > (1 + limits.max_upsampling) * sampling.p95_ppi) {
-      r.Warn("dpi_above_sampling",
-             "the page is written at " + Fixed(restored->dpi, 0) +
-                 " dpi, but the camera truly sampled it at " + Fixed(sampling.p95_ppi, 0) +
-                 " ppi at the finest (median " + Fixed(sampling.median_ppi, 0) +
-                 "): it is upsampled " + Fixed(restored->dpi / sampling.p95_ppi, 1) +
-                 " times and holds no finer detail than that; leave the dpi unset (0) to write "
-                 "the true sampling");
-    }
-  }
+  const RestoreFigures figures =
+      MeasureFigures(*restored, texture.channels(), camera_icc, flattened, context, limits, &r);
   const std::map<std::string, std::string> provenance =
       Provenance(*restored, flattened, context, figures, earlier, r, page);
   if (restored->view == RestoreView::kOrthographic && !restored->mask.empty()) {
