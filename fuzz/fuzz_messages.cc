@@ -52,7 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       DecodeResult decoded;
       cv::Size projector;
       ChunkSet chunks;
-      if (chunks.Add(m.scan_id, m.chunk_index, m.chunk_count).ok()) {
+      if (chunks.Add(m.scan_id, m.chunk_index, m.chunk_count, Clock::time_point()).ok()) {
         (void)AddChunk(m, &decoded, &projector);
       }
       ScanContext context;

@@ -1307,6 +1307,164 @@ TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFail
   EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
 }
 
+// Whether `shot` shows `text` as the viewer writes it: OpenCV's Hershey simplex at `scale` in
+// colour `fg` on `bg`. The text rendered alone the same way is found among the screen's pixels
+// near `fg` (normalised correlation of the two masks, 0.9 at least): the viewer's words checked
+// on the X screen, without OCR.
+bool ShowsText(const cv::Mat& shot, const std::string& text, double scale, const cv::Scalar& fg,
+               const cv::Scalar& bg) {
+  int baseline = 0;
+  const cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, 1, &baseline);
+  cv::Mat glyphs(size.height + baseline + 4, size.width + 4, CV_8UC3, bg);
+  cv::putText(glyphs, text, cv::Point(2, size.height + 2), cv::FONT_HERSHEY_SIMPLEX, scale, fg, 1,
+              cv::LINE_AA);
+  const cv::Scalar low = fg - cv::Scalar::all(30), high = fg + cv::Scalar::all(30);
+  cv::Mat want, have;
+  cv::inRange(glyphs, low, high, want);
+  cv::inRange(shot, low, high, have);
+  if (have.cols < want.cols || have.rows < want.rows) return false;
+  cv::Mat score;
+  cv::matchTemplate(have, want, score, cv::TM_CCORR_NORMED);
+  double best = 0;
+  cv::minMaxLoc(score, nullptr, &best);
+  return best >= 0.9;
+}
+
+// The operator's sequence at the gantry (a real X server, keys typed with xdotool), through
+// a camera that stops mid-scan: folio 4 verso of MS 12 is scanned and fails when the camera is
+// killed. The failure box names the folio; `s` with the camera down is refused, on screen; with
+// the camera back, Enter retakes 4 verso (not 5 recto), and its result is named as the second
+// attempt. A viewer restarted after it resumes at 5 recto. Every folder, report and XMP carries
+// its folio.
+TEST_F(StationTest, AFolioWhoseScanFailedIsRetakenNextAndTheSequenceSurvivesARestart) {
+  const double capture_timeout_s = 8;
+  ViewedStation station = StartViewedStation(
+      kRig, {}, std::to_string(static_cast<int>(capture_timeout_s)), {"--scan-timeout", "5"});
+  const std::string& display = station.display;
+  const std::string& screen = station.screen;
+  std::vector<scan_request_t> requests;
+  Listener<scan_request_t> on_request(*lcm_, "SCAN_REQUEST",
+                                      [&](const scan_request_t& m) { requests.push_back(m); });
+  std::vector<restored_t> restored;
+  Listener<restored_t> on_restored(*lcm_, "RESTORED",
+                                   [&](const restored_t& m) { restored.push_back(m); });
+  int captured = 0;
+  Listener<capture_t> on_capture(*lcm_, "CAPTURE", [&](const capture_t&) { ++captured; });
+  std::string viewer_state, viewer_detail;
+  Listener<status_t> on_viewer(*lcm_, "STATUS_VIEWER", [&](const status_t& m) {
+    viewer_state = m.state;
+    viewer_detail = m.detail;
+  });
+  auto focus = [&] {
+    return Xdotool(display,
+                   {"search", "--sync", "--name", "vellum station", "windowfocus", "--sync", "%1"});
+  };
+  auto ready = [&] {
+    return HandleUntil(*lcm_, 60, [&] { return viewer_detail == "ready to scan"; });
+  };
+  ASSERT_TRUE(focus());
+  ASSERT_TRUE(Xdotool(display, {"key", "e"}));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return viewer_state == "editing"; }));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "MS 12"}));
+  ASSERT_TRUE(Xdotool(display, {"key", "Tab"}));
+  ASSERT_TRUE(Xdotool(display, {"type", "--delay", "30", "4"}));
+  ASSERT_TRUE(Xdotool(display, {"key", "Tab", "space", "space", "Return"}));  // verso
+  ASSERT_TRUE(ready()) << viewer_state << ": " << viewer_detail;
+  // 4 verso; the camera stops mid-scan.
+  ASSERT_TRUE(Xdotool(display, {"key", "s"}));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return requests.size() == 1; }));
+  const int64_t first = requests.back().scan_id;
+  EXPECT_EQ(requests.back().identity.folio, "4");
+  EXPECT_EQ(requests.back().identity.side, "verso");
+  ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] { return captured >= 5; }));
+  station.camera->Kill();
+  // The failure box, titled with the folio (white on the box's dark red).
+  const std::string title = "MS 12, 4 verso (scan " + std::to_string(first) + ") failed:";
+  ASSERT_TRUE(HandleUntil(*lcm_, capture_timeout_s + 30,
+                          [&] {
+                            const cv::Mat shot = testing::ReadXwd(screen);
+                            return !shot.empty() &&
+                                   ShowsText(shot, title, 0.55, cv::Scalar(255, 255, 255),
+                                             cv::Scalar(20, 20, 60));
+                          }))
+      << "no '" << title << "' on the screen; see " << dir_ + "/failed.png";
+  cv::imwrite(dir_ + "/failed.png", testing::ReadXwd(screen));
+  // s with the camera down: refused, the reason on screen in red and on the viewer's status.
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return viewer_detail.find("cannot scan: the camera sends nothing") != std::string::npos;
+  })) << viewer_detail;
+  ASSERT_TRUE(Xdotool(display, {"key", "s"}));
+  HandleUntil(*lcm_, 3, [] { return false; });  // The key's time to be read (a no-show).
+  EXPECT_EQ(requests.size(), 1u) << "a scan asked for with the camera down";
+  {
+    const cv::Mat shot = testing::ReadXwd(screen);
+    cv::imwrite(dir_ + "/refused.png", shot);
+    EXPECT_TRUE(ShowsText(shot, "cannot scan: the camera sends nothing", 0.42,
+                          cv::Scalar(40, 40, 220), cv::Scalar(30, 30, 30)))
+        << "see " << dir_ + "/refused.png";
+  }
+  // The camera back: Enter retakes 4 verso, the second attempt.
+  station.camera =
+      Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  ASSERT_TRUE(ready()) << viewer_detail;
+  ASSERT_TRUE(Xdotool(display, {"key", "Return"}));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return requests.size() == 2; }));
+  const int64_t retake = requests.back().scan_id;
+  EXPECT_EQ(requests.back().identity.folio, "4");
+  EXPECT_EQ(requests.back().identity.side, "verso") << "the next scan after a failure is a retake";
+  ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] {
+    return std::any_of(restored.begin(), restored.end(),
+                       [&](const restored_t& m) { return m.scan_id == retake; });
+  })) << "the retake was not restored";
+  ASSERT_TRUE(HandleUntil(*lcm_, 30,
+                          [&] {
+                            const cv::Mat shot = testing::ReadXwd(screen);
+                            return !shot.empty() &&
+                                   ShowsText(shot, "MS 12, 4 verso, attempt 2 (retake)", 0.5,
+                                             cv::Scalar(230, 230, 230), cv::Scalar(30, 30, 30));
+                          }))
+      << "the result is not named as the retake; see " << dir_ + "/retaken.png";
+  cv::imwrite(dir_ + "/retaken.png", testing::ReadXwd(screen));
+  // The viewer restarted: the sequence goes on at 5 recto.
+  ASSERT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
+  viewer_state.clear();  // What the stopped viewer last said.
+  viewer_detail.clear();
+  station.viewer = Start(Daemon("vellum-viewer"), {"--data", dir_ + "/scans"},
+                         {"DISPLAY=" + display, "SDL_VIDEODRIVER=x11"});
+  ASSERT_TRUE(ready()) << viewer_detail;  // Its window drawn, the station heard...
+  ASSERT_TRUE(focus());                   // ...then it takes the keyboard.
+  ASSERT_TRUE(Xdotool(display, {"key", "Return"}));
+  const bool asked = HandleUntil(*lcm_, 30, [&] { return requests.size() == 3; });
+  cv::imwrite(dir_ + "/restarted.png", testing::ReadXwd(screen));
+  ASSERT_TRUE(asked) << "see " << dir_ + "/restarted.png";
+  EXPECT_EQ(requests.back().identity.folio, "5");
+  EXPECT_EQ(requests.back().identity.side, "recto");
+  const int64_t next = requests.back().scan_id;
+  ASSERT_TRUE(HandleUntil(*lcm_, 300, [&] {
+    return std::any_of(restored.begin(), restored.end(),
+                       [&](const restored_t& m) { return m.scan_id == next; });
+  }));
+  // The folders: the failed first attempt set aside by the retake, each restored scan's report
+  // and XMP naming its folio.
+  EXPECT_TRUE(fs::exists(dir_ + "/scans/scan-" + std::to_string(retake) + "-MS-12_4_verso"));
+  EXPECT_TRUE(fs::exists(dir_ + "/scans/scan-" + std::to_string(next) + "-MS-12_5_recto"));
+  EXPECT_TRUE(fs::exists(dir_ + "/scans/retaken/scan-" + std::to_string(first) + "-MS-12_4_verso"));
+  for (const auto& [id, folio, side] :
+       {std::tuple<int64_t, std::string, std::string>{retake, "4", "verso"},
+        std::tuple<int64_t, std::string, std::string>{next, "5", "recto"}}) {
+    const std::string results =
+        dir_ + "/scans/scan-" + std::to_string(id) + "-MS-12_" + folio + "_" + side + "/results";
+    const nlohmann::json report = nlohmann::json::parse(ReadText(results + "/report.json"));
+    EXPECT_EQ(report["identity"]["folio"], folio);
+    EXPECT_EQ(report["identity"]["side"], side);
+    std::map<std::string, std::string> xmp;
+    EXPECT_TRUE(ReadXmp(results + "/restored.tif", &xmp).ok()) << results;
+    EXPECT_EQ(xmp["vellum:folio"], folio);
+    EXPECT_EQ(xmp["vellum:side"], side);
+  }
+  EXPECT_EQ(station.viewer->Stop(), 0) << station.viewer->Output();
+}
+
 // A small leaf off the view's centre on a support as bright as it (the default rig): asked for
 // with no hint, it is found there (the support is what it lies on) and restored clean; with the
 // operator's hint (`vellum scan --leaf-hint`, as the viewer's drawn box: fractions of the view)
