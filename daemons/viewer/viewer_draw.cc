@@ -66,12 +66,23 @@ cv::Scalar VerdictColour(const std::string& verdict) {
 // sharp it is.
 void DrawFocus(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
   cv::rectangle(canvas, box, cv::Scalar(70, 70, 70), 1);
-  char caption[96];
-  std::snprintf(caption, sizeof(caption), "100%% of the view's centre (z: back), focus %.0f",
-                s.focus_sharpness());
+  char caption[128];
+  std::snprintf(caption, sizeof(caption),
+                "100%% of the view's centre (z: back), focus %.0f, peak %.0f", s.focus_sharpness(),
+                s.focus_peak());
   cv::putText(canvas, caption, box.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.45,
               cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
-  const cv::Rect inner(box.x + 2, box.y + 22, box.width - 4, box.height - 24);
+  // The focus meter: a bar to the present sharpness, a white tick at the peak held.
+  const cv::Rect meter(box.x + 4, box.y + 22, box.width - 8, 8);
+  cv::rectangle(canvas, meter, cv::Scalar(70, 70, 70), cv::FILLED);
+  if (s.focus_peak() > 0) {
+    const double at = std::min(1.0, s.focus_sharpness() / s.focus_peak());
+    cv::rectangle(canvas, cv::Rect(meter.x, meter.y, static_cast<int>(at * meter.width), 8),
+                  at > 0.95 ? kGreen : kAmber, cv::FILLED);
+    cv::line(canvas, cv::Point(meter.br().x - 1, meter.y - 2),
+             cv::Point(meter.br().x - 1, meter.br().y + 2), cv::Scalar(200, 200, 200), 2);
+  }
+  const cv::Rect inner(box.x + 2, box.y + 34, box.width - 4, box.height - 36);
   if (!s.focus().empty()) {
     const cv::Mat& bgr = s.focus();
     const cv::Rect part(0, 0, std::min(bgr.cols, inner.width), std::min(bgr.rows, inner.height));
@@ -152,6 +163,15 @@ void DrawHistogram(const ViewerState& s, cv::Mat& canvas, cv::Rect strip) {
         cv::Rect(strip.x + 1 + static_cast<int>(b * bin_w), strip.y + strip.height - 2 - bar,
                  std::max(1, static_cast<int>(bin_w)), bar),
         colour, cv::FILLED);
+  }
+  // The axis: the levels 0, 64, 128, 192 and 255 under the strip; the clipping end in red.
+  for (const int level : {0, 64, 128, 192, 255}) {
+    const int x = strip.x + 1 + static_cast<int>(level / 256.0 * (strip.width - 2));
+    cv::line(canvas, cv::Point(x, strip.br().y - 3), cv::Point(x, strip.br().y + 2),
+             level == 255 && clipped > 0 ? kRed : cv::Scalar(150, 150, 150), 1);
+    cv::putText(canvas, std::to_string(level),
+                cv::Point(std::min(x, strip.br().x - 22), strip.br().y + 12),
+                cv::FONT_HERSHEY_SIMPLEX, 0.3, cv::Scalar(150, 150, 150), 1, cv::LINE_AA);
   }
   char line[64];
   std::snprintf(line, sizeof(line), "clipped %.2f%%", 100 * clipped);
@@ -258,34 +278,44 @@ cv::Rect DrawLeft(const ViewerState& s, cv::Mat& canvas, int top, int width,
   DrawNoSignal(s, canvas, box, now);
   const cv::Rect strip(8, top + preview_h + 2, width - 12, 36);
   DrawHistogram(s, canvas, strip);
-  const int y = DrawDaemons(s, canvas, strip.y + strip.height + 18, now);
+  const int y = DrawDaemons(s, canvas, strip.y + strip.height + 28, now);
   const int form_lines = s.editing() ? kFormFields + 1 : 4;
   DrawIdentity(s, canvas, std::max(y + 6, h - 8 - 18 * form_lines), width, now);
   return preview_at;
 }
 
 void DrawSheet(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
-  const auto& results = s.results();
+  const std::vector<ViewerState::SheetEntry> entries = s.SheetInBookOrder();
   cv::rectangle(canvas, area, cv::Scalar(30, 30, 30), cv::FILLED);
-  cv::putText(canvas, "this session: " + std::to_string(results.size()) + " scan(s) (c: back)",
+  cv::putText(canvas,
+              "this session, in book order: " + std::to_string(s.results().size()) + " restored, " +
+                  std::to_string(s.failed().size()) + " failed (c: back)",
               area.tl() + cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.55,
               cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
-  const int n = static_cast<int>(results.size());
+  const int n = static_cast<int>(entries.size());
   if (n == 0) return;
-  // Columns for about 4:3 cells, newest first.
+  // Columns for about 4:3 cells.
   int cols = 1;
   while (cols * cols * 3 < n * 4) ++cols;
   const int rows = (n + cols - 1) / cols;
   const int cell_w = (area.width - 8) / cols, cell_h = std::min((area.height - 30) / rows, cell_w);
   for (int k = 0; k < n; ++k) {
-    const ViewerState::Result& r = results[n - 1 - k];
+    const ViewerState::SheetEntry& e = entries[k];
     const cv::Rect cell(area.x + 4 + (k % cols) * cell_w, area.y + 26 + (k / cols) * cell_h,
                         cell_w - 6, cell_h - 6);
+    if (e.failed) {  // Failed before it was restored: a red tile, the folio named.
+      Panel(canvas, cell, cv::Mat(), AttemptTitle(e.failed->identity, e.failed->attempt));
+      cv::putText(canvas, "FAILED", cell.tl() + cv::Point(8, cell.height / 2),
+                  cv::FONT_HERSHEY_SIMPLEX, 0.6, kRed, 2, cv::LINE_AA);
+      cv::rectangle(canvas, cell, kRed, 3);
+      continue;
+    }
+    const ViewerState::Result& r = *e.result;
     const cv::Scalar colour =
         r.quality.empty() ? cv::Scalar(120, 120, 120) : VerdictColour(r.quality);
     Panel(canvas, cell, r.restored, r.title);
     cv::rectangle(canvas, cell, colour, 3);
-    if (k == n - 1 - s.shown_index()) cv::rectangle(canvas, cell, cv::Scalar(255, 255, 255), 1);
+    if (e.index == s.shown_index()) cv::rectangle(canvas, cell, cv::Scalar(255, 255, 255), 1);
   }
 }
 

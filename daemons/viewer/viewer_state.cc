@@ -1,10 +1,14 @@
 #include "daemons/viewer/viewer_state.h"
 
+#include <cctype>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tuple>
 
 #include "core/common/text.h"
 #include "core/outline/outline.h"
@@ -66,18 +70,30 @@ cv::Mat ReportPicture(const std::string& results, std::initializer_list<const ch
   return cv::Mat();
 }
 
-// The identity in a scan's report.json, as its title; "scan <id>" when it has none.
-std::string ReportTitle(const std::string& results, int64_t scan_id) {
+// The identity in a scan's report.json (empty when it has none or it cannot be read).
+ScanIdentity ReportIdentity(const std::string& results) {
+  ScanIdentity id;
   std::ifstream report(fs::path(results) / "report.json");
   const nlohmann::json j = nlohmann::json::parse(report, nullptr, false);
   if (j.is_object() && j.contains("identity") && j["identity"].is_object()) {
-    ScanIdentity id;
     ForEachIdentityField(id, [&](const char* key, std::string& value) {
       if (j["identity"].contains(key) && j["identity"][key].is_string()) value = j["identity"][key];
     });
-    if (!(id == ScanIdentity())) return DescribeIdentity(id);
   }
-  return "scan " + std::to_string(scan_id);
+  return id;
+}
+
+// The leading number of a folio ("12" of "12a", "f12" -> 12 too), or a large number when it
+// has none: such folios sort after the numbered ones, by their text.
+long FolioNumber(const std::string& folio) {
+  size_t k = 0;
+  while (k < folio.size() && !std::isdigit(static_cast<unsigned char>(folio[k]))) ++k;
+  if (k == folio.size()) return std::numeric_limits<long>::max();
+  return std::strtol(folio.c_str() + k, nullptr, 10);
+}
+
+int SideOrder(const std::string& side) {
+  return side == "recto" || side == "left" ? 0 : side == "verso" || side == "right" ? 1 : 2;
 }
 
 // The sides a folio is scanned on, in the order the form offers them; "" is none (pages).
@@ -163,6 +179,7 @@ void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now) {
 void ViewerState::OnFocus(cv::Mat image) {
   if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 257);
   focus_sharpness_ = Sharpness(image);
+  focus_peak_ = std::max(focus_peak_, focus_sharpness_);
   if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
   focus_ = image;
 }
@@ -252,6 +269,10 @@ void ViewerState::OnStatus(const status_t& m, Clock::time_point now) {
   scan_ = failed_scan_ = m.last_error_scan_id;
   failure_ = m.process + ": " + m.last_error;
   progress_ = "scan " + std::to_string(m.last_error_scan_id) + " FAILED";
+  if (const Asked* a = asked(m.last_error_scan_id)) {
+    failed_.push_back({m.last_error_scan_id, a->identity, a->attempt, failure_});
+    if (failed_.size() > kMaxResults) failed_.pop_front();
+  }
   OfferRetake(m.last_error_scan_id, "it failed");
 }
 
@@ -279,8 +300,13 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
   r.texture = ReportPicture(m.results, {"outline.png", "texture.png"});
   r.depth = ReportPicture(m.results, {"depth.png"});
   r.strain = ReportPicture(m.results, {"strain.png", "strain-left.png"});
-  r.title = ReportTitle(m.results, m.scan_id);
-  if (const Asked* a = asked(m.scan_id)) r.title = AttemptTitle(a->identity, a->attempt);
+  r.identity = ReportIdentity(m.results);
+  if (const Asked* a = asked(m.scan_id)) {
+    r.identity = a->identity;
+    r.attempt = a->attempt;
+  }
+  r.title = r.identity == ScanIdentity() ? "scan " + std::to_string(m.scan_id)
+                                         : AttemptTitle(r.identity, r.attempt);
   if (r.quality == "fail") OfferRetake(m.scan_id, "its verdict is FAIL");
   results_.push_back(r);
   if (results_.size() > kMaxResults) results_.pop_front();
@@ -294,6 +320,31 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
 
 const ViewerState::Result* ViewerState::shown() const {
   return shown_ >= 0 && shown_ < static_cast<int>(results_.size()) ? &results_[shown_] : nullptr;
+}
+
+std::vector<ViewerState::SheetEntry> ViewerState::SheetInBookOrder() const {
+  struct Keyed {
+    SheetEntry entry;
+    const ScanIdentity* identity;
+    int attempt;
+    int64_t scan_id;
+  };
+  std::vector<Keyed> all;
+  for (size_t k = 0; k < results_.size(); ++k) {
+    const Result& r = results_[k];
+    all.push_back({{&r, nullptr, static_cast<int>(k)}, &r.identity, r.attempt, r.scan_id});
+  }
+  for (const Failed& f : failed_)
+    all.push_back({{nullptr, &f, -1}, &f.identity, f.attempt, f.scan_id});
+  std::stable_sort(all.begin(), all.end(), [](const Keyed& a, const Keyed& b) {
+    const ScanIdentity &x = *a.identity, &y = *b.identity;
+    return std::make_tuple(x.shelfmark, FolioNumber(x.folio), x.folio, SideOrder(x.side), a.attempt,
+                           a.scan_id) < std::make_tuple(y.shelfmark, FolioNumber(y.folio), y.folio,
+                                                        SideOrder(y.side), b.attempt, b.scan_id);
+  });
+  std::vector<SheetEntry> out;
+  for (const Keyed& k : all) out.push_back(k.entry);
+  return out;
 }
 
 std::vector<std::string> ViewerState::warnings() const {
@@ -448,6 +499,7 @@ ViewerState::Command ViewerState::Act(Action action, int64_t new_scan_id, Clock:
       break;
     case Action::kZoom:
       zoom_ = !zoom_;
+      if (zoom_) focus_peak_ = focus_sharpness_;  // A new peak to find.
       break;
     case Action::kEdit:
       editing_ = 0;

@@ -84,6 +84,8 @@ class ViewerState {
   // A scan restored this session, as shown.
   struct Result {
     int64_t scan_id = 0;
+    ScanIdentity identity;  // From the request (or its report); empty when it had none.
+    int attempt = 1;
     std::string summary, results, quality;
     // The identity from its report with the attempt ("MS 12, 3 recto, attempt 2 (retake)"), or
     // the scan id.
@@ -93,6 +95,19 @@ class ViewerState {
   };
   // Results kept (the oldest go).
   static constexpr size_t kMaxResults = 50;
+  // A scan of this session that failed before it was restored.
+  struct Failed {
+    int64_t scan_id = 0;
+    ScanIdentity identity;
+    int attempt = 1;
+    std::string why;  // "<process>: <its error>".
+  };
+  // One tile of the session's contact sheet: a restored scan or a failed one.
+  struct SheetEntry {
+    const Result* result = nullptr;  // Else:
+    const Failed* failed = nullptr;
+    int index = -1;  // The result's place in results() (-1 for a failed scan).
+  };
 
   // From the bus. A preview or a restored scan whose image does not decode is the caller's to
   // report; the rest is taken as it comes.
@@ -124,8 +139,12 @@ class ViewerState {
   void Dragging(const cv::Rect2d& box) { drag_ = box; }
   void SetHint(const cv::Rect2d& box);
 
-  // Scans restored this session (the last kMaxResults).
+  // Scans restored this session (the last kMaxResults), and those that failed before.
   const std::deque<Result>& results() const { return results_; }
+  const std::deque<Failed>& failed() const { return failed_; }
+  // The session's scans in book order: by shelfmark, then folio (its number, then its text),
+  // recto before verso, then attempt; a failed scan in its folio's place.
+  std::vector<SheetEntry> SheetInBookOrder() const;
   // The result shown (null when none).
   const Result* shown() const;
   int shown_index() const { return shown_; }
@@ -169,6 +188,8 @@ class ViewerState {
   // PREVIEW_FOCUS: the view's centre at full resolution (BGR), and its sharpness.
   const cv::Mat& focus() const { return focus_; }
   double focus_sharpness() const { return focus_sharpness_; }
+  // The sharpest seen since the 100% view was last opened: the peak to turn the focus ring to.
+  double focus_peak() const { return focus_peak_; }
   // The failure of the scan in progress ("" when none): "<process>: <its whole error>".
   const std::string& failure() const { return failure_; }
   int64_t failed_scan() const { return failed_scan_; }
@@ -205,10 +226,12 @@ class ViewerState {
   Clock::time_point last_preview_;
   cv::Mat focus_;
   double focus_sharpness_ = 0;
+  double focus_peak_ = 0;
   std::string progress_ = "waiting for the station";
   std::map<std::string, status_t> statuses_;
   std::map<std::string, Clock::time_point> seen_;
   std::deque<Result> results_;
+  std::deque<Failed> failed_;
   int shown_ = -1;
   ScanIdentity next_;
   ObjectKind object_ = ObjectKind::kAuto;  // The sequence's object, sent with each request.

@@ -339,6 +339,67 @@ TEST(ViewerState, TheLiveViewIsHeldWhileThePatternsRun) {
   EXPECT_GT(cv::norm(v.preview_shown(), before, cv::NORM_INF), 0);
 }
 
+// The session's sheet in book order whatever the order scanned: 3 recto, 3 verso (failed, then
+// retaken), 10 recto; a failed scan in its folio's place.
+TEST(ViewerState, TheSessionSheetIsInBookOrderWithFailuresInTheirPlace) {
+  ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
+  v.OnStatus(Status("vellum-decoder", "", 0, 1), now);
+  auto scan = [&](int64_t id, const std::string& folio, const std::string& side) {
+    v.Act(Action::kEdit);
+    v.Act(Action::kFieldNext);
+    v.Act(Action::kBackspace);
+    v.Act(Action::kBackspace);
+    v.Type(folio);
+    v.Act(Action::kFieldNext);
+    while (v.sequence_next().side != side) v.Act(Action::kChoose);
+    v.Act(Action::kFormDone);
+    ASSERT_EQ(v.Act(Action::kScan, id, now).kind, Kind::kRequestScan);
+  };
+  scan(1, "10", "recto");
+  v.OnRestored(Restored(1, "pass"), cv::Mat());
+  scan(2, "3", "verso");
+  v.OnStatus(Status("vellum-decoder", "scan 2 failed: no capture for 30 s", 2, 2), now);
+  ASSERT_EQ(v.Act(Action::kScan, 3, now).request.identity.folio, "3");  // The retake.
+  v.OnRestored(Restored(3, "pass"), cv::Mat());
+  scan(4, "3", "recto");
+  v.OnRestored(Restored(4, "warn"), cv::Mat());
+  const std::vector<ViewerState::SheetEntry> sheet = v.SheetInBookOrder();
+  ASSERT_EQ(sheet.size(), 4u);
+  auto id = [](const ViewerState::SheetEntry& e) {
+    return e.result ? e.result->scan_id : e.failed->scan_id;
+  };
+  EXPECT_EQ(id(sheet[0]), 4);  // 3 recto
+  EXPECT_EQ(id(sheet[1]), 2);  // 3 verso, failed
+  ASSERT_NE(sheet[1].failed, nullptr);
+  EXPECT_NE(sheet[1].failed->why.find("no capture"), std::string::npos);
+  EXPECT_EQ(id(sheet[2]), 3);  // 3 verso, attempt 2
+  EXPECT_EQ(sheet[2].result->title, "3 verso, attempt 2 (retake)");
+  EXPECT_EQ(id(sheet[3]), 1);  // 10 recto
+}
+
+// The focus meter holds the sharpest frame seen since the 100% view was opened.
+TEST(ViewerState, TheFocusMeterHoldsItsPeakUntilTheViewIsOpenedAgain) {
+  ViewerState v;
+  cv::Mat sharp(120, 160, CV_8U, cv::Scalar(0));
+  for (int x = 0; x < sharp.cols; x += 4) sharp.col(x).setTo(255);
+  cv::Mat soft;
+  cv::GaussianBlur(sharp, soft, cv::Size(0, 0), 2);
+  v.Act(Action::kZoom);
+  v.OnFocus(soft);
+  const double low = v.focus_sharpness();
+  v.OnFocus(sharp);
+  const double high = v.focus_sharpness();
+  ASSERT_GT(high, 4 * low);
+  v.OnFocus(soft);
+  EXPECT_EQ(v.focus_peak(), high);
+  EXPECT_EQ(v.focus_sharpness(), low);
+  v.Act(Action::kZoom);
+  v.Act(Action::kZoom);  // Opened again: the peak starts from the present.
+  EXPECT_EQ(v.focus_peak(), low);
+}
+
 TEST(ViewerState, ResultsAreSteppedThroughAndTheNewestIsShown) {
   ViewerState v;
   for (int k = 1; k <= 3; ++k) v.OnRestored(Restored(k, k == 2 ? "fail" : "pass"), cv::Mat());
