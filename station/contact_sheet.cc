@@ -9,6 +9,7 @@
 #include "core/common/text.h"
 #include "io/json.h"
 #include "io/scan_io.h"
+#include "station/scan_log.h"
 #include "station/scan_store.h"
 
 namespace vellum::station {
@@ -34,6 +35,9 @@ SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t i
   if (fs::exists(raw / "scan.yaml", ec)) {
     const Status ignored = ReadScanYaml(raw.string(), &sequence, &camera, &e.identity);
     (void)ignored;  // An unreadable scan.yaml: the entry shows no identity.
+  } else {
+    // A scan that never completed has no scan.yaml: its log's SCAN_STARTED names it.
+    (void)ReadLoggedIdentity((raw / "captures.lcmlog").string(), &e.identity);
   }
   for (const char* page : {"report/restored.png", "report/restored-left.png"}) {
     if (fs::exists(results / page, ec)) {
@@ -47,10 +51,12 @@ SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t i
       break;
     }
   }
+  // A restored scan's report decides, even while its folder is still marked pending (the
+  // restorer writes the sheet before the decoder hears RESTORED and clears the mark).
   if (fs::exists(raw / "failed.txt", ec)) {
     e.state = "failed";
     e.detail = FirstLine((raw / "failed.txt").string());
-  } else if (fs::exists(dir / "pending", ec)) {
+  } else if (!fs::exists(results / "report.json", ec) && fs::exists(dir / "pending", ec)) {
     e.state = "pending";
   } else if (fs::exists(results / "report.json", ec)) {
     std::ifstream in(results / "report.json");

@@ -103,6 +103,24 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
   return Status::Ok();
 }
 
+bool ReadLoggedIdentity(const std::string& log_path, ScanIdentity* identity) {
+  if (!PathExists(log_path)) return false;
+  lcm::LogFile log(log_path, "r");
+  if (!log.good()) return false;
+  // SCAN_STARTED is the log's first event; a few more are looked at for a log that began
+  // otherwise (a calibration first), never the whole scan.
+  int events = 0;
+  for (const lcm::LogEvent* e = log.readNextEvent(); e && events < 8; e = log.readNextEvent()) {
+    ++events;
+    if (e->channel != channel::kScanStarted) continue;
+    scan_started_t m;
+    if (!SafeDecode(e->data, e->datalen, &m)) return false;
+    *identity = SanitizedIdentity(FromMessage(m.identity));
+    return true;
+  }
+  return false;
+}
+
 Status ReadScanLog(const std::string& log_path, int64_t scan_id, Scan* scan, bool* has_calibration,
                    calibration_t* calibration, int64_t* found_scan_id) {
   if (!PathExists(log_path)) return Status::Error(log_path + ": file is missing");

@@ -26,6 +26,10 @@ Status WriteScanLog(const std::string& log_path, const Scan& scan, int64_t scan_
                     const std::string& station, const calibration_t* calibration,
                     int64_t interval_us = 20000);
 
+// The identity a recorded log's scan was started with (its SCAN_STARTED, read without reading
+// its captures); false when the log cannot be read or holds none.
+bool ReadLoggedIdentity(const std::string& log_path, ScanIdentity* identity);
+
 // The SCAN_STARTED a projector publishes for `scan` (station and seq left to the publisher).
 scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t session);
 

@@ -23,6 +23,7 @@
 #include "core/mesh/mesh.h"
 #include "core/sim/gantry.h"
 #include "station/assembler.h"
+#include "station/contact_sheet.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_log.h"
@@ -578,6 +579,52 @@ TEST(ScanStore, ARetakeSetsTheEarlierAttemptsAside) {
   EXPECT_EQ(ScanFolderId("scan-15-MS-7_1_verso_x"), 15);
   EXPECT_EQ(ScanFolderId("scan-x12"), 0);
   EXPECT_EQ(ScanFolderId("scan-12x"), 0);
+  fs::remove_all(dir);
+}
+
+// The contact sheet tells a scan as it is: one restored while its folder is still marked
+// pending (the restorer writes the sheet before the mark is cleared) by its report's verdict,
+// not as pending; one that failed before its scan.yaml was written by the identity its log's
+// SCAN_STARTED carried, not as a scan without one.
+TEST(ContactSheet, ARestoredScanIsNotPendingAndAFailedOneKeepsItsIdentity) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_sheet_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const fs::path restored = dir / "scan-40-MS-7_4_recto";
+  fs::create_directories(restored / "results");
+  std::ofstream(restored / "pending") << "1\n";
+  std::ofstream(restored / "results" / "report.json")
+      << R"({"qc": {"verdict": "warn", "checks": [{"name": "scale", "verdict": "warn",
+                                                  "detail": "leaf 190 x 240 mm"}]}})";
+  Scan scan = SmallScan();
+  scan.identity.shelfmark = "MS 7";
+  scan.identity.folio = "4";
+  scan.identity.side = "recto";
+  fs::create_directories(restored / "raw");
+  ASSERT_TRUE(WriteScanLog((restored / "raw" / "captures.lcmlog").string(), scan, 40,
+                           kDefaultStation, nullptr)
+                  .ok());
+  const fs::path failed = dir / "scan-41-MS-7_4_verso";
+  fs::create_directories(failed / "raw");
+  scan.identity.side = "verso";
+  ASSERT_TRUE(WriteScanLog((failed / "raw" / "captures.lcmlog").string(), scan, 41, kDefaultStation,
+                           nullptr)
+                  .ok());
+  std::ofstream(failed / "raw" / "failed.txt") << "no capture for 30 s\n";
+  const std::vector<SheetEntry> sheet = ReadSheet(dir.string());
+  ASSERT_EQ(sheet.size(), 2u);
+  EXPECT_EQ(sheet[1].scan_id, 40);
+  EXPECT_EQ(sheet[1].state, "warn");
+  EXPECT_NE(sheet[1].detail.find("scale: leaf 190"), std::string::npos) << sheet[1].detail;
+  EXPECT_EQ(sheet[0].scan_id, 41);
+  EXPECT_EQ(sheet[0].state, "failed");
+  EXPECT_EQ(IdentityTitle(sheet[0].identity), "MS 7, 4 verso");
+  ASSERT_TRUE(WriteContactSheet(dir.string()).ok());
+  std::ifstream in(dir / "index.html");
+  const std::string html((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(html.find("MS 7, 4 verso"), std::string::npos);
+  EXPECT_EQ(html.find("class=\"scan pending"), std::string::npos) << html;
+  EXPECT_NE(html.find("class=\"scan warn"), std::string::npos) << html;
+  EXPECT_EQ(html.find("(no identity)"), std::string::npos) << html;
   fs::remove_all(dir);
 }
 
