@@ -328,7 +328,7 @@ void DrawHeader(const ViewerState& s, cv::Mat& canvas, int top) {
               cv::Scalar(255, 255, 255), 2, cv::LINE_AA);
   const bool doubtful = s.progress().find("warning(s)") != std::string::npos;
   // The progress line, cut to end before the keys' help.
-  const int help_x = w - 390;
+  const int help_x = w - 425;
   std::string progress = s.progress();
   int baseline = 0;
   while (progress.size() > 4 &&
@@ -342,7 +342,7 @@ void DrawHeader(const ViewerState& s, cv::Mat& canvas, int top) {
               : doubtful ? kAmber
                          : cv::Scalar(120, 220, 255),
               failed ? 2 : 1, cv::LINE_AA);
-  cv::putText(canvas, "s: scan  e: identity  c: sheet  drag: leaf hint  q: quit",
+  cv::putText(canvas, "Enter: scan  e: identity  c: sheet  drag: leaf hint  q: quit",
               cv::Point(help_x, 28), cv::FONT_HERSHEY_SIMPLEX, 0.45,
               failed ? cv::Scalar(255, 255, 255) : cv::Scalar(160, 160, 160), 1, cv::LINE_AA);
 }

@@ -83,7 +83,8 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
   restored_t r = Restored(12);
   bus_.probe().Publish(channel::kRestored, &r);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 1u; }));
-  EXPECT_NE(viewer.state().progress().find("scan 12: 300x400 41 dpi restored"), std::string::npos)
+  EXPECT_NE(viewer.state().progress().find("scan 12: restored, 300x400 at 41 dpi"),
+            std::string::npos)
       << viewer.state().progress();
   // The restored page is drawn in the right third: its dark letter shows there.
   ASSERT_TRUE(bus_.RunUntil(
@@ -121,7 +122,7 @@ TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 1u; }));
   ASSERT_EQ(viewer.state().warnings().size(), 1u);
   EXPECT_EQ(viewer.state().warnings()[0].rfind("page_cut_off", 0), 0u);
-  EXPECT_NE(viewer.state().progress().find("with 1 warning(s)"), std::string::npos)
+  EXPECT_NE(viewer.state().progress().find("1 warning(s) under the page"), std::string::npos)
       << viewer.state().progress();
   auto amber = [](const cv::Mat& area) {
     cv::Mat mask;
@@ -263,7 +264,7 @@ TEST_F(ViewerNodeTest, AFailedScanTurnsTheHeaderRedAndTheVerdictShowsInItsColour
   r.qc = "fail";
   bus_.probe().Publish(channel::kRestored, &r);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().quality() == "fail"; }, 10));
-  EXPECT_NE(viewer.state().progress().find("quality fail"), std::string::npos)
+  EXPECT_NE(viewer.state().progress().find(": FAIL, "), std::string::npos)
       << viewer.state().progress();
   ASSERT_TRUE(bus_.RunUntil(
       [&] {

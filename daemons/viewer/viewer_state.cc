@@ -285,12 +285,11 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
   Result r;
   r.scan_id = m.scan_id;
   r.results = m.results;
-  char summary[160];
-  std::snprintf(summary, sizeof(summary), "scan %lld: %dx%d %s", static_cast<long long>(m.scan_id),
-                m.width, m.height,
+  char summary[96];
+  std::snprintf(summary, sizeof(summary), "%dx%d %s", m.width, m.height,
                 m.view == "orthographic"
-                    ? (std::to_string(static_cast<int>(m.dpi)) + " dpi").c_str()
-                    : "camera view");
+                    ? ("at " + std::to_string(static_cast<int>(m.dpi)) + " dpi").c_str()
+                    : "(camera view)");
   r.summary = summary;
   r.restored = preview;
   r.warnings = m.warnings;
@@ -311,11 +310,15 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
   results_.push_back(r);
   if (results_.size() > kMaxResults) results_.pop_front();
   shown_ = static_cast<int>(results_.size()) - 1;
-  progress_ =
-      r.summary + " restored" + (r.quality.empty() ? std::string() : ", quality " + r.quality) +
-      (r.warnings.empty()
-           ? std::string()
-           : " with " + std::to_string(r.warnings.size()) + " warning(s): check before delivering");
+  // Short enough for the header: the folio, its verdict in the words of the report and the
+  // badge (PASS, WARN, FAIL), the size; the warnings are in full under the page.
+  std::string verdict = r.quality;
+  for (char& c : verdict) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+  progress_ = r.title + ": " + (verdict.empty() ? std::string("restored") : verdict) + ", " +
+              r.summary +
+              (r.warnings.empty()
+                   ? std::string()
+                   : ", " + std::to_string(r.warnings.size()) + " warning(s) under the page");
 }
 
 const ViewerState::Result* ViewerState::shown() const {

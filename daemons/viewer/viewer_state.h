@@ -86,7 +86,8 @@ class ViewerState {
     int64_t scan_id = 0;
     ScanIdentity identity;  // From the request (or its report); empty when it had none.
     int attempt = 1;
-    std::string summary, results, quality;
+    std::string summary;  // "300x400 at 41 dpi".
+    std::string results, quality;
     // The identity from its report with the attempt ("MS 12, 3 recto, attempt 2 (retake)"), or
     // the scan id.
     std::string title;
