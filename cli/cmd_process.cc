@@ -34,10 +34,10 @@ int RunProcess(const std::vector<std::string>& args) {
       "warnings) and report.html (the same with pictures, for a browser). On a spread (an\n"
       "open book) each page's files go to pages/left/ and pages/right/.\n"
       "Exit status: 0 restored; 1 an error (one line names the file and the problem); 2 bad\n"
-      "flags; 3 restored with warnings that make the result doubtful (the leaf runs off the\n"
-      "view, an uncertain outline, high strain or fold-over, an unexpected leaf size, a\n"
-      "spread's pages missing over 5 mm at the gutter): check report.html before delivering\n"
-      "it.",
+      "flags; 3 restored with a verdict other than PASS: warnings that make the result\n"
+      "doubtful (the leaf runs off the view, an uncertain outline, high strain or fold-over,\n"
+      "an unexpected leaf size, a spread's pages missing over 5 mm at the gutter) or a figure\n"
+      "short of the collection's target (--target-*): check report.html before delivering it.",
       specs);
   if (!flags.Parse(args)) return 0;
   // One scan, processed once: fresh pages are dear (each faults in zeroed; on this project's

@@ -1,6 +1,7 @@
 #include "pipeline/report.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -82,7 +83,7 @@ void HtmlHead(const std::string& title, std::ostringstream* out) {
     << "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px "
        "10px;text-align:left}\nfigure{margin:1.5em 0}img{max-width:100%;border:1px solid "
        "#ccc}\nfigcaption{color:#555;margin-top:4px}.identity{font-size:1.1em}\n"
-       "figure.restored img{max-height:90vh}.warn{color:#a40}\n"
+       "figure.restored img{max-height:90vh}.warn{color:#a40}.fail{color:#a11}\n"
        ".warnings{border:2px solid #a40;padding:0.5em 1em;background:#fff6f0}\n"
        ".qc{border:3px solid;padding:0.2em 1em;margin:1em 0}.qc h2{margin:0.3em 0}\n"
        ".qc-pass{border-color:#2a2;color:#161}.qc-warn{border-color:#d90;color:#850}"
@@ -159,8 +160,12 @@ void HtmlWarningsAndFadgi(const ProcessReport& r, std::ostringstream* out) {
   std::ostringstream& h = *out;
   const std::vector<Warning> warnings = r.Warnings();
   if (!warnings.empty()) {
-    h << "<div class=warnings><h2 class=warn>Warnings: check this scan before it is "
-         "delivered</h2>\n<ul>\n";
+    // Headed with the verdict, in the same words as the viewer's badge and `vellum scan`.
+    const QcVerdict verdict = AssessQuality(r).verdict;
+    std::string word = VerdictName(verdict);
+    for (char& c : word) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    h << "<div class=warnings><h2 class=\"" << VerdictName(verdict) << "\">" << word
+      << ": what makes this scan doubtful, and what to do</h2>\n<ul>\n";
     for (const Warning& w : warnings) {
       h << "<li><b>" << HtmlEscape(w.code) << "</b>: " << HtmlEscape(w.message) << "</li>\n";
     }
