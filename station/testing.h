@@ -60,21 +60,24 @@ class MemqBus {
   }
 
   // As RunUntil, and the clock moves `step_s` whenever no message came for 5 ms (what was sent
-  // has been handled), up to `most_s` in all; false if `done` does not hold by then.
+  // has been handled), `most_s` in all; after that `done` is awaited with the clock still (a
+  // slow worker finishing what the last step set off). False if `done` does not hold within 60 s
+  // of real time.
   bool StepUntil(const std::function<bool()>& done, double step_s, double most_s) {
     const Clock::time_point end = clock_.Now() + Seconds(most_s);
     const auto real_end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
     while (!done()) {
-      if (clock_.Now() > end || std::chrono::steady_clock::now() > real_end) return false;
+      if (std::chrono::steady_clock::now() > real_end) return false;
       const bool quiet = lcm_.handleTimeout(5) == 0;
       for (const auto& tick : ticks_) tick();
-      if (quiet) clock_.Advance(step_s);
+      if (quiet && clock_.Now() < end) clock_.Advance(step_s);
     }
     return true;
   }
   // Lets `seconds` pass on the clock, handling messages and ticking, as StepUntil does.
   void StepFor(double seconds, double step_s = 0.1) {
-    StepUntil([] { return false; }, step_s, seconds);
+    const Clock::time_point end = clock_.Now() + Seconds(seconds);
+    StepUntil([&] { return clock_.Now() >= end; }, step_s, seconds + step_s);
   }
 
   // Records every message of `channel` (decoded as Msg) from now on.

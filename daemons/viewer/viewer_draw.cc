@@ -99,8 +99,13 @@ void DrawFocus(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
 // The live preview, its clipped pixels in red and the leaf outlined, the leaf hint in cyan, the
 // box being dragged, and a line on the leaf; returns where the preview's pixels went.
 cv::Rect DrawPreview(const ViewerState& s, cv::Mat& canvas, cv::Rect box) {
+  // Held: dimmed, in a picture of its own (never the state's, which the next draw shows again).
   cv::Mat shown = s.preview_shown();
-  if (s.capturing() && !shown.empty()) shown = shown * 0.45;  // Held: dimmed.
+  if (s.capturing() && !shown.empty()) {
+    cv::Mat dimmed;
+    shown.convertTo(dimmed, -1, 0.45);
+    shown = dimmed;
+  }
   const cv::Rect at = Panel(canvas, box, shown,
                             s.capturing() ? "camera preview: held while the patterns run"
                                           : "camera preview (clipped in red)");

@@ -103,7 +103,7 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window,
     cv::Mat image;
     const Status s = FromMessage(m, &image);
     if (!s.ok()) return node_->Error("PREVIEW: " + s.message());
-    state_.OnPreview(image, node_->Now());
+    state_.OnPreview(image, node_->Now(), /*of_capture=*/m.scan_id != 0);
   });
   node->Subscribe<image_t>(channel::kPreviewFocus, [this](const image_t& m) {
     cv::Mat image;

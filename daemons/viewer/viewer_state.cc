@@ -159,9 +159,9 @@ std::string ViewerState::FailureNextStep() const {
   return remedy + ", then Enter to retake " + DescribeIdentity(*retake_);
 }
 
-void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now) {
-  last_preview_ = now;     // The camera is alive...
-  if (capturing_) return;  // ...but shows the patterns: the last live frame is held.
+void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now, bool of_capture) {
+  last_preview_ = now;                   // The camera is alive...
+  if (capturing_ || of_capture) return;  // ...but shows the patterns: the live frame is held.
   preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
   // The leaf as it is being placed: outlined green, red once it runs off the view.
   const Outline leaf = LeafInPreview(image);

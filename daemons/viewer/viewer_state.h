@@ -112,7 +112,9 @@ class ViewerState {
 
   // From the bus. A preview or a restored scan whose image does not decode is the caller's to
   // report; the rest is taken as it comes.
-  void OnPreview(const cv::Mat& image, Clock::time_point now);
+  // `of_capture`: the frame of a scan's capture (PREVIEW with a scan id), which shows a pattern:
+  // it says the camera is alive, and never replaces the live view.
+  void OnPreview(const cv::Mat& image, Clock::time_point now, bool of_capture = false);
   void OnFocus(cv::Mat image);
   void OnPatternShown(const pattern_shown_t& m);
   void OnLightPrompt(const light_t& m);

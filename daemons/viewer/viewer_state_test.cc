@@ -333,8 +333,15 @@ TEST(ViewerState, TheLiveViewIsHeldWhileThePatternsRun) {
   scanning.state = "scanning";
   v.OnStatus(scanning, t0 + Seconds(3));
   EXPECT_TRUE(v.capturing());
+  // Drawn dimmed as often as the window redraws, the held frame itself stays as it was.
+  ViewerLayout layout;
+  for (int k = 0; k < 5; ++k) DrawViewer(v, cv::Size(960, 540), t0 + Seconds(3), &layout);
+  EXPECT_EQ(cv::norm(v.preview_shown(), before, cv::NORM_INF), 0) << "the held frame was dimmed";
   v.OnStatus(Status("vellum-projector"), t0 + Seconds(4));  // Idle: the scan is captured.
   EXPECT_FALSE(v.capturing());
+  // The last capture's frame, come after the projector went idle: still not the live view.
+  v.OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(0, 0, 0)), t0 + Seconds(4), true);
+  EXPECT_EQ(cv::norm(v.preview_shown(), before, cv::NORM_INF), 0);
   v.OnPreview(cv::Mat(60, 80, CV_8UC3, cv::Scalar(30, 30, 30)), t0 + Seconds(5));
   EXPECT_GT(cv::norm(v.preview_shown(), before, cv::NORM_INF), 0);
 }
