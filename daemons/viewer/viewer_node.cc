@@ -163,10 +163,13 @@ void ViewerNode::LoadSession() {
   text << in.rdbuf();
   std::string why;
   if (!in || !state_.LoadSession(text.str(), &why)) {
+    // Set aside under a name of its own (an earlier one set aside is kept too).
+    std::string aside = file + ".bad";
+    for (int k = 1; std::filesystem::exists(aside); ++k) aside = file + ".bad." + std::to_string(k);
     std::error_code ec;
-    std::filesystem::rename(file, file + ".bad", ec);
+    std::filesystem::rename(file, aside, ec);
     node_->Error("session " + file + " not taken up (" + (in ? why : "cannot be read") +
-                 "); set aside as " + file + ".bad, starting afresh");
+                 "); set aside as " + aside + ", starting afresh");
     return;
   }
   saved_session_ = state_.SessionJson();
@@ -185,19 +188,17 @@ void ViewerNode::SaveSessionAndReadiness() {
   if (file.empty()) return;
   const std::string session = state_.SessionJson();
   if (session == saved_session_) return;
+  // Said once per change of the session, not at every draw, when it cannot be written.
+  saved_session_ = session;
   const std::string part = file + ".part";
   {
     std::ofstream out(part, std::ios::trunc);
     out << session;
-    if (!out.flush()) {
-      node_->Error("cannot write the session to " + part);
-      return;
-    }
+    if (!out.flush()) return node_->Error("cannot write the session to " + part);
   }
   std::error_code ec;
   std::filesystem::rename(part, file, ec);
-  if (ec) return node_->Error("cannot write the session to " + file + ": " + ec.message());
-  saved_session_ = session;
+  if (ec) node_->Error("cannot write the session to " + file + ": " + ec.message());
 }
 
 void ViewerNode::OnKey(SDL_Keycode key) {

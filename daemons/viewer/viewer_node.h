@@ -54,7 +54,7 @@ class ViewerNode {
  public:
   // Everything runs on the LCM thread (the window's events, drawing and the messages).
   // Takes up the session in options.session_file if there is one (one that does not read is
-  // reported and set aside as <file>.bad, never lost).
+  // reported and set aside as <file>.bad, or .bad.1, .bad.2..., never lost).
   ViewerNode(Node* node, std::unique_ptr<display::Window> window,
              const ViewerNodeOptions& options = ViewerNodeOptions());
 
