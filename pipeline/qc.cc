@@ -86,21 +86,22 @@ void JudgeTarget(const ProcessReport& report, QcResult* qc) {
       std::snprintf(text, sizeof(text), "%.0f bits per channel", bits);
       QcCheck& c = CheckNamed(qc, "bit depth", std::string(text) + ", as " + target + " asks");
       if (bits < want_bits) {
-        c.detail = text;
-        FallsShort(qc, "bit depth", which + target + " asks " + std::to_string(want_bits));
+        if (c.verdict == QcVerdict::kPass) c.detail.clear();  // A spread's other page kept.
+        FallsShort(qc, "bit depth",
+                   which + text + "; " + target + " asks " + std::to_string(want_bits));
       }
     }
     // Scale error, for a FADGI level.
     if (level) {
       QcCheck& c = CheckNamed(qc, "scale error", "within " + target);
       if (!report.Find("restored", "scale_error_percent", page)) {
-        c.detail.clear();
+        if (c.verdict == QcVerdict::kPass) c.detail.clear();
         FallsShort(qc, "scale error", which + "no true scale (camera view)");
       } else if (const double e = report.Number("restored", "scale_error_percent", page);
                  e > level->scale_error_percent) {
         std::snprintf(text, sizeof(text), "%s%.3f%%; %s asks %.0f%% at most", which.c_str(), e,
                       target.c_str(), level->scale_error_percent);
-        c.detail.clear();
+        if (c.verdict == QcVerdict::kPass) c.detail.clear();
         FallsShort(qc, "scale error", text);
       }
     }
