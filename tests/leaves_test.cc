@@ -17,10 +17,12 @@
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <opencv2/aruco.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tuple>
 
 #include "core/decode/decode.h"
 #include "core/geometry/rigid2d.h"
@@ -312,6 +314,52 @@ TEST(Doubtful, ALeafOfAnotherSizeThanExpectedIsFlagged) {
   const Scanned right = Process(Scene{"size", PageShape::kCurl}, 31, options);
   ASSERT_TRUE(right.result.status.ok()) << right.result.status.message();
   EXPECT_TRUE(WarningCodes(right).empty()) << ::testing::PrintToString(WarningCodes(right));
+}
+
+// A collection's target judges every page of a spread: each page short of it is named in the
+// check, neither hides the other; a page that meets it adds nothing. The figures are a report's
+// as the restore stage records them.
+TEST(Quality, ATargetJudgesEachPageOfASpreadAndNamesEveryShortfall) {
+  ProcessReport report;
+  for (const auto& [page, p5, bits] : {std::tuple<const char*, double, double>{"left", 320, 8},
+                                       std::tuple<const char*, double, double>{"right", 280, 8}}) {
+    StageReport stage;
+    stage.stage = "restore";
+    stage.page = page;
+    stage.Number("restored", "dpi", 300);
+    stage.Number("restored", "bits_per_channel", bits);
+    stage.Number("restored", "scale_error_percent", 0.5);
+    stage.Number("sampling", "p5_ppi", p5);
+    stage.Number("sampling", "median_ppi", p5 + 20);
+    report.stages.push_back(stage);
+  }
+  EXPECT_EQ(AssessQuality(report).verdict, QcVerdict::kPass);  // No target: nothing judged.
+  report.target.ppi = 300;
+  report.target.bits = 16;
+  const QcResult qc = AssessQuality(report);
+  EXPECT_EQ(qc.verdict, QcVerdict::kFail);
+  std::map<std::string, QcCheck> by_name;
+  for (const QcCheck& c : qc.checks) by_name[c.name] = c;
+  EXPECT_EQ(by_name["sampling"].verdict, QcVerdict::kFail);
+  EXPECT_NE(by_name["sampling"].detail.find("right page: 280 ppi at 95% of the page"),
+            std::string::npos)
+      << by_name["sampling"].detail;
+  EXPECT_EQ(by_name["sampling"].detail.find("left page"), std::string::npos)
+      << "the left page meets 300 ppi: " << by_name["sampling"].detail;
+  EXPECT_EQ(by_name["bit depth"].verdict, QcVerdict::kFail);
+  for (const char* page : {"left page: 8 bits per channel", "right page: 8 bits per channel"}) {
+    EXPECT_NE(by_name["bit depth"].detail.find(page), std::string::npos)
+        << page << " in " << by_name["bit depth"].detail;
+  }
+  report.target = QcTarget();
+  report.target.fadgi_stars = 1;  // 285 ppi, 8 bits, 5%: the left page meets it, the right not.
+  const QcResult one = AssessQuality(report);
+  std::map<std::string, QcCheck> stars;
+  for (const QcCheck& c : one.checks) stars[c.name] = c;
+  EXPECT_EQ(stars["sampling"].verdict, QcVerdict::kFail);
+  EXPECT_NE(stars["sampling"].detail.find("right page"), std::string::npos);
+  EXPECT_EQ(stars["bit depth"].verdict, QcVerdict::kPass);
+  EXPECT_EQ(stars["scale error"].verdict, QcVerdict::kPass);
 }
 
 // Asking 600 dpi of the default rig (which samples the table at about 102 ppi) writes
