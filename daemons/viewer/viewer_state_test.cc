@@ -35,6 +35,21 @@ void Alive(ViewerState* v, Clock::time_point now) {
   for (const ChainLink& link : kChain) v->OnStatus(Status(link.process), now);
 }
 
+// The operator names the next folio in the form: each text field cleared and typed, the side
+// chosen (Space) until it is `side`.
+void NameFolio(ViewerState* v, const std::string& shelfmark, const std::string& folio,
+               const std::string& side) {
+  v->Act(Action::kEdit);
+  for (const std::string* text : {&shelfmark, &folio}) {
+    const FormField& field = IdentityForm()[v->editing_field()];
+    while (!(v->sequence_next().*field.field).empty()) v->Act(Action::kBackspace);
+    v->Type(*text);
+    v->Act(Action::kFieldNext);
+  }
+  while (v->sequence_next().side != side) v->Act(Action::kChoose);
+  v->Act(Action::kFormDone);
+}
+
 // An identity of MS 12: folio and side.
 ScanIdentity Folio(const std::string& folio, const std::string& side) {
   ScanIdentity id;
@@ -113,13 +128,7 @@ TEST(ViewerState, AFolioThatFailedIsOfferedAgainBeforeTheSequenceGoesOn) {
   ViewerState v;
   const Clock::time_point now = Clock::Steady().Now();
   Alive(&v, now);
-  v.Act(Action::kEdit);
-  v.Type("MS 12");
-  v.Act(Action::kFieldNext);
-  v.Type("4");
-  v.Act(Action::kFieldNext);
-  v.Act(Action::kChoose);
-  v.Act(Action::kFormDone);
+  NameFolio(&v, "MS 12", "4", "recto");
   ASSERT_EQ(v.Act(Action::kScan, 41, now).request.identity.side, "recto");
   ASSERT_EQ(v.Act(Action::kScan, 42, now).request.identity.side, "verso");  // 4v: it fails.
   v.OnStatus(Status("vellum-decoder", "", 0, 10), now);  // Heard before: its errors from now on.
@@ -195,13 +204,7 @@ TEST(ViewerState, TheSessionCarriesTheSequenceAcrossARestart) {
   ViewerState v;
   const Clock::time_point now = Clock::Steady().Now();
   Alive(&v, now);
-  v.Act(Action::kEdit);
-  v.Type("MS 12");
-  v.Act(Action::kFieldNext);
-  v.Type("4");
-  v.Act(Action::kFieldNext);
-  v.Act(Action::kChoose);
-  v.Act(Action::kFormDone);
+  NameFolio(&v, "MS 12", "4", "recto");
   v.Act(Action::kObject);
   v.SetHint(cv::Rect2d(0.1, 0.2, 0.3, 0.4));
   v.Act(Action::kScan, 41, now);
@@ -354,14 +357,7 @@ TEST(ViewerState, TheSessionSheetIsInBookOrderWithFailuresInTheirPlace) {
   Alive(&v, now);
   v.OnStatus(Status("vellum-decoder", "", 0, 1), now);
   auto scan = [&](int64_t id, const std::string& folio, const std::string& side) {
-    v.Act(Action::kEdit);
-    v.Act(Action::kFieldNext);
-    v.Act(Action::kBackspace);
-    v.Act(Action::kBackspace);
-    v.Type(folio);
-    v.Act(Action::kFieldNext);
-    while (v.sequence_next().side != side) v.Act(Action::kChoose);
-    v.Act(Action::kFormDone);
+    NameFolio(&v, "", folio, side);
     ASSERT_EQ(v.Act(Action::kScan, id, now).kind, Kind::kRequestScan);
   };
   scan(1, "10", "recto");
