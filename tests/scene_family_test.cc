@@ -39,6 +39,7 @@
 
 #include "core/sim/evaluate.h"
 #include "pipeline/process.h"
+#include "pipeline/qc.h"
 #include "tests/page_measure.h"
 
 namespace vellum {
@@ -337,6 +338,100 @@ TEST(SceneFamily, ACurlRolledPastTheCamerasSightIsFlagged) {
   std::printf("[edge-on] seed 142: %s | %s | %s\n", shows.met ? "met" : "MISS",
               shows.warnings.c_str(), shows.figures.c_str());
   EXPECT_TRUE(shows.met) << shows.missed;
+}
+
+// A leaf at the view's edge (DrawEdgeScene: the family's scenes moved square to one side of the
+// view, half running off it by 2 to 40 mm, half lying 2 to 15 mm inside it), judged against the
+// virtual gantry's truth: the camera pixels that see the page (truth.on_page).
+// - Where the page reaches the view's outermost line of pixels along 10 px or more (2.5 mm of
+//   its edge, more than the rim's blur and noise can fake), part of the leaf is not in the
+//   restored page: the scan must not PASS (an error, "no leaf found", is loud too). The check
+//   that should say so, "leaf in view", is counted apart.
+// - Where the page lies 8 px (2 mm) or more inside every side, the leaf is wholly in view:
+//   "leaf in view" must pass when the leaf was found (its outline's IoU with the truth 0.9 or
+//   more). A warning that cries wolf there is a defect too. An outline that took something else
+//   (a frame) must not pass.
+// Between the two (the page's edge within 2 mm of the border) either answer is allowed.
+TEST(SceneFamily, ALeafAtTheViewsEdgeNeverPassesWhenItRunsOffAndIsInViewWhenInside) {
+  const uint64_t count = EnvNumber("VELLUM_EDGE_SCENES", 16);
+  const uint64_t first = EnvNumber("VELLUM_EDGE_FIRST", 1);
+  int off = 0, off_in_view_failed = 0, inside = 0, between = 0;
+  for (uint64_t seed = first; seed < first + count; ++seed) {
+    const FamilyScene s = DrawEdgeScene(seed);
+    const SimulatedScan scan =
+        SimulateScan(DefaultRig(), s.page, s.texture, s.scene, s.seed, s.light);
+    const cv::Mat& truth = scan.gantry->truth().on_page;
+    // The page on the view's outermost line, per side, and its least distance from each side.
+    const cv::Rect lines[4] = {
+        cv::Rect(0, 0, 1, truth.rows), cv::Rect(truth.cols - 1, 0, 1, truth.rows),
+        cv::Rect(0, 0, truth.cols, 1), cv::Rect(0, truth.rows - 1, truth.cols, 1)};
+    int on_border = 0;
+    for (const cv::Rect& line : lines)
+      on_border = std::max(on_border, cv::countNonZero(truth(line)));
+    const cv::Rect inner = cv::Rect(8, 8, truth.cols - 16, truth.rows - 16);
+    ASSERT_GT(cv::countNonZero(truth), 0) << "the page is out of sight: " << s.Describe();
+    const bool runs_off = on_border >= 10;
+    const bool well_inside = cv::countNonZero(truth) == cv::countNonZero(truth(inner));
+    ProcessInput input;
+    input.scan_dir = "edge-" + std::to_string(seed);
+    input.calibration_path = "the virtual gantry's rig";
+    input.scan = AsScan(scan);
+    input.scan.object = s.said;
+    input.calibration = scan.gantry->rig();
+    const std::string out =
+        (fs::temp_directory_path() / ("vellum_edge_" + std::to_string(getpid()))).string();
+    fs::remove_all(out);
+    const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
+    fs::remove_all(out);
+    if (const char* dump = std::getenv("VELLUM_EDGE_DUMP"); dump && !result.outline.mask.empty()) {
+      DumpOutline(std::string(dump) + "/edge_" + std::to_string(seed) + ".png", input.scan.texture,
+                  result.outline.mask, truth);
+    }
+    std::string verdict = "error", in_view = "-", warnings;
+    for (const Warning& w : result.report.Warnings()) warnings += w.code + " ";
+    if (result.status.ok()) {
+      const QcResult qc = AssessQuality(result.report);
+      verdict = VerdictName(qc.verdict);
+      for (const QcCheck& check : qc.checks) {
+        if (check.name == "leaf in view") in_view = VerdictName(check.verdict);
+        if (check.verdict != QcVerdict::kPass) warnings += check.name + ": " + check.detail + "; ";
+      }
+    }
+    std::printf("[edge] %-7s %-5s leaf in view %-4s | %s | %s%s\n",
+                runs_off      ? "off"
+                : well_inside ? "inside"
+                              : "between",
+                verdict.c_str(), in_view.c_str(), s.Describe().c_str(), warnings.c_str(),
+                result.status.ok() ? "" : result.status.message().c_str());
+    std::fflush(stdout);
+    if (runs_off) {
+      ++off;
+      off_in_view_failed += in_view == "fail";
+      EXPECT_NE(verdict, "pass") << "a leaf running off the view (" << on_border
+                                 << " px of its page on the border) passed: " << s.Describe();
+    } else if (well_inside) {
+      ++inside;
+      // Against the leaf found (a frame taken for the leaf runs off the view: a wrong outline,
+      // which must not pass either).
+      const cv::Mat& found = result.outline.mask;
+      const double iou = found.empty() ? 0.0
+                                       : static_cast<double>(cv::countNonZero(found & truth)) /
+                                             std::max(1, cv::countNonZero(found | truth));
+      if (iou >= 0.9) {
+        EXPECT_NE(in_view, "fail")
+            << "a leaf inside the view failed \"leaf in view\": " << s.Describe();
+      } else {
+        EXPECT_NE(verdict, "pass")
+            << "an outline " << iou << " IoU off the leaf passed: " << s.Describe();
+      }
+    } else {
+      ++between;
+    }
+  }
+  std::printf(
+      "[edge] %d ran off the view (%d failed on \"leaf in view\"), %d lay inside it, %d "
+      "within 2 mm of its border\n",
+      off, off_in_view_failed, inside, between);
 }
 
 TEST(SceneFamily, EveryScanMeetsTheBarsOrIsFlagged) {

@@ -1244,16 +1244,16 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
       << station.viewer->Output();  // Before its X server goes.
 }
 
-// A leaf that runs off the camera's view (its centre 60 mm up: its top edge 30 mm past
-// the default rig's view) is restored, and fails quality control on "leaf in view": in
-// report.json, on RESTORED, in `vellum scan`'s output and exit status, and as a red badge over
-// the restored page in the viewer (read from the X screen).
+// A flat leaf that runs off the right edge of the camera's view (its centre 115 mm right: its
+// right edge 10 mm past the small rig's 200 mm half width) is restored, and fails quality
+// control on "leaf in view": in report.json, on RESTORED, in `vellum scan`'s output and exit
+// status, and as a red badge over the restored page in the viewer (read from the X screen).
+// This scene passed every check once: the view's outer ring taught the cut the flat leaf's look
+// as the table's, its outline stopped short of the edge, and nothing else said the leaf ran on
+// (LookRunsOff does now; the scene family's edge test covers the rest).
 TEST_F(StationTest, ALeafPartlyOutOfViewFailsQualityControlInTheReportAndTheViewer) {
-  // The default rig: on the small rig's coarse pixels (0.6 mm) a leaf cut off at its curl is
-  // not told from the table at all ("no leaf found"); on the default rig it is found, and
-  // flagged.
   const ViewedStation station =
-      StartViewedStation(kSource + "/config/default_calibration.yaml", {"--centre", "0,60"});
+      StartViewedStation(kRig, {"--page", "flat", "--centre", "115,0", "--texture", "text"});
   const std::string& screen = station.screen;
   std::vector<restored_t> restored;
   Listener<restored_t> on_restored(*lcm_, "RESTORED",

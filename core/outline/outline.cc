@@ -51,6 +51,11 @@ bool OutlineOptions::Check(std::string* why) const {
     *why = "gutter_apart_px and gutter_borrow_rows must be >= 1, gutter_meet_px >= 0";
     return false;
   }
+  if (!(off_view_reach_share > 0 && off_view_reach_share <= 0.5) ||
+      !(off_view_share > 0 && off_view_share <= 1)) {
+    *why = "off_view_reach_share must be in (0, 0.5], off_view_share in (0, 1]";
+    return false;
+  }
   if (unseen_reach_px < 1 || !(unseen_look >= 0) || !(unseen_clear_mm > 0) ||
       !(max_unseen_share >= 0 && max_unseen_share <= 1) ||
       !(max_lost_share >= 0 && max_lost_share <= 1) ||
@@ -532,7 +537,12 @@ void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues
              "of it and the leaf beneath is missing from the restored page; lay that edge "
              "flatter, or turn it towards the camera, and scan again"});
   }
-  out->touches_border = TouchesBorder(leaf, options.border_px);
+  const int longer = std::max(leaf.cols, leaf.rows);
+  out->touches_border =
+      TouchesBorder(leaf, options.border_px) ||
+      LookRunsOff(leaf, cues.colour, options.border_px,
+                  static_cast<int>(options.off_view_reach_share * longer),
+                  options.unseen_look) >= std::max(3.0, options.off_view_share * longer);
   // Plausibility: a leaf lies inside the view; what fills most of it, or reaches two or more of
   // its sides, is more likely the table or a support.
   const int sides = SidesTouched(leaf, options.border_px);

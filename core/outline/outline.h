@@ -98,6 +98,12 @@ struct OutlineOptions {
   double max_view_share = 0.85;  // A leaf covering more of the measured view is doubtful.
   cv::Rect hint;                 // Camera pixels inside the leaf (empty: the centre of the view).
   int border_px = 2;             // A leaf within this of the image border runs off the view.
+  // So does one whose look runs on to the border beyond its outline (LookRunsOff: within
+  // off_view_reach_share of the view's longer side from the border, along a stretch of at least
+  // off_view_share of it): where the projector does not reach the view's edge, or where a flat
+  // leaf's look alone sets it apart, the outline stops short of the border the leaf runs off.
+  double off_view_reach_share = 0.08;
+  double off_view_share = 0.005;
   // The rim's confidence (RimConfidence): set apart by its look where the brighter fifth of the
   // leaf and of what lies beside it, within rim_look_px of the outline, differ by this share of
   // the paper's brightness.

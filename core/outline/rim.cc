@@ -5,6 +5,7 @@
 #include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <vector>
 
 #include "core/outline/steps.h"
 
@@ -331,6 +332,115 @@ int SidesTouched(const cv::Mat& mask, int border) {
   int touched = 0;
   for (const cv::Rect& side : sides) touched += cv::countNonZero(mask(side)) > 0;
   return touched;
+}
+
+int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reach,
+                double min_look) {
+  const int b = std::max(1, border);
+  reach = std::min({std::max(reach, b + 1), leaf.cols / 2, leaf.rows / 2});
+  if (reach <= b) return 0;
+  // Each side's strip, `reach` deep: left, right, top, bottom.
+  const cv::Rect strips[4] = {
+      cv::Rect(0, 0, reach, leaf.rows), cv::Rect(leaf.cols - reach, 0, reach, leaf.rows),
+      cv::Rect(0, 0, leaf.cols, reach), cv::Rect(0, leaf.rows - reach, leaf.cols, reach)};
+  bool near[4], any = false;
+  for (int side = 0; side < 4; ++side) any |= near[side] = cv::countNonZero(leaf(strips[side])) > 0;
+  if (!any) return 0;
+  // The looks, from every other pixel: the leaf's from its own, what lies beside it from the
+  // pixels 4 to `reach` from its outline (nearer, the camera's blur mixes the two), one per side
+  // with that side's strip left out: what lies beside the leaf elsewhere (a table, a support, a
+  // frame), not what it runs into at the side judged.
+  cv::Mat apart;
+  cv::distanceTransform(~leaf, apart, cv::DIST_L1, 3, CV_8U);
+  Look leaf_look;
+  std::array<Look, 4> beside;
+  for (int v = 0; v < leaf.rows; v += 2) {
+    const uint8_t* l = leaf.ptr<uint8_t>(v);
+    const uint8_t* d = apart.ptr<uint8_t>(v);
+    for (int u = 0; u < leaf.cols; u += 2) {
+      if (l[u]) {
+        leaf_look.Add(Look::Bin(Mean3x3(colour, u, v)), 1);
+        continue;
+      }
+      if (d[u] <= 3 || d[u] > reach) continue;
+      const int bin = Look::Bin(Mean3x3(colour, u, v));
+      for (int side = 0; side < 4; ++side) {
+        if (near[side] && !strips[side].contains(cv::Point(u, v))) beside[side].Add(bin, 1);
+      }
+    }
+  }
+  leaf_look.Finish();
+  int longest = 0;
+  for (int side = 0; side < 4; ++side) {
+    if (!near[side]) continue;
+    beside[side].Finish();
+    if (leaf_look.empty() || beside[side].empty()) continue;
+    // The leaf's look at the edge, and what may join it there: a pixel more like the leaf than
+    // what lies beside it (paper between the lines of text; not a frame's grain, nor the mixed
+    // pixels of a gap between the leaf and the edge).
+    std::array<uint8_t, Look::kBins> leafish, besideish;
+    for (int bin = 0; bin < Look::kBins; ++bin) {
+      const double ratio = leaf_look.Log(bin) - beside[side].Log(bin);
+      leafish[bin] = ratio >= min_look;
+      besideish[bin] = ratio <= 0;
+    }
+    // Passable: the leaf, and what looks more like it; 2 in the edge band where the pixel looks
+    // like the leaf.
+    const cv::Rect strip = strips[side];
+    const cv::Mat in_leaf = leaf(strip);
+    cv::Mat pass(strip.size(), CV_8U, cv::Scalar(0));
+    for (int v = 0; v < strip.height; ++v) {
+      const uint8_t* l = in_leaf.ptr<uint8_t>(v);
+      uint8_t* out = pass.ptr<uint8_t>(v);
+      for (int u = 0; u < strip.width; ++u) {
+        if (l[u]) {
+          out[u] = 1;
+          continue;
+        }
+        const int x = strip.x + u, y = strip.y + v;
+        const int bin = Look::Bin(Mean3x3(colour, x, y));
+        if (besideish[bin]) continue;
+        const bool at_edge = side == 0   ? x < b
+                             : side == 1 ? x >= leaf.cols - b
+                             : side == 2 ? y < b
+                                         : y >= leaf.rows - b;
+        out[u] = at_edge && leafish[bin] ? 2 : 1;
+      }
+    }
+    cv::Mat labels;
+    const int n = cv::connectedComponents(pass != 0, labels, 8, CV_32S);
+    std::vector<uint8_t> joined(n, 0);
+    for (int v = 0; v < strip.height; ++v) {
+      const uint8_t* l = in_leaf.ptr<uint8_t>(v);
+      const int* label = labels.ptr<int>(v);
+      for (int u = 0; u < strip.width; ++u) {
+        if (l[u]) joined[label[u]] = 1;
+      }
+    }
+    // The positions along the edge with a joined pixel that looks like the leaf.
+    const bool down = side < 2;  // The left and right sides run down the rows.
+    std::vector<uint8_t> seen(down ? strip.height : strip.width, 0);
+    for (int v = 0; v < strip.height; ++v) {
+      const uint8_t* p = pass.ptr<uint8_t>(v);
+      const int* label = labels.ptr<int>(v);
+      for (int u = 0; u < strip.width; ++u) {
+        if (p[u] == 2 && joined[label[u]]) seen[down ? v : u] = 1;
+      }
+    }
+    // The longest stretch of them (a gap of a pixel bridged): a leaf runs off the view along
+    // a stretch of the edge, where a frame's grain or the noise passes for paper here and there.
+    int run = 0, gap = 0;
+    for (const uint8_t at : seen) {
+      if (at) {
+        run += 1 + gap;
+        gap = 0;
+        longest = std::max(longest, run);
+      } else if (++gap > 1) {
+        run = gap = 0;
+      }
+    }
+  }
+  return longest;
 }
 
 ProjectorSight::ProjectorSight(const Calibration& rig, const cv::Mat& points,

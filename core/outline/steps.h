@@ -321,6 +321,17 @@ double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double 
 bool TouchesBorder(const cv::Mat& leaf, int border);
 // How many of the view's four sides the mask reaches (within `border` pixels).
 int SidesTouched(const cv::Mat& mask, int border);
+// Where the leaf's look runs on to the view's edge beyond its outline: the longest stretch of
+// positions along one of the view's sides (rows of the left and right sides, columns of the
+// top and bottom; a gap of one bridged) whose pixels within `border` of the edge look like the
+// leaf (`min_look` nats more likely under the leaf's look than under that of what lies beside
+// it elsewhere, both learned here by their 3 x 3 mean colour) and are joined to the leaf,
+// 8-connected, through pixels more like the leaf than what lies beside it, all within `reach`
+// of that edge. The outline stops short of an edge the leaf runs off where the projector does
+// not reach it (nothing measured there), or where a flat leaf's look alone sets it apart and
+// the view's outer ring taught the cut the leaf's look as the table's; the leaf's look runs on.
+// Zero at once when the leaf comes nowhere near an edge.
+int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reach, double min_look);
 
 // ---- SplitAtGutter ----
 // An open book's gutter: a straight valley down the leaf (through each row's lowest point in the

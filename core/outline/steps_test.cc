@@ -758,6 +758,41 @@ namespace {
 
 // Every threshold of finding the leaf is an option with its unit, and Check() refuses a value
 // out of its range (FindLeaf then fails with the reason instead of finding a wrong leaf).
+// A leaf (light, with dark lines of text) on a dark table, its outline stopping 20 px short of
+// the right edge of a 300 x 200 view. Where the leaf runs on to the edge (its look there, the
+// text too), the rows it runs on along are counted; where the table lies between (a 20 px
+// gap), or a light mount of its own, grey look that lies beside the leaf on its other sides
+// too, nothing is. Asymmetric on purpose: only the right side is near the leaf.
+TEST(LookRunsOff, CountsTheLeafsLookRunningOnToTheEdgeAndNotATableOrAMount) {
+  const cv::Size size(300, 200);
+  const cv::Scalar paper(200, 215, 225), table(50, 50, 50), mount(170, 170, 170);
+  auto scene = [&](const cv::Scalar& beyond) {
+    cv::Mat colour(size, CV_8UC3, table);
+    colour(cv::Rect(100, 40, 200, 120)).setTo(paper);  // The leaf, to the right edge...
+    colour(cv::Rect(280, 40, 20, 120)).setTo(beyond);  // ...or what lies past its outline.
+    for (int v = 50; v < 150; v += 12) colour(cv::Rect(110, v, 190, 3)).setTo(table);  // Text.
+    // The mount on the leaf's other sides too, when there is one (what lies beside it).
+    if (beyond == mount) {
+      colour(cv::Rect(60, 10, 240, 30)).setTo(mount);
+      colour(cv::Rect(60, 160, 240, 30)).setTo(mount);
+      colour(cv::Rect(60, 40, 40, 120)).setTo(mount);
+    }
+    return colour;
+  };
+  cv::Mat leaf(size, CV_8U, cv::Scalar(0));
+  leaf(cv::Rect(100, 40, 180, 120)).setTo(255);  // The outline, 20 px short of the edge.
+  // reach 60 px, min_look 1 nat.
+  const int runs_on = outline::LookRunsOff(leaf, scene(paper), 2, 60, 1.0);
+  // The leaf's 120 rows (the text's bridged by the paper beside it), and up to two more at
+  // either end, where the 3 x 3 mean and a bridged gap of one reach past it.
+  EXPECT_GE(runs_on, 110);
+  EXPECT_LE(runs_on, 124);
+  EXPECT_EQ(outline::LookRunsOff(leaf, scene(table), 2, 60, 1.0), 0);
+  EXPECT_EQ(outline::LookRunsOff(leaf, scene(mount), 2, 60, 1.0), 0);
+  // Far from every edge (reach 10 px): not looked at.
+  EXPECT_EQ(outline::LookRunsOff(leaf, scene(paper), 2, 10, 1.0), 0);
+}
+
 TEST(OutlineOptions, CheckRefusesEachThresholdOutOfItsRange) {
   std::string why;
   ASSERT_TRUE(OutlineOptions().Check(&why)) << why;
@@ -773,6 +808,8 @@ TEST(OutlineOptions, CheckRefusesEachThresholdOutOfItsRange) {
       {"raised_plane_mm", [](OutlineOptions* o) { o->raised_plane_mm = 0; }},
       {"wider_support_share", [](OutlineOptions* o) { o->wider_support_share = 1.5; }},
       {"unseen_reach_px", [](OutlineOptions* o) { o->unseen_reach_px = 0; }},
+      {"off_view_reach_share", [](OutlineOptions* o) { o->off_view_reach_share = 0; }},
+      {"off_view_share", [](OutlineOptions* o) { o->off_view_share = 2; }},
       {"unseen_look", [](OutlineOptions* o) { o->unseen_look = -1; }},
       {"max_unseen_share", [](OutlineOptions* o) { o->max_unseen_share = 2; }},
       {"max_lost_share", [](OutlineOptions* o) { o->max_lost_share = -0.1; }},

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <opencv2/imgproc.hpp>
+#include <vector>
 
 namespace vellum {
 namespace {
@@ -66,9 +67,9 @@ void RandomProfile(PageOptions* page, cv::RNG& rng) {
   }
 }
 
-// Whether every point of the page's outline (and of each page of a spread) lies inside the
-// default rig's view with `margin_px` to spare.
-bool InView(const FamilyScene& s, double margin_px) {
+// How far the page's outline (and each page's of a spread) lies inside each side of the default
+// rig's view: left, right, top, bottom, in camera pixels (negative: it runs past that side).
+cv::Vec4d ViewMargins(const FamilyScene& s) {
   const Calibration rig = DefaultRig();
   std::vector<PageOptions> pages{s.page};
   if (s.scene.spread) {
@@ -85,6 +86,7 @@ bool InView(const FamilyScene& s, double margin_px) {
     }
   }
   const cv::Size view = rig.camera.size;
+  cv::Vec4d margins(1e9, 1e9, 1e9, 1e9);
   for (const PageOptions& o : pages) {
     const Page page(o);
     const double w = o.size_mm.width, h = o.size_mm.height;
@@ -92,14 +94,18 @@ bool InView(const FamilyScene& s, double margin_px) {
       for (const cv::Vec2d& st :
            {cv::Vec2d(f * w, 0), cv::Vec2d(f * w, h), cv::Vec2d(0, f * h), cv::Vec2d(w, f * h)}) {
         const cv::Point2d p = rig.camera.Project(page.Point(st[0], st[1]));
-        if (!(p.x >= margin_px && p.y >= margin_px && p.x <= view.width - 1 - margin_px &&
-              p.y <= view.height - 1 - margin_px)) {
-          return false;
-        }
+        const cv::Vec4d here(p.x, view.width - 1 - p.x, p.y, view.height - 1 - p.y);
+        for (int k = 0; k < 4; ++k) margins[k] = std::min(margins[k], here[k]);
       }
     }
   }
-  return true;
+  return margins;
+}
+
+// Whether every point of the page's outline lies inside the view with `margin_px` to spare.
+bool InView(const FamilyScene& s, double margin_px) {
+  const cv::Vec4d m = ViewMargins(s);
+  return std::min({m[0], m[1], m[2], m[3]}) >= margin_px;
 }
 
 }  // namespace
@@ -238,6 +244,43 @@ void PlaceInView(cv::RNG& rng, FamilyScene* out) {
   }
 }
 
+// The page moved on the table by `by` (mm): a leaf's centre, or a spread's pose (the gantry
+// places a spread's pages about x = 0 whatever its centre).
+void Shift(FamilyScene* s, const cv::Vec2d& by) {
+  PageOptions& page = s->page;
+  if (s->scene.spread) {
+    page.pose_translation += cv::Vec3d(by[0], by[1], 0);
+    return;
+  }
+  page.centre_mm += by;
+  const cv::Vec3d centre(page.centre_mm[0], page.centre_mm[1], 0);
+  page.pose_translation = centre - page.pose_rotation * centre;
+}
+
+// Placed inside the view, then moved square to one side of it until the page's outline lies
+// `edge_margin_px` inside that side (negative: past it), to a pixel: Newton's steps on the
+// margin's slope, measured for a 1 mm move.
+void PlaceAtEdge(cv::RNG& rng, FamilyScene* out) {
+  FamilyScene& s = *out;
+  PlaceInView(rng, &s);
+  // A spread's pages are placed about the gutter at x = 0 (VirtualGantry): it moves up or down.
+  s.edge_side = s.scene.spread ? rng.uniform(2, 4) : rng.uniform(0, 4);
+  // Half run off the view by 2 to 40 mm (8 to 160 px of the default rig's 0.25 mm), half lie
+  // 2 to 15 mm inside it: near enough that a careless test of the border would cry wolf.
+  s.edge_margin_px = Chance(rng, 0.5) ? -rng.uniform(8.0, 160.0) : rng.uniform(8.0, 60.0);
+  const cv::Vec2d unit = s.edge_side < 2 ? cv::Vec2d(1, 0) : cv::Vec2d(0, 1);
+  for (int step = 0; step < 8; ++step) {
+    const double margin = ViewMargins(s)[s.edge_side];
+    if (std::fabs(margin - s.edge_margin_px) < 0.5) break;
+    Shift(&s, unit);
+    const double slope = ViewMargins(s)[s.edge_side] - margin;  // Pixels per mm.
+    Shift(&s, -unit);
+    if (std::fabs(slope) < 0.5) break;  // Not a move this side follows (a camera pixel is 0.25 mm).
+    Shift(&s, unit * std::clamp((s.edge_margin_px - margin) / slope, -200.0, 200.0));
+  }
+  s.edge_margin_px = ViewMargins(s)[s.edge_side];
+}
+
 // The support and the frame around the leaf where it came to lie.
 void DrawSupportAndFrame(cv::RNG& rng, FamilyScene* out) {
   FamilyScene& s = *out;
@@ -263,9 +306,7 @@ void DrawSupportAndFrame(cv::RNG& rng, FamilyScene* out) {
   }
 }
 
-}  // namespace
-
-FamilyScene DrawFamilyScene(uint64_t seed) {
+FamilyScene Draw(uint64_t seed, bool at_edge) {
   FamilyScene s;
   s.seed = seed;
   // One generator drawn from in a fixed order: the same seed gives the same scene.
@@ -274,13 +315,23 @@ FamilyScene DrawFamilyScene(uint64_t seed) {
   DrawSurround(seed, rng, &s);
   DrawTexture(seed, rng, &s);
   DrawLight(seed, rng, &s);
-  PlaceInView(rng, &s);
+  if (at_edge) {
+    PlaceAtEdge(rng, &s);
+  } else {
+    PlaceInView(rng, &s);
+  }
   DrawSupportAndFrame(rng, &s);
   // What the operator says it is: half the time, nothing (auto).
   const bool spread = s.shape == "spread";
   s.said = Chance(rng, 0.5) ? ObjectKind::kAuto : spread ? ObjectKind::kBook : ObjectKind::kLeaf;
   return s;
 }
+
+}  // namespace
+
+FamilyScene DrawFamilyScene(uint64_t seed) { return Draw(seed, false); }
+
+FamilyScene DrawEdgeScene(uint64_t seed) { return Draw(seed, true); }
 
 std::string FamilyScene::Describe() const {
   char text[512];
@@ -300,6 +351,12 @@ std::string FamilyScene::Describe() const {
   if (scene.spread) {
     std::snprintf(text, sizeof(text), "; gutter %.0f deg, radius %.0f mm, gap %.1f mm",
                   page.gutter_angle_deg, page.gutter_radius_mm, scene.spread_gap_mm);
+    out += text;
+  }
+  if (edge_side >= 0) {
+    const char* sides[] = {"left", "right", "top", "bottom"};
+    std::snprintf(text, sizeof(text), "; %.0f px %s the view's %s side", std::fabs(edge_margin_px),
+                  edge_margin_px < 0 ? "past" : "inside", sides[edge_side]);
     out += text;
   }
   return out;

@@ -27,6 +27,11 @@ struct FamilyScene {
   LightOptions light;      // The renderer: noise, blur, defocus, ambient, the table.
   SceneOptions scene;      // Support, frame or spread.
   ObjectKind said = ObjectKind::kAuto;  // What the operator says it is.
+  // A scene at the view's edge (DrawEdgeScene): the side (0 left, 1 right, 2 top, 3 bottom, as
+  // the camera sees them; -1: none) and how far inside it the page's outline lies, camera pixels
+  // (negative: past it, the leaf runs off the view).
+  int edge_side = -1;
+  double edge_margin_px = 0;
 
   bool book() const { return scene.spread; }
   // One line: the seed and every choice that matters, for a table row and a failure message.
@@ -36,5 +41,9 @@ struct FamilyScene {
 // The scene of `seed` (the same seed gives the same scene), for the default rig's view (400 x
 // 300 mm on the table): every leaf lies wholly inside it.
 FamilyScene DrawFamilyScene(uint64_t seed);
+
+// The scene of `seed` moved square to one side of the view: half run off it by 2 to 40 mm, half
+// lie 2 to 15 mm inside it, for what the station says of a leaf at the edge.
+FamilyScene DrawEdgeScene(uint64_t seed);
 
 }  // namespace vellum
