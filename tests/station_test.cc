@@ -1244,6 +1244,29 @@ TEST_F(StationTest, AFolioSequenceTypedInTheViewerIsNamedAndARetakeKeepsTheFirst
       << station.viewer->Output();  // Before its X server goes.
 }
 
+// Whether `shot` shows `text` as the viewer writes it: OpenCV's Hershey simplex at `scale` in
+// colour `fg` on `bg`. The text rendered alone the same way is found among the screen's pixels
+// near `fg` (normalised correlation of the two masks, 0.9 at least): the viewer's words checked
+// on the X screen, without OCR.
+bool ShowsText(const cv::Mat& shot, const std::string& text, double scale, const cv::Scalar& fg,
+               const cv::Scalar& bg) {
+  int baseline = 0;
+  const cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, 1, &baseline);
+  cv::Mat glyphs(size.height + baseline + 4, size.width + 4, CV_8UC3, bg);
+  cv::putText(glyphs, text, cv::Point(2, size.height + 2), cv::FONT_HERSHEY_SIMPLEX, scale, fg, 1,
+              cv::LINE_AA);
+  const cv::Scalar low = fg - cv::Scalar::all(30), high = fg + cv::Scalar::all(30);
+  cv::Mat want, have;
+  cv::inRange(glyphs, low, high, want);
+  cv::inRange(shot, low, high, have);
+  if (have.cols < want.cols || have.rows < want.rows) return false;
+  cv::Mat score;
+  cv::matchTemplate(have, want, score, cv::TM_CCORR_NORMED);
+  double best = 0;
+  cv::minMaxLoc(score, nullptr, &best);
+  return best >= 0.9;
+}
+
 // A flat leaf that runs off the right edge of the camera's view (its centre 115 mm right: its
 // right edge 10 mm past the small rig's 200 mm half width) is restored, and fails quality
 // control on "leaf in view": in report.json, on RESTORED, in `vellum scan`'s output and exit
@@ -1282,6 +1305,23 @@ TEST_F(StationTest, ALeafPartlyOutOfViewFailsQualityControlInTheReportAndTheView
     return cv::countNonZero(mask) > badge.area() / 2;
   };
   EXPECT_TRUE(HandleUntil(*lcm_, 30, badge_red)) << "no red quality badge; see " << screen;
+  // The warning under the page in full, wrapped to the panel's width, to its remedy's last word
+  // (a line cut at the panel's edge lost the remedy once), in amber on the X screen: its first
+  // line, and its last, which is some tail of its words ending in "scan again", wherever the
+  // wrap put it. (Lines are matched whole: a word amid a line lies at a fraction of a pixel.)
+  const std::string warning =
+      "! page_cut_off: the leaf runs off the camera's view: what lies outside it is missing from "
+      "the restored page; move the leaf into the view and scan again";
+  auto remedy_shown = [&] {
+    const cv::Mat shot = testing::ReadXwd(screen);
+    const cv::Scalar amber(0, 170, 255), background(30, 30, 30);
+    if (shot.empty() || !ShowsText(shot, "! page_cut_off:", 0.42, amber, background)) return false;
+    for (size_t at = warning.find(' '); at != std::string::npos; at = warning.find(' ', at + 1)) {
+      if (ShowsText(shot, warning.substr(at + 1), 0.42, amber, background)) return true;
+    }
+    return false;
+  };
+  EXPECT_TRUE(HandleUntil(*lcm_, 30, remedy_shown)) << "the remedy is not shown; see " << screen;
   cv::imwrite(dir_ + "/cut_off.png", testing::ReadXwd(screen));
   EXPECT_EQ(StopCleanly(station.viewer), 0) << station.viewer->Output();
 }
@@ -1328,29 +1368,6 @@ TEST_F(StationTest, ACameraStoppedMidScanTurnsTheViewerRedAndTheScanIsMarkedFail
   ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return fs::exists(failed); })) << failed;
   EXPECT_NE(ReadText(failed).find("captures missing"), std::string::npos) << ReadText(failed);
   EXPECT_EQ(StopCleanly(station.viewer), 0) << station.viewer->Output();
-}
-
-// Whether `shot` shows `text` as the viewer writes it: OpenCV's Hershey simplex at `scale` in
-// colour `fg` on `bg`. The text rendered alone the same way is found among the screen's pixels
-// near `fg` (normalised correlation of the two masks, 0.9 at least): the viewer's words checked
-// on the X screen, without OCR.
-bool ShowsText(const cv::Mat& shot, const std::string& text, double scale, const cv::Scalar& fg,
-               const cv::Scalar& bg) {
-  int baseline = 0;
-  const cv::Size size = cv::getTextSize(text, cv::FONT_HERSHEY_SIMPLEX, scale, 1, &baseline);
-  cv::Mat glyphs(size.height + baseline + 4, size.width + 4, CV_8UC3, bg);
-  cv::putText(glyphs, text, cv::Point(2, size.height + 2), cv::FONT_HERSHEY_SIMPLEX, scale, fg, 1,
-              cv::LINE_AA);
-  const cv::Scalar low = fg - cv::Scalar::all(30), high = fg + cv::Scalar::all(30);
-  cv::Mat want, have;
-  cv::inRange(glyphs, low, high, want);
-  cv::inRange(shot, low, high, have);
-  if (have.cols < want.cols || have.rows < want.rows) return false;
-  cv::Mat score;
-  cv::matchTemplate(have, want, score, cv::TM_CCORR_NORMED);
-  double best = 0;
-  cv::minMaxLoc(score, nullptr, &best);
-  return best >= 0.9;
 }
 
 // The operator's sequence at the gantry (a real X server, keys typed with xdotool), through
