@@ -41,7 +41,7 @@ const FadgiLevel* LevelOf(int stars) {
 QcCheck& CheckNamed(QcResult* qc, const std::string& name, const std::string& detail) {
   for (QcCheck& c : qc->checks)
     if (c.name == name) return c;
-  qc->checks.push_back({name, QcVerdict::kPass, detail});
+  qc->checks.push_back({name, QcVerdict::kPass, detail, ""});
   return qc->checks.back();
 }
 
@@ -50,6 +50,7 @@ void FallsShort(QcResult* qc, const std::string& check, const std::string& why) 
   QcCheck& c = CheckNamed(qc, check, "");
   c.verdict = QcVerdict::kFail;
   c.detail += (c.detail.empty() ? "" : "; ") + why;
+  c.shortfall += (c.shortfall.empty() ? "" : "; ") + why;
   qc->verdict = QcVerdict::kFail;
 }
 
@@ -190,6 +191,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
       said += (said.empty() ? "" : "; ") + w.message;
     }
     c.detail = figure + (said.empty() ? "" : ": " + said);
+    if (figure_fails) c.shortfall = figure;
     qc.verdict = std::max(qc.verdict, c.verdict);
     qc.checks.push_back(c);
   };

@@ -40,6 +40,9 @@ struct QcCheck {
                      // "sampling"
   QcVerdict verdict = QcVerdict::kPass;
   std::string detail;  // The figure, or the warnings that set the verdict.
+  // What a figure alone fails it by, no warning saying so (a share of the leaf measured or
+  // clipped past the limit, a figure short of the collection's target); "" when none does.
+  std::string shortfall;
 };
 
 struct QcResult {

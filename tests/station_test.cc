@@ -504,6 +504,41 @@ TEST_F(StationTest, FullResolutionScanCrossesTheBusInChunks) {
   RunFullScan(kSource + "/config/default_calibration.yaml", 58);
 }
 
+// A station whose collection is scanned to 300 ppi (the restorer's --target-ppi, as its config
+// would set it) on the small rig, whose pages are truly sampled at about 41 ppi: every scan is
+// restored, and FAILs on "sampling", named with what the target asks, in `vellum scan`'s output
+// and exit status and in report.json. Two scans: the target holds for each, not the first.
+TEST_F(StationTest, AStationTargetOf300PpiFailsEverySmallRigScanOnSampling) {
+  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing({"--target-ppi", "300"});
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  for (int scan = 0; scan < 2; ++scan) {
+    SCOPED_TRACE("scan " + std::to_string(scan + 1));
+    std::string out;
+    EXPECT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 3) << out;
+    EXPECT_NE(out.find("quality: fail"), std::string::npos) << out;
+    EXPECT_NE(out.find("warning sampling: "), std::string::npos) << out;
+    EXPECT_NE(out.find("the target (300 ppi) asks 300"), std::string::npos) << out;
+    const size_t arrow = out.find("-> ");
+    ASSERT_NE(arrow, std::string::npos) << out;
+    const std::string results = out.substr(arrow + 3, out.find('\n', arrow) - arrow - 3);
+    const nlohmann::json report = nlohmann::json::parse(ReadText(results + "/report.json"));
+    EXPECT_EQ(report["qc"]["verdict"], "fail");
+    EXPECT_EQ(report["qc"]["target"], "300 ppi");
+    std::string sampling;
+    for (const auto& check : report["qc"]["checks"]) {
+      if (check["name"] == "sampling" && check["verdict"] == "fail") sampling = check["detail"];
+    }
+    EXPECT_NE(sampling.find("asks 300"), std::string::npos) << report["qc"].dump();
+  }
+}
+
 TEST_F(StationTest, PlaybackOfTheRecordedLogDrivesTheProcessingDaemons) {
   ASSERT_TRUE(fs::exists(kDemoLog)) << kDemoLog << " (made from tests/data at build time)";
   std::vector<restored_t> restored;

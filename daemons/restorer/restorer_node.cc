@@ -222,8 +222,14 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   out.pages = pages->names;
   out.npages = static_cast<int32_t>(out.pages.size());
   for (const Warning& w : report.Warnings()) out.warnings.push_back(w.code + ": " + w.message);
+  // And the figures that fail a check with no warning saying so (a target not met), named by
+  // their check: a FAIL always says why, on the viewer's screen and in `vellum scan`'s output.
+  const QcResult qc = AssessQuality(report);
+  for (const QcCheck& c : qc.checks) {
+    if (!c.shortfall.empty()) out.warnings.push_back(c.name + ": " + c.shortfall);
+  }
   out.nwarnings = static_cast<int32_t>(out.warnings.size());
-  out.qc = VerdictName(AssessQuality(report).verdict);
+  out.qc = VerdictName(qc.verdict);
   // The preview: the pages side by side, scaled to at most preview_pixels.
   std::vector<cv::Mat> previews;
   int height = 0;

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -221,6 +222,11 @@ TEST_F(RestorerNodeTest, AStationTargetFailsAScanShortOfItOnSampling) {
     if (c["name"] == "sampling" && c["verdict"] == "fail") sampling = c["detail"];
   }
   EXPECT_NE(sampling.find("the target (300 ppi) asks 300"), std::string::npos) << j["qc"].dump();
+  // RESTORED says why: the shortfall, named by its check, beside the warnings.
+  const std::vector<std::string>& said = restored->back().warnings;
+  EXPECT_TRUE(std::any_of(said.begin(), said.end(), [](const std::string& w) {
+    return w.rfind("sampling: ", 0) == 0 && w.find("asks 300") != std::string::npos;
+  })) << ::testing::PrintToString(said);
 }
 
 TEST(RestorerNodeOptions, NonsenseIsRefusedByName) {
