@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/common/text.h"
+#include "core/patterns/scan.h"
 #include "io/json.h"
 #include "pipeline/qc.h"
 
@@ -83,7 +84,9 @@ void HtmlHead(const std::string& title, std::ostringstream* out) {
     << "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px "
        "10px;text-align:left}\nfigure{margin:1.5em 0}img{max-width:100%;border:1px solid "
        "#ccc}\nfigcaption{color:#555;margin-top:4px}.identity{font-size:1.1em}\n"
-       "figure.restored img{max-height:90vh}.warn{color:#a40}.fail{color:#a11}\n"
+       "figure.restored img{height:min(85vh,1200px);width:auto;max-width:100%;"
+       "object-fit:contain;object-position:left top}\n"
+       ".warn{color:#a40}.fail{color:#a11}\n"
        ".warnings{border:2px solid #a40;padding:0.5em 1em;background:#fff6f0}\n"
        ".qc{border:3px solid;padding:0.2em 1em;margin:1em 0}.qc h2{margin:0.3em 0}\n"
        ".qc-pass{border-color:#2a2;color:#161}.qc-warn{border-color:#d90;color:#850}"
@@ -291,7 +294,13 @@ void HtmlConfiguration(const ProcessReport& r, std::ostringstream* out) {
 
 Status WriteHtml(const std::string& dir, const std::string& title, const ProcessReport& r) {
   std::ostringstream h;
-  HtmlHead(title, &h);
+  // Headed with the folio it shows ("MS 12, 4 verso"), as the viewer and the contact sheet name
+  // it, then what the caller calls it (the scan's folder).
+  ScanIdentity identity;
+  ForEachIdentityField(
+      identity, [&](const char* key, std::string& value) { value = r.Text("identity", key); });
+  const std::string named = IdentityTitle(identity);
+  HtmlHead(named.empty() ? title : named + " (" + title + ")", &h);
   HtmlIdentityAndQuality(r, &h);
   HtmlRestoredPages(r, &h);
   HtmlWarningsAndFadgi(r, &h);

@@ -353,6 +353,9 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
   const std::string raw = fs::path(results).parent_path().string() + "/raw";
   // The scan's folder is named after the folio: scan-<id>-MS-12_3_recto.
   EXPECT_NE(results.find("-MS-12_3_recto/results"), std::string::npos) << results;
+  // And its report is headed with the folio, not a scan number.
+  EXPECT_NE(ReadText(results + "/report.html").find("<h1>vellum: MS 12, 3 recto ("),
+            std::string::npos);
 
   // Nothing lost: the texture, every frame, the scan's log and its calibration are on disk.
   EXPECT_TRUE(fs::exists(raw + "/texture.png"));
