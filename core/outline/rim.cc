@@ -350,14 +350,18 @@ int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reac
   // pixels 4 to `reach` from its outline (nearer, the camera's blur mixes the two), one per side
   // with that side's strip left out: what lies beside the leaf elsewhere (a table, a support, a
   // frame), not what it runs into at the side judged.
+  // Over the leaf's box and `reach` around it (all that lies within reach of the leaf).
+  const cv::Rect box =
+      (cv::boundingRect(leaf) - cv::Point(reach, reach) + cv::Size(2 * reach, 2 * reach)) &
+      cv::Rect(0, 0, leaf.cols, leaf.rows);
   cv::Mat apart;
-  cv::distanceTransform(~leaf, apart, cv::DIST_L1, 3, CV_8U);
+  cv::distanceTransform(~leaf(box), apart, cv::DIST_L1, 3, CV_8U);
   Look leaf_look;
   std::array<Look, 4> beside;
-  for (int v = 0; v < leaf.rows; v += 2) {
+  for (int v = box.y + box.y % 2; v < box.y + box.height; v += 2) {  // Even rows and columns.
     const uint8_t* l = leaf.ptr<uint8_t>(v);
-    const uint8_t* d = apart.ptr<uint8_t>(v);
-    for (int u = 0; u < leaf.cols; u += 2) {
+    const uint8_t* d = apart.ptr<uint8_t>(v - box.y) - box.x;
+    for (int u = box.x + box.x % 2; u < box.x + box.width; u += 2) {
       if (l[u]) {
         leaf_look.Add(Look::Bin(Mean3x3(colour, u, v)), 1);
         continue;
