@@ -414,9 +414,7 @@ TEST(SceneFamily, ALeafAtTheViewsEdgeNeverPassesWhenItRunsOffAndIsInViewWhenInsi
       // Against the leaf found (a frame taken for the leaf runs off the view: a wrong outline,
       // which must not pass either).
       const cv::Mat& found = result.outline.mask;
-      const double iou = found.empty() ? 0.0
-                                       : static_cast<double>(cv::countNonZero(found & truth)) /
-                                             std::max(1, cv::countNonZero(found | truth));
+      const double iou = found.empty() ? 0.0 : MaskIoU(found, truth);
       if (iou >= 0.9) {
         EXPECT_NE(in_view, "fail")
             << "a leaf inside the view failed \"leaf in view\": " << s.Describe();
