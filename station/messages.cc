@@ -48,7 +48,8 @@ Status FromModel(const camera_model_t& m, const std::string& what, CameraModel* 
 // Checks a row chunk's geometry against the whole product's.
 Status CheckRows(const std::string& what, int width, int height, int row_begin, int row_count,
                  int n, int index, int count) {
-  if (width <= 0 || height <= 0 || width > 65535 || height > 65535) {
+  if (width <= 0 || height <= 0 || width > 65535 || height > 65535 ||
+      static_cast<int64_t>(width) * height > kMaxViewPixels) {
     return Status::Error(what + ": bad size " + std::to_string(width) + "x" +
                          std::to_string(height));
   }
@@ -784,7 +785,7 @@ Status AddChunk(const mesh_t& m, Mesh* mesh, FlattenResult* flattened, SheetPage
                          std::to_string(m.page_count));
   }
   if (m.mask_width <= 0 || m.mask_height <= 0 || m.mask_width > 65535 || m.mask_height > 65535 ||
-      m.nruns % 3 != 0) {
+      static_cast<int64_t>(m.mask_width) * m.mask_height > kMaxViewPixels || m.nruns % 3 != 0) {
     return Status::Error("FLAT_MESH: bad page mask (" + std::to_string(m.mask_width) + "x" +
                          std::to_string(m.mask_height) + ", " + std::to_string(m.nruns) +
                          " run values)");

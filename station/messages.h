@@ -4,6 +4,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstdint>
 #include <map>
 #include <opencv2/core.hpp>
 #include <string>
@@ -40,6 +41,10 @@ namespace vellum::station {
 // Messages stay under this size on the bus (LCM udpm loses a whole message with any of its
 // fragments; smaller messages lose less and reassemble within the receive buffer).
 inline constexpr size_t kMaxMessageBytes = 1 << 20;
+// The most pixels a product of a camera's view may claim (its rows and columns as a message
+// gives them, or a page mask's): 2^28, 268 M, above a 150 MP back. A bad or hostile message that
+// claims more is refused before anything that size is allocated.
+inline constexpr int64_t kMaxViewPixels = int64_t{1} << 28;
 
 // Images: 8-bit gray (GREY) or BGR (BGR3).
 void ToMessage(const cv::Mat& image, image_t* msg);

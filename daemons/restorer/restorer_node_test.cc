@@ -105,6 +105,13 @@ TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   Publish(6, bad);
   EXPECT_TRUE(bus_.WaitForError("vellum-restorer", "FLAT_MESH: node 3 has unknown kind 9"))
       << bus_.Status("vellum-restorer").last_error;
+  // A page mask claiming 65535 x 65535 pixels (4 GB, found by fuzz_messages): refused before
+  // it is allocated.
+  std::vector<mesh_t> huge = Sheet(9);
+  for (mesh_t& m : huge) m.mask_width = m.mask_height = 65535;
+  Publish(9, huge);
+  EXPECT_TRUE(bus_.WaitForError("vellum-restorer", "FLAT_MESH: bad page mask (65535x65535"))
+      << bus_.Status("vellum-restorer").last_error;
   std::vector<mesh_t> no_report = Sheet(7);
   for (mesh_t& m : no_report) m.stages[0].stage = "";
   Publish(7, no_report);
