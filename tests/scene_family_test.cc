@@ -74,16 +74,22 @@ void DumpOutline(const std::string& path, const cv::Mat& texture, const cv::Mat&
   cv::imwrite(path, show);
 }
 
-Outcome ScanAndMeasure(const FamilyScene& s) {
-  Outcome o;
-  const SimulatedScan scan =
-      SimulateScan(DefaultRig(), s.page, s.texture, s.scene, s.seed, s.light);
+// A family scene's scan as `vellum process` takes it (named `name`, the object said as drawn).
+ProcessInput FamilyInput(const FamilyScene& s, const SimulatedScan& scan, const std::string& name) {
   ProcessInput input;
-  input.scan_dir = "family-" + std::to_string(s.seed);
+  input.scan_dir = name;
   input.calibration_path = "the virtual gantry's rig";
   input.scan = AsScan(scan);
   input.scan.object = s.said;
   input.calibration = scan.gantry->rig();
+  return input;
+}
+
+Outcome ScanAndMeasure(const FamilyScene& s) {
+  Outcome o;
+  const SimulatedScan scan =
+      SimulateScan(DefaultRig(), s.page, s.texture, s.scene, s.seed, s.light);
+  const ProcessInput input = FamilyInput(s, scan, "family-" + std::to_string(s.seed));
   const std::string out =
       (fs::temp_directory_path() / ("vellum_family_" + std::to_string(getpid()))).string();
   fs::remove_all(out);
@@ -372,12 +378,7 @@ TEST(SceneFamily, ALeafAtTheViewsEdgeNeverPassesWhenItRunsOffAndIsInViewWhenInsi
     ASSERT_GT(cv::countNonZero(truth), 0) << "the page is out of sight: " << s.Describe();
     const bool runs_off = on_border >= 10;
     const bool well_inside = cv::countNonZero(truth) == cv::countNonZero(truth(inner));
-    ProcessInput input;
-    input.scan_dir = "edge-" + std::to_string(seed);
-    input.calibration_path = "the virtual gantry's rig";
-    input.scan = AsScan(scan);
-    input.scan.object = s.said;
-    input.calibration = scan.gantry->rig();
+    const ProcessInput input = FamilyInput(s, scan, "edge-" + std::to_string(seed));
     const std::string out =
         (fs::temp_directory_path() / ("vellum_edge_" + std::to_string(getpid()))).string();
     fs::remove_all(out);
