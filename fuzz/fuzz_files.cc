@@ -37,11 +37,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   switch (kind) {
     case 0: {
-      PatternSequence sequence;
-      cv::Size camera;
-      ScanIdentity identity;
-      std::vector<ScanLight> lights;  // The extra lights' list too.
-      (void)ReadScanYaml(dir.string(), &sequence, &camera, &identity, &lights);
+      Scan header;  // Every key: identity, lights, hint, object, what the live view saw.
+      (void)ReadScanYaml(dir.string(), &header);
       break;
     }
     case 1: {

@@ -396,6 +396,38 @@ TEST_F(IoTest, ScanLeafHintRoundTripsAndABadOneIsRefused) {
   }
 }
 
+// What the live view saw at the view's edge, in scan.yaml: the sides kept through a round trip
+// (written by name), none when absent, and a list that is not of sides refused naming the key.
+TEST_F(IoTest, ScanLiveOffViewRoundTripsAndABadOneIsRefused) {
+  Scan scan = SmallScan();
+  scan.live_off_view = kViewRight | kViewBottom;
+  ASSERT_TRUE(WriteScan(Path("seen"), scan).ok());
+  Scan r;
+  ASSERT_TRUE(ReadScan(Path("seen"), &r).ok());
+  EXPECT_EQ(r.live_off_view, kViewRight | kViewBottom);
+  std::string yaml;
+  {
+    std::ifstream in(Path("seen") + "/scan.yaml");
+    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  const size_t at = yaml.find("live_off_view:");
+  ASSERT_NE(at, std::string::npos) << yaml;
+  const size_t end = yaml.find('\n', at);
+  EXPECT_NE(yaml.substr(at, end - at).find("[ right, bottom ]"), std::string::npos) << yaml;
+  ASSERT_TRUE(WriteScan(Path("unseen"), SmallScan()).ok());
+  ASSERT_TRUE(ReadScan(Path("unseen"), &r).ok());
+  EXPECT_EQ(r.live_off_view, 0);
+  for (const std::string& bad : {std::string("[ rigth ]"), std::string("[ left, left ]"),
+                                 std::string("right"), std::string("[ 1 ]")}) {
+    std::string edited = yaml;
+    edited.replace(at, end - at, "live_off_view: " + bad);
+    std::ofstream(Path("seen") + "/scan.yaml") << edited;
+    const Status s = ReadScanHeader(Path("seen"), &r);
+    ASSERT_FALSE(s.ok()) << bad;
+    EXPECT_NE(s.message().find("scan.yaml: key 'live_off_view'"), std::string::npos) << s.message();
+  }
+}
+
 // The catalogue identity in scan.yaml (docs/formats.md, "Identity"), kept through a round
 // trip, read as hand-written (a folio as a number), and made safe: control characters removed,
 // a field cut to 200 bytes, an unknown side dropped.
@@ -410,10 +442,9 @@ TEST_F(IoTest, ScanIdentityRoundTripsAndIsSanitised) {
   Scan r;
   ASSERT_TRUE(ReadScan(Path("scan"), &r).ok());
   EXPECT_TRUE(r.identity == scan.identity);
-  PatternSequence sequence;
-  cv::Size camera;
-  ScanIdentity id;
-  ASSERT_TRUE(ReadScanYaml(Path("scan"), &sequence, &camera, &id).ok());
+  Scan header;
+  ASSERT_TRUE(ReadScanYaml(Path("scan"), &header).ok());
+  ScanIdentity id = header.identity;
   EXPECT_EQ(id.shelfmark, "MS 12");
   // By hand: a folio written as a number, a side in capitals, a shelfmark with a control
   // character and a note far too long.
@@ -429,7 +460,8 @@ TEST_F(IoTest, ScanIdentityRoundTripsAndIsSanitised) {
       at, end - at,
       "shelfmark: \"MS\\t12\"\nfolio: 3\nside: Verso\nnote: \"" + std::string(300, 'x') + "\"\n");
   std::ofstream(Path("scan") + "/scan.yaml") << yaml;
-  ASSERT_TRUE(ReadScanYaml(Path("scan"), &sequence, &camera, &id).ok());
+  ASSERT_TRUE(ReadScanYaml(Path("scan"), &header).ok());
+  id = header.identity;
   EXPECT_EQ(id.shelfmark, "MS12");
   EXPECT_EQ(id.folio, "3");
   EXPECT_EQ(id.side, "verso");
@@ -962,9 +994,8 @@ TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
   std::filesystem::create_directories(dir);
   std::ofstream(dir / "scan.yaml", std::ios::binary) << bytes;
   std::ofstream(dir / "calibration.yaml", std::ios::binary) << bytes;
-  PatternSequence sequence;
-  cv::Size camera;
-  EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
+  Scan header;
+  EXPECT_FALSE(ReadScanYaml(dir.string(), &header).ok());
   Calibration calibration;
   EXPECT_FALSE(ReadCalibration((dir / "calibration.yaml").string(), &calibration).ok());
   // The same throw from the station's lights file ended the process (its reader caught only
@@ -1001,9 +1032,8 @@ TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
     EXPECT_FALSE(s.ok());
     EXPECT_NE(s.message().find(c.problem), std::string::npos) << s.message();
     std::ofstream(dir / "scan.yaml", std::ios::binary) << c.text;
-    PatternSequence sequence;
-    cv::Size camera;
-    EXPECT_FALSE(ReadScanYaml(dir.string(), &sequence, &camera).ok());
+    Scan header;
+    EXPECT_FALSE(ReadScanYaml(dir.string(), &header).ok());
   }
   // The header OpenCV writes, comments and blank lines before the first entry are fine.
   Calibration calibration;
@@ -1065,9 +1095,8 @@ TEST(IoFuzzRegressions, SizesBeyondTheBoundAreRefusedNamingTheKey) {
   EXPECT_NE(s.message().find("camera_size' must be 1 to 16384"), std::string::npos) << s.message();
   std::ofstream(dir / "scan.yaml") << "%YAML:1.0\n---\nprojector_size: [ 40, 30 ]\n"
                                       "camera_size: [ 3, 70000 ]\npatterns: [ x ]\n";
-  PatternSequence sequence;
-  cv::Size camera;
-  s = ReadScanYaml(dir.string(), &sequence, &camera);
+  Scan header;
+  s = ReadScanYaml(dir.string(), &header);
   ASSERT_FALSE(s.ok());
   EXPECT_NE(s.message().find("scan.yaml: key 'camera_size' must be 1 to 16384"), std::string::npos)
       << s.message();

@@ -137,9 +137,11 @@ Status WriteFrameImage(const std::string& path, const cv::Mat& frame) {
 
 std::string LightFileName(const std::string& name) { return "light_" + name + ".png"; }
 
-Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
-                     const ScanIdentity& identity, const std::vector<ScanLight>& lights,
-                     const cv::Rect& leaf_hint, ObjectKind object) {
+Status WriteScanYaml(const std::string& dir, const Scan& header) {
+  const PatternSequence& sequence = header.sequence;
+  const cv::Size camera_size = header.camera_size;
+  const cv::Rect& leaf_hint = header.leaf_hint;
+  const std::vector<ScanLight>& lights = header.lights;
   const std::string path = (fs::path(dir) / kScanYaml).string();
   try {
     cv::FileStorage out(path, cv::FileStorage::WRITE);
@@ -148,14 +150,22 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
     out << "version" << 1;
     out << "projector_size" << sequence.projector_size;
     if (camera_size.area() > 0) out << "camera_size" << camera_size;
-    ForEachIdentityField(identity, [&](const char* key, const std::string& value) {
+    ForEachIdentityField(header.identity, [&](const char* key, const std::string& value) {
       if (!value.empty()) out << key << value;
     });
     if (!leaf_hint.empty()) {
       out << "leaf_hint"
           << std::vector<int>{leaf_hint.x, leaf_hint.y, leaf_hint.width, leaf_hint.height};
     }
-    if (object != ObjectKind::kAuto) out << "object" << ToString(object);
+    if (header.object != ObjectKind::kAuto) out << "object" << ToString(header.object);
+    if (header.live_off_view != 0) {
+      out << "live_off_view"
+          << "[:";  // Flow style: [ right, top ].
+      for (int k = 0; k < kViewSideCount; ++k) {
+        if (header.live_off_view & (1 << k)) out << kViewSideNames[k];
+      }
+      out << "]";
+    }
     out << "texture" << kTexture;
     if (!lights.empty()) {
       out << "lights"
@@ -190,6 +200,23 @@ Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv
 }
 
 namespace {
+
+// A sequence of the view's sides by name (`[right, top]`; absent or empty: none) into *sides.
+Status ReadViewSides(const cv::FileNode& n, const std::string& path, int* sides) {
+  *sides = 0;
+  if (n.empty() || n.isNone()) return Status::Ok();
+  const Status bad = Status::Error(
+      path +
+      ": key 'live_off_view' must be a sequence of the view's sides (left, right, top, "
+      "bottom), each at most once");
+  if (!n.isSeq() || n.size() > kViewSideCount) return bad;
+  for (const cv::FileNode& side : n) {
+    const int bit = side.isString() ? ViewSideOf(static_cast<std::string>(side)) : 0;
+    if (bit == 0 || (*sides & bit)) return bad;
+    *sides |= bit;
+  }
+  return Status::Ok();
+}
 
 // The `lights` sequence of a scan.yaml or a station's lights file (at `path`, for messages): each
 // {name, direction} (direction optional), at most kMaxLights, and with `channels` its optional
@@ -281,9 +308,9 @@ Status ReadLightsFile(const std::string& path, StationLights* out) {
   return Status::Ok();
 }
 
-Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity, std::vector<ScanLight>* lights, cv::Rect* leaf_hint,
-                    ObjectKind* object) {
+Status ReadScanYaml(const std::string& dir, Scan* header) {
+  PatternSequence* sequence = &header->sequence;
+  cv::Size* camera_size = &header->camera_size;
   const std::string path = (fs::path(dir) / kScanYaml).string();
   if (!fs::is_directory(dir)) return Status::Error(dir + ": not a directory");
   if (!fs::exists(path)) return Status::Error(path + ": file is missing");
@@ -314,7 +341,7 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
     if (!s.ok()) return s;
     s = read_size("camera_size", camera_size, false);
     if (!s.ok()) return s;
-    if (identity) {
+    {
       ScanIdentity read;
       std::string bad;  // The first key that is not text.
       ForEachIdentityField(read, [&](const char* key, std::string& value) {
@@ -329,13 +356,12 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
         }
       });
       if (!bad.empty()) return Status::Error(path + ": key '" + bad + "' must be text");
-      *identity = SanitizedIdentity(read);
+      header->identity = SanitizedIdentity(read);
     }
-    if (lights) {
-      const Status s = ReadLightList(in["lights"], path, lights, nullptr);
-      if (!s.ok()) return s;
-    }
-    if (leaf_hint) {
+    s = ReadLightList(in["lights"], path, &header->lights, nullptr);
+    if (!s.ok()) return s;
+    {
+      cv::Rect* leaf_hint = &header->leaf_hint;
       *leaf_hint = cv::Rect();
       const cv::FileNode n = in["leaf_hint"];
       if (!n.empty() && !n.isNone()) {
@@ -362,14 +388,15 @@ Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size*
         *leaf_hint = r;
       }
     }
-    if (object) {
-      *object = ObjectKind::kAuto;
-      const cv::FileNode n = in["object"];
-      if (!n.empty() && !n.isNone() &&
-          (!n.isString() || !ParseObjectKind(static_cast<std::string>(n), object))) {
-        return Status::Error(path + ": key 'object' must be leaf, book or auto");
-      }
+    header->object = ObjectKind::kAuto;
+    const cv::FileNode object = in["object"];
+    if (!object.empty() && !object.isNone() &&
+        (!object.isString() ||
+         !ParseObjectKind(static_cast<std::string>(object), &header->object))) {
+      return Status::Error(path + ": key 'object' must be leaf, book or auto");
     }
+    s = ReadViewSides(in["live_off_view"], path, &header->live_off_view);
+    if (!s.ok()) return s;
     const cv::FileNode list = in["patterns"];
     if (!list.isSeq() || list.size() == 0) {
       return Status::Error(path + ": key 'patterns' must be a non-empty sequence");
@@ -459,8 +486,7 @@ Status MissingFrame(const std::string& path, int k, const Scan& scan) {
 }  // namespace
 
 Status ReadScanHeader(const std::string& dir, Scan* scan) {
-  Status s = ReadScanYaml(dir, &scan->sequence, &scan->camera_size, &scan->identity, &scan->lights,
-                          &scan->leaf_hint, &scan->object);
+  Status s = ReadScanYaml(dir, scan);
   if (!s.ok()) return s;
   const fs::path root(dir);
   // Judged by its header first when scan.yaml gives the camera's size.
@@ -559,8 +585,7 @@ Status WriteScan(const std::string& dir, const Scan& scan) {
       return Status::Error(dir + ": light name '" + light.name + "' is not a valid name");
     }
   }
-  s = WriteScanYaml(dir, scan.sequence, scan.camera_size, scan.identity, scan.lights,
-                    scan.leaf_hint, scan.object);
+  s = WriteScanYaml(dir, scan);
   if (!s.ok()) return s;
   const fs::path root(dir);
   s = WriteImage((root / kTexture).string(), scan.texture);
@@ -579,7 +604,9 @@ Status WriteScan(const std::string& dir, const Scan& scan) {
 Status WritePatterns(const std::string& dir, const PatternSequence& sequence) {
   Status s = MakeDirectories(dir);
   if (!s.ok()) return s;
-  s = WriteScanYaml(dir, sequence, cv::Size());
+  Scan header;
+  header.sequence = sequence;
+  s = WriteScanYaml(dir, header);
   if (!s.ok()) return s;
   for (size_t k = 0; k < sequence.patterns.size(); ++k) {
     s = WriteImage((fs::path(dir) / PatternName(static_cast<int>(k))).string(),

@@ -18,22 +18,19 @@ std::string PatternName(int index);  // "pattern_007.png"
 
 std::string LightFileName(const std::string& name);  // "light_raking-090.png"
 
-// Reads scan.yaml only; its identity keys (shelfmark, folio, side, operator, note, label; any may
-// be absent) into *identity when given, sanitised (SanitizedIdentity); its extra lights (key
-// `lights`: a sequence of {name, direction: [x, y, z]}, direction optional) into *lights when
-// given, names and directions only (the images are light_<name>.png); the operator's
-// `leaf_hint: [x, y, width, height]` (camera pixels, within camera_size when that is given) into
-// *leaf_hint when given, empty when absent; what the object is (`object: leaf | book | auto`)
-// into *object when given, auto when absent.
-Status ReadScanYaml(const std::string& dir, PatternSequence* sequence, cv::Size* camera_size,
-                    ScanIdentity* identity = nullptr, std::vector<ScanLight>* lights = nullptr,
-                    cv::Rect* leaf_hint = nullptr, ObjectKind* object = nullptr);
-// Writes scan.yaml; camera_size may be empty; identity keys only when set; `lights` by name and
-// direction; leaf_hint when not empty; object when not auto.
-Status WriteScanYaml(const std::string& dir, const PatternSequence& sequence, cv::Size camera_size,
-                     const ScanIdentity& identity = ScanIdentity(),
-                     const std::vector<ScanLight>& lights = {},
-                     const cv::Rect& leaf_hint = cv::Rect(), ObjectKind object = ObjectKind::kAuto);
+// Reads scan.yaml only, into *header: the pattern sequence, the camera's size (0x0 when absent),
+// the identity keys (shelfmark, folio, side, operator, note, label; any may be absent), sanitised
+// (SanitizedIdentity); the extra lights (key `lights`: a sequence of {name, direction: [x, y,
+// z]}, direction optional), names and directions only (the images are light_<name>.png); the
+// operator's `leaf_hint: [x, y, width, height]` (camera pixels, within camera_size when that is
+// given), empty when absent; what the object is (`object: leaf | book | auto`), auto when absent;
+// where the live view saw the leaf run off the view (`live_off_view: [right, ...]`), none when
+// absent. The texture and frames are not touched.
+Status ReadScanYaml(const std::string& dir, Scan* header);
+// Writes scan.yaml from *header's fields above; camera_size may be empty; identity keys only when
+// set; `lights` by name and direction; leaf_hint when not empty; object when not auto;
+// live_off_view when any side.
+Status WriteScanYaml(const std::string& dir, const Scan& header);
 
 // A station's extra lights, as vellum-projector and vellum-lights read them from one
 // YAML file: `lights`, a sequence of {name, direction: [x, y, z], channel} (direction optional, as

@@ -9,6 +9,7 @@ ScanContext ScanContext::Of(const Scan& scan) {
   c.identity = scan.identity;
   c.leaf_hint = scan.leaf_hint;
   c.object = scan.object;
+  c.live_off_view = scan.live_off_view;
   return c;
 }
 

@@ -19,11 +19,13 @@ struct ScanContext {
   ScanIdentity identity;
   cv::Rect leaf_hint;                     // Camera pixels inside the leaf; empty: none.
   ObjectKind object = ObjectKind::kAuto;  // What the operator said lies there.
-  std::string calibration_sha256;         // Of the calibration the points were measured with.
+  int live_off_view = 0;  // ViewSide bits: where the live view saw the leaf run off the view.
+  std::string calibration_sha256;  // Of the calibration the points were measured with.
   // That calibration's measured error of every length, %, NaN when not measured.
   double scale_error_percent = std::numeric_limits<double>::quiet_NaN();
 
-  // The scan's own part (identity, leaf hint, object); the calibration's not yet known.
+  // The scan's own part (identity, leaf hint, object, what the live view saw); the calibration's
+  // not yet known.
   static ScanContext Of(const Scan& scan);
   // The whole context: the scan's part, measured with `calibration`.
   static ScanContext For(const Scan& scan, const Calibration& calibration);

@@ -196,7 +196,7 @@ QcResult AssessQuality(const ProcessReport& report, const QcLimits& limits) {
     qc.checks.push_back(c);
   };
   const bool has_outline = report.Find("outline", "leaf_pixels") != nullptr;
-  check("leaf in view", {}, {"page_cut_off"}, false,
+  check("leaf in view", {"seen_off_view"}, {"page_cut_off"}, false,
         report.Number("outline", "touches_border") > 0 ? "the leaf touches the view's edge"
                                                        : "the leaf lies inside the view");
   const double valid = report.Number("outline", "valid_in_leaf");

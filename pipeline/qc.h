@@ -5,7 +5,9 @@
 // to the viewer, and printed by `vellum process` and `vellum scan`.
 //
 // The checks:
-//  - leaf in view: fail when the leaf runs off the camera's view (page_cut_off);
+//  - leaf in view: fail when the leaf runs off the camera's view (page_cut_off); warn when the
+//    live view saw it run off when the scan was asked and the outline comes near that side but
+//    stays inside (seen_off_view);
 //  - measured: warn when less of the leaf was measured in 3D than WarningLimits asks
 //    (valid_low), fail below QcLimits::fail_valid_in_leaf;
 //  - flattening: warn on strain above its limits (strain_high), fail on fold-over (fold_over);

@@ -166,6 +166,9 @@ StageReport DecodeStage(const Scan& scan, Decoder* decoder, const WarningLimits&
   // Where the operator said the leaf is (scan.yaml, or SCAN_STARTED at the station).
   if (!scan.leaf_hint.empty()) r.Text("operator", "leaf_hint", LeafHintText(scan.leaf_hint));
   if (scan.object != ObjectKind::kAuto) r.Text("operator", "object", ToString(scan.object));
+  if (scan.live_off_view != 0) {
+    r.Text("operator", "live_off_view", ViewSidesText(scan.live_off_view));
+  }
   r.Text("sizes", "camera", SizeText(scan.camera_size));
   r.Text("sizes", "projector", SizeText(scan.sequence.projector_size));
   r.Number("sizes", "patterns", static_cast<double>(scan.sequence.patterns.size()));
@@ -365,6 +368,33 @@ void JudgeRaisedHole(const cv::Mat& points, const Outline& outline, int leaf, do
   }
 }
 
+// The live view saw the leaf run off the view (`seen`, ViewSide bits) when the scan was asked, and
+// the scan's outline does not: it may have taken less than the leaf for it. Where the outline comes
+// within reach of a side so seen, the two disagree and the scan cannot pass; an outline far from
+// every such side means the live view, which goes by brightness alone, took a support or a table
+// for the leaf: recorded, not warned of.
+void JudgeLiveOffView(const Outline& outline, int seen, const OutlineOptions& options,
+                      StageReport* r) {
+  const cv::Size view = outline.mask.size();
+  const cv::Rect box = cv::boundingRect(outline.mask);
+  const int gap[kViewSideCount] = {box.x, view.width - box.br().x, box.y, view.height - box.br().y};
+  const double reach = options.off_view_reach_share * std::max(view.width, view.height);
+  int near = 0, nearest = std::numeric_limits<int>::max();
+  for (int k = 0; k < kViewSideCount; ++k) {
+    if (!(seen & (1 << k)) || gap[k] > reach) continue;
+    near |= 1 << k;
+    nearest = std::min(nearest, gap[k]);
+  }
+  r->Text("outline", "live_off_view", ViewSidesText(seen));
+  r->Text("outline", "live_off_view_near", near ? ViewSidesText(near) : "none");
+  if (near == 0) return;
+  r->Warn("seen_off_view",
+          "the live view saw the leaf run off the view (" + ViewSidesText(near, ", ") +
+              ") when the scan was asked, but the scan's outline stops " + std::to_string(nearest) +
+              " camera pixels inside it: check the outline in the report; if the leaf runs off, "
+              "move it into the view and scan again");
+}
+
 }  // namespace
 
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
@@ -401,6 +431,8 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
     r.Warn("page_cut_off",
            "the leaf runs off the camera's view: what lies outside it is missing from the "
            "restored page; move the leaf into the view and scan again");
+  } else if (context.live_off_view != 0) {
+    JudgeLiveOffView(*outline, context.live_off_view, options, &r);
   }
   if (outline->pages.size() == 2) JudgeGutter(points, *outline, limits, &r);
   JudgeRaisedHole(points, *outline, leaf, options.step_mm, limits, &r);

@@ -29,12 +29,12 @@ SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t i
   e.scan_id = id;
   e.folder = relative;
   const fs::path raw = dir / "raw", results = dir / "results";
-  PatternSequence sequence;
-  cv::Size camera;
   std::error_code ec;
   if (fs::exists(raw / "scan.yaml", ec)) {
-    const Status ignored = ReadScanYaml(raw.string(), &sequence, &camera, &e.identity);
-    (void)ignored;  // An unreadable scan.yaml: the entry shows no identity.
+    Scan header;
+    const Status ignored = ReadScanYaml(raw.string(), &header);
+    (void)ignored;  // An unreadable scan.yaml: the entry shows what was read before the fault.
+    e.identity = header.identity;
   } else {
     // A scan that never completed has no scan.yaml: its log's SCAN_STARTED names it.
     (void)ReadLoggedIdentity((raw / "captures.lcmlog").string(), &e.identity);

@@ -9,6 +9,7 @@
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/scan_started_v2_t.hpp"
 #include "vellum/scan_started_v3_t.hpp"
+#include "vellum/scan_started_v4_t.hpp"
 
 namespace vellum::station {
 
@@ -54,6 +55,15 @@ scan_started_t StartedFrom(const Earlier& old) {
 
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg) {
   if (SafeDecode<scan_started_t>(data, size, msg)) return true;
+  scan_started_v4_t v4;
+  if (SafeDecode<scan_started_v4_t>(data, size, &v4)) {
+    *msg = StartedFrom(v4);
+    msg->light_count = v4.light_count;
+    msg->lights = std::move(v4.lights);
+    std::copy(v4.leaf_hint, v4.leaf_hint + 4, msg->leaf_hint);
+    msg->object = std::move(v4.object);
+    return true;  // Nothing seen off the view.
+  }
   scan_started_v3_t v3;
   if (SafeDecode<scan_started_v3_t>(data, size, &v3)) {
     *msg = StartedFrom(v3);

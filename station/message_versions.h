@@ -28,7 +28,8 @@ bool SafeDecode(const void* data, int64_t size, Msg* msg) {
 // a log recorded before decodes through its earlier type (capture_v1_t, scan_started_v1_t), as a
 // scan without extra lights, so every scan's log stays readable and playable; a SCAN_STARTED
 // recorded before the leaf hint (scan_started_v2_t), as a scan without a hint; one recorded before
-// the object (scan_started_v3_t), as a scan whose object is auto.
+// the object (scan_started_v3_t), as a scan whose object is auto; one recorded before the live
+// view's word on the view's edge (scan_started_v4_t), as a scan the live view saw nothing off.
 bool SafeDecode(const void* data, int64_t size, capture_t* msg);
 bool SafeDecode(const void* data, int64_t size, scan_started_t* msg);
 // Likewise a CALIBRATION recorded before it carried the working volume and the scale error

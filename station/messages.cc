@@ -226,6 +226,7 @@ scan_context_t ToMessage(const ScanContext& context) {
   m.leaf_hint[2] = has_hint ? hint.width : 0;
   m.leaf_hint[3] = has_hint ? hint.height : 0;
   m.object = ToString(context.object);
+  m.live_off_view = ViewSidesText(context.live_off_view);
   m.calibration_sha256 = context.calibration_sha256;
   m.scale_error_percent = context.scale_error_percent;
   return m;
@@ -245,6 +246,10 @@ Status FromMessage(const scan_context_t& m, ScanContext* context) {
   }
   if (!ParseObjectKind(m.object, &c.object)) {
     return Status::Error("scan context: unknown object '" + m.object + "'");
+  }
+  if (!ParseViewSides(m.live_off_view, &c.live_off_view)) {
+    return Status::Error("scan context: live_off_view '" + Printable(m.live_off_view, 40) +
+                         "' is not the view's sides");
   }
   const std::string& sha = m.calibration_sha256;
   if (!sha.empty() &&
@@ -279,6 +284,8 @@ void FromStarted(const scan_started_t& m, Scan* scan) {
   scan->leaf_hint = LeafHintPixels(m.leaf_hint, scan->camera_size);
   scan->object = ObjectKind::kAuto;
   if (!m.object.empty()) ParseObjectKind(m.object, &scan->object);  // ScanGate refuses others.
+  scan->live_off_view = 0;
+  ParseViewSides(m.live_off_view, &scan->live_off_view);  // ScanGate refuses others.
 }
 
 void ToLeafHint(const cv::Rect2d& fraction, float hint[4]) {

@@ -85,6 +85,12 @@ ScanGate::Decision ScanGate::Start(const scan_started_t& m) {
         what + ": SCAN_STARTED with object '" + Printable(m.object, 40) + "' (leaf, book or auto)",
         "scans refused");
   }
+  int sides = 0;
+  if (!ParseViewSides(m.live_off_view, &sides)) {
+    return Refuse(what + ": SCAN_STARTED with live_off_view '" + Printable(m.live_off_view, 40) +
+                      "' (the view's sides left, right, top, bottom, joined by commas)",
+                  "scans refused");
+  }
   std::vector<std::string> names;
   std::string bad;
   if (!LightNames(m, &names, &bad)) {

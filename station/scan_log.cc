@@ -25,6 +25,7 @@ scan_started_t MakeScanStarted(const Scan& scan, int64_t scan_id, int64_t sessio
   m.light_count = static_cast<int32_t>(scan.lights.size());
   for (const ScanLight& light : scan.lights) m.lights.push_back(ToMessage(light));
   m.object = ToString(scan.object);
+  m.live_off_view = ViewSidesText(scan.live_off_view);
   return m;
 }
 

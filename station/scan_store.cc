@@ -405,9 +405,6 @@ Status ScanRecorder::Write(const calibration_t& calibration) {
   return WriteCalibration(folder_.calibration(), c);
 }
 
-Status ScanRecorder::Finish(const Scan& scan) {
-  return WriteScanYaml(folder_.raw(), scan.sequence, scan.camera_size, scan.identity, scan.lights,
-                       scan.leaf_hint, scan.object);
-}
+Status ScanRecorder::Finish(const Scan& scan) { return WriteScanYaml(folder_.raw(), scan); }
 
 }  // namespace vellum::station

@@ -34,6 +34,7 @@
 #include "vellum/scan_request_t.hpp"
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/scan_started_v2_t.hpp"
+#include "vellum/scan_started_v4_t.hpp"
 #include "vellum/status_t.hpp"
 #include "vellum/texture_t.hpp"
 
@@ -360,9 +361,10 @@ TEST(Messages, TheWorkingVolumeAndScaleErrorTravelAndAnOldCalibrationStillDecode
   EXPECT_EQ(back.camera.matrix, rig.camera.matrix);
 }
 
-// A SCAN_STARTED as logs recorded it before the leaf hint (v2) and before the extra lights (v1)
-// still reads: the same scan, no hint (and no lights); and the hint as the viewer sends it turns
-// into camera pixels, while one that is not a region of the view is none.
+// A SCAN_STARTED as logs recorded it before the live view's word (v4), the leaf hint (v2) and the
+// extra lights (v1) still reads: the same scan, nothing seen off the view, no hint (and no lights);
+// and the hint as the viewer sends it turns into camera pixels, while one that is not a region of
+// the view is none.
 TEST(Messages, EarlierScanStartedLayoutsReadAndTheLeafHintIsARegionOfTheView) {
   scan_started_v2_t v2{};
   v2.scan_id = 41;
@@ -391,6 +393,17 @@ TEST(Messages, EarlierScanStartedLayoutsReadAndTheLeafHintIsARegionOfTheView) {
   EXPECT_EQ(m.identity.folio, "3");
   EXPECT_EQ(m.light_count, 0);
   EXPECT_EQ(m.leaf_hint[2], 0.0f);
+  // Before the live view's word on the edge (v4): the hint and the object kept, nothing seen off.
+  scan_started_v4_t v4{};
+  v4.scan_id = 43;
+  v4.leaf_hint[2] = 0.5f;
+  v4.object = "book";
+  bytes = Encode(v4);
+  ASSERT_TRUE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &m));
+  EXPECT_EQ(m.scan_id, 43);
+  EXPECT_EQ(m.leaf_hint[2], 0.5f);
+  EXPECT_EQ(m.object, "book");
+  EXPECT_EQ(m.live_off_view, "");
 
   const cv::Size camera(1600, 1200);
   const float hint[4] = {0.6875f, 0.25f, 0.125f, 0.5f};

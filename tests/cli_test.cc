@@ -76,9 +76,9 @@ TEST_F(CliTest, PatternsWritesImagesAndScanYaml) {
   const std::string dir = (root_ / "patterns").string();
   const Result r = RunVellum("patterns --projector 854x480 --out " + dir);
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  PatternSequence seq;
-  cv::Size camera;
-  ASSERT_TRUE(ReadScanYaml(dir, &seq, &camera).ok());
+  Scan header;
+  ASSERT_TRUE(ReadScanYaml(dir, &header).ok());
+  const PatternSequence& seq = header.sequence;
   EXPECT_EQ(seq.projector_size, cv::Size(854, 480));
   EXPECT_EQ(seq.GrayBits(Axis::kColumn), 10);
   EXPECT_EQ(seq.GrayBits(Axis::kRow), 9);

@@ -203,6 +203,58 @@ TEST(Doubtful, ALeafRunningOffTheViewIsFlagged) {
   EXPECT_EQ(qc.checks[0].verdict, QcVerdict::kFail);
 }
 
+// What the live view saw at the view's edge when the scan was asked (scan.yaml's live_off_view)
+// keeps a scan from passing when the scan's own outline comes near that side but stays inside
+// it: a flat leaf 6 mm (24 px) inside the view's edge nearest it. The same scan, told nothing,
+// passes; told of the opposite side (far from the leaf: the live view took something else for
+// it), passes too, with the claim recorded as not near.
+TEST(Doubtful, WhatTheLiveViewSawRunOffTheViewKeepsTheScanFromPassing) {
+  PageOptions page;
+  page.shape = PageShape::kFlat;
+  page.centre_mm = {0.0, 150.0 - 6.0 - page.size_mm.height / 2};
+  const SimulatedScan scan = SimulateScan(DefaultRig(), page, TextureOptions(), SceneOptions(), 5);
+  // The side of the view nearest the leaf, as the camera sees it (left, right, top, bottom).
+  const cv::Mat& truth = scan.gantry->truth().on_page;
+  const cv::Rect box = cv::boundingRect(truth);
+  const int gap[kViewSideCount] = {box.x, truth.cols - box.br().x, box.y, truth.rows - box.br().y};
+  const int nearest = static_cast<int>(std::min_element(gap, gap + kViewSideCount) - gap);
+  ASSERT_GT(gap[nearest], 15) << "the leaf must lie inside the view";
+  ASSERT_LT(gap[nearest], 35);
+  const int opposite = nearest ^ 1;  // left <-> right, top <-> bottom.
+  const std::string out =
+      (fs::temp_directory_path() / ("vellum_live_edge_" + std::to_string(getpid()))).string();
+  auto run = [&](int live_off_view) {
+    ProcessInput input;
+    input.scan_dir = "live_edge";
+    input.calibration_path = "the virtual gantry's rig";
+    input.scan = AsScan(scan);
+    input.scan.live_off_view = live_off_view;
+    input.calibration = DefaultRig();
+    const ProcessResult result = RunPipeline(input, PipelineOptions(), out);
+    fs::remove_all(out);
+    EXPECT_TRUE(result.status.ok()) << result.status.message();
+    return result;
+  };
+  const ProcessResult seen = run(1 << nearest);
+  const QcResult qc = AssessQuality(seen.report);
+  EXPECT_EQ(qc.verdict, QcVerdict::kWarn);
+  EXPECT_EQ(qc.checks[0].name, "leaf in view");
+  EXPECT_EQ(qc.checks[0].verdict, QcVerdict::kWarn);
+  std::string said;
+  for (const Warning& w : seen.report.Warnings()) {
+    if (w.code == "seen_off_view") said = w.message;
+  }
+  EXPECT_NE(said.find("(" + std::string(kViewSideNames[nearest]) + ")"), std::string::npos) << said;
+  EXPECT_EQ(seen.report.Text("operator", "live_off_view"), kViewSideNames[nearest]);
+
+  const ProcessResult unseen = run(0);
+  EXPECT_EQ(AssessQuality(unseen.report).verdict, QcVerdict::kPass);
+  const ProcessResult far = run(1 << opposite);
+  EXPECT_EQ(AssessQuality(far.report).verdict, QcVerdict::kPass);
+  EXPECT_EQ(far.report.Text("outline", "live_off_view"), kViewSideNames[opposite]);
+  EXPECT_EQ(far.report.Text("outline", "live_off_view_near"), "none");
+}
+
 // A spread's gutter: what the restored pages leave out of the pages there is reported (at
 // least the straight line between the last points of either page), flagged past 5 mm, and
 // never invented: each restored page ends where its page was last seen (TrueGutter).

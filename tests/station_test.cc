@@ -1361,6 +1361,33 @@ TEST_F(StationTest, ALeafPartlyOutOfViewFailsQualityControlInTheReportAndTheView
   };
   EXPECT_TRUE(HandleUntil(*lcm_, 30, remedy_shown)) << "the remedy is not shown; see " << screen;
   cv::imwrite(dir_ + "/cut_off.png", testing::ReadXwd(screen));
+  // Asked from the viewer, whose live outline ran off the right edge: the request says so, the
+  // scan's raw/scan.yaml keeps it, and its report records it.
+  std::vector<scan_request_t> requests;
+  Listener<scan_request_t> on_request(*lcm_, "SCAN_REQUEST",
+                                      [&](const scan_request_t& m) { requests.push_back(m); });
+  std::string viewer_detail;
+  Listener<status_t> on_viewer(*lcm_, "STATUS_VIEWER",
+                               [&](const status_t& m) { viewer_detail = m.detail; });
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] { return viewer_detail == "ready to scan"; }))
+      << viewer_detail;
+  ASSERT_TRUE(Xdotool(station.display, {"search", "--sync", "--name", "vellum station",
+                                        "windowfocus", "--sync", "%1"}));
+  ASSERT_TRUE(Xdotool(station.display, {"key", "s"}));
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return !requests.empty(); }));
+  EXPECT_EQ(requests[0].live_off_view, "right");
+  ASSERT_TRUE(HandleUntil(*lcm_, 120, [&] {
+    return std::any_of(restored.begin(), restored.end(),
+                       [&](const restored_t& m) { return m.scan_id == requests[0].scan_id; });
+  }));
+  const restored_t& asked =
+      *std::find_if(restored.begin(), restored.end(),
+                    [&](const restored_t& m) { return m.scan_id == requests[0].scan_id; });
+  EXPECT_EQ(asked.qc, "fail");
+  const std::string yaml = ReadText(asked.results + "/../raw/scan.yaml");
+  EXPECT_NE(yaml.find("live_off_view: [ right ]"), std::string::npos) << yaml;
+  const nlohmann::json seen = nlohmann::json::parse(ReadText(asked.results + "/report.json"));
+  EXPECT_NE(seen.dump().find("\"live_off_view\":\"right\""), std::string::npos);
   EXPECT_EQ(StopCleanly(station.viewer), 0) << station.viewer->Output();
 }
 

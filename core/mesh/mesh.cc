@@ -339,7 +339,7 @@ bool MeshOptions::Check(std::string* why) const {
   return true;
 }
 
-cv::Mat SegmentPage(const cv::Mat& texture, double fraction) {
+cv::Mat SegmentPage(const cv::Mat& texture, double fraction, bool largest_only) {
   cv::Mat gray = texture;
   if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
   if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 255.0 / 65535.0);
@@ -367,6 +367,7 @@ cv::Mat SegmentPage(const cv::Mat& texture, double fraction) {
   const int k = std::max(3, (std::min(mask.cols, mask.rows) / 100) | 1);
   cv::morphologyEx(mask, mask, cv::MORPH_CLOSE,
                    cv::getStructuringElement(cv::MORPH_ELLIPSE, {k, k}));
+  if (!largest_only) return mask;
   // Largest region, holes (ink inside the page) filled.
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);

@@ -70,7 +70,8 @@ struct Mesh {
 
 // The page in the texture image: brighter than `fraction` of the bright level (98th
 // percentile), holes (ink) filled, the largest region. A page on a darker table is assumed.
-cv::Mat SegmentPage(const cv::Mat& texture, double fraction = 0.6);
+// With largest_only false: every bright region, ink bridged but holes not filled.
+cv::Mat SegmentPage(const cv::Mat& texture, double fraction = 0.6, bool largest_only = true);
 
 // Builds the sheet over the page mask's bounding box from an organised point map (CV_32FC3,
 // NaN where invalid). `project` maps a world point to its camera pixel.

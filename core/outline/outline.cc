@@ -661,26 +661,6 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
   return out;
 }
 
-Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
-  Outline out;
-  out.method = "brightness";
-  const cv::Mat bright = SegmentPage(image);
-  const double share = static_cast<double>(cv::countNonZero(bright)) / bright.total();
-  if (share < options.min_area) {
-    out.status = Status::Error("no leaf in view");
-    return out;
-  }
-  if (share > 0.9) {
-    out.status = Status::Error("leaf as bright as its surround");  // The scan finds it by shape.
-    return out;
-  }
-  out.mask = bright;
-  out.pages = {bright};
-  out.touches_border = outline::TouchesBorder(bright, options.border_px);
-  out.status = Status::Ok();
-  return out;
-}
-
 cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline) {
   cv::Mat out;
   if (texture.channels() == 1) {

@@ -19,6 +19,7 @@
 
 #include "core/common/object_kind.h"
 #include "core/common/status.h"
+#include "core/common/view_sides.h"
 #include "core/geometry/calibration.h"
 
 namespace vellum {
@@ -237,12 +238,21 @@ struct RaisedHole {
 };
 RaisedHole HighestRaisedHole(const cv::Mat& points, const cv::Mat& leaf_mask, double min_rise_mm);
 
+// The live preview's most width, camera pixels (vellum-camera sends it at most this wide).
+inline constexpr int kPreviewWidth = 640;
+// The camera's image as the live preview shows it: at most kPreviewWidth wide (by area).
+cv::Mat PreviewOf(const cv::Mat& image);
+
 // The leaf as a live preview shows it, before any scan, for placing it: by brightness alone
 // (a leaf brighter than its surround; the scan itself finds the leaf by its shape). Sets
 // `touches_border` when it runs off the view. An error, in a few words for the viewer, when
 // nothing sets a leaf apart: no bright region of min_area ("no leaf in view"), or one covering
 // most of the view (a support as bright as the leaf, which only the scan tells apart).
 Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options = OutlineOptions());
+
+// The sides of the view (ViewSide bits, core/common/view_sides.h) a mask reaches within `border`
+// pixels of the edge; every side for a mask too small to have an inside.
+int ViewSidesReached(const cv::Mat& mask, int border);
 
 // The texture with the outline drawn over it (each page in its own colour), for the report and
 // the viewer.

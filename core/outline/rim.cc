@@ -324,15 +324,34 @@ double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double 
 bool TouchesBorder(const cv::Mat& leaf, int border) { return SidesTouched(leaf, border) > 0; }
 
 int SidesTouched(const cv::Mat& mask, int border) {
-  const int b = std::max(1, border);
-  if (mask.cols <= 2 * b || mask.rows <= 2 * b) return 4;
-  const cv::Rect sides[4] = {cv::Rect(0, 0, b, mask.rows), cv::Rect(mask.cols - b, 0, b, mask.rows),
-                             cv::Rect(0, 0, mask.cols, b),
-                             cv::Rect(0, mask.rows - b, mask.cols, b)};
+  const int bits = ViewSidesReached(mask, border);
   int touched = 0;
-  for (const cv::Rect& side : sides) touched += cv::countNonZero(mask(side)) > 0;
+  for (int k = 0; k < kViewSideCount; ++k) touched += (bits >> k) & 1;
   return touched;
 }
+
+}  // namespace vellum::outline
+
+namespace vellum {
+
+int ViewSidesReached(const cv::Mat& mask, int border) {
+  const int b = std::max(1, border);
+  const int all = kViewLeft | kViewRight | kViewTop | kViewBottom;
+  if (mask.cols <= 2 * b || mask.rows <= 2 * b) return all;
+  // In ViewSide order: left, right, top, bottom.
+  const cv::Rect sides[kViewSideCount] = {
+      cv::Rect(0, 0, b, mask.rows), cv::Rect(mask.cols - b, 0, b, mask.rows),
+      cv::Rect(0, 0, mask.cols, b), cv::Rect(0, mask.rows - b, mask.cols, b)};
+  int reached = 0;
+  for (int k = 0; k < kViewSideCount; ++k) {
+    if (cv::countNonZero(mask(sides[k])) > 0) reached |= 1 << k;
+  }
+  return reached;
+}
+
+}  // namespace vellum
+
+namespace vellum::outline {
 
 int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reach,
                 double min_look) {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/common/object_kind.h"
+#include "core/common/view_sides.h"
 #include "core/patterns/patterns.h"
 
 namespace vellum {
@@ -112,6 +113,9 @@ struct Scan {
   // What the operator says lies on the table (scan.yaml's `object`): a leaf, an open book, or
   // auto (vellum decides). It outranks the options'.
   ObjectKind object = ObjectKind::kAuto;
+  // Where the live view saw the leaf run off the camera's view when the scan was asked (ViewSide
+  // bits; scan.yaml's live_off_view): 0 when it saw the leaf in view, or saw none.
+  int live_off_view = 0;
 };
 
 }  // namespace vellum

@@ -2,6 +2,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/outline/outline.h"
 #include "station/messages.h"
 #include "vellum/capture_t.hpp"
 
@@ -48,13 +49,8 @@ void CameraNode::Tick() {
 
 void CameraNode::PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index,
                                 int count) {
-  cv::Mat small = image;
-  if (image.cols > 640) {
-    const double s = 640.0 / image.cols;
-    cv::resize(image, small, cv::Size(), s, s, cv::INTER_AREA);
-  }
   image_t p{};
-  ToMessage(small, &p);
+  ToMessage(PreviewOf(image), &p);
   p.utime = utime;
   p.scan_id = scan_id;
   p.pattern_index = index;

@@ -93,6 +93,7 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
   for (const ScanLight& l : options_.lights) started.lights.push_back(ToMessage(l));
   std::copy(m.leaf_hint, m.leaf_hint + 4, started.leaf_hint);
   started.object = m.object;
+  started.live_off_view = m.live_off_view;
   node_->Publish(channel::kScanStarted, &started);
   if (options_.calibration) {
     calibration_t c{};

@@ -220,30 +220,28 @@ void DrawIdentity(const ViewerState& s, cv::Mat& canvas, int y, int width, Clock
         AttemptTitle(next, s.NextAttempt(next)) +
         (next.operator_name.empty() ? std::string() : " (" + next.operator_name + ")");
     const size_t chars = static_cast<size_t>(std::max(20, (width - 16) / 8));
+    // Each part wrapped to the left column's width, so that nothing runs under the film strip.
+    int line_y = y + 12;
+    auto say = [&](const std::string& text, double scale, cv::Scalar colour, int thick,
+                   size_t most) {
+      const std::vector<std::string> lines = Wrap(text, chars);
+      for (size_t k = 0; k < std::min(most, lines.size()); ++k, line_y += 16) {
+        cv::putText(canvas, lines[k], cv::Point(12, line_y), cv::FONT_HERSHEY_SIMPLEX, scale,
+                    colour, thick, cv::LINE_AA);
+      }
+    };
     if (s.retake()) {
-      cv::putText(canvas, "RETAKE (Enter): " + title, cv::Point(12, y + 12),
-                  cv::FONT_HERSHEY_SIMPLEX, 0.45, kAmber, 2, cv::LINE_AA);
-      const std::vector<std::string> why =
-          Wrap(s.retake_why() + "; u: go on without it, to " + DescribeIdentity(s.sequence_next()),
-               chars);
-      cv::putText(canvas, why[0], cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, kAmber, 1,
-                  cv::LINE_AA);
+      say("RETAKE (Enter): " + title, 0.45, kAmber, 2, 2);
+      say(s.retake_why() + "; u: go on without it, to " + DescribeIdentity(s.sequence_next()), 0.4,
+          kAmber, 1, 1);
     } else {
-      cv::putText(canvas, "next scan (Enter): " + title + "  (" + ToString(s.object()) + ")",
-                  cv::Point(12, y + 12), cv::FONT_HERSHEY_SIMPLEX, 0.45, cv::Scalar(255, 255, 255),
-                  1, cv::LINE_AA);
-      cv::putText(canvas, "e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom",
-                  cv::Point(12, y + 30), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(160, 160, 160),
-                  1, cv::LINE_AA);
+      say("next scan (Enter): " + title + "  (" + ToString(s.object()) + ")", 0.45,
+          cv::Scalar(255, 255, 255), 1, 2);
+      say("e: edit   o: leaf/book/auto   u: undo the last advance   z: 100% zoom", 0.4,
+          cv::Scalar(160, 160, 160), 1, 2);
     }
     const std::string refused = s.Refusal(now);
-    if (!refused.empty()) {  // In full: two lines.
-      const std::vector<std::string> lines = Wrap("cannot scan: " + refused, chars);
-      for (size_t k = 0; k < std::min<size_t>(2, lines.size()); ++k) {
-        cv::putText(canvas, lines[k], cv::Point(12, y + 48 + 16 * static_cast<int>(k)),
-                    cv::FONT_HERSHEY_SIMPLEX, 0.42, kRed, 1, cv::LINE_AA);
-      }
-    }
+    if (!refused.empty()) say("cannot scan: " + refused, 0.42, kRed, 1, 2);  // In full.
     return;
   }
   cv::putText(canvas, "identity of the next scan (Tab: next field, Return: done)",
@@ -284,9 +282,64 @@ cv::Rect DrawLeft(const ViewerState& s, cv::Mat& canvas, int top, int width,
   const cv::Rect strip(8, top + preview_h + 2, width - 12, 36);
   DrawHistogram(s, canvas, strip);
   const int y = DrawDaemons(s, canvas, strip.y + strip.height + 28, now);
-  const int form_lines = s.editing() ? kFormFields + 1 : 4;
+  const int form_lines = s.editing() ? kFormFields + 1 : 7;
   DrawIdentity(s, canvas, std::max(y + 6, h - 8 - 18 * form_lines), width, now);
   return preview_at;
+}
+
+// One scan of the session in `cell`: a failed one as a red tile marked FAILED, a restored one
+// framed in its verdict's colour (white inside for the one shown), titled `title`.
+void DrawTile(const ViewerState& s, const ViewerState::SheetEntry& e, const std::string& title,
+              cv::Mat& canvas, cv::Rect cell) {
+  if (e.failed) {  // Failed before it was restored: a red tile, the folio named.
+    cv::putText(canvas, title, cell.tl() + cv::Point(4, 16), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                cv::Scalar(230, 230, 230), 1, cv::LINE_AA);
+    cv::putText(canvas, "FAILED", cell.tl() + cv::Point(6, cell.height / 2 + 6),
+                cv::FONT_HERSHEY_SIMPLEX, cell.width < 120 ? 0.4 : 0.6, kRed, 2, cv::LINE_AA);
+    cv::rectangle(canvas, cell, kRed, 3);
+    return;
+  }
+  const ViewerState::Result& r = *e.result;
+  const cv::Scalar colour =
+      r.quality.empty() ? cv::Scalar(120, 120, 120) : VerdictColour(r.quality);
+  Panel(canvas, cell, r.restored, title);
+  cv::rectangle(canvas, cell, colour, 3);
+  if (e.index == s.shown_index()) cv::rectangle(canvas, cell, cv::Scalar(255, 255, 255), 1);
+}
+
+// A tile's short title for the film strip: "4v", "4v #2" for a retake, "12" for a page.
+std::string StripTitle(const ViewerState::SheetEntry& e) {
+  const ScanIdentity& id = e.failed ? e.failed->identity : e.result->identity;
+  const int attempt = e.failed ? e.failed->attempt : e.result->attempt;
+  std::string title = id.folio.empty() ? (id.label.empty() ? "scan" : id.label) : id.folio;
+  if (!id.side.empty()) title += id.side.substr(0, 1);
+  if (attempt > 1) title += " #" + std::to_string(attempt);
+  return title;
+}
+
+// The session's film strip along `strip`: its scans in book order, as many as fit, the one shown
+// among them (else the last), each a small tile (DrawTile); where each went, into *cells.
+void DrawFilmStrip(const ViewerState& s, cv::Mat& canvas, cv::Rect strip,
+                   std::vector<cv::Rect>* cells) {
+  const std::vector<ViewerState::SheetEntry> entries = s.SheetInBookOrder();
+  const int n = static_cast<int>(entries.size());
+  if (n == 0) return;
+  const int cell_w = std::max(40, (strip.height - 4) * 4 / 3);
+  const int fit = std::max(1, strip.width / (cell_w + 4));
+  int shown = n - 1;
+  for (int k = 0; k < n; ++k) {
+    if (entries[k].result && entries[k].index == s.shown_index()) shown = k;
+  }
+  const int first = std::clamp(shown - fit / 2, 0, std::max(0, n - fit));
+  for (int k = first; k < std::min(n, first + fit); ++k) {
+    const cv::Rect cell(strip.x + (k - first) * (cell_w + 4), strip.y, cell_w, strip.height - 4);
+    DrawTile(s, entries[k], StripTitle(entries[k]), canvas, cell);
+    cells->push_back(cell);
+  }
+  if (first > 0 || first + fit < n) {
+    cv::putText(canvas, std::to_string(n) + " scans: c for all", strip.br() + cv::Point(-150, -6),
+                cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(200, 200, 200), 1, cv::LINE_AA);
+  }
 }
 
 void DrawSheet(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
@@ -308,19 +361,8 @@ void DrawSheet(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
     const ViewerState::SheetEntry& e = entries[k];
     const cv::Rect cell(area.x + 4 + (k % cols) * cell_w, area.y + 26 + (k / cols) * cell_h,
                         cell_w - 6, cell_h - 6);
-    if (e.failed) {  // Failed before it was restored: a red tile, the folio named.
-      Panel(canvas, cell, cv::Mat(), AttemptTitle(e.failed->identity, e.failed->attempt));
-      cv::putText(canvas, "FAILED", cell.tl() + cv::Point(8, cell.height / 2),
-                  cv::FONT_HERSHEY_SIMPLEX, 0.6, kRed, 2, cv::LINE_AA);
-      cv::rectangle(canvas, cell, kRed, 3);
-      continue;
-    }
-    const ViewerState::Result& r = *e.result;
-    const cv::Scalar colour =
-        r.quality.empty() ? cv::Scalar(120, 120, 120) : VerdictColour(r.quality);
-    Panel(canvas, cell, r.restored, r.title);
-    cv::rectangle(canvas, cell, colour, 3);
-    if (e.index == s.shown_index()) cv::rectangle(canvas, cell, cv::Scalar(255, 255, 255), 1);
+    DrawTile(s, e, e.failed ? AttemptTitle(e.failed->identity, e.failed->attempt) : e.result->title,
+             canvas, cell);
   }
 }
 
@@ -458,7 +500,10 @@ cv::Mat DrawViewer(const ViewerState& s, cv::Size size, Clock::time_point now,
   layout->preview = DrawLeft(s, canvas, top, left_w, now);
   // Middle: texture, depth, strain; right: the restored page, large.
   const ViewerState::Result* r = s.shown();
-  const int mid_x = left_w, mid_w = w / 3, third = (h - top) / 3;
+  // Along the bottom of the middle and the right, once the session has a scan: the film strip.
+  const bool strip = !s.results().empty() || !s.failed().empty();
+  const int strip_h = strip ? 84 : 0;
+  const int mid_x = left_w, mid_w = w / 3, third = (h - top - strip_h) / 3;
   static const ViewerState::Result kEmpty;
   const ViewerState::Result& show = r ? *r : kEmpty;
   Panel(canvas, cv::Rect(mid_x, top, mid_w - 8, third - 4), show.texture,
@@ -466,7 +511,12 @@ cv::Mat DrawViewer(const ViewerState& s, cv::Size size, Clock::time_point now,
   Panel(canvas, cv::Rect(mid_x, top + third, mid_w - 8, third - 4), show.depth, "depth (mm)");
   Panel(canvas, cv::Rect(mid_x, top + 2 * third, mid_w - 8, third - 4), show.strain,
         "flattening strain");
-  DrawPage(s, canvas, cv::Rect(mid_x + mid_w, top, w - mid_x - mid_w - 8, h - top - 8));
+  DrawPage(s, canvas, cv::Rect(mid_x + mid_w, top, w - mid_x - mid_w - 8, h - top - 8 - strip_h));
+  layout->strip.clear();
+  if (strip) {
+    DrawFilmStrip(s, canvas, cv::Rect(mid_x, h - 4 - strip_h, w - mid_x - 8, strip_h),
+                  &layout->strip);
+  }
   // Over the middle and the right: the contact sheet, a light prompt, a failure.
   const cv::Rect over(mid_x, top, w - mid_x - 8, h - top - 8);
   if (s.sheet()) DrawSheet(s, canvas, over);

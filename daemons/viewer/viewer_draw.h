@@ -8,6 +8,7 @@
 #pragma once
 
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "daemons/viewer/viewer_state.h"
 #include "station/clock.h"
@@ -17,6 +18,8 @@ namespace vellum::station {
 // Where the parts went on the window (for the mouse).
 struct ViewerLayout {
   cv::Rect preview;  // The live preview's pixels; empty when none is drawn (none yet, zoomed).
+  // The film strip's tiles, left to right: the session's scans in book order (as many as fit).
+  std::vector<cv::Rect> strip;
 };
 
 // The window's picture (8-bit BGR of `size`) at time `now`, and its layout.

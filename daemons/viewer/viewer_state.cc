@@ -165,11 +165,14 @@ void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now, bool of
   preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
   // The leaf as it is being placed: outlined green, red once it runs off the view.
   const Outline leaf = LeafInPreview(image);
+  preview_off_view_ = 0;
   if (!leaf.status.ok()) {
     preview_leaf_ = leaf.status.message();
     return;
   }
   preview_leaf_ = leaf.touches_border ? "off the view" : "in view";
+  if (leaf.touches_border)
+    preview_off_view_ = ViewSidesReached(leaf.mask, OutlineOptions().border_px);
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(leaf.mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
   cv::drawContours(preview_shown_, contours, -1, leaf.touches_border ? kRed : kGreen,
@@ -424,6 +427,7 @@ ViewerState::Command ViewerState::RequestScan(int64_t scan_id, Clock::time_point
   if (identity == ScanIdentity()) r.identity.label = "from vellum-viewer";
   ToLeafHint(hint_, r.leaf_hint);
   r.object = ToString(object_);
+  r.live_off_view = ViewSidesText(preview_off_view_);  // The scan cannot pass when so seen.
   Asked asked{identity, 1};
   const std::string slug = IdentitySlug(identity);
   if (!slug.empty()) asked.attempt = ++attempts_[slug];

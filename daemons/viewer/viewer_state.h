@@ -226,6 +226,7 @@ class ViewerState {
   double preview_clipped_ = 0;
   bool capturing_ = false;
   std::string preview_leaf_;
+  int preview_off_view_ = 0;  // ViewSide bits where the live outline runs off the view.
   Clock::time_point last_preview_;
   cv::Mat focus_;
   double focus_sharpness_ = 0;

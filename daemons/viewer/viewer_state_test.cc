@@ -265,6 +265,27 @@ TEST(ViewerState, TheLeafHintRidesEveryRequestUntilCleared) {
   EXPECT_EQ(v.Act(Action::kScan, 6, now).request.leaf_hint[2], 0);
 }
 
+// What the live view saw at the edge rides the scan asked for: a bright leaf on a dark table
+// running off the right edge is "right" (not "left": the test leaf is asymmetric), one wholly in
+// view is "", and so is a view where the live outline cannot tell the leaf.
+TEST(ViewerState, WhereTheLiveViewSawTheLeafRunOffRidesTheRequest) {
+  ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
+  cv::Mat preview(120, 160, CV_8UC3, cv::Scalar(40, 40, 40));
+  cv::rectangle(preview, cv::Rect(100, 30, 60, 70), cv::Scalar(220, 220, 220), cv::FILLED);
+  v.OnPreview(preview, now);
+  EXPECT_EQ(v.preview_leaf(), "off the view");
+  EXPECT_EQ(v.Act(Action::kScan, 5, now).request.live_off_view, "right");
+  preview.setTo(cv::Scalar(40, 40, 40));
+  cv::rectangle(preview, cv::Rect(40, 30, 60, 70), cv::Scalar(220, 220, 220), cv::FILLED);
+  v.OnPreview(preview, now);
+  EXPECT_EQ(v.preview_leaf(), "in view");
+  EXPECT_EQ(v.Act(Action::kScan, 6, now).request.live_off_view, "");
+  v.OnPreview(cv::Mat(120, 160, CV_8UC3, cv::Scalar(40, 40, 40)), now);  // No leaf.
+  EXPECT_EQ(v.Act(Action::kScan, 7, now).request.live_off_view, "");
+}
+
 // A new error about the scan in progress is its failure; an old error (heard first), an error
 // about another scan, or one without a scan is not; the next scan's first pattern clears it.
 TEST(ViewerState, AFailureIsTheScanInProgressesAndTheNextScanClearsIt) {
@@ -425,6 +446,47 @@ TEST(ViewerState, ResultsAreSteppedThroughAndTheNewestIsShown) {
 // The picture: the preview in the left third, where the layout says, with the leaf hint drawn
 // over it where it lies; NO SIGNAL once the camera was silent for more than 2 s by the time
 // given, not before.
+// The film strip under the results: the session's scans in book order, not the order scanned
+// (10 recto, then 3 verso failed, then 3 recto warn), each framed in its verdict's colour: amber
+// for 3r, red for 3v's failure, green for 10r; none before the first scan.
+TEST(ViewerDraw, TheFilmStripShowsTheSessionInBookOrderInItsVerdictsColours) {
+  ViewerState v;
+  const Clock::time_point now = Clock::Steady().Now();
+  Alive(&v, now);
+  const cv::Size size(1280, 720);
+  ViewerLayout layout;
+  DrawViewer(v, size, now, &layout);
+  EXPECT_TRUE(layout.strip.empty());
+  v.OnStatus(Status("vellum-decoder", "", 0, 1), now);
+  auto scan = [&](int64_t id, const std::string& folio, const std::string& side) {
+    NameFolio(&v, "MS 12", folio, side);
+    ASSERT_EQ(v.Act(Action::kScan, id, now).kind, Kind::kRequestScan);
+  };
+  const cv::Mat page(40, 30, CV_8UC3, cv::Scalar(200, 200, 200));
+  scan(1, "10", "recto");
+  v.OnRestored(Restored(1, "pass"), page);
+  scan(2, "3", "verso");
+  v.OnStatus(Status("vellum-decoder", "scan 2 failed: no capture for 30 s", 2, 2), now);
+  v.Act(Action::kUndo);  // Decline the retake.
+  scan(3, "3", "recto");
+  v.OnRestored(Restored(3, "warn"), page);
+  const cv::Mat drawn = DrawViewer(v, size, now, &layout);
+  ASSERT_EQ(layout.strip.size(), 3u);
+  for (size_t k = 1; k < layout.strip.size(); ++k) {
+    EXPECT_GT(layout.strip[k].x, layout.strip[k - 1].x);
+  }
+  EXPECT_GE(layout.strip[0].x, size.width / 3);       // Under the results, not the preview.
+  EXPECT_GT(layout.strip[0].y, size.height * 3 / 4);  // Along the bottom.
+  // The frame's colour: a pixel on each tile's left edge, half way down.
+  auto frame = [&](const cv::Rect& cell) {
+    return drawn.at<cv::Vec3b>(cell.y + cell.height / 2, cell.x + 1);
+  };
+  const cv::Vec3b amber(0, 170, 255), red(40, 40, 220), green(60, 190, 60);
+  EXPECT_EQ(frame(layout.strip[0]), amber) << "3 recto, warn";
+  EXPECT_EQ(frame(layout.strip[1]), red) << "3 verso, failed";
+  EXPECT_EQ(frame(layout.strip[2]), green) << "10 recto, pass";
+}
+
 TEST(ViewerDraw, ThePreviewIsWhereTheLayoutSaysAndNoSignalFollowsTheTimeGiven) {
   ViewerState v;
   const Clock::time_point t0 = Clock::Steady().Now();
