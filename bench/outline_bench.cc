@@ -3,7 +3,8 @@
 // segmentation (SegmentPage) with the paper's 45 x 45 sheet, and FindLeaf as it stood before it
 // became one cut over every cue (bench/baseline/outline_v1: the height flood, brightness as a
 // fallback). The bars: the shape's way and its sheet add at most 50 ms to the paper's; finding
-// the leaf by every cue at once takes at most 50 ms more than the height flood did.
+// the leaf by every cue at once takes at most 50 ms more than the height flood did. And the live
+// outline on the viewer's preview beside the brightness rule it replaced: at most 50 ms.
 //
 //   ./build/bench/outline_bench
 #include <benchmark/benchmark.h>
@@ -97,6 +98,18 @@ void BM_Vellum_FindLeaf_SheetAuto(benchmark::State& state) {
   }
 }
 
+// The live outline on the preview (640 wide, as vellum-camera sends it): the brightness rule it was
+// (SegmentPage), and LeafInPreview (core/outline/live.cc) as the viewer runs it on every preview.
+void BM_Baseline_SegmentPage_Preview(benchmark::State& state) {
+  const cv::Mat preview = PreviewOf(Shared().texture);
+  for (auto _ : state) benchmark::DoNotOptimize(SegmentPage(preview).data);
+}
+
+void BM_Vellum_LeafInPreview(benchmark::State& state) {
+  const cv::Mat preview = PreviewOf(Shared().texture);
+  for (auto _ : state) benchmark::DoNotOptimize(LeafInPreview(preview).mask.data);
+}
+
 // Each benchmark is repeated, the repetitions of all five interleaved in random order (main), and
 // the medians compared: this machine is shared, and its speed drifts over a run.
 void Repeated(benchmark::internal::Benchmark* b) {
@@ -108,6 +121,8 @@ BENCHMARK(BM_Baseline_SegmentPage_Sheet45)->Apply(Repeated);
 BENCHMARK(BM_Baseline_FindLeafV1)->Apply(Repeated);
 BENCHMARK(BM_Vellum_FindLeaf)->Apply(Repeated);
 BENCHMARK(BM_Vellum_FindLeaf_SheetAuto)->Apply(Repeated);
+BENCHMARK(BM_Baseline_SegmentPage_Preview)->Apply(Repeated);
+BENCHMARK(BM_Vellum_LeafInPreview)->Apply(Repeated);
 
 }  // namespace
 }  // namespace vellum
@@ -129,6 +144,14 @@ int main(int argc, char** argv) {
         "brightness "
         "rule and a 45x45 sheet: %.1f ms added (bar: 50 ms), ratio %.2fx\n",
         ours, base, ours - base, ours / base);
+  }
+  const double bright = reporter.Median("BM_Baseline_SegmentPage_Preview");
+  const double live = reporter.Median("BM_Vellum_LeafInPreview");
+  if (bright > 0 && live > 0) {
+    std::printf(
+        "the live outline on a 640x480 preview (medians): %.2f ms against %.2f ms for the "
+        "brightness rule, ratio %.2fx (bar: 50 ms, a tenth of the 2 Hz preview's period)\n",
+        live, bright, live / bright);
   }
   const double flood = reporter.Median("BM_Baseline_FindLeafV1");
   const double cut = reporter.Median("BM_Vellum_FindLeaf/");

@@ -194,16 +194,19 @@ Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
   const cv::Mat tone = PaperTone(image);
   const int view_px = static_cast<int>(tone.total());
   const int min_px = static_cast<int>(options.min_area * view_px);
-  // What reaches three sides of the view, or covers most of it, is the table or a support larger
-  // than the view: the leaf, if any, is another bright region (in its holes). Within such a
-  // surround no part is taken for the leaf: along the view's edge it has no rim to enclose one,
-  // and a table's own shades would pass for a leaf.
+  // What reaches three sides of the view, or two opposite ones, or covers most of it, is the table
+  // or a support larger than the view: the leaf, if any, is another bright region (in its holes).
+  // (A leaf across the whole view runs off it both ways: its scan fails on "leaf in view" alone.)
+  // Within such a surround no part is taken for the leaf: along the view's edge it has no rim to
+  // enclose one, and a table's own shades would pass for a leaf.
   cv::Mat leaf, bright;
   bool surround_alike = false;
   for (const cv::Mat& region : BrightRegions(tone, min_px, &bright)) {
     const int sides = ViewSidesReached(region, options.border_px);
     const int reached = (sides & 1) + (sides >> 1 & 1) + (sides >> 2 & 1) + (sides >> 3 & 1);
-    if (reached >= 3 || cv::countNonZero(region) > 0.9 * view_px) {
+    const bool across = (sides & (kViewLeft | kViewRight)) == (kViewLeft | kViewRight) ||
+                        (sides & (kViewTop | kViewBottom)) == (kViewTop | kViewBottom);
+    if (reached >= 3 || across || cv::countNonZero(region) > 0.9 * view_px) {
       surround_alike = true;
       continue;
     }

@@ -243,11 +243,14 @@ inline constexpr int kPreviewWidth = 640;
 // The camera's image as the live preview shows it: at most kPreviewWidth wide (by area).
 cv::Mat PreviewOf(const cv::Mat& image);
 
-// The leaf as a live preview shows it, before any scan, for placing it: by brightness alone
-// (a leaf brighter than its surround; the scan itself finds the leaf by its shape). Sets
+// The leaf as a live preview shows it, before any scan, for placing it: by its look alone (the
+// scan itself finds the leaf by its shape; core/outline/live.cc). A bright region set apart from
+// a darker surround; within it, a solid part of another bright tone that it encloses, edged by
+// a sharp step, when the region is a support or a mount about as bright as the leaf. Sets
 // `touches_border` when it runs off the view. An error, in a few words for the viewer, when
-// nothing sets a leaf apart: no bright region of min_area ("no leaf in view"), or one covering
-// most of the view (a support as bright as the leaf, which only the scan tells apart).
+// nothing sets a leaf apart: no bright region of min_area ("no leaf in view"), or only one that
+// reaches three sides of the view, or two opposite ones, or covers most of it ("leaf as bright
+// as its surround": a table or a support larger than the view, which only the scan tells apart).
 Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options = OutlineOptions());
 
 // The sides of the view (ViewSide bits, core/common/view_sides.h) a mask reaches within `border`
