@@ -371,7 +371,7 @@ void JudgeRaisedHole(const cv::Mat& points, const Outline& outline, int leaf, do
 // The live view saw the leaf run off the view (`seen`, ViewSide bits) when the scan was asked, and
 // the scan's outline does not: it may have taken less than the leaf for it. Where the outline comes
 // within reach of a side so seen, the two disagree and the scan cannot pass; an outline far from
-// every such side means the live view, which goes by brightness alone, took a support or a table
+// every such side means the live view, which goes by the look alone, took a support or a table
 // for the leaf: recorded, not warned of.
 void JudgeLiveOffView(const Outline& outline, int seen, const OutlineOptions& options,
                       StageReport* r) {

@@ -100,8 +100,10 @@ double EdgeStep(const cv::Mat& tone, const std::vector<cv::Point>& contour) {
   return steps[steps.size() / 2];
 }
 
-// Of a part's filled outline, what its own tone must cover: a checkerboard's squares fill half of
-// theirs, a leaf with text and pictures on it 0.68 (the family's seed 17).
+// Of a part's filled outline, what its own tone must cover. Ink and pictures are holes in a leaf's
+// paper (not bright, they are never candidates): a checkerboard page's paper covers about half of
+// its outline, a page of text and pictures 0.68 (the family's seed 17). A part mostly holes is
+// not a sheet.
 constexpr double kSolid = 0.4;
 // A leaf's edge is a step of the two tones within a pixel or two (EdgeStep at least this share of
 // the step between them); shading across a curl or a bulge changes as much over tens of pixels.
@@ -191,6 +193,11 @@ cv::Mat PreviewOf(const cv::Mat& image) {
 Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
   Outline out;
   out.method = "look";
+  constexpr int kLeast = 32;  // Pixels each way: a preview smaller shows no leaf to place.
+  if (image.cols < kLeast || image.rows < kLeast) {
+    out.status = Status::Error("no leaf in view");
+    return out;
+  }
   const cv::Mat tone = PaperTone(image);
   const int view_px = static_cast<int>(tone.total());
   const int min_px = static_cast<int>(options.min_area * view_px);

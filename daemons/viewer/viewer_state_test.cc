@@ -284,6 +284,9 @@ TEST(ViewerState, WhereTheLiveViewSawTheLeafRunOffRidesTheRequest) {
   EXPECT_EQ(v.Act(Action::kScan, 6, now).request.live_off_view, "");
   v.OnPreview(cv::Mat(120, 160, CV_8UC3, cv::Scalar(40, 40, 40)), now);  // No leaf.
   EXPECT_EQ(v.Act(Action::kScan, 7, now).request.live_off_view, "");
+  v.OnPreview(cv::Mat(3, 2, CV_8UC3, cv::Scalar(220, 220, 220)), now);  // Too small to tell.
+  EXPECT_EQ(v.preview_leaf(), "no leaf in view");
+  EXPECT_EQ(v.Act(Action::kScan, 8, now).request.live_off_view, "");
 }
 
 // A new error about the scan in progress is its failure; an old error (heard first), an error
