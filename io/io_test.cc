@@ -41,6 +41,29 @@ class IoTest : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+  // The text of scan.yaml in `dir`.
+  static std::string ScanYaml(const std::string& dir) {
+    std::ifstream in(dir + "/scan.yaml");
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  // `key`'s line of scan.yaml in `dir` (which must have it) given each of `values` in turn: every
+  // one refused by ReadScanHeader, naming the file and the key. scan.yaml is left at the last.
+  static void ExpectEachRefused(const std::string& dir, const std::string& key,
+                                const std::vector<std::string>& values) {
+    const std::string yaml = ScanYaml(dir);
+    const size_t at = yaml.find(key + ":");
+    ASSERT_NE(at, std::string::npos) << yaml;
+    const size_t end = yaml.find('\n', at);
+    for (const std::string& bad : values) {
+      std::string edited = yaml;
+      edited.replace(at, end - at, key + ": " + bad);
+      std::ofstream(dir + "/scan.yaml") << edited;
+      Scan r;
+      const Status s = ReadScanHeader(dir, &r);
+      ASSERT_FALSE(s.ok()) << bad;
+      EXPECT_NE(s.message().find("scan.yaml: key '" + key + "'"), std::string::npos) << s.message();
+    }
+  }
   fs::path dir_;
 };
 
@@ -268,11 +291,7 @@ TEST_F(IoTest, ScanLightsRoundTripAndBadOnesAreNamed) {
   EXPECT_EQ(r.lights[1].image.type(), CV_16U);
   EXPECT_EQ(cv::norm(r.lights[1].image, uv.image, cv::NORM_INF), 0);
 
-  std::string yaml;
-  {
-    std::ifstream in(Path("scan") + "/scan.yaml");
-    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
+  std::string yaml = ScanYaml(Path("scan"));
   const size_t at = yaml.find("lights:"), end = yaml.find("patterns:");
   ASSERT_NE(at, std::string::npos) << yaml;
   const struct {
@@ -375,25 +394,10 @@ TEST_F(IoTest, ScanLeafHintRoundTripsAndABadOneIsRefused) {
   ASSERT_TRUE(WriteScan(Path("plain"), SmallScan()).ok());
   ASSERT_TRUE(ReadScan(Path("plain"), &r).ok());
   EXPECT_TRUE(r.leaf_hint.empty());
-  std::string yaml;
-  {
-    std::ifstream in(Path("hinted") + "/scan.yaml");
-    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
-  const size_t at = yaml.find("leaf_hint:");
-  ASSERT_NE(at, std::string::npos) << yaml;
-  const size_t end = yaml.find('\n', at);
-  for (const std::string& bad : {std::string("[ 10, 7, 31 ]"), std::string("[ 10, 7, -1, 19 ]"),
-                                 std::string("[ a, 7, 31, 19 ]"),
-                                 std::string("[ 2147483000, 7, 2000, 19 ]"),  // Wraps an int.
-                                 "[ " + std::to_string(camera.width - 5) + ", 7, 31, 19 ]"}) {
-    std::string edited = yaml;
-    edited.replace(at, end - at, "leaf_hint: " + bad);
-    std::ofstream(Path("hinted") + "/scan.yaml") << edited;
-    const Status s = ReadScanHeader(Path("hinted"), &r);
-    ASSERT_FALSE(s.ok()) << bad;
-    EXPECT_NE(s.message().find("scan.yaml: key 'leaf_hint'"), std::string::npos) << s.message();
-  }
+  ExpectEachRefused(Path("hinted"), "leaf_hint",
+                    {"[ 10, 7, 31 ]", "[ 10, 7, -1, 19 ]", "[ a, 7, 31, 19 ]",
+                     "[ 2147483000, 7, 2000, 19 ]",  // Wraps an int.
+                     "[ " + std::to_string(camera.width - 5) + ", 7, 31, 19 ]"});
 }
 
 // What the live view saw at the view's edge, in scan.yaml: the sides kept through a round trip
@@ -405,27 +409,13 @@ TEST_F(IoTest, ScanLiveOffViewRoundTripsAndABadOneIsRefused) {
   Scan r;
   ASSERT_TRUE(ReadScan(Path("seen"), &r).ok());
   EXPECT_EQ(r.live_off_view, kViewRight | kViewBottom);
-  std::string yaml;
-  {
-    std::ifstream in(Path("seen") + "/scan.yaml");
-    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
-  const size_t at = yaml.find("live_off_view:");
-  ASSERT_NE(at, std::string::npos) << yaml;
-  const size_t end = yaml.find('\n', at);
-  EXPECT_NE(yaml.substr(at, end - at).find("[ right, bottom ]"), std::string::npos) << yaml;
+  EXPECT_NE(ScanYaml(Path("seen")).find("live_off_view: [ right, bottom ]"), std::string::npos)
+      << ScanYaml(Path("seen"));
   ASSERT_TRUE(WriteScan(Path("unseen"), SmallScan()).ok());
   ASSERT_TRUE(ReadScan(Path("unseen"), &r).ok());
   EXPECT_EQ(r.live_off_view, 0);
-  for (const std::string& bad : {std::string("[ rigth ]"), std::string("[ left, left ]"),
-                                 std::string("right"), std::string("[ 1 ]")}) {
-    std::string edited = yaml;
-    edited.replace(at, end - at, "live_off_view: " + bad);
-    std::ofstream(Path("seen") + "/scan.yaml") << edited;
-    const Status s = ReadScanHeader(Path("seen"), &r);
-    ASSERT_FALSE(s.ok()) << bad;
-    EXPECT_NE(s.message().find("scan.yaml: key 'live_off_view'"), std::string::npos) << s.message();
-  }
+  ExpectEachRefused(Path("seen"), "live_off_view",
+                    {"[ rigth ]", "[ left, left ]", "right", "[ 1 ]"});
 }
 
 // The catalogue identity in scan.yaml (docs/formats.md, "Identity"), kept through a round
@@ -448,11 +438,7 @@ TEST_F(IoTest, ScanIdentityRoundTripsAndIsSanitised) {
   EXPECT_EQ(id.shelfmark, "MS 12");
   // By hand: a folio written as a number, a side in capitals, a shelfmark with a control
   // character and a note far too long.
-  std::string yaml;
-  {
-    std::ifstream in(Path("scan") + "/scan.yaml");
-    yaml.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-  }
+  std::string yaml = ScanYaml(Path("scan"));
   const size_t at = yaml.find("shelfmark:");
   ASSERT_NE(at, std::string::npos) << yaml;
   const size_t end = yaml.find("texture:");

@@ -24,6 +24,13 @@ inline std::string ViewSidesText(int sides, const char* separator = ",") {
   return text;
 }
 
+// How many sides `sides` holds.
+inline int ViewSideCount(int sides) {
+  int n = 0;
+  for (int k = 0; k < kViewSideCount; ++k) n += (sides >> k) & 1;
+  return n;
+}
+
 // One side's bit from its name; 0 for anything else.
 inline int ViewSideOf(const std::string& name) {
   for (int k = 0; k < kViewSideCount; ++k) {

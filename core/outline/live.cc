@@ -210,7 +210,7 @@ Outline LeafInPreview(const cv::Mat& image, const OutlineOptions& options) {
   bool surround_alike = false;
   for (const cv::Mat& region : BrightRegions(tone, min_px, &bright)) {
     const int sides = ViewSidesReached(region, options.border_px);
-    const int reached = (sides & 1) + (sides >> 1 & 1) + (sides >> 2 & 1) + (sides >> 3 & 1);
+    const int reached = ViewSideCount(sides);
     const bool across = (sides & (kViewLeft | kViewRight)) == (kViewLeft | kViewRight) ||
                         (sides & (kViewTop | kViewBottom)) == (kViewTop | kViewBottom);
     if (reached >= 3 || across || cv::countNonZero(region) > 0.9 * view_px) {

@@ -324,10 +324,7 @@ double RimConfidence(const cv::Mat& leaf, const Cues& cues, int band_px, double 
 bool TouchesBorder(const cv::Mat& leaf, int border) { return SidesTouched(leaf, border) > 0; }
 
 int SidesTouched(const cv::Mat& mask, int border) {
-  const int bits = ViewSidesReached(mask, border);
-  int touched = 0;
-  for (int k = 0; k < kViewSideCount; ++k) touched += (bits >> k) & 1;
-  return touched;
+  return ViewSideCount(ViewSidesReached(mask, border));
 }
 
 }  // namespace vellum::outline

@@ -502,7 +502,7 @@ cv::Mat DrawViewer(const ViewerState& s, cv::Size size, Clock::time_point now,
   const ViewerState::Result* r = s.shown();
   // Along the bottom of the middle and the right, once the session has a scan: the film strip.
   const bool strip = !s.results().empty() || !s.failed().empty();
-  const int strip_h = strip ? 84 : 0;
+  const int strip_h = strip ? kFilmStripHeight - 4 : 0;
   const int mid_x = left_w, mid_w = w / 3, third = (h - top - strip_h) / 3;
   static const ViewerState::Result kEmpty;
   const ViewerState::Result& show = r ? *r : kEmpty;

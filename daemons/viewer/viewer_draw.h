@@ -15,6 +15,9 @@
 
 namespace vellum::station {
 
+// The film strip's height along the window's bottom, its margin below it included (pixels).
+inline constexpr int kFilmStripHeight = 88;
+
 // Where the parts went on the window (for the mouse).
 struct ViewerLayout {
   cv::Rect preview;  // The live preview's pixels; empty when none is drawn (none yet, zoomed).

@@ -133,9 +133,9 @@ TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
       [&] {
         const cv::Mat screen = window->Screen();
         if (screen.empty()) return false;
-        // The bottom of the right third, under the page, above the film strip (its last 88 px).
-        const cv::Mat under =
-            screen(cv::Rect(screen.cols * 2 / 3, screen.rows - 88 - 40, screen.cols / 3, 40));
+        // The bottom of the right third, under the page, above the film strip.
+        const cv::Mat under = screen(cv::Rect(
+            screen.cols * 2 / 3, screen.rows - kFilmStripHeight - 40, screen.cols / 3, 40));
         return amber(under) > 20;
       },
       10));
