@@ -7,6 +7,18 @@
 #include "vellum/capture_t.hpp"
 
 namespace vellum::station {
+namespace {
+
+// The bus carries 8-bit frames (image_t: GREY, BGR3): a deeper camera's frame is scaled down
+// here, its own depth kept up to this point.
+cv::Mat EightBit(const cv::Mat& image) {
+  if (image.depth() == CV_8U) return image;
+  cv::Mat out;
+  image.convertTo(out, CV_8U, 255.0 / 65535.0);
+  return out;
+}
+
+}  // namespace
 
 bool CameraNodeOptions::Check(std::string* why) const {
   if (!(preview_hz > 0)) {
@@ -33,6 +45,7 @@ void CameraNode::Tick() {
     cv::Mat image;
     int64_t exposure = 0;
     if (!camera_->Preview(&image, &exposure).ok()) return;
+    image = EightBit(image);
     PublishPreview(image, exposure, 0, -1, 0);
     // The centre, pixel for pixel.
     const cv::Size crop(std::min(320, image.cols), std::min(240, image.rows));
@@ -93,6 +106,7 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   int64_t exposure = 0;
   s = camera_->Capture(request, &image, &exposure);
   if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
+  image = EightBit(image);
   if (m.pattern_index >= 0 && !under_light && image.channels() == 3) {
     cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
   }

@@ -16,7 +16,10 @@ int main(int argc, char** argv) {
       {"backend", "NAME", "v4l2 (a real camera) or sim (the virtual gantry)", "sim"},
       {"device", "PATH", "v4l2: the camera device", "/dev/video0"},
       {"size", "WxH", "v4l2: frame size", "1600x1200"},
-      {"format", "FOURCC", "v4l2: BGR3 (colour texture) or GREY (monochrome camera)", "BGR3"},
+      {"format", "FOURCC",
+       "v4l2: auto (the camera's best: colour where it has it, the most bits, uncompressed), "
+       "GREY (gray first) or a FourCC to insist on (Y16, YUYV, RGGB, MJPG, ...)",
+       "auto"},
       {"exposure", "N", "v4l2: manual exposure, 100 us units; -1 = camera's setting", "-1"},
       {"gain", "N", "v4l2: gain; -1 = camera's setting", "-1"},
       {"rig", "FILE", "sim: the rig's calibration (default: the built-in default rig)", ""},
@@ -46,11 +49,7 @@ int main(int argc, char** argv) {
                         V4l2Options v4l2;
                         v4l2.device = flags.Get("device");
                         v4l2.size = flags.GetSize("size");
-                        const std::string format = flags.Get("format");
-                        if (format != "BGR3" && format != "GREY") {
-                          throw UsageError("--format must be BGR3 or GREY, got '" + format + "'");
-                        }
-                        v4l2.gray = format == "GREY";
+                        v4l2.format = flags.Get("format");
                         v4l2.exposure = flags.GetInt("exposure", -1, 1 << 24);
                         v4l2.gain = flags.GetInt("gain", -1, 1 << 16);
                         auto v4l2_camera = std::make_unique<V4l2Camera>();
