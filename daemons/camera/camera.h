@@ -34,6 +34,10 @@ class Camera {
   virtual Status Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) = 0;
   // A current frame for the live preview.
   virtual Status Preview(cv::Mat* image, int64_t* exposure_utime) = 0;
+  // Frames the camera's driver dropped, and frames it gave that were not taken (flagged bad,
+  // short, undecodable), in all.
+  virtual int64_t dropped_frames() const { return 0; }
+  virtual int64_t bad_frames() const { return 0; }
 };
 
 }  // namespace vellum::station

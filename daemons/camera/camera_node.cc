@@ -44,7 +44,14 @@ void CameraNode::Tick() {
   node_->Post([this] {
     cv::Mat image;
     int64_t exposure = 0;
-    if (!camera_->Preview(&image, &exposure).ok()) return;
+    const Status s = camera_->Preview(&image, &exposure);
+    CountCameraFaults();
+    // A camera gone at idle is logged once, and again when it is back: not twice a second.
+    if (!s.ok() || !preview_error_.empty()) {
+      if (s.message() != preview_error_) node_->Log(s.ok() ? "live preview back" : s.message());
+      preview_error_ = s.ok() ? "" : s.message();
+    }
+    if (!s.ok()) return;
     image = EightBit(image);
     PublishPreview(image, exposure, 0, -1, 0);
     // The centre, pixel for pixel.
@@ -58,6 +65,14 @@ void CameraNode::Tick() {
     focus.pattern_index = -1;
     node_->Publish(channel::kPreviewFocus, &focus);
   });
+}
+
+void CameraNode::CountCameraFaults() {
+  const int64_t dropped = camera_->dropped_frames(), bad = camera_->bad_frames();
+  if (dropped > dropped_seen_) node_->Count("frames the camera dropped", dropped - dropped_seen_);
+  if (bad > bad_seen_) node_->Count("frames the camera flagged bad", bad - bad_seen_);
+  dropped_seen_ = dropped;
+  bad_seen_ = bad;
 }
 
 void CameraNode::PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index,
@@ -105,6 +120,7 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   cv::Mat image;
   int64_t exposure = 0;
   s = camera_->Capture(request, &image, &exposure);
+  CountCameraFaults();
   if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
   image = EightBit(image);
   if (m.pattern_index >= 0 && !under_light && image.channels() == 3) {

@@ -29,9 +29,13 @@ class CameraNode {
  private:
   void OnShown(const pattern_shown_t& m);  // Worker thread.
   void PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index, int count);
+  // Counts the frames the camera dropped or refused since the last call (worker thread).
+  void CountCameraFaults();
 
   Node* node_;
   std::unique_ptr<Camera> camera_;  // Worker thread only (after construction).
+  int64_t dropped_seen_ = 0, bad_seen_ = 0;  // Worker thread only.
+  std::string preview_error_;                // Worker thread only: the last one logged.
   std::chrono::duration<double> preview_period_;
   // LCM thread only:
   Clock::time_point busy_until_, next_preview_;

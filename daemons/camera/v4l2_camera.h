@@ -49,9 +49,9 @@ class V4l2Camera : public Camera {
   Status Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) override;
   Status Preview(cv::Mat* image, int64_t* exposure_utime) override;
   // Frames the driver dropped (sequence gaps) and frames it gave that were not taken (the
-  // error flag, short or undecodable), since Open.
-  int64_t dropped_frames() const { return dropped_; }
-  int64_t bad_frames() const { return bad_; }
+  // error flag, short or undecodable), in all.
+  int64_t dropped_frames() const override { return dropped_; }
+  int64_t bad_frames() const override { return bad_; }
 
  private:
   Status Negotiate();

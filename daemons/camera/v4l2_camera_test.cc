@@ -309,8 +309,8 @@ TEST(V4l2Camera, UnpluggedMidScanTheFrameFailsClearlyAndTheCameraComesBackWhenPl
   EXPECT_EQ(o.device->control(V4L2_CID_EXPOSURE_AUTO).value, V4L2_EXPOSURE_MANUAL);
 }
 
-// vellum-camera's node over the recorded webcam on an in-process bus: captures of a scan, then
-// the camera unplugged: the next scan's frame is an error of that scan, naming the camera; once
+// vellum-camera's node over the recorded webcam on an in-process bus: captures of a scan on a
+// camera dropping every other frame (counted), then the camera unplugged: the next scan's frame is an error of that scan, naming the camera; once
 // it is back, the scan after that is captured.
 TEST(V4l2CameraNode, AScanWhileTheCameraIsGoneFailsClearlyAndTheNextOneIsCaptured) {
   testing::MemqBus bus;
@@ -321,6 +321,8 @@ TEST(V4l2CameraNode, AScanWhileTheCameraIsGoneFailsClearlyAndTheNextOneIsCapture
   Node node("vellum-camera", &bus.lcm());
   CameraNode camera(&node, std::move(o.camera), CameraNodeOptions());
   auto captures = bus.Record<capture_t>(channel::kCapture);
+  device->DropEvery(2);  // A struggling USB bus: every other frame lost.
+  device->FlagError(4);
   const PatternSequence sequence = MakePatternSequence(PatternOptions{cv::Size(800, 600)});
   auto shown = [&](int64_t scan, int index) {
     pattern_shown_t m{};
@@ -343,6 +345,8 @@ TEST(V4l2CameraNode, AScanWhileTheCameraIsGoneFailsClearlyAndTheNextOneIsCapture
   ASSERT_TRUE(FromMessage((*captures)[1].image, &pattern).ok());
   EXPECT_EQ(texture.type(), CV_8UC3);  // The texture in colour, from YUYV.
   EXPECT_EQ(pattern.type(), CV_8UC1);  // A pattern in gray.
+  EXPECT_GE(node.Counter("frames the camera dropped"), 1);
+  EXPECT_EQ(node.Counter("frames the camera flagged bad"), 1);
   device->UnplugAfter(0);
   shown(61, 1);
   EXPECT_TRUE(bus.WaitForError("vellum-camera", "scan 61, pattern 1: camera /dev/video4 is gone"))
