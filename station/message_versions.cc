@@ -6,6 +6,7 @@
 #include "core/geometry/calibration.h"
 #include "vellum/calibration_v1_t.hpp"
 #include "vellum/capture_v1_t.hpp"
+#include "vellum/pattern_shown_v1_t.hpp"
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/scan_started_v2_t.hpp"
 #include "vellum/scan_started_v3_t.hpp"
@@ -103,6 +104,26 @@ bool SafeDecode(const void* data, int64_t size, calibration_t* msg) {
   msg->max_z_mm = defaults.max_z_mm;
   msg->scale_error_percent = defaults.scale_error_percent;
   return true;
+}
+
+bool SafeDecode(const void* data, int64_t size, pattern_shown_t* msg) {
+  if (SafeDecode<pattern_shown_t>(data, size, msg)) return true;
+  pattern_shown_v1_t old;
+  if (!SafeDecode<pattern_shown_v1_t>(data, size, &old)) return false;
+  *msg = pattern_shown_t{};
+  msg->utime = old.utime;
+  msg->seq = old.seq;
+  msg->scan_id = old.scan_id;
+  msg->station = old.station;
+  msg->session = old.session;
+  msg->pattern_index = old.pattern_index;
+  msg->pattern_count = old.pattern_count;
+  msg->projector_width = old.projector_width;
+  msg->projector_height = old.projector_height;
+  msg->pattern = old.pattern;
+  msg->light_count = old.light_count;
+  msg->light = old.light;
+  return true;  // handed_utime 0: not said.
 }
 
 }  // namespace vellum::station

@@ -8,6 +8,7 @@
 
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
+#include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
@@ -35,5 +36,8 @@ bool SafeDecode(const void* data, int64_t size, scan_started_t* msg);
 // Likewise a CALIBRATION recorded before it carried the working volume and the scale error
 // (calibration_v1_t): the default working volume, the scale error not measured.
 bool SafeDecode(const void* data, int64_t size, calibration_t* msg);
+// A PATTERN_SHOWN recorded before it said when the image was handed to the display
+// (pattern_shown_v1_t): handed_utime 0, not said.
+bool SafeDecode(const void* data, int64_t size, pattern_shown_t* msg);
 
 }  // namespace vellum::station

@@ -35,6 +35,7 @@
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/scan_started_v2_t.hpp"
 #include "vellum/scan_started_v4_t.hpp"
+#include "vellum/pattern_shown_v1_t.hpp"
 #include "vellum/status_t.hpp"
 #include "vellum/texture_t.hpp"
 
@@ -416,6 +417,33 @@ TEST(Messages, EarlierScanStartedLayoutsReadAndTheLeafHintIsARegionOfTheView) {
     EXPECT_TRUE(LeafHintPixels(bad.data(), camera).empty())
         << bad[0] << "," << bad[1] << "," << bad[2] << "," << bad[3];
   }
+}
+
+// A PATTERN_SHOWN recorded before it said when the image was handed to the display reads with
+// handed_utime 0 (not said), everything else kept.
+TEST(Messages, AnEarlierPatternShownReadsWithItsHandoverNotSaid) {
+  pattern_shown_v1_t v1{};
+  v1.utime = 1234;
+  v1.scan_id = 44;
+  v1.pattern_index = 7;
+  v1.pattern_count = 40;
+  v1.projector_width = 800;
+  v1.projector_height = 600;
+  const std::vector<uint8_t> bytes = Encode(v1);
+  pattern_shown_t m{};
+  m.handed_utime = 99;
+  ASSERT_TRUE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &m));
+  EXPECT_EQ(m.utime, 1234);
+  EXPECT_EQ(m.scan_id, 44);
+  EXPECT_EQ(m.pattern_index, 7);
+  EXPECT_EQ(m.projector_width, 800);
+  EXPECT_EQ(m.handed_utime, 0);
+  pattern_shown_t now{};
+  now.handed_utime = 1000;
+  now.utime = 1034;
+  const std::vector<uint8_t> current = Encode(now);
+  ASSERT_TRUE(SafeDecode(current.data(), static_cast<int64_t>(current.size()), &m));
+  EXPECT_EQ(m.handed_utime, 1000);
 }
 
 Scan SmallScan() {

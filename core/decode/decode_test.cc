@@ -6,6 +6,8 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "core/decode/frame_check.h"
+
 namespace vellum {
 namespace {
 
@@ -480,6 +482,44 @@ TEST(StreamingDecode, AFrameMissingTwiceOrOfTheWrongSizeIsNamed) {
   ASSERT_TRUE(decoder.Begin(seq, frames[0].size()).ok());
   EXPECT_NE(decoder.Add(58, frames[0]).message().find("frame 58: no such frame"),
             std::string::npos);
+}
+
+// A capture that shows its own pattern, one that shows the one before, and one that mixes the
+// two, on a linear camera (offset 20, gain 200) with stripes 6 pixels wide blurred over two:
+// the pair adds up to white plus black only when clean; the steady check sees a change of a
+// third of the contrast over half the picture, and not the noise.
+TEST(FrameCheck, APairAddsUpOnlyWhenEachFrameShowsItsOwnPattern) {
+  const cv::Size size(120, 80);
+  cv::Mat light(size, CV_32F);
+  for (int x = 0; x < size.width; ++x) light.col(x).setTo((x / 6) % 2 ? 1.0 : 0.0);
+  cv::GaussianBlur(light, light, cv::Size(0, 0), 1.0);
+  auto frame = [&](const cv::Mat& l, double seed) {
+    cv::Mat noise(size, CV_32F), out;
+    cv::RNG(static_cast<uint64_t>(seed)).fill(noise, cv::RNG::NORMAL, 0, 1.5);
+    cv::Mat(20 + 200 * l + noise).convertTo(out, CV_8U);
+    return out;
+  };
+  const cv::Mat ones(size, CV_32F, cv::Scalar(1)), zeros(size, CV_32F, cv::Scalar(0));
+  const cv::Mat white = frame(ones, 1), black = frame(zeros, 2);
+  const cv::Mat pattern = frame(light, 3), inverse = frame(ones - light, 4);
+  EXPECT_LT(PairMismatch(pattern, inverse, white, black), 0.01);
+  // The inverse shows its pattern whole (a display lag of more than an exposure).
+  EXPECT_GT(PairMismatch(pattern, frame(light, 5), white, black), 0.9);
+  // The inverse holds a third of its pattern (an exposure straddling the change).
+  const cv::Mat mixed = frame((ones - light) * (2.0 / 3) + light * (1.0 / 3), 6);
+  const double mismatch = PairMismatch(pattern, mixed, white, black);
+  EXPECT_GT(mismatch, FrameCheckOptions().mixed_share) << mismatch;
+  // Steady: the same pattern in two frames (their own noise) against the mixed one.
+  EXPECT_LE(FrameChange(inverse, frame(ones - light, 7)), FrameCheckOptions().changed_share);
+  EXPECT_GT(FrameChange(inverse, mixed), 0.2);
+  // Unlit: no pixel to judge, nothing found.
+  EXPECT_EQ(PairMismatch(black, black, black, black), 0.0);
+  FrameCheckOptions o;
+  std::string why;
+  EXPECT_TRUE(o.Check(&why)) << why;
+  o.pair_tolerance = 1.5;
+  EXPECT_FALSE(o.Check(&why));
+  EXPECT_NE(why.find("frame check"), std::string::npos);
 }
 
 }  // namespace

@@ -16,6 +16,9 @@ namespace vellum::station {
 // The frame a scan asks for: the first whose exposure starts after the pattern was shown.
 struct FrameRequest {
   int64_t shown_utime = 0;  // When the pattern was on screen, microseconds since the epoch.
+  // When the projector handed it to its display (vsync passed); 0: not said. The virtual
+  // gantry's display lag counts from it.
+  int64_t handed_utime = 0;
   int pattern_index = -1;   // -1: the texture (projector black, studio light).
   PatternSpec pattern;      // What the projector shows.
   cv::Size projector;       // The projector's image size.
@@ -37,6 +40,10 @@ class Camera {
   // Frames the camera's driver dropped, and frames it gave that were not taken (flagged bad,
   // short, undecodable), in all.
   virtual int64_t dropped_frames() const { return 0; }
+  // Whether its frames are linear in the light (offset plus gain times light): a raw or
+  // monochrome sensor's are, a webcam's gamma-encoded YUYV or MJPEG are not. A Gray-code pair
+  // is checked to add up (core/decode/frame_check.h) only on a linear camera.
+  virtual bool linear() const { return true; }
   virtual int64_t bad_frames() const { return 0; }
 };
 

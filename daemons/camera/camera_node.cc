@@ -18,6 +18,15 @@ cv::Mat EightBit(const cv::Mat& image) {
   return out;
 }
 
+cv::Mat Gray(const cv::Mat& image) {
+  if (image.channels() == 1) return image;
+  cv::Mat gray;
+  cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+  return gray;
+}
+
+std::string Percent(double share) { return std::to_string(static_cast<int>(100 * share + 0.5)) + "%"; }
+
 }  // namespace
 
 bool CameraNodeOptions::Check(std::string* why) const {
@@ -75,6 +84,79 @@ void CameraNode::CountCameraFaults() {
   bad_seen_ = bad;
 }
 
+Status CameraNode::Next(const FrameRequest& request, int64_t after, cv::Mat* image,
+                        int64_t* exposure) {
+  FrameRequest next = request;
+  next.shown_utime = after + 1;
+  const Status s = camera_->Capture(next, image, exposure);
+  if (s.ok()) *image = Gray(EightBit(*image));
+  return s;
+}
+
+void CameraNode::NameMixed(const std::string& where, const std::string& how) {
+  node_->Count("frames mixing two patterns");
+  node_->Log(where + ": " + how + ": not sent, taken again from the camera's next frame");
+}
+
+Status CameraNode::CheckedCapture(const FrameRequest& request, const std::string& where,
+                                  cv::Mat* image, int64_t* exposure) {
+  cv::Mat frame;
+  Status s = camera_->Capture(request, &frame, exposure);
+  if (!s.ok()) return s;
+  frame = Gray(EightBit(frame));
+  const PatternSpec& spec = request.pattern;
+  constexpr int kTries = 3;
+  if (spec.kind == PatternKind::kWhite || spec.kind == PatternKind::kBlack) {
+    // No pair: the camera's next frame must show the same.
+    for (int tries = 0;; ++tries) {
+      cv::Mat next;
+      int64_t next_exposure = 0;
+      s = Next(request, *exposure, &next, &next_exposure);
+      if (!s.ok()) return s;
+      const double change = FrameChange(frame, next, check_);
+      if (change <= check_.changed_share) break;
+      if (tries + 1 == kTries) {
+        return Status::Error("the picture kept changing under one pattern (" + Percent(change) +
+                             " of the pixels, " + std::to_string(kTries) +
+                             " frames): is the display's lag longer than the projector waits? " +
+                             "Measure it: vellum calibrate latency");
+      }
+      NameMixed(where, "the frame changed before the next (" + Percent(change) +
+                           " of the pixels): it mixes two patterns or shows the one before");
+      frame = next;
+      *exposure = next_exposure;
+    }
+    (spec.kind == PatternKind::kWhite ? kept_.white : kept_.black) = frame;
+  } else if (spec.kind == PatternKind::kGray && spec.inverted && camera_->linear() &&
+             !kept_.pattern.empty() &&
+             !kept_.white.empty() && !kept_.black.empty() &&
+             kept_.pattern_spec.axis == spec.axis && kept_.pattern_spec.bit == spec.bit) {
+    for (int tries = 0;; ++tries) {
+      const double mismatch = PairMismatch(kept_.pattern, frame, kept_.white, kept_.black, check_);
+      if (mismatch <= check_.mixed_share) break;
+      if (tries + 1 == kTries) {
+        // The inverse is steady and still does not add up with its pattern: the pattern, sent
+        // already, was the mixed frame.
+        return Status::Error("pattern " + std::to_string(kept_.pattern_index) + " (" +
+                             Describe(kept_.pattern_spec) + ") was taken mixing two patterns (" +
+                             Percent(mismatch) + " of the lit pixels off its inverse): the " +
+                             "scan cannot be decoded; is the display's lag longer than the " +
+                             "projector waits? Measure it: vellum calibrate latency");
+      }
+      NameMixed(where, "the frame does not add up with its pattern (" + Percent(mismatch) +
+                           " of the lit pixels off): it mixes two patterns or shows the one before");
+      s = Next(request, *exposure, &frame, exposure);
+      if (!s.ok()) return s;
+    }
+  } else if (spec.kind == PatternKind::kGray && !spec.inverted) {
+    kept_.pattern = frame;
+    kept_.pattern_spec = spec;
+    kept_.pattern_index = request.pattern_index;
+  }
+  *image = frame;
+  return Status::Ok();
+}
+
 void CameraNode::PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index,
                                 int count) {
   image_t p{};
@@ -119,7 +201,13 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
                                     std::to_string(m.pattern_count));
   cv::Mat image;
   int64_t exposure = 0;
-  s = camera_->Capture(request, &image, &exposure);
+  request.handed_utime = m.handed_utime;
+  if (kept_.scan_id != m.scan_id) {
+    kept_ = Kept();
+    kept_.scan_id = m.scan_id;
+  }
+  s = under_light || m.pattern_index < 0 ? camera_->Capture(request, &image, &exposure)
+                                         : CheckedCapture(request, where, &image, &exposure);
   CountCameraFaults();
   if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
   image = EightBit(image);

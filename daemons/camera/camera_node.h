@@ -7,6 +7,7 @@
 #include <chrono>
 #include <memory>
 
+#include "core/decode/frame_check.h"
 #include "daemons/camera/camera.h"
 #include "station/node.h"
 #include "vellum/pattern_shown_t.hpp"
@@ -31,10 +32,27 @@ class CameraNode {
   void PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index, int count);
   // Counts the frames the camera dropped or refused since the last call (worker thread).
   void CountCameraFaults();
+  // The frame for `request`, checked to show its own pattern (core/decode/frame_check.h):
+  // white and black against the camera's next frame, a Gray code's inverse against its
+  // pattern. A frame that does not is named, counted, never sent, and taken again from the
+  // camera's next frame (three tries); a pattern already sent that its inverse finds mixed
+  // fails the scan (worker thread).
+  Status CheckedCapture(const FrameRequest& request, const std::string& where, cv::Mat* image,
+                        int64_t* exposure);
+  Status Next(const FrameRequest& request, int64_t after, cv::Mat* image, int64_t* exposure);
+  void NameMixed(const std::string& where, const std::string& how);
 
   Node* node_;
   std::unique_ptr<Camera> camera_;  // Worker thread only (after construction).
   int64_t dropped_seen_ = 0, bad_seen_ = 0;  // Worker thread only.
+  // Worker thread only: the scan's frames the checks need (8-bit gray).
+  struct Kept {
+    int64_t scan_id = 0;
+    cv::Mat white, black, pattern;  // pattern: the last Gray-code frame taken, not inverted.
+    PatternSpec pattern_spec;
+    int pattern_index = -1;
+  } kept_;
+  FrameCheckOptions check_;
   std::string preview_error_;                // Worker thread only: the last one logged.
   std::chrono::duration<double> preview_period_;
   // LCM thread only:

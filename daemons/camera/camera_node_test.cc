@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include "daemons/camera/sim_camera.h"
 #include "station/daemon.h"
 #include "station/messages.h"
@@ -124,6 +126,89 @@ TEST_F(CameraNodeTest, BadPatternsAreReportedAndTheNodeGoesOn) {
 
 // What the daemon's flags or config may leave nonsensical is refused by name (the daemon exits 2
 // with it, by RequireValid), not run.
+// The virtual gantry's display shows each pattern two refreshes (33.3 ms at 60 Hz) after
+// vsync, and its camera exposes 10 ms per frame, 30 frames a second. Each PATTERN_SHOWN comes
+// `wait_ms` after the handover, as a projector waiting that long would send it.
+class DisplayLag : public CameraNodeTest {
+ protected:
+  DisplayLag() {
+    sim_.timing.display_lag_refreshes = 2;
+    sim_.timing.frame_ms = 1000.0 / 30;
+    sim_.timing.exposure_ms = 10;
+  }
+  void Show(int64_t scan, int index, double wait_ms) {
+    pattern_shown_t m = Shown(scan, index);
+    m.handed_utime = handed_;
+    m.utime = handed_ + static_cast<int64_t>(1000 * wait_ms);
+    handed_ += 200000;  // The next pattern 200 ms later.
+    bus_.probe().Publish(channel::kPatternShown, &m);
+  }
+  // The frame the fault-free gantry gives for a capture.
+  cv::Mat FaultFree(const capture_t& c) {
+    SimCameraOptions plain = sim_;
+    plain.timing = SimTiming();
+    SimCamera reference(plain);
+    FrameRequest request;
+    request.pattern_index = c.pattern_index;
+    request.projector = sim_.rig.projector.size;
+    EXPECT_TRUE(FromMessage(c.pattern, &request.pattern).ok());
+    cv::Mat frame;
+    int64_t exposure = 0;
+    EXPECT_TRUE(reference.Capture(request, &frame, &exposure).ok());
+    if (c.pattern_index >= 0 && frame.channels() == 3) cv::cvtColor(frame, frame, cv::COLOR_BGR2GRAY);
+    return frame;
+  }
+  int64_t handed_ = NowUtime();
+};
+
+// The projector waits 30 ms, short of the lag: every first frame straddles the change (two
+// thirds this pattern, a third the one before). White and black are each taken again from the
+// camera's next frame, named, and sent as the fault-free gantry gives them; the first Gray-code
+// pattern, which has no check of its own, goes out mixed, and its inverse finds it: the scan
+// fails naming it. Nothing mixed is decoded.
+TEST_F(DisplayLag, AFrameThatMixesTwoPatternsIsNamedAndNeverSent) {
+  Node node("vellum-camera", &bus_.lcm());
+  CameraNode camera(&node, std::make_unique<SimCamera>(sim_), CameraNodeOptions());
+  bus_.Watch("vellum-camera");
+  auto captures = bus_.Record<capture_t>(channel::kCapture);
+  for (int index : {-1, 0, 1, 2, 3}) Show(71, index, 30);
+  ASSERT_TRUE(bus_.WaitForError("vellum-camera", "pattern 2 (") &&
+              bus_.RunUntil([&] { return captures->size() == 4; }))
+      << bus_.Status("vellum-camera").last_error;
+  const std::string error = bus_.Status("vellum-camera").last_error;
+  EXPECT_NE(error.find("scan 71, pattern 3: pattern 2 (gray column bit 0) was taken mixing two "
+                       "patterns"),
+            std::string::npos)
+      << error;
+  EXPECT_NE(error.find("vellum calibrate latency"), std::string::npos) << error;
+  for (int k = 0; k < 3; ++k) {  // The texture, white and black.
+    cv::Mat got;
+    ASSERT_TRUE(FromMessage((*captures)[k].image, &got).ok());
+    EXPECT_EQ(cv::norm(got, FaultFree((*captures)[k]), cv::NORM_INF), 0) << k - 1;
+  }
+  // White, black, and the inverse three times (the last time steady, still not adding up).
+  EXPECT_EQ(node.Counter("frames mixing two patterns"), 4);
+}
+
+// The projector waits the measured lag (34 ms): every frame is the fault-free one, even on a
+// camera that loses every third frame.
+TEST_F(DisplayLag, WithTheLagWaitedForEveryFrameIsTheFaultFreeOne) {
+  sim_.timing.drop_every = 3;
+  Node node("vellum-camera", &bus_.lcm());
+  CameraNode camera(&node, std::make_unique<SimCamera>(sim_), CameraNodeOptions());
+  auto captures = bus_.Record<capture_t>(channel::kCapture);
+  for (int index : {-1, 0, 1, 2, 3, 4, 5}) Show(72, index, 34);
+  ASSERT_TRUE(bus_.RunUntil([&] { return captures->size() == 7; }));
+  for (const capture_t& c : *captures) {
+    cv::Mat got;
+    ASSERT_TRUE(FromMessage(c.image, &got).ok());
+    EXPECT_EQ(cv::norm(got, FaultFree(c), cv::NORM_INF), 0) << c.pattern_index;
+    EXPECT_GT(c.image.utime, c.shown_utime);
+  }
+  EXPECT_EQ(node.Counter("frames mixing two patterns"), 0);
+  EXPECT_GE(node.Counter("frames the camera dropped"), 2);
+}
+
 TEST(CameraNodeOptions, NonsenseIsRefusedByName) {
   CameraNodeOptions o;
   std::string why;

@@ -24,6 +24,14 @@ int main(int argc, char** argv) {
       {"gain", "N", "v4l2: gain; -1 = camera's setting", "-1"},
       {"rig", "FILE", "sim: the rig's calibration (default: the built-in default rig)", ""},
       {"preview-hz", "HZ", "live preview rate on PREVIEW while idle", "2"},
+      {"sim-refresh-hz", "HZ", "sim: the projector's refresh rate", "60"},
+      {"sim-display-lag", "REFRESHES",
+       "sim: the display shows an image this many refreshes after vsync (a fault, for testing "
+       "the handshake)",
+       "0"},
+      {"sim-frame-ms", "MS", "sim: the camera's frame period (0: a frame whenever asked)", "0"},
+      {"sim-exposure-ms", "MS", "sim: each frame's exposure (0: instantaneous)", "0"},
+      {"sim-drop-every", "N", "sim: every Nth frame is lost (0: none; a fault)", "0"},
   };
   return DaemonMain(argc, argv, "vellum-camera",
                     "Captures a frame for each PATTERN_SHOWN (the first whose exposure starts\n"
@@ -43,6 +51,11 @@ int main(int argc, char** argv) {
                         const Status s = SimOptionsFromFlags(flags, &sim.page, &sim.texture,
                                                              &sim.light, &sim.scene, &sim.seed);
                         if (!s.ok()) throw UsageError("--texture " + s.message());
+                        sim.timing.refresh_hz = flags.GetDouble("sim-refresh-hz", 1, 1000);
+                        sim.timing.display_lag_refreshes = flags.GetInt("sim-display-lag", 0, 10);
+                        sim.timing.frame_ms = flags.GetDouble("sim-frame-ms", 0, 10000);
+                        sim.timing.exposure_ms = flags.GetDouble("sim-exposure-ms", 0, 10000);
+                        sim.timing.drop_every = flags.GetInt("sim-drop-every", 0, 1000000);
                         RequireValid(sim);
                         camera = std::make_unique<SimCamera>(sim);
                       } else if (backend == "v4l2") {

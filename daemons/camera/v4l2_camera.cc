@@ -229,6 +229,11 @@ Status V4l2Camera::StartStreaming() {
   return Status::Ok();
 }
 
+bool V4l2Camera::linear() const {
+  return fourcc_ != V4L2_PIX_FMT_YUYV && fourcc_ != V4L2_PIX_FMT_MJPEG &&
+         fourcc_ != V4L2_PIX_FMT_BGR24;
+}
+
 std::string V4l2Camera::Describe() const {
   std::string text = "v4l2 camera " + options_.device + " '" + card_ + "': " + format_why_;
   if (!controls_.empty()) text += "; " + controls_;

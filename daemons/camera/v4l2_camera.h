@@ -52,6 +52,9 @@ class V4l2Camera : public Camera {
   // error flag, short or undecodable), in all.
   int64_t dropped_frames() const override { return dropped_; }
   int64_t bad_frames() const override { return bad_; }
+  // The raw and monochrome formats (Bayer, GREY, Y10-Y16); not YUYV, MJPEG or BGR3, which a
+  // camera's processing gamma-encodes.
+  bool linear() const override;
 
  private:
   Status Negotiate();

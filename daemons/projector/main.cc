@@ -22,7 +22,11 @@ int main(int argc, char** argv) {
       {"display", "N", "SDL display index of the projector", "0"},
       {"fullscreen", "BOOL", "full-screen window on that display", "true"},
       {"flip", "AXIS", "mirror flip: none, horizontal, vertical or both", "none"},
-      {"settle-ms", "MS", "wait after vsync before PATTERN_SHOWN", "30"},
+      {"settle-ms", "MS", "wait after vsync and the display's lag before PATTERN_SHOWN", "30"},
+      {"display-lag-ms", "MS",
+       "the display's lag from vsync to the image on the page, as measured (0: not measured; "
+       "the settle time must then cover it)",
+       "0"},
       {"capture-timeout", "S", "fail the scan when a CAPTURE takes longer", "5"},
       {"lights", "FILE",
        "the station's extra lights (the file vellum-lights reads): each scan takes a frame under "
@@ -56,6 +60,8 @@ int main(int argc, char** argv) {
         }
         options.patterns = PatternOptionsFromFlags(flags, size);
         options.settle = std::chrono::milliseconds(flags.GetInt("settle-ms", 0, 10000));
+        options.display_lag = std::chrono::microseconds(
+            static_cast<int64_t>(1000 * flags.GetDouble("display-lag-ms", 0, 1000)));
         options.capture_timeout =
             std::chrono::duration<double>(flags.GetDouble("capture-timeout", 0.1, 600));
         if (!flags.Get("lights").empty()) {

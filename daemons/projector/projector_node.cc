@@ -12,8 +12,9 @@
 namespace vellum::station {
 
 bool ProjectorNodeOptions::Check(std::string* why) const {
-  if (settle.count() < 0 || !(capture_timeout.count() > 0) || !(light_timeout.count() > 0)) {
-    *why = "projector: settle must be >= 0, capture_timeout and light_timeout > 0";
+  if (settle.count() < 0 || display_lag.count() < 0 || !(capture_timeout.count() > 0) ||
+      !(light_timeout.count() > 0)) {
+    *why = "projector: settle and display_lag must be >= 0, capture_timeout and light_timeout > 0";
     return false;
   }
   return patterns.Check(why) && (!calibration || calibration->Check(why));
@@ -183,8 +184,10 @@ void ProjectorNode::ShowPattern(int index) {
   const bool pattern = index >= 0 && index < Patterns();
   if (pattern) spec = sequence_.patterns[index];
   projector_->Show(pattern ? RenderPattern(spec, sequence_.projector_size) : black_);
-  std::this_thread::sleep_for(options_.settle);
+  const int64_t handed = NowUtime();
+  std::this_thread::sleep_for(options_.display_lag + options_.settle);
   pattern_shown_t m{};
+  m.handed_utime = handed;
   m.scan_id = scan_id_;
   m.session = session_;
   m.pattern_index = index;

@@ -33,7 +33,11 @@ struct ProjectorNodeOptions {
   PatternOptions patterns;                 // The sequence (its projector_size: the screen's).
   std::optional<Calibration> calibration;  // Published as CALIBRATION with every scan.
   std::string calibration_source;          // Where it came from (the message says).
-  std::chrono::milliseconds settle{30};    // Wait after the image is on screen.
+  // The display's lag from vsync to the image on the page (measured; 0: not measured), and
+  // the wait after it: PATTERN_SHOWN goes out vsync + display_lag + settle after the handover,
+  // and the camera takes the first frame exposed after that.
+  std::chrono::microseconds display_lag{0};
+  std::chrono::milliseconds settle{30};
   std::chrono::duration<double> capture_timeout{5.0};  // Longest wait for each CAPTURE.
   // The station's extra lights, taken after the patterns in this order (names and directions;
   // no images). Empty: none.
