@@ -413,6 +413,102 @@ void StationTest::RunFullScan(const std::string& rig, int patterns) {
 
 TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) { RunFullScan(kRig, 54); }
 
+// The virtual gantry's faults (issue: the real gantry): its display shows each image two
+// refreshes after vsync (33.3 ms at 60 Hz), its camera exposes 10 ms of each 33.3 ms frame,
+// starting as early as it may (so a first frame straddles the change), and loses every
+// twentieth frame.
+const std::vector<std::string> kLaggingGantry = {"--sim-display-lag", "2",  "--sim-frame-ms",
+                                                 "33.333",            "--sim-exposure-ms", "10",
+                                                 "--sim-drop-every",  "20"};
+
+// With the lag waited for (--display-lag-ms 34: two refreshes and the rounding up), a scan on
+// the faulty gantry is the fault-free one: every frame byte for byte, the restored page pixel
+// for pixel (its master's metadata holds the scan's own times), no frame found mixed.
+TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne) {
+  Process* camera = Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--display-lag-ms", "34",
+         "--capture-timeout", kSimCaptureTimeout},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  auto scan = [&](const std::string& folio) {
+    std::string out;
+    EXPECT_EQ(RunTool({"scan", "--url", url_, "--folio", folio, "--timeout", "300"}, &out), 0) << out;
+    const size_t arrow = out.find("-> ");
+    EXPECT_NE(arrow, std::string::npos) << out;
+    if (arrow == std::string::npos) return std::string();
+    const std::string results = out.substr(arrow + 3);
+    return fs::path(results.substr(0, results.find('\n'))).parent_path().string();
+  };
+  const std::string fault_free = scan("1");
+  ASSERT_FALSE(fault_free.empty());
+  camera->Kill();
+  camera->Wait(30);
+  Start(Daemon("vellum-camera"), [] {
+    std::vector<std::string> flags = {"--backend", "sim", "--rig", kRig, "--page", "curl"};
+    flags.insert(flags.end(), kLaggingGantry.begin(), kLaggingGantry.end());
+    return flags;
+  }());
+  status_t camera_status{};
+  Listener<status_t> on_status(*lcm_, "STATUS_CAMERA", [&](const status_t& m) { camera_status = m; });
+  WaitForHeartbeats({"STATUS_CAMERA"});
+  const std::string faulty = scan("2");
+  ASSERT_FALSE(faulty.empty());
+  Scan a, b;
+  ASSERT_TRUE(ReadScan(fault_free + "/raw", &a).ok());
+  ASSERT_TRUE(ReadScan(faulty + "/raw", &b).ok());
+  ASSERT_EQ(a.frames.size(), b.frames.size());
+  for (size_t k = 0; k < a.frames.size(); ++k) {
+    EXPECT_EQ(cv::norm(a.frames[k], b.frames[k], cv::NORM_INF), 0) << "frame " << k;
+  }
+  EXPECT_EQ(cv::norm(a.texture, b.texture, cv::NORM_INF), 0);
+  const cv::Mat page_a = cv::imread(fault_free + "/results/restored.tif", cv::IMREAD_UNCHANGED);
+  const cv::Mat page_b = cv::imread(faulty + "/results/restored.tif", cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(page_a.empty());
+  ASSERT_EQ(page_a.size(), page_b.size());
+  EXPECT_EQ(cv::norm(page_a, page_b, cv::NORM_INF), 0);
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return station::StatusCounter(camera_status, "frames the camera dropped") > 0;
+  }));
+  EXPECT_EQ(station::StatusCounter(camera_status, "frames mixing two patterns"), 0);
+}
+
+// Without it (the settle's 30 ms alone, short of the lag), the first frame of each pattern
+// straddles the change: the camera names each mixed frame and takes white and black again, and
+// when the first Gray-code pair shows its pattern was sent mixed, the scan fails saying so.
+// Nothing is restored from it.
+TEST_F(StationTest, WithoutTheDisplayLagMixedFramesAreNamedAndTheScanFailsRestoringNothing) {
+  std::vector<std::string> camera = {"--backend", "sim", "--rig", kRig, "--page", "curl"};
+  camera.insert(camera.end(), kLaggingGantry.begin(), kLaggingGantry.end());
+  Process* camera_process = Start(Daemon("vellum-camera"), camera);
+  Start(Daemon("vellum-projector"),
+        {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", "5"},
+        {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  std::string out;
+  EXPECT_NE(RunTool({"scan", "--url", url_, "--timeout", "120"}, &out), 0) << out;
+  // The first pair: pattern 2 (its pattern, sent) and 3 (its inverse, taken again).
+  EXPECT_NE(out.find("pattern 3: pattern 2 (gray column bit 0) was taken mixing two patterns"),
+            std::string::npos)
+      << out;
+  const std::string log = camera_process->Output();
+  EXPECT_NE(log.find("pattern 0: the frame changed before the next"), std::string::npos) << log;
+  EXPECT_NE(log.find("pattern 1: the frame changed before the next"), std::string::npos) << log;
+  EXPECT_NE(log.find("pattern 3: the frame does not add up with its pattern"), std::string::npos)
+      << log;
+  EXPECT_EQ(out.find("-> "), std::string::npos) << out;
+  for (const auto& entry : fs::recursive_directory_iterator(dir_ + "/scans")) {
+    EXPECT_NE(entry.path().filename(), "restored.tif") << entry.path();
+  }
+}
+
 // A station with extra lights (three raking lamps and a UV lamp, switched by
 // vellum-lights' sim backend): after the patterns the projector asks for each light and the
 // camera takes its frame; the scan's folder holds them (light_<name>.png, named in scan.yaml

@@ -50,7 +50,8 @@ Status SimCamera::Capture(const FrameRequest& request, cv::Mat* image, int64_t* 
     *image = Render(request, seed);
     return Status::Ok();
   }
-  if (request.pattern_index != current_.pattern_index || request.pattern_index < 0) {
+  const bool again = request.pattern_index == current_.pattern_index && request.pattern_index >= 0;
+  if (!again) {
     previous_ = current_;
     if (request.pattern_index <= 0) {  // The texture and white follow the projector's black.
       previous_ = request;
@@ -60,10 +61,12 @@ Status SimCamera::Capture(const FrameRequest& request, cv::Mat* image, int64_t* 
     }
     current_ = request;
   }
-  // The first frame starting after the pattern was shown, on the camera's frame clock; a lost
-  // frame means the next one.
+  // The first frame for a pattern starts just after it was shown (the camera's phase at its
+  // worst, whatever real time the rendering took); the next one asked for the same pattern a
+  // frame period after the last; a lost frame means the one after it.
   const auto period = static_cast<int64_t>(1000 * t.frame_ms);
-  int64_t start = std::max(request.shown_utime + 1, last_frame_utime_ + period);
+  int64_t start = request.shown_utime + 1;
+  if (again) start = std::max(start, last_frame_utime_ + period);
   ++frames_;
   if (t.drop_every > 0 && frames_ % t.drop_every == 0) {
     ++dropped_;
