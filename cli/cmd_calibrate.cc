@@ -203,7 +203,9 @@ int RunCalibrate(const std::vector<std::string>& args) {
       "       vellum calibrate solve --board COLSxROWS --square MM --table DIR --out FILE DIR...\n"
       "       vellum calibrate flatfield --scan DIR --calibration FILE --albedo A --out FILE\n"
       "       vellum calibrate studio --scan DIR --calibration FILE --lamps X,Y,Z;... --out FILE\n"
-      "Run 'vellum calibrate STEP --help' (capture, solve, flatfield, studio) for details.\n";
+      "       vellum calibrate latency [--url URL]   the display's lag, through the station\n"
+      "Run 'vellum calibrate STEP --help' (capture, solve, flatfield, studio, latency) for "
+      "details.\n";
   if (args.empty() || args[0] == "--help") {
     std::fputs(usage.c_str(), args.empty() ? stderr : stdout);
     return args.empty() ? 2 : 0;
@@ -213,6 +215,7 @@ int RunCalibrate(const std::vector<std::string>& args) {
   if (args[0] == "solve") return RunCalibrateSolve(rest);
   if (args[0] == "flatfield") return RunCalibrateFlatField(rest);
   if (args[0] == "studio") return RunCalibrateStudio(rest);
+  if (args[0] == "latency") return RunCalibrateLatency(rest);
   std::fprintf(stderr, "vellum calibrate: unknown step '%s'\n%s", args[0].c_str(), usage.c_str());
   return 2;
 }

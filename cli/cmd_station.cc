@@ -25,6 +25,10 @@
 #include "station/node.h"
 #include "station/scan_log.h"
 #include "station/scan_store.h"
+#include "core/patterns/display_lag.h"
+#include "vellum/latency_probe_t.hpp"
+#include "vellum/latency_request_t.hpp"
+#include "vellum/latency_seen_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/restored_t.hpp"
 #include "vellum/scan_request_t.hpp"
@@ -419,6 +423,86 @@ int RunCalibrateCapture(const std::vector<std::string>& args) {
     return 1;
   }
   std::printf("pose recorded: %d captures -> %s\n", set.Received(), out.c_str());
+  return 0;
+}
+
+int RunCalibrateLatency(const std::vector<std::string>& args) {
+  std::vector<Flags::Spec> specs = BusSpecs();
+  specs.push_back({"flashes", "N", "flashes, white and black in turn", "12"});
+  specs.push_back({"timeout", "S", "give up after this long", "60"});
+  Flags flags(
+      "vellum calibrate latency",
+      "Measures the display's lag: from the projector handing an image to its display (vsync\n"
+      "passed) to the camera seeing it on the page. The projector flashes white and black;\n"
+      "the camera says when each frame it took started and what it saw. Prints the lag in\n"
+      "milliseconds and refreshes, with its spread. The projector waits it from now on\n"
+      "(vellum-projector --measure-lag does this at start-up); on a station without a camera\n"
+      "at start-up, put it in vellum-projector.yaml as display-lag-ms. Point the camera at\n"
+      "the projector's light (the table, a white card) and fix its exposure.",
+      specs);
+  if (!flags.Parse(args)) return 0;
+  const int flashes = flags.GetInt("flashes", 2, 100);
+  const double timeout = flags.GetDouble("timeout", 1, 3600);
+  Node node("vellum-calibrate", flags.Get("url"));
+  station::SetStationFromFlags(flags, &node);
+  std::set<std::string> heard;
+  for (const char* process : {"vellum-projector", "vellum-camera"}) {
+    node.Subscribe<status_t>(station::StatusChannel(process),
+                             [&heard](const status_t& m) { heard.insert(m.process); });
+  }
+  if (!Follow(node, std::min(timeout, 10.0), [&] { return heard.size() == 2; })) {
+    std::fprintf(stderr,
+                 "vellum calibrate latency: no heartbeat from %s within 10 s: are they running "
+                 "and on this bus?\n",
+                 heard.count("vellum-projector") ? "vellum-camera" : "vellum-projector");
+    return 1;
+  }
+  latency_request_t request{};
+  request.session = station::NewSession();
+  request.flashes = flashes;
+  std::vector<FlashFrames> seen(static_cast<size_t>(flashes));
+  int answered = 0;
+  double refresh_hz = 0;
+  std::string failure;
+  node.Subscribe<latency_probe_t>(station::channel::kLatencyProbe, [&](const latency_probe_t& m) {
+    if (m.session != request.session || m.index < 0 || m.index >= flashes) return;
+    seen[m.index].handed_us = m.handed_utime;
+    seen[m.index].white = m.white;
+    refresh_hz = m.refresh_hz;
+  });
+  node.Subscribe<latency_seen_t>(station::channel::kLatencySeen, [&](const latency_seen_t& m) {
+    if (m.session != request.session || m.index < 0 || m.index >= flashes) return;
+    if (!m.error.empty()) failure = "the camera: " + m.error;
+    FlashFrames& f = seen[m.index];
+    f.exposure_us = m.exposure_us;
+    f.start_us = m.start_utime;
+    f.level.assign(m.level.begin(), m.level.end());
+    ++answered;
+  });
+  node.Subscribe<status_t>(station::StatusChannel("vellum-projector"), [&](const status_t& m) {
+    if (m.last_error.find("display lag") != std::string::npos &&
+        m.last_error_utime >= request.utime) {
+      failure = "vellum-projector: " + m.last_error;
+    }
+  });
+  node.Publish(station::channel::kLatencyRequest, &request);
+  if (!Follow(node, timeout, [&] { return answered == flashes || !failure.empty(); })) {
+    std::fprintf(stderr, "vellum calibrate latency: %d of %d flashes answered within %d s\n",
+                 answered, flashes, static_cast<int>(timeout));
+    return 1;
+  }
+  if (!failure.empty()) {
+    std::fprintf(stderr, "vellum calibrate latency: %s\n", failure.c_str());
+    return 1;
+  }
+  const DisplayLag lag = EstimateDisplayLag(seen, refresh_hz);
+  if (!lag.status.ok()) {
+    std::fprintf(stderr, "vellum calibrate latency: %s\n", lag.status.message().c_str());
+    return 1;
+  }
+  std::printf("%s\n", lag.Describe().c_str());
+  std::printf("vellum-projector.yaml: display-lag-ms: %.1f (the projector waits it from now on)\n",
+              lag.wait_ms);
   return 0;
 }
 

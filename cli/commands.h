@@ -23,5 +23,6 @@ int RunExport(const std::vector<std::string>& args);
 int RunImport(const std::vector<std::string>& args);
 int RunCalibrate(const std::vector<std::string>& args);
 int RunCalibrateCapture(const std::vector<std::string>& args);
+int RunCalibrateLatency(const std::vector<std::string>& args);
 
 }  // namespace vellum

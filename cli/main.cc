@@ -25,7 +25,8 @@ constexpr char kUsage[] =
     "  iiif       write IIIF manifests of restored scans, for an image server\n"
     "  export     write a recorded scan log as a scan directory (vellum export LOG DIR)\n"
     "  import     write a scan directory as a scan log (vellum import DIR LOG)\n"
-    "  calibrate  calibrate camera, projector and table from board poses (capture | solve)\n"
+    "  calibrate  calibrate camera, projector and table from board poses, the display's lag\n"
+    "             (capture | solve | flatfield | studio | latency)\n"
     "\n"
     "Run 'vellum COMMAND --help' for a command's flags.\n";
 

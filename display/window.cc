@@ -86,6 +86,12 @@ void Window::Show(const cv::Mat& image, Flip flip) {
   SDL_RenderPresent(renderer_);
 }
 
+double Window::refresh_hz() const {
+  SDL_DisplayMode mode{};
+  if (SDL_GetWindowDisplayMode(window_, &mode) != 0) return 0;
+  return mode.refresh_rate > 0 ? mode.refresh_rate : 0;
+}
+
 cv::Mat Window::Screen() const {
   int w = 0, h = 0;
   if (SDL_GetRendererOutputSize(renderer_, &w, &h) != 0 || w <= 0 || h <= 0) return cv::Mat();

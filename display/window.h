@@ -35,6 +35,9 @@ class Window {
   Window& operator=(const Window&) = delete;
 
   cv::Size size() const { return size_; }
+  // The refresh rate of the display the window is on (Hz); 0 when SDL does not know it (the
+  // offscreen and dummy drivers).
+  double refresh_hz() const;
   // Shows an 8-bit gray or BGR image of size(), flipped as asked.
   void Show(const cv::Mat& image, Flip flip = Flip::kNone);
   // What is on screen now, as BGR (read back from the renderer).

@@ -59,6 +59,11 @@ inline constexpr char kResend[] = "RESEND";
 inline constexpr char kPreview[] = "PREVIEW";  // Camera preview, at most 640 px wide.
 // The live preview's centre at the camera's full resolution (320 x 240 at most), for focusing.
 inline constexpr char kPreviewFocus[] = "PREVIEW_FOCUS";
+// The display's lag measured (`vellum calibrate latency`, the projector at start-up): the
+// projector flashes, the camera says when it saw each flash.
+inline constexpr char kLatencyRequest[] = "LATENCY_REQUEST";
+inline constexpr char kLatencyProbe[] = "LATENCY_PROBE";
+inline constexpr char kLatencySeen[] = "LATENCY_SEEN";
 inline constexpr char kStatusPrefix[] = "STATUS_";  // + the process name, upper case
 }  // namespace channel
 

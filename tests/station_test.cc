@@ -476,6 +476,54 @@ TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne)
   EXPECT_EQ(station::StatusCounter(camera_status, "frames mixing two patterns"), 0);
 }
 
+// The display's lag measured as the virtual gantry has it, 3 refreshes and then 1 at 60 Hz
+// (50 and 16.7 ms; frames of 10 ms every 33.3): by the projector at start-up, which then waits
+// it (a scan on the lagging gantry finds no mixed frame and restores, where the settle's 30 ms
+// alone would not do), and by `vellum calibrate latency`, whose measurement the projector then
+// waits.
+TEST_F(StationTest, TheDisplayLagIsMeasuredAsTheGantryHasItAndTheHandshakeWaitsIt) {
+  auto start_camera = [&](int refreshes) {
+    std::vector<std::string> flags = {"--backend", "sim", "--rig", kRig, "--page", "curl",
+                                      "--sim-display-lag", std::to_string(refreshes),
+                                      "--sim-frame-ms", "33.333", "--sim-exposure-ms", "10"};
+    return Start(Daemon("vellum-camera"), flags);
+  };
+  Process* camera = start_camera(3);
+  Process* projector =
+      Start(Daemon("vellum-projector"),
+            {"--calibration", kRig, "--fullscreen", "false", "--measure-lag", "true",
+             "--refresh-hz", "60", "--capture-timeout", kSimCaptureTimeout},
+            {"SDL_VIDEODRIVER=offscreen"});
+  StartProcessing();
+  std::vector<std::string> all = kProcessingStatus;
+  all.push_back("STATUS_CAMERA");
+  all.push_back("STATUS_PROJECTOR");
+  WaitForHeartbeats(all);
+  ASSERT_TRUE(HandleUntil(*lcm_, 60, [&] {
+    return projector->Output().find("display lag") != std::string::npos;
+  })) << projector->Output();
+  EXPECT_NE(projector->Output().find("display lag 50.0 ms (3.00 refreshes at 60 Hz): median of"),
+            std::string::npos)
+      << projector->Output();
+  std::string out;
+  ASSERT_EQ(RunTool({"scan", "--url", url_, "--timeout", "300"}, &out), 0) << out;
+  EXPECT_NE(out.find("-> "), std::string::npos) << out;
+  EXPECT_EQ(camera->Output().find("mixes two patterns"), std::string::npos) << camera->Output();
+
+  camera->Kill();
+  camera->Wait(30);
+  camera = start_camera(1);
+  WaitForHeartbeats({"STATUS_CAMERA"});
+  ASSERT_EQ(RunTool({"calibrate", "latency", "--url", url_}, &out), 0) << out;
+  std::printf("[latency] %s", out.c_str());
+  EXPECT_NE(out.find("display lag 16.7 ms (1.00 refreshes at 60 Hz): median of"), std::string::npos)
+      << out;
+  EXPECT_NE(out.find("display-lag-ms: 17.7"), std::string::npos) << out;
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return projector->Output().find("display lag 16.7 ms") != std::string::npos;
+  })) << projector->Output();
+}
+
 // Without it (the settle's 30 ms alone, short of the lag), the first frame of each pattern
 // straddles the change: the camera names each mixed frame and takes white and black again, and
 // when the first Gray-code pair shows its pattern was sent mixed, the scan fails saying so.

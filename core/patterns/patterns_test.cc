@@ -5,6 +5,7 @@
 #include <limits>
 #include <set>
 
+#include "core/patterns/display_lag.h"
 #include "core/patterns/scan.h"
 
 namespace vellum {
@@ -237,6 +238,57 @@ TEST(Patterns, AnAbsurdProjectorIsRefusedAtOnce) {
   }
   EXPECT_FALSE(seq.Check(&why));
   EXPECT_NE(why.find("period of 2000000000 px is out of range"), std::string::npos) << why;
+}
+
+// Flashes on a display whose image reaches the page `lag_ms` after vsync, seen by a linear
+// camera exposing `exposure_ms` of each 33.3 ms frame, its frames' phase against the flashes
+// drifting from flash to flash (as two free-running clocks do): white 200, black 20.
+std::vector<FlashFrames> Flashes(double lag_ms, double exposure_ms, int count) {
+  std::vector<FlashFrames> flashes;
+  const double period = 1000.0 / 30;
+  for (int i = 0; i < count; ++i) {
+    FlashFrames f;
+    f.handed_us = 1000000LL * (i + 1);
+    f.white = i % 2 == 0;
+    f.exposure_us = static_cast<int64_t>(1000 * exposure_ms);
+    const double phase = period * ((i * 5) % 12) / 12;
+    for (double t = -phase; t < 150; t += period) {
+      // The share of the exposure after the change, as the camera integrates it.
+      const double share = exposure_ms > 0 ? std::clamp((t + exposure_ms - lag_ms) / exposure_ms, 0.0, 1.0)
+                                           : (t >= lag_ms ? 1.0 : 0.0);
+      const double seen = f.white ? share : 1 - share;
+      f.start_us.push_back(f.handed_us + static_cast<int64_t>(1000 * t));
+      f.level.push_back(20 + 180 * seen);
+    }
+    flashes.push_back(f);
+  }
+  return flashes;
+}
+
+TEST(DisplayLag, IsReadOffTheFramesTheChangeFellWithinInMillisecondsAndRefreshes) {
+  for (double lag : {0.0, 16.7, 33.3, 50.0}) {
+    const DisplayLag d = EstimateDisplayLag(Flashes(lag, 10, 12), 60);
+    ASSERT_TRUE(d.status.ok()) << d.status.message();
+    EXPECT_NEAR(d.median_ms, lag, 0.01) << d.Describe();
+    EXPECT_NEAR(d.refreshes(), lag * 60 / 1000, 0.001);
+    EXPECT_GE(d.exact, 3) << d.Describe();  // The change falls within 10 ms of each 33.3.
+    EXPECT_NEAR(d.wait_ms, lag + 1, 0.01);  // The slowest flash and a millisecond.
+    EXPECT_EQ(d.seen, 12);
+  }
+  // Without the exposure's length, frames before and after the change bound it: the wait
+  // covers the lag.
+  const DisplayLag bounds = EstimateDisplayLag(Flashes(33.3, 0, 8), 60);
+  ASSERT_TRUE(bounds.status.ok()) << bounds.status.message();
+  EXPECT_EQ(bounds.exact, 0);
+  EXPECT_GE(bounds.wait_ms, 33.3);
+  EXPECT_LE(bounds.wait_ms, 33.3 + 1000.0 / 30 + 1);
+  EXPECT_NE(bounds.Describe().find("at most"), std::string::npos) << bounds.Describe();
+  // A camera that does not see the projector: refused, saying so.
+  std::vector<FlashFrames> dark = Flashes(33.3, 10, 8);
+  for (FlashFrames& f : dark) std::fill(f.level.begin(), f.level.end(), 21.0);
+  const DisplayLag none = EstimateDisplayLag(dark, 60);
+  ASSERT_FALSE(none.status.ok());
+  EXPECT_NE(none.status.message().find("the camera saw no flash"), std::string::npos);
 }
 
 }  // namespace

@@ -44,6 +44,9 @@ class Camera {
   // monochrome sensor's are, a webcam's gamma-encoded YUYV or MJPEG are not. A Gray-code pair
   // is checked to add up (core/decode/frame_check.h) only on a linear camera.
   virtual bool linear() const { return true; }
+  // Its frame period and each frame's exposure (microseconds); 0 when not known.
+  virtual int64_t frame_period_us() const { return 0; }
+  virtual int64_t exposure_us() const { return 0; }
   virtual int64_t bad_frames() const { return 0; }
 };
 

@@ -5,6 +5,7 @@
 #include "core/outline/outline.h"
 #include "station/messages.h"
 #include "vellum/capture_t.hpp"
+#include "vellum/latency_seen_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -44,6 +45,10 @@ CameraNode::CameraNode(Node* node, std::unique_ptr<Camera> camera, const CameraN
     busy_until_ = node_->Now() + std::chrono::seconds(2);
     node_->Post([this, m] { OnShown(m); }, "a PATTERN_SHOWN");
   });
+  node->Subscribe<latency_probe_t>(channel::kLatencyProbe, [this](const latency_probe_t& m) {
+    busy_until_ = node_->Now() + std::chrono::seconds(2);
+    node_->Post([this, m] { OnProbe(m); }, "a LATENCY_PROBE");
+  });
 }
 
 void CameraNode::Tick() {
@@ -82,6 +87,38 @@ void CameraNode::CountCameraFaults() {
   if (bad > bad_seen_) node_->Count("frames the camera flagged bad", bad - bad_seen_);
   dropped_seen_ = dropped;
   bad_seen_ = bad;
+}
+
+void CameraNode::OnProbe(const latency_probe_t& m) {
+  latency_seen_t seen{};
+  seen.session = m.session;
+  seen.index = m.index;
+  seen.exposure_us = static_cast<int32_t>(camera_->exposure_us());
+  FrameRequest request;
+  // Flash k as pattern k (the first, white, follows the projector's black).
+  request.pattern_index = m.index;
+  request.pattern.kind = m.white ? PatternKind::kWhite : PatternKind::kBlack;
+  request.projector = cv::Size(m.projector_width, m.projector_height);
+  request.handed_utime = m.handed_utime;
+  // From up to a frame period before the handover (a frame of the old level to start with),
+  // at a phase that differs from flash to flash: where a camera's frames fall against its
+  // display drifts anyway; a camera that only gives frames from now on gives those.
+  const int64_t period = camera_->frame_period_us();
+  request.shown_utime = m.handed_utime - period * ((m.index * 5) % 12) / 12;
+  const int64_t end = m.handed_utime + std::clamp(m.window_us, 0, 2000000);
+  cv::Mat frame;
+  int64_t start = 0;
+  Status s = camera_->Capture(request, &frame, &start);
+  while (s.ok()) {
+    seen.start_utime.push_back(start);
+    seen.level.push_back(static_cast<float>(cv::mean(Gray(EightBit(frame)))[0]));
+    if (start > end || seen.start_utime.size() >= 60) break;
+    s = Next(request, start, &frame, &start);
+  }
+  CountCameraFaults();
+  if (!s.ok()) seen.error = s.message();
+  seen.count = static_cast<int32_t>(seen.start_utime.size());
+  node_->Publish(channel::kLatencySeen, &seen);
 }
 
 Status CameraNode::Next(const FrameRequest& request, int64_t after, cv::Mat* image,

@@ -10,6 +10,7 @@
 #include "core/decode/frame_check.h"
 #include "daemons/camera/camera.h"
 #include "station/node.h"
+#include "vellum/latency_probe_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 
 namespace vellum::station {
@@ -29,6 +30,9 @@ class CameraNode {
 
  private:
   void OnShown(const pattern_shown_t& m);  // Worker thread.
+  // The frames around a flash of the display-lag measurement, answered on LATENCY_SEEN
+  // (worker thread).
+  void OnProbe(const latency_probe_t& m);
   void PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index, int count);
   // Counts the frames the camera dropped or refused since the last call (worker thread).
   void CountCameraFaults();

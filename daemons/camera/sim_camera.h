@@ -49,6 +49,12 @@ class SimCamera : public Camera {
   // the display has not yet changed, a blend of the two where the change falls within it.
   Status Capture(const FrameRequest& request, cv::Mat* image, int64_t* exposure_utime) override;
   int64_t dropped_frames() const override { return dropped_; }
+  int64_t frame_period_us() const override {
+    return static_cast<int64_t>(1000 * options_.timing.frame_ms);
+  }
+  int64_t exposure_us() const override {
+    return static_cast<int64_t>(1000 * options_.timing.exposure_ms);
+  }
   Status Preview(cv::Mat* image, int64_t* exposure_utime) override;
 
  private:

@@ -151,6 +151,7 @@ Status V4l2Camera::SetControl(uint32_t id, int value, const char* name, int* rea
 Status V4l2Camera::SwitchOffAutomatics() {
   refusal_.clear();
   controls_.clear();
+  exposure_us_ = 0;
   int value = 0;
   auto refuse = [&](const std::string& why) {
     if (refusal_.empty()) refusal_ = why;
@@ -193,6 +194,7 @@ Status V4l2Camera::SwitchOffAutomatics() {
       if (device_->Ioctl(VIDIOC_G_CTRL, &g) < 0) continue;
       value = g.value;
     }
+    if (id == V4L2_CID_EXPOSURE_ABSOLUTE) exposure_us_ = 100LL * value;
     controls_ += std::string(controls_.empty() ? "" : ", ") + set.name + " " + std::to_string(value);
     if (set.asked >= 0 && value != set.asked) {
       controls_ += " (asked " + std::to_string(set.asked) + ": the camera's nearest)";

@@ -55,6 +55,10 @@ class V4l2Camera : public Camera {
   // The raw and monochrome formats (Bayer, GREY, Y10-Y16); not YUYV, MJPEG or BGR3, which a
   // camera's processing gamma-encodes.
   bool linear() const override;
+  int64_t frame_period_us() const override { return frame_period_us_; }
+  // V4L2_CID_EXPOSURE_ABSOLUTE's value (100 us units) as read back; 0 where the camera has
+  // only its own units.
+  int64_t exposure_us() const override { return exposure_us_; }
 
  private:
   Status Negotiate();
@@ -77,6 +81,7 @@ class V4l2Camera : public Camera {
   uint32_t fourcc_ = 0;
   uint32_t bytes_per_line_ = 0;
   int64_t frame_period_us_ = 0;
+  int64_t exposure_us_ = 0;
   struct Buffer {
     void* start = nullptr;
     size_t length = 0;

@@ -27,6 +27,13 @@ int main(int argc, char** argv) {
        "the display's lag from vsync to the image on the page, as measured (0: not measured; "
        "the settle time must then cover it)",
        "0"},
+      {"measure-lag", "BOOL",
+       "measure the display's lag at start-up (once the camera is heard, about a second) and "
+       "wait that instead of display-lag-ms",
+       "false"},
+      {"lag-flashes", "N", "flashes for the display's lag (white and black in turn)", "12"},
+      {"refresh-hz", "HZ", "the display's refresh rate where SDL does not know it (0: ask SDL)",
+       "0"},
       {"capture-timeout", "S", "fail the scan when a CAPTURE takes longer", "5"},
       {"lights", "FILE",
        "the station's extra lights (the file vellum-lights reads): each scan takes a frame under "
@@ -62,6 +69,9 @@ int main(int argc, char** argv) {
         options.settle = std::chrono::milliseconds(flags.GetInt("settle-ms", 0, 10000));
         options.display_lag = std::chrono::microseconds(
             static_cast<int64_t>(1000 * flags.GetDouble("display-lag-ms", 0, 1000)));
+        options.measure_lag = flags.GetBool("measure-lag");
+        options.lag_flashes = flags.GetInt("lag-flashes", 2, 100);
+        options.refresh_hz = flags.GetDouble("refresh-hz", 0, 1000);
         options.capture_timeout =
             std::chrono::duration<double>(flags.GetDouble("capture-timeout", 0.1, 600));
         if (!flags.Get("lights").empty()) {

@@ -16,6 +16,8 @@ class Projector {
   virtual void Show(const cv::Mat& gray) = 0;
   // Handles its window's events; false once it was closed.
   virtual bool Poll() = 0;
+  // Its display's refresh rate (Hz); 0 when not known.
+  virtual double refresh_hz() const { return 0; }
 };
 
 }  // namespace vellum::station

@@ -6,6 +6,7 @@
 #include "core/common/text.h"
 #include "station/messages.h"
 #include "vellum/calibration_t.hpp"
+#include "vellum/latency_probe_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_started_t.hpp"
 
@@ -36,6 +37,12 @@ ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
   node->Subscribe<light_t>(channel::kLightOn, [this](const light_t& m) { OnLightOn(m); });
   node->Subscribe<status_t>(StatusChannel("vellum-decoder"),
                             [this](const status_t& m) { OnDecoderStatus(m); });
+  node->Subscribe<status_t>(StatusChannel("vellum-camera"),
+                            [this](const status_t&) { camera_heard_ = true; });
+  node->Subscribe<latency_request_t>(channel::kLatencyRequest,
+                                     [this](const latency_request_t& m) { OnLatencyRequest(m); });
+  node->Subscribe<latency_seen_t>(channel::kLatencySeen,
+                                  [this](const latency_seen_t& m) { OnLatencySeen(m); });
   std::string lights;
   for (const ScanLight& l : options_.lights) lights += (lights.empty() ? "" : ", ") + l.name;
   node->Log("projector " + SizeText(projector_->size()) + ", " +
@@ -45,6 +52,15 @@ ProjectorNode::ProjectorNode(Node* node, std::unique_ptr<Projector> projector,
 
 void ProjectorNode::Tick() {
   if (!projector_->Poll()) node_->Stop();
+  if (options_.measure_lag && !lag_measured_ && camera_heard_ && latency_.session == 0 &&
+      scan_id_ == 0) {
+    lag_measured_ = true;  // Once: a failure keeps the configured lag.
+    StartLatency(NewSession(), options_.lag_flashes);
+  }
+  if (latency_.session != 0 && node_->Now() > latency_.deadline) {
+    EndLatency("no LATENCY_SEEN for flash " + std::to_string(latency_.index) +
+               " within 3 s (is vellum-camera running and on the same bus?)");
+  }
   if (scan_id_ == 0) return;
   const auto waited = node_->Now() - shown_at_;
   if (awaiting_light_ && waited > options_.light_timeout) {
@@ -74,6 +90,10 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
     node_->Error("scan " + std::to_string(m.scan_id) + " refused: scan " +
                      std::to_string(scan_id_) + " is in progress",
                  m.scan_id);
+    return;
+  }
+  if (latency_.session != 0) {  // Measuring the display's lag: a second at most, then this.
+    deferred_ = m;
     return;
   }
   scan_id_ = m.scan_id;
@@ -106,6 +126,81 @@ void ProjectorNode::OnRequest(const scan_request_t& m) {
   }
   started_ = std::chrono::steady_clock::now();  // For the log: the real time it took.
   ShowPattern(-1);
+}
+
+void ProjectorNode::OnLatencyRequest(const latency_request_t& m) {
+  if (scan_id_ != 0 || latency_.session != 0) {
+    node_->Error("display lag measurement refused: " +
+                 (scan_id_ != 0 ? "scan " + std::to_string(scan_id_) + " is in progress"
+                                : std::string("one is in progress")));
+    return;
+  }
+  StartLatency(m.session, std::clamp(m.flashes, 2, 100));
+}
+
+void ProjectorNode::StartLatency(int64_t session, int flashes) {
+  latency_ = Latency();
+  latency_.session = session;
+  latency_.flashes = flashes;
+  node_->SetState("measuring", 0, "the display's lag");
+  Flash(0);
+}
+
+void ProjectorNode::Flash(int index) {
+  latency_.index = index;
+  const bool white = index % 2 == 0;
+  projector_->Show(white ? cv::Mat(projector_->size(), CV_8U, cv::Scalar(255)) : black_);
+  latency_probe_t m{};
+  m.handed_utime = NowUtime();
+  m.session = latency_.session;
+  m.index = index;
+  m.flashes = latency_.flashes;
+  m.white = white;
+  m.window_us = 120000;  // Lags of a few refreshes, and a frame of the new level.
+  m.projector_width = sequence_.projector_size.width;
+  m.projector_height = sequence_.projector_size.height;
+  m.refresh_hz = static_cast<float>(options_.refresh_hz > 0 ? options_.refresh_hz
+                                                            : projector_->refresh_hz());
+  FlashFrames f;
+  f.handed_us = m.handed_utime;
+  f.white = white;
+  latency_.seen.push_back(f);
+  latency_.deadline = node_->Now() + std::chrono::seconds(3);
+  node_->Publish(channel::kLatencyProbe, &m);
+}
+
+void ProjectorNode::OnLatencySeen(const latency_seen_t& m) {
+  if (latency_.session == 0 || m.session != latency_.session || m.index != latency_.index) return;
+  if (!m.error.empty()) return EndLatency("the camera: " + Printable(m.error, 200));
+  FlashFrames& f = latency_.seen.back();
+  f.exposure_us = m.exposure_us;
+  f.start_us = m.start_utime;
+  f.level.assign(m.level.begin(), m.level.end());
+  if (latency_.index + 1 < latency_.flashes) return Flash(latency_.index + 1);
+  EndLatency("");
+}
+
+void ProjectorNode::EndLatency(const std::string& failure) {
+  projector_->Show(black_);
+  const double refresh = options_.refresh_hz > 0 ? options_.refresh_hz : projector_->refresh_hz();
+  DisplayLag lag;
+  if (failure.empty()) lag = EstimateDisplayLag(latency_.seen, refresh);
+  latency_ = Latency();
+  node_->SetState("idle");
+  if (!failure.empty() || !lag.status.ok()) {
+    node_->Error("display lag not measured: " + (failure.empty() ? lag.status.message() : failure) +
+                 "; the handshake keeps waiting " +
+                 Fixed(std::chrono::duration<double, std::milli>(options_.display_lag).count(), 1) +
+                 " ms and the settle time");
+  } else {
+    options_.display_lag = std::chrono::microseconds(static_cast<int64_t>(1000 * lag.wait_ms));
+    node_->Log(lag.Describe());
+  }
+  if (deferred_) {
+    const scan_request_t request = *deferred_;
+    deferred_.reset();
+    OnRequest(request);
+  }
 }
 
 void ProjectorNode::OnCalibration(const calibration_t& m) {

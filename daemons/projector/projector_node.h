@@ -9,6 +9,12 @@
 // (its status: "scans failed" rose, the error names the scan) is stopped at once: the projector
 // goes black and takes the next request. A CALIBRATION with scan_id 0 replaces the station's
 // calibration from the next scan on.
+//
+// The display's lag (core/patterns/display_lag.h): on LATENCY_REQUEST, or at start-up once the
+// camera is heard (measure_lag), the projector flashes white and black in turn, publishing
+// LATENCY_PROBE with each handover; the camera answers LATENCY_SEEN with its frames' starts and
+// levels. From then on the handshake waits the lag measured. A scan asked meanwhile starts when
+// the measurement ends.
 #pragma once
 
 #include <chrono>
@@ -22,7 +28,10 @@
 #include "daemons/projector/projector.h"
 #include "station/node.h"
 #include "vellum/calibration_t.hpp"
+#include "core/patterns/display_lag.h"
 #include "vellum/capture_t.hpp"
+#include "vellum/latency_request_t.hpp"
+#include "vellum/latency_seen_t.hpp"
 #include "vellum/light_t.hpp"
 #include "vellum/scan_request_t.hpp"
 #include "vellum/status_t.hpp"
@@ -38,6 +47,13 @@ struct ProjectorNodeOptions {
   // and the camera takes the first frame exposed after that.
   std::chrono::microseconds display_lag{0};
   std::chrono::milliseconds settle{30};
+  // Measure the display's lag at start-up (once the camera is heard), in about a second, and
+  // wait what it measured instead of display_lag; a LATENCY_REQUEST (`vellum calibrate
+  // latency`) measures it again whenever no scan runs.
+  bool measure_lag = false;
+  // White and black in turn; the camera's phase against them drifts over twelve.
+  int lag_flashes = 12;
+  double refresh_hz = 0;     // The display's, where SDL does not know it (0: ask SDL).
   std::chrono::duration<double> capture_timeout{5.0};  // Longest wait for each CAPTURE.
   // The station's extra lights, taken after the patterns in this order (names and directions;
   // no images). Empty: none.
@@ -65,6 +81,11 @@ class ProjectorNode {
   void OnCalibration(const calibration_t& m);
   void OnLightOn(const light_t& m);
   void OnDecoderStatus(const status_t& m);
+  void OnLatencyRequest(const latency_request_t& m);
+  void OnLatencySeen(const latency_seen_t& m);
+  void StartLatency(int64_t session, int flashes);
+  void Flash(int index);
+  void EndLatency(const std::string& failure);
   void ShowPattern(int index);
   void RequestLight(int k);  // k -1: all off.
   int Patterns() const { return static_cast<int>(sequence_.patterns.size()); }
@@ -84,6 +105,14 @@ class ProjectorNode {
   Clock::time_point shown_at_;   // By the node's clock.
   std::chrono::steady_clock::time_point started_;
   int64_t decoder_failed_ = -1;  // The decoder's "scans failed" (-1: no status yet).
+  struct Latency {
+    int64_t session = 0;  // 0: not measuring.
+    int flashes = 0, index = 0;
+    Clock::time_point deadline;
+    std::vector<FlashFrames> seen;
+  } latency_;
+  bool camera_heard_ = false, lag_measured_ = false;
+  std::optional<scan_request_t> deferred_;  // Asked while the lag was measured.
 };
 
 }  // namespace vellum::station

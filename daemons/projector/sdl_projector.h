@@ -22,6 +22,7 @@ class SdlProjector : public Projector {
   cv::Size size() const override { return window_.size(); }
   void Show(const cv::Mat& gray) override { window_.Show(gray, flip_); }
   bool Poll() override { return window_.Poll(); }
+  double refresh_hz() const override { return window_.refresh_hz(); }
   // What the projector shows now (BGR): the last pattern with the flip applied.
   cv::Mat Screen() const { return window_.Screen(); }
 
