@@ -2,15 +2,18 @@
 // is decoded as that type (LCM checks the fingerprint and lengths) and, when it decodes, goes
 // through the station's readers exactly as a daemon would take it: image conversion, capture
 // sets, chunk reassembly of correspondences, point clouds, flat meshes (and the sheet rebuilt
-// from the nodes) and the scan contexts they carry, textures, calibration, stage reports.
+// from the nodes) and the scan contexts they carry, textures, calibration, stage reports, the
+// camera's answers to the display-lag measurement.
 // Nothing may crash, hang or read out of bounds.
 #include <cstddef>
 #include <cstdint>
 
+#include "core/patterns/display_lag.h"
 #include "core/sim/gantry.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_store.h"
+#include "vellum/latency_seen_t.hpp"
 #include "vellum/light_t.hpp"
 
 namespace vellum::station {
@@ -29,7 +32,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace vellum;
   using namespace vellum::station;
   if (size < 1) return 0;
-  const uint8_t kind = data[0] % 9;
+  const uint8_t kind = data[0] % 10;
   ++data;
   --size;
   switch (kind) {
@@ -105,6 +108,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       light_t m;
       ScanLight light;
       if (Decode(data, size, &m)) (void)FromMessage(m.light, &light);
+      break;
+    }
+    case 9: {  // The projector's display-lag measurement, as it takes the camera's answers.
+      latency_seen_t m;
+      if (!Decode(data, size, &m)) break;
+      FlashFrames f;
+      f.handed_us = m.utime;
+      f.white = m.index % 2 == 0;
+      f.exposure_us = m.exposure_us;
+      f.start_us = m.start_utime;
+      f.level.assign(m.level.begin(), m.level.end());
+      FlashFrames g = f;
+      g.white = !f.white;
+      (void)EstimateDisplayLag({f, g}, m.count);
       break;
     }
   }

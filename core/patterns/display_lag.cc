@@ -53,8 +53,16 @@ DisplayLag EstimateDisplayLag(const std::vector<FlashFrames>& flashes, double re
   lag.refresh_hz = refresh_hz;
   // Each level as the camera sees it steady: the last frame of each flash.
   std::vector<double> whites, blacks;
+  // A flash is taken when its frames are whole: a level and a start each, finite, in order.
+  const auto whole = [](const FlashFrames& f) {
+    if (f.level.empty() || f.level.size() != f.start_us.size() || f.exposure_us < 0) return false;
+    for (size_t j = 0; j < f.level.size(); ++j) {
+      if (!std::isfinite(f.level[j]) || (j > 0 && f.start_us[j] <= f.start_us[j - 1])) return false;
+    }
+    return true;
+  };
   for (const FlashFrames& f : flashes) {
-    if (f.level.empty() || f.level.size() != f.start_us.size()) continue;
+    if (!whole(f)) continue;
     (f.white ? whites : blacks).push_back(f.level.back());
   }
   const double white = Median(whites), black = Median(blacks);
@@ -68,7 +76,7 @@ DisplayLag EstimateDisplayLag(const std::vector<FlashFrames>& flashes, double re
   double lower = -std::numeric_limits<double>::infinity();
   double upper = std::numeric_limits<double>::infinity();
   for (const FlashFrames& f : flashes) {
-    if (f.level.empty() || f.level.size() != f.start_us.size()) continue;
+    if (!whole(f)) continue;
     const auto share = [&](size_t j) {
       const double s = (f.level[j] - black) / (white - black);
       return std::clamp(f.white ? s : 1 - s, 0.0, 1.0);
@@ -78,13 +86,15 @@ DisplayLag EstimateDisplayLag(const std::vector<FlashFrames>& flashes, double re
     if (j == f.level.size()) continue;
     ++lag.seen;
     const double e = static_cast<double>(f.exposure_us);
-    const double start = static_cast<double>(f.start_us[j] - f.handed_us);
+    // In doubles: a hostile message's times may be anything, and their difference overflow.
+    const double handed = static_cast<double>(f.handed_us);
+    const double start = static_cast<double>(f.start_us[j]) - handed;
     if (e > 0 && share(j) < 1 - kSeen) {
       exact.push_back((start + e * (1 - share(j))) / 1000);  // Where the change fell.
       continue;
     }
     upper = std::min(upper, (start + e * kSeen) / 1000);
-    if (j > 0) lower = std::max(lower, static_cast<double>(f.start_us[j - 1] - f.handed_us) / 1000);
+    if (j > 0) lower = std::max(lower, (static_cast<double>(f.start_us[j - 1]) - handed) / 1000);
   }
   if (!exact.empty()) {
     lag.exact = static_cast<int>(exact.size());
@@ -99,6 +109,13 @@ DisplayLag EstimateDisplayLag(const std::vector<FlashFrames>& flashes, double re
   } else {
     lag.status = Status::Error("no flash was seen changing within its frames (" +
                                std::to_string(lag.flashes) + " flashes)");
+    return lag;
+  }
+  // A lag beyond a second is no display's: clocks that disagree, or frames not of these flashes.
+  if (!(lag.min_ms >= -kJitterMs && lag.wait_ms < 1000)) {
+    lag.status = Status::Error("a lag of " + Ms(lag.median_ms) + " ms (" + Ms(lag.min_ms) + " to " +
+                               Ms(lag.max_ms) + ") is no display's: are the camera's and the " +
+                               "projector's clocks one?");
     return lag;
   }
   lag.status = Status::Ok();

@@ -104,7 +104,8 @@ void CameraNode::OnProbe(const latency_probe_t& m) {
   // at a phase that differs from flash to flash: where a camera's frames fall against its
   // display drifts anyway; a camera that only gives frames from now on gives those.
   const int64_t period = camera_->frame_period_us();
-  request.shown_utime = m.handed_utime - period * ((m.index * 5) % 12) / 12;
+  const int64_t phase = (static_cast<int64_t>(m.index) * 5 % 12 + 12) % 12;
+  request.shown_utime = m.handed_utime - period * phase / 12;
   const int64_t end = m.handed_utime + std::clamp(m.window_us, 0, 2000000);
   cv::Mat frame;
   int64_t start = 0;
@@ -143,8 +144,11 @@ Status CameraNode::CheckedCapture(const FrameRequest& request, const std::string
   frame = Gray(EightBit(frame));
   const PatternSpec& spec = request.pattern;
   constexpr int kTries = 3;
-  if (spec.kind == PatternKind::kWhite || spec.kind == PatternKind::kBlack) {
-    // No pair: the camera's next frame must show the same.
+  // A Gray-code inverse is checked against its pattern on a linear camera; every other frame
+  // (white, black, phase, and a gamma-encoding camera's Gray code) against the next one.
+  const bool paired = spec.kind == PatternKind::kGray && camera_->linear();
+  if (!paired) {
+    // The camera's next frame must show the same.
     for (int tries = 0;; ++tries) {
       cv::Mat next;
       int64_t next_exposure = 0;
@@ -163,9 +167,9 @@ Status CameraNode::CheckedCapture(const FrameRequest& request, const std::string
       frame = next;
       *exposure = next_exposure;
     }
-    (spec.kind == PatternKind::kWhite ? kept_.white : kept_.black) = frame;
-  } else if (spec.kind == PatternKind::kGray && spec.inverted && camera_->linear() &&
-             !kept_.pattern.empty() &&
+    if (spec.kind == PatternKind::kWhite) kept_.white = frame;
+    if (spec.kind == PatternKind::kBlack) kept_.black = frame;
+  } else if (spec.inverted && !kept_.pattern.empty() &&
              !kept_.white.empty() && !kept_.black.empty() &&
              kept_.pattern_spec.axis == spec.axis && kept_.pattern_spec.bit == spec.bit) {
     for (int tries = 0;; ++tries) {
@@ -185,7 +189,7 @@ Status CameraNode::CheckedCapture(const FrameRequest& request, const std::string
       s = Next(request, *exposure, &frame, exposure);
       if (!s.ok()) return s;
     }
-  } else if (spec.kind == PatternKind::kGray && !spec.inverted) {
+  } else if (!spec.inverted) {
     kept_.pattern = frame;
     kept_.pattern_spec = spec;
     kept_.pattern_index = request.pattern_index;

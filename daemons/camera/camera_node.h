@@ -36,11 +36,11 @@ class CameraNode {
   void PublishPreview(const cv::Mat& image, int64_t utime, int64_t scan_id, int index, int count);
   // Counts the frames the camera dropped or refused since the last call (worker thread).
   void CountCameraFaults();
-  // The frame for `request`, checked to show its own pattern (core/decode/frame_check.h):
-  // white and black against the camera's next frame, a Gray code's inverse against its
-  // pattern. A frame that does not is named, counted, never sent, and taken again from the
-  // camera's next frame (three tries); a pattern already sent that its inverse finds mixed
-  // fails the scan (worker thread).
+  // The frame for `request`, checked to show its own pattern (core/decode/frame_check.h): a
+  // Gray code's inverse against its pattern on a linear camera, every other frame against the
+  // camera's next one. A frame that does not is named, counted, never sent, and taken again
+  // from the camera's next frame (three tries); a pattern already sent that its inverse finds
+  // mixed fails the scan (worker thread).
   Status CheckedCapture(const FrameRequest& request, const std::string& where, cv::Mat* image,
                         int64_t* exposure);
   Status Next(const FrameRequest& request, int64_t after, cv::Mat* image, int64_t* exposure);
