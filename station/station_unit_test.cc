@@ -30,12 +30,12 @@
 #include "station/scan_store.h"
 #include "station/supervisor.h"
 #include "vellum/calibration_v1_t.hpp"
+#include "vellum/pattern_shown_v1_t.hpp"
 #include "vellum/point_cloud_t.hpp"
 #include "vellum/scan_request_t.hpp"
 #include "vellum/scan_started_v1_t.hpp"
 #include "vellum/scan_started_v2_t.hpp"
 #include "vellum/scan_started_v4_t.hpp"
-#include "vellum/pattern_shown_v1_t.hpp"
 #include "vellum/status_t.hpp"
 #include "vellum/texture_t.hpp"
 

@@ -417,15 +417,16 @@ TEST_F(StationTest, FullScanThroughAllSixDaemonsEqualsVellumProcess) { RunFullSc
 // refreshes after vsync (33.3 ms at 60 Hz), its camera exposes 10 ms of each 33.3 ms frame,
 // starting as early as it may (so a first frame straddles the change), and loses every
 // twentieth frame.
-const std::vector<std::string> kLaggingGantry = {"--sim-display-lag", "2",  "--sim-frame-ms",
-                                                 "33.333",            "--sim-exposure-ms", "10",
-                                                 "--sim-drop-every",  "20"};
+const std::vector<std::string> kLaggingGantry = {
+    "--sim-display-lag", "2",  "--sim-frame-ms",   "33.333",
+    "--sim-exposure-ms", "10", "--sim-drop-every", "20"};
 
 // With the lag waited for (--display-lag-ms 34: two refreshes and the rounding up), a scan on
 // the faulty gantry is the fault-free one: every frame byte for byte, the restored page pixel
 // for pixel (its master's metadata holds the scan's own times), no frame found mixed.
 TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne) {
-  Process* camera = Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Process* camera =
+      Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
   Start(Daemon("vellum-projector"),
         {"--calibration", kRig, "--fullscreen", "false", "--display-lag-ms", "34",
          "--capture-timeout", kSimCaptureTimeout},
@@ -437,7 +438,8 @@ TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne)
   WaitForHeartbeats(all);
   auto scan = [&](const std::string& folio) {
     std::string out;
-    EXPECT_EQ(RunTool({"scan", "--url", url_, "--folio", folio, "--timeout", "300"}, &out), 0) << out;
+    EXPECT_EQ(RunTool({"scan", "--url", url_, "--folio", folio, "--timeout", "300"}, &out), 0)
+        << out;
     const size_t arrow = out.find("-> ");
     EXPECT_NE(arrow, std::string::npos) << out;
     if (arrow == std::string::npos) return std::string();
@@ -454,7 +456,8 @@ TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne)
     return flags;
   }());
   status_t camera_status{};
-  Listener<status_t> on_status(*lcm_, "STATUS_CAMERA", [&](const status_t& m) { camera_status = m; });
+  Listener<status_t> on_status(*lcm_, "STATUS_CAMERA",
+                               [&](const status_t& m) { camera_status = m; });
   WaitForHeartbeats({"STATUS_CAMERA"});
   const std::string faulty = scan("2");
   ASSERT_FALSE(faulty.empty());
@@ -471,7 +474,8 @@ TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne)
   ASSERT_FALSE(page_a.empty());
   ASSERT_EQ(page_a.size(), page_b.size());
   EXPECT_EQ(cv::norm(page_a, page_b, cv::NORM_INF), 0);
-  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] { return station::StatusCounter(camera_status, "frames the camera dropped") > 0;
+  ASSERT_TRUE(HandleUntil(*lcm_, 30, [&] {
+    return station::StatusCounter(camera_status, "frames the camera dropped") > 0;
   }));
   EXPECT_EQ(station::StatusCounter(camera_status, "frames mixing two patterns"), 0);
 }
@@ -483,9 +487,18 @@ TEST_F(StationTest, WithTheDisplayLagWaitedForAFaultyGantryScansAsAFaultFreeOne)
 // waits.
 TEST_F(StationTest, TheDisplayLagIsMeasuredAsTheGantryHasItAndTheHandshakeWaitsIt) {
   auto start_camera = [&](int refreshes) {
-    std::vector<std::string> flags = {"--backend", "sim", "--rig", kRig, "--page", "curl",
-                                      "--sim-display-lag", std::to_string(refreshes),
-                                      "--sim-frame-ms", "33.333", "--sim-exposure-ms", "10"};
+    std::vector<std::string> flags = {"--backend",
+                                      "sim",
+                                      "--rig",
+                                      kRig,
+                                      "--page",
+                                      "curl",
+                                      "--sim-display-lag",
+                                      std::to_string(refreshes),
+                                      "--sim-frame-ms",
+                                      "33.333",
+                                      "--sim-exposure-ms",
+                                      "10"};
     return Start(Daemon("vellum-camera"), flags);
   };
   Process* camera = start_camera(3);

@@ -12,8 +12,9 @@ bool FrameCheckOptions::Check(std::string* why) const {
   if (min_contrast < 1 || min_contrast > 255 || !(pair_tolerance > 0 && pair_tolerance < 1) ||
       !(mixed_share > 0 && mixed_share < 1) || changed_levels < 1 || changed_levels > 255 ||
       !(changed_share > 0 && changed_share < 1)) {
-    *why = "frame check: min_contrast and changed_levels in 1..255, the tolerance and shares "
-           "between 0 and 1";
+    *why =
+        "frame check: min_contrast and changed_levels in 1..255, the tolerance and shares "
+        "between 0 and 1";
     return false;
   }
   return true;

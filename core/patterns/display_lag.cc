@@ -38,11 +38,11 @@ std::string DisplayLag::Describe() const {
     std::snprintf(r, sizeof r, " (%.2f refreshes at %.0f Hz)", refreshes(), refresh_hz);
     text += r;
   }
-  text += exact > 0 ? ": median of " + std::to_string(exact) +
-                          " flashes caught within an exposure, " + Ms(min_ms) + " to " +
-                          Ms(max_ms) + " ms"
-                    : ": at most, from frames before and after each change (none fell within "
-                      "an exposure)";
+  text += exact > 0
+              ? ": median of " + std::to_string(exact) + " flashes caught within an exposure, " +
+                    Ms(min_ms) + " to " + Ms(max_ms) + " ms"
+              : ": at most, from frames before and after each change (none fell within "
+                "an exposure)";
   return text + "; " + std::to_string(seen) + " of " + std::to_string(flashes) +
          " flashes seen; the handshake waits " + Ms(wait_ms) + " ms after vsync";
 }
@@ -67,9 +67,10 @@ DisplayLag EstimateDisplayLag(const std::vector<FlashFrames>& flashes, double re
   }
   const double white = Median(whites), black = Median(blacks);
   if (whites.empty() || blacks.empty() || white - black < kMinContrast) {
-    lag.status = Status::Error("the camera saw no flash (white " + Ms(white) + ", black " +
-                               Ms(black) + "): is it looking at the projector's light, with its "
-                               "exposure fixed?");
+    lag.status =
+        Status::Error("the camera saw no flash (white " + Ms(white) + ", black " + Ms(black) +
+                      "): is it looking at the projector's light, with its "
+                      "exposure fixed?");
     return lag;
   }
   std::vector<double> exact;

@@ -17,9 +17,9 @@
 namespace vellum {
 
 struct FlashFrames {
-  int64_t handed_us = 0;    // When the flash was handed to the display.
-  bool white = true;        // To white (from black), or to black (from white).
-  int64_t exposure_us = 0;  // Each frame's exposure; 0: not known (bounds only).
+  int64_t handed_us = 0;          // When the flash was handed to the display.
+  bool white = true;              // To white (from black), or to black (from white).
+  int64_t exposure_us = 0;        // Each frame's exposure; 0: not known (bounds only).
   std::vector<int64_t> start_us;  // Each frame's exposure start, in time order.
   std::vector<double> level;      // Each frame's mean level.
 };

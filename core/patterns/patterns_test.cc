@@ -254,8 +254,9 @@ std::vector<FlashFrames> Flashes(double lag_ms, double exposure_ms, int count) {
     const double phase = period * ((i * 5) % 12) / 12;
     for (double t = -phase; t < 150; t += period) {
       // The share of the exposure after the change, as the camera integrates it.
-      const double share = exposure_ms > 0 ? std::clamp((t + exposure_ms - lag_ms) / exposure_ms, 0.0, 1.0)
-                                           : (t >= lag_ms ? 1.0 : 0.0);
+      const double share = exposure_ms > 0
+                               ? std::clamp((t + exposure_ms - lag_ms) / exposure_ms, 0.0, 1.0)
+                               : (t >= lag_ms ? 1.0 : 0.0);
       const double seen = f.white ? share : 1 - share;
       f.start_us.push_back(f.handed_us + static_cast<int64_t>(1000 * t));
       f.level.push_back(20 + 180 * seen);

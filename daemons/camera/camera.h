@@ -19,9 +19,9 @@ struct FrameRequest {
   // When the projector handed it to its display (vsync passed); 0: not said. The virtual
   // gantry's display lag counts from it.
   int64_t handed_utime = 0;
-  int pattern_index = -1;   // -1: the texture (projector black, studio light).
-  PatternSpec pattern;      // What the projector shows.
-  cv::Size projector;       // The projector's image size.
+  int pattern_index = -1;  // -1: the texture (projector black, studio light).
+  PatternSpec pattern;     // What the projector shows.
+  cv::Size projector;      // The projector's image size.
   // Under an extra light (projector black, the studio light off): its name and
   // direction (no image). Empty name: none.
   ScanLight light;

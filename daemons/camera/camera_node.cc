@@ -26,7 +26,9 @@ cv::Mat Gray(const cv::Mat& image) {
   return gray;
 }
 
-std::string Percent(double share) { return std::to_string(static_cast<int>(100 * share + 0.5)) + "%"; }
+std::string Percent(double share) {
+  return std::to_string(static_cast<int>(100 * share + 0.5)) + "%";
+}
 
 }  // namespace
 
@@ -169,9 +171,9 @@ Status CameraNode::CheckedCapture(const FrameRequest& request, const std::string
     }
     if (spec.kind == PatternKind::kWhite) kept_.white = frame;
     if (spec.kind == PatternKind::kBlack) kept_.black = frame;
-  } else if (spec.inverted && !kept_.pattern.empty() &&
-             !kept_.white.empty() && !kept_.black.empty() &&
-             kept_.pattern_spec.axis == spec.axis && kept_.pattern_spec.bit == spec.bit) {
+  } else if (spec.inverted && !kept_.pattern.empty() && !kept_.white.empty() &&
+             !kept_.black.empty() && kept_.pattern_spec.axis == spec.axis &&
+             kept_.pattern_spec.bit == spec.bit) {
     for (int tries = 0;; ++tries) {
       const double mismatch = PairMismatch(kept_.pattern, frame, kept_.white, kept_.black, check_);
       if (mismatch <= check_.mixed_share) break;
@@ -184,8 +186,9 @@ Status CameraNode::CheckedCapture(const FrameRequest& request, const std::string
                              "scan cannot be decoded; is the display's lag longer than the " +
                              "projector waits? Measure it: vellum calibrate latency");
       }
-      NameMixed(where, "the frame does not add up with its pattern (" + Percent(mismatch) +
-                           " of the lit pixels off): it mixes two patterns or shows the one before");
+      NameMixed(where,
+                "the frame does not add up with its pattern (" + Percent(mismatch) +
+                    " of the lit pixels off): it mixes two patterns or shows the one before");
       s = Next(request, *exposure, &frame, exposure);
       if (!s.ok()) return s;
     }

@@ -47,7 +47,7 @@ class CameraNode {
   void NameMixed(const std::string& where, const std::string& how);
 
   Node* node_;
-  std::unique_ptr<Camera> camera_;  // Worker thread only (after construction).
+  std::unique_ptr<Camera> camera_;           // Worker thread only (after construction).
   int64_t dropped_seen_ = 0, bad_seen_ = 0;  // Worker thread only.
   // Worker thread only: the scan's frames the checks need (8-bit gray).
   struct Kept {
@@ -57,7 +57,7 @@ class CameraNode {
     int pattern_index = -1;
   } kept_;
   FrameCheckOptions check_;
-  std::string preview_error_;                // Worker thread only: the last one logged.
+  std::string preview_error_;  // Worker thread only: the last one logged.
   std::chrono::duration<double> preview_period_;
   // LCM thread only:
   Clock::time_point busy_until_, next_preview_;

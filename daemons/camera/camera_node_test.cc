@@ -155,7 +155,8 @@ class DisplayLag : public CameraNodeTest {
     cv::Mat frame;
     int64_t exposure = 0;
     EXPECT_TRUE(reference.Capture(request, &frame, &exposure).ok());
-    if (c.pattern_index >= 0 && frame.channels() == 3) cv::cvtColor(frame, frame, cv::COLOR_BGR2GRAY);
+    if (c.pattern_index >= 0 && frame.channels() == 3)
+      cv::cvtColor(frame, frame, cv::COLOR_BGR2GRAY);
     return frame;
   }
   int64_t handed_ = NowUtime();
@@ -172,9 +173,9 @@ TEST_F(DisplayLag, AFrameThatMixesTwoPatternsIsNamedAndNeverSent) {
   bus_.Watch("vellum-camera");
   auto captures = bus_.Record<capture_t>(channel::kCapture);
   for (int index : {-1, 0, 1, 2, 3}) Show(71, index, 30);
-  ASSERT_TRUE(bus_.WaitForError("vellum-camera", "pattern 2 (") &&
-              bus_.RunUntil([&] { return captures->size() == 4; }))
-      << bus_.Status("vellum-camera").last_error;
+  ASSERT_TRUE(bus_.WaitForError("vellum-camera", "pattern 2 (") && bus_.RunUntil([&] {
+    return captures->size() == 4;
+  })) << bus_.Status("vellum-camera").last_error;
   const std::string error = bus_.Status("vellum-camera").last_error;
   EXPECT_NE(error.find("scan 71, pattern 3: pattern 2 (gray column bit 0) was taken mixing two "
                        "patterns"),

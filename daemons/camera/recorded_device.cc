@@ -93,7 +93,7 @@ Status ReadRecordedCamera(const std::string& path, RecordedCamera* camera) {
       RecordedControl control;
       control.id = id->second;
       const std::string type = c.at("type").get<std::string>();
-      control.type = type == "menu" ? V4L2_CTRL_TYPE_MENU
+      control.type = type == "menu"   ? V4L2_CTRL_TYPE_MENU
                      : type == "bool" ? V4L2_CTRL_TYPE_BOOLEAN
                                       : V4L2_CTRL_TYPE_INTEGER;
       control.minimum = c.at("min").get<int>();
@@ -190,7 +190,8 @@ int RecordedDevice::SetFormat(void* arg) {
   }
   fourcc_ = format->fourcc;
   size_ = best;
-  bytes_per_line_ = format->compressed ? 0 : static_cast<uint32_t>(best.width * BytesPerPixel(fourcc_));
+  bytes_per_line_ =
+      format->compressed ? 0 : static_cast<uint32_t>(best.width * BytesPerPixel(fourcc_));
   size_image_ = format->compressed ? static_cast<uint32_t>(best.area() * 2)
                                    : bytes_per_line_ * static_cast<uint32_t>(best.height);
   fmt->fmt.pix.pixelformat = fourcc_;
@@ -250,9 +251,9 @@ int RecordedDevice::Dequeue(void* arg) {
   buf->bytesused = static_cast<uint32_t>(std::min(frame_.size(), data.size()));
   buf->timestamp.tv_sec = stamp / 1000000;
   buf->timestamp.tv_usec = stamp % 1000000;
-  buf->flags = V4L2_BUF_FLAG_MAPPED | V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC |
-               (camera_.end_of_frame_stamps ? V4L2_BUF_FLAG_TSTAMP_SRC_EOF
-                                            : V4L2_BUF_FLAG_TSTAMP_SRC_SOE);
+  buf->flags =
+      V4L2_BUF_FLAG_MAPPED | V4L2_BUF_FLAG_TIMESTAMP_MONOTONIC |
+      (camera_.end_of_frame_stamps ? V4L2_BUF_FLAG_TSTAMP_SRC_EOF : V4L2_BUF_FLAG_TSTAMP_SRC_SOE);
   if (flagged_.count(sequence)) buf->flags |= V4L2_BUF_FLAG_ERROR;
   ++delivered_;
   return 0;
@@ -266,7 +267,8 @@ int RecordedDevice::Ioctl(unsigned long request, void* arg) {
       auto* cap = static_cast<v4l2_capability*>(arg);
       std::snprintf(reinterpret_cast<char*>(cap->driver), sizeof cap->driver, "%s",
                     camera_.driver.c_str());
-      std::snprintf(reinterpret_cast<char*>(cap->card), sizeof cap->card, "%s", camera_.card.c_str());
+      std::snprintf(reinterpret_cast<char*>(cap->card), sizeof cap->card, "%s",
+                    camera_.card.c_str());
       cap->device_caps = V4L2_CAP_VIDEO_CAPTURE | V4L2_CAP_STREAMING;
       cap->capabilities = cap->device_caps | V4L2_CAP_DEVICE_CAPS;
       return 0;

@@ -53,10 +53,13 @@ class RecordedDevice : public V4l2Device {
   RecordedDevice(RecordedCamera camera, cv::Mat scene);
 
   // Faults, set before or while streaming.
-  void DropEvery(int n) { drop_every_ = n; }        // Sequence numbers n-1, 2n-1, ... never come.
+  void DropEvery(int n) { drop_every_ = n; }  // Sequence numbers n-1, 2n-1, ... never come.
   void FlagError(uint32_t sequence) { flagged_.insert(sequence); }
   void UnplugAfter(int frames) { unplug_after_ = frames; }  // Frames delivered, then ENODEV.
-  void Replug() { unplugged_ = false; unplug_after_ = -1; }
+  void Replug() {
+    unplugged_ = false;
+    unplug_after_ = -1;
+  }
   RecordedControl& control(uint32_t id) { return camera_.controls.at(id); }
   // The CLOCK_MONOTONIC start of exposure of the frame with this sequence number.
   int64_t StartOf(uint32_t sequence) const;

@@ -11,8 +11,9 @@ bool SimTiming::Check(std::string* why) const {
   if (!(refresh_hz > 0) || display_lag_refreshes < 0 || display_lag_refreshes > 10 ||
       !(frame_ms >= 0) || !(exposure_ms >= 0) || drop_every < 0 || drop_every == 1 ||
       (frame_ms > 0 && exposure_ms > frame_ms)) {
-    *why = "sim timing: refresh_hz > 0, display_lag_refreshes 0..10, frame_ms and exposure_ms "
-           ">= 0 (the exposure within the frame), drop_every 0 (none) or >= 2";
+    *why =
+        "sim timing: refresh_hz > 0, display_lag_refreshes 0..10, frame_ms and exposure_ms "
+        ">= 0 (the exposure within the frame), drop_every 0 (none) or >= 2";
     return false;
   }
   return true;

@@ -31,8 +31,9 @@ bool HasControl(V4l2Device* device, uint32_t id) {
 bool V4l2Options::Check(std::string* why) const {
   if (device.empty() || size.width < 1 || size.height < 1 || exposure < -1 || gain < -1 ||
       format.empty()) {
-    *why = "v4l2: the device and format must be named, the size at least 1 x 1, exposure and "
-           "gain >= -1";
+    *why =
+        "v4l2: the device and format must be named, the size at least 1 x 1, exposure and "
+        "gain >= -1";
     return false;
   }
   return true;
@@ -71,8 +72,10 @@ Status V4l2Camera::Open(const V4l2Options& o) {
 
 Status V4l2Camera::Negotiate() {
   v4l2_capability cap{};
-  if (device_->Ioctl(VIDIOC_QUERYCAP, &cap) < 0) return Status::Error("not a V4L2 device: " + Errno());
-  const uint32_t caps = (cap.capabilities & V4L2_CAP_DEVICE_CAPS) ? cap.device_caps : cap.capabilities;
+  if (device_->Ioctl(VIDIOC_QUERYCAP, &cap) < 0)
+    return Status::Error("not a V4L2 device: " + Errno());
+  const uint32_t caps =
+      (cap.capabilities & V4L2_CAP_DEVICE_CAPS) ? cap.device_caps : cap.capabilities;
   card_ = reinterpret_cast<const char*>(cap.card);
   if (!(caps & V4L2_CAP_VIDEO_CAPTURE) || !(caps & V4L2_CAP_STREAMING)) {
     return Status::Error("'" + card_ + "' is not a streaming capture device (a camera's other " +
@@ -94,7 +97,8 @@ Status V4l2Camera::Negotiate() {
       fs.pixel_format = d.pixelformat;
       if (device_->Ioctl(VIDIOC_ENUM_FRAMESIZES, &fs) < 0 || fs.type != V4L2_FRMSIZE_TYPE_DISCRETE)
         break;
-      f.sizes.emplace_back(static_cast<int>(fs.discrete.width), static_cast<int>(fs.discrete.height));
+      f.sizes.emplace_back(static_cast<int>(fs.discrete.width),
+                           static_cast<int>(fs.discrete.height));
     }
     offered.push_back(f);
   }
@@ -107,15 +111,16 @@ Status V4l2Camera::Negotiate() {
   fmt.fmt.pix.pixelformat = fourcc_;
   fmt.fmt.pix.field = V4L2_FIELD_NONE;
   if (device_->Ioctl(VIDIOC_S_FMT, &fmt) < 0) {
-    return Status::Error("cannot set " + format_why_.substr(0, format_why_.find(';')) + ": " + Errno());
+    return Status::Error("cannot set " + format_why_.substr(0, format_why_.find(';')) + ": " +
+                         Errno());
   }
   size_ = cv::Size(static_cast<int>(fmt.fmt.pix.width), static_cast<int>(fmt.fmt.pix.height));
   if (fmt.fmt.pix.pixelformat != fourcc_ || size_ != options_.size) {
     return Status::Error("asked for " + FourccText(fourcc_) + " at " +
                          std::to_string(options_.size.width) + "x" +
                          std::to_string(options_.size.height) + ", the camera set " +
-                         FourccText(fmt.fmt.pix.pixelformat) + " at " + std::to_string(size_.width) +
-                         "x" + std::to_string(size_.height));
+                         FourccText(fmt.fmt.pix.pixelformat) + " at " +
+                         std::to_string(size_.width) + "x" + std::to_string(size_.height));
   }
   bytes_per_line_ = fmt.fmt.pix.bytesperline;
   v4l2_streamparm parm{};
@@ -169,8 +174,8 @@ Status V4l2Camera::SwitchOffAutomatics() {
   if (HasControl(device_.get(), V4L2_CID_AUTOGAIN)) {
     const Status s = SetControl(V4L2_CID_AUTOGAIN, 0, "automatic gain off", &value);
     if (!s.ok() || value != 0) {
-      refuse("automatic gain stays on: " + (s.ok() ? "the camera reads " + std::to_string(value)
-                                                   : "the camera " + s.message()));
+      refuse("automatic gain stays on: " +
+             (s.ok() ? "the camera reads " + std::to_string(value) : "the camera " + s.message()));
     }
   }
   struct Setting {
@@ -195,7 +200,8 @@ Status V4l2Camera::SwitchOffAutomatics() {
       value = g.value;
     }
     if (id == V4L2_CID_EXPOSURE_ABSOLUTE) exposure_us_ = 100LL * value;
-    controls_ += std::string(controls_.empty() ? "" : ", ") + set.name + " " + std::to_string(value);
+    controls_ +=
+        std::string(controls_.empty() ? "" : ", ") + set.name + " " + std::to_string(value);
     if (set.asked >= 0 && value != set.asked) {
       controls_ += " (asked " + std::to_string(set.asked) + ": the camera's nearest)";
     }
@@ -216,7 +222,8 @@ Status V4l2Camera::StartStreaming() {
     buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
     buf.memory = V4L2_MEMORY_MMAP;
     buf.index = i;
-    if (device_->Ioctl(VIDIOC_QUERYBUF, &buf) < 0) return Status::Error("VIDIOC_QUERYBUF: " + Errno());
+    if (device_->Ioctl(VIDIOC_QUERYBUF, &buf) < 0)
+      return Status::Error("VIDIOC_QUERYBUF: " + Errno());
     Buffer b;
     b.length = buf.length;
     b.start = device_->Map(buf.length, buf.m.offset);
@@ -288,7 +295,9 @@ Status V4l2Camera::CaptureAfter(int64_t after_utime, cv::Mat* image, int64_t* ex
   const int64_t after_mono = after_utime - offset;
   for (int tries = 0; tries < 200; ++tries) {
     const int r = device_->Poll(2000);
-    if (r < 0) return errno == ENODEV ? Gone("waiting for a frame") : Status::Error("camera: poll: " + Errno());
+    if (r < 0)
+      return errno == ENODEV ? Gone("waiting for a frame")
+                             : Status::Error("camera: poll: " + Errno());
     if (r == 0) return Status::Error("camera " + options_.device + ": no frame within 2 s");
     v4l2_buffer buf{};
     buf.type = V4L2_BUF_TYPE_VIDEO_CAPTURE;
@@ -320,7 +329,8 @@ Status V4l2Camera::CaptureAfter(int64_t after_utime, cv::Mat* image, int64_t* ex
       if (!taken) ++bad_;
     }
     if (device_->Ioctl(VIDIOC_QBUF, &buf) < 0) {
-      return errno == ENODEV ? Gone("VIDIOC_QBUF") : Status::Error("camera: VIDIOC_QBUF: " + Errno());
+      return errno == ENODEV ? Gone("VIDIOC_QBUF")
+                             : Status::Error("camera: VIDIOC_QBUF: " + Errno());
     }
     if (taken) {
       *exposure_utime = start + offset;

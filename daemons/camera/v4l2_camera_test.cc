@@ -26,8 +26,8 @@ namespace {
 
 RecordedCamera Recorded(const std::string& name) {
   RecordedCamera camera;
-  const Status s =
-      ReadRecordedCamera(std::string(VELLUM_SOURCE_DIR) + "/tests/data/v4l2/" + name + ".json", &camera);
+  const Status s = ReadRecordedCamera(
+      std::string(VELLUM_SOURCE_DIR) + "/tests/data/v4l2/" + name + ".json", &camera);
   EXPECT_TRUE(s.ok()) << s.message();
   return camera;
 }
@@ -137,7 +137,8 @@ TEST_P(EachCamera, TakesTheFormatThatKeepsMostAndGivesTheSceneTheRightWayRound) 
   EXPECT_LE(error, kind.mean_error) << kind.camera;
   // The blocks where the scene has them: red at the top left, blue at the bottom right.
   const auto at = [&](double fx, double fy) {
-    cv::Mat px = frame(cv::Rect(static_cast<int>(fx * frame.cols), static_cast<int>(fy * frame.rows), 1, 1));
+    cv::Mat px =
+        frame(cv::Rect(static_cast<int>(fx * frame.cols), static_cast<int>(fy * frame.rows), 1, 1));
     return cv::mean(px);
   };
   const cv::Scalar top_left = at(0.19, 0.21), bottom_right = at(0.81, 0.79);
@@ -152,7 +153,8 @@ TEST_P(EachCamera, TakesTheFormatThatKeepsMostAndGivesTheSceneTheRightWayRound) 
     // More than 8 bits kept: the ramp's row holds far more than 256 levels.
     cv::Mat row = frame.row(frame.rows / 2).reshape(1).clone();
     std::sort(row.begin<uint16_t>(), row.end<uint16_t>());
-    const auto levels = std::unique(row.begin<uint16_t>(), row.end<uint16_t>()) - row.begin<uint16_t>();
+    const auto levels =
+        std::unique(row.begin<uint16_t>(), row.end<uint16_t>()) - row.begin<uint16_t>();
     EXPECT_GT(levels, 300) << kind.camera;
   }
 }
@@ -223,7 +225,8 @@ TEST(V4l2Camera, AutomaticExposureAndGainAreSwitchedOffAndReadBack) {
   Opened kept = Open("uvc_webcam", At({1600, 896}));
   ASSERT_TRUE(kept.status.ok());
   EXPECT_EQ(kept.device->control(V4L2_CID_EXPOSURE_AUTO).value, V4L2_EXPOSURE_MANUAL);
-  EXPECT_NE(kept.camera->Describe().find("exposure 250"), std::string::npos) << kept.camera->Describe();
+  EXPECT_NE(kept.camera->Describe().find("exposure 250"), std::string::npos)
+      << kept.camera->Describe();
 }
 
 // Firmware that answers "done" and keeps automatic exposure, and one that fails the request:
@@ -232,9 +235,8 @@ TEST(V4l2Camera, ACameraThatKeepsItsAutomaticExposureOrGainRefusesEveryScan) {
   for (const char* on_set : {"keeps", "refuses"}) {
     for (uint32_t control : {static_cast<uint32_t>(V4L2_CID_EXPOSURE_AUTO),
                              static_cast<uint32_t>(V4L2_CID_AUTOGAIN)}) {
-      Opened o = Open("mono_industrial", At({1600, 1200}), [&](RecordedCamera* c) {
-        c->controls.at(control).on_set = on_set;
-      });
+      Opened o = Open("mono_industrial", At({1600, 1200}),
+                      [&](RecordedCamera* c) { c->controls.at(control).on_set = on_set; });
       const std::string what = control == V4L2_CID_AUTOGAIN ? "gain" : "exposure";
       ASSERT_TRUE(o.status.ok()) << o.status.message();
       EXPECT_NE(o.camera->Describe().find("REFUSES SCANS: automatic " + what + " stays on"),
@@ -258,7 +260,8 @@ TEST(V4l2Camera, ACameraThatKeepsItsAutomaticExposureOrGainRefusesEveryScan) {
 // the pattern was shown, with stamps at the start of exposure and at the end of the frame.
 TEST(V4l2Camera, ADroppedOrFlaggedFrameIsNeverTakenAsACapture) {
   for (const char* name : {"uvc_webcam", "mono_industrial"}) {
-    const cv::Size size = std::string(name) == "uvc_webcam" ? cv::Size(640, 480) : cv::Size(1600, 1200);
+    const cv::Size size =
+        std::string(name) == "uvc_webcam" ? cv::Size(640, 480) : cv::Size(1600, 1200);
     Opened o = Open(name, At(size));
     ASSERT_TRUE(o.status.ok()) << o.status.message();
     o.device->DropEvery(20);  // Sequence 19, 39, ... never come.
@@ -271,13 +274,15 @@ TEST(V4l2Camera, ADroppedOrFlaggedFrameIsNeverTakenAsACapture) {
     // Shown just before frame 19 starts: 19 was dropped, so frame 20 is the one.
     request.shown_utime = o.device->StartOf(19) + offset - 1000;
     ASSERT_TRUE(o.camera->Capture(request, &frame, &exposure).ok());
-    EXPECT_NEAR(static_cast<double>(exposure - offset), static_cast<double>(o.device->StartOf(20)), 500)
+    EXPECT_NEAR(static_cast<double>(exposure - offset), static_cast<double>(o.device->StartOf(20)),
+                500)
         << name;
     EXPECT_EQ(o.camera->dropped_frames(), 1) << name;
     // Shown just before frame 39 starts: 39 dropped, 40 flagged bad, so 41.
     request.shown_utime = o.device->StartOf(39) + offset - 1000;
     ASSERT_TRUE(o.camera->Capture(request, &frame, &exposure).ok());
-    EXPECT_NEAR(static_cast<double>(exposure - offset), static_cast<double>(o.device->StartOf(41)), 500)
+    EXPECT_NEAR(static_cast<double>(exposure - offset), static_cast<double>(o.device->StartOf(41)),
+                500)
         << name;
     EXPECT_EQ(o.camera->dropped_frames(), 2) << name;
     EXPECT_EQ(o.camera->bad_frames(), 1) << name;
@@ -296,7 +301,8 @@ TEST(V4l2Camera, UnpluggedMidScanTheFrameFailsClearlyAndTheCameraComesBackWhenPl
   EXPECT_NE(s.message().find("camera /dev/video4 is gone"), std::string::npos) << s.message();
   s = o.camera->Capture(Now(), &frame, &exposure);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.message().find("camera /dev/video4 is not back yet"), std::string::npos) << s.message();
+  EXPECT_NE(s.message().find("camera /dev/video4 is not back yet"), std::string::npos)
+      << s.message();
   EXPECT_FALSE(o.camera->Preview(&frame, &exposure).ok());
   o.device->Replug();
   // A scan's frame opens it at once; the same format and controls are set again.
@@ -310,8 +316,8 @@ TEST(V4l2Camera, UnpluggedMidScanTheFrameFailsClearlyAndTheCameraComesBackWhenPl
 }
 
 // vellum-camera's node over the recorded webcam on an in-process bus: captures of a scan on a
-// camera dropping every other frame (counted), then the camera unplugged: the next scan's frame is an error of that scan, naming the camera; once
-// it is back, the scan after that is captured.
+// camera dropping every other frame (counted), then the camera unplugged: the next scan's frame is
+// an error of that scan, naming the camera; once it is back, the scan after that is captured.
 TEST(V4l2CameraNode, AScanWhileTheCameraIsGoneFailsClearlyAndTheNextOneIsCaptured) {
   testing::MemqBus bus;
   bus.Watch("vellum-camera");

@@ -28,7 +28,9 @@ std::vector<uint32_t> Preference(bool gray_first) {
   return order;
 }
 
-std::string SizeText(cv::Size s) { return std::to_string(s.width) + "x" + std::to_string(s.height); }
+std::string SizeText(cv::Size s) {
+  return std::to_string(s.width) + "x" + std::to_string(s.height);
+}
 
 std::string Offered(const std::vector<DeviceFormat>& offered) {
   std::string text;
@@ -138,7 +140,8 @@ Status ChooseFormat(const std::vector<DeviceFormat>& offered, const std::string&
 Status ConvertFrame(uint32_t fourcc, cv::Size size, uint32_t bytes_per_line, const uint8_t* data,
                     size_t used, cv::Mat* image) {
   const int bits = FormatBits(fourcc);
-  if (bits == 0) return Status::Error("frame format " + FourccText(fourcc) + " is not one vellum takes");
+  if (bits == 0)
+    return Status::Error("frame format " + FourccText(fourcc) + " is not one vellum takes");
   if (fourcc == V4L2_PIX_FMT_MJPEG) {
     const cv::Mat bytes(1, static_cast<int>(used), CV_8U, const_cast<uint8_t*>(data));
     cv::Mat decoded = used > 0 ? cv::imdecode(bytes, cv::IMREAD_COLOR) : cv::Mat();

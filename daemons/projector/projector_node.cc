@@ -159,8 +159,8 @@ void ProjectorNode::Flash(int index) {
   m.window_us = 120000;  // Lags of a few refreshes, and a frame of the new level.
   m.projector_width = sequence_.projector_size.width;
   m.projector_height = sequence_.projector_size.height;
-  m.refresh_hz = static_cast<float>(options_.refresh_hz > 0 ? options_.refresh_hz
-                                                            : projector_->refresh_hz());
+  m.refresh_hz =
+      static_cast<float>(options_.refresh_hz > 0 ? options_.refresh_hz : projector_->refresh_hz());
   FlashFrames f;
   f.handed_us = m.handed_utime;
   f.white = white;

@@ -23,12 +23,12 @@
 #include <string>
 
 #include "core/geometry/calibration.h"
+#include "core/patterns/display_lag.h"
 #include "core/patterns/patterns.h"
 #include "core/patterns/scan.h"
 #include "daemons/projector/projector.h"
 #include "station/node.h"
 #include "vellum/calibration_t.hpp"
-#include "core/patterns/display_lag.h"
 #include "vellum/capture_t.hpp"
 #include "vellum/latency_request_t.hpp"
 #include "vellum/latency_seen_t.hpp"
@@ -53,7 +53,7 @@ struct ProjectorNodeOptions {
   bool measure_lag = false;
   // White and black in turn; the camera's phase against them drifts over twelve.
   int lag_flashes = 12;
-  double refresh_hz = 0;     // The display's, where SDL does not know it (0: ask SDL).
+  double refresh_hz = 0;  // The display's, where SDL does not know it (0: ask SDL).
   std::chrono::duration<double> capture_timeout{5.0};  // Longest wait for each CAPTURE.
   // The station's extra lights, taken after the patterns in this order (names and directions;
   // no images). Empty: none.
