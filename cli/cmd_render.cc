@@ -22,10 +22,6 @@ int RunRender(const std::vector<std::string>& args) {
        "the projector's light falls with the square of the distance and towards its image's "
        "corners, as a real projector's does (off by default: the scans the tests were set on)",
        "false"},
-      {"texture-bits", "N",
-       "bits per sample of the studio-light texture: 8, or 16 as a camera that gives more than 8 "
-       "(the structured-light frames stay 8-bit)",
-       "8"},
       {"studio-lamps", "X,Y,Z;...",
        "light the texture with these point lamps (world mm, ';' between lamps) instead of evenly",
        ""},
@@ -67,12 +63,8 @@ int RunRender(const std::vector<std::string>& args) {
   }
   light.ambient = flags.GetDouble("ambient", 0, 1);
   light.defocus_sigma_px = flags.GetDouble("defocus", 0, 20);
-  light.texture_bits = flags.GetInt("texture-bits", 8, 16);
   light.projector_falloff = flags.GetBool("projector-falloff");
   light.studio_lamps = ParseLamps("studio-lamps", flags.Get("studio-lamps"));
-  if (light.texture_bits != 8 && light.texture_bits != 16) {
-    throw UsageError("--texture-bits must be 8 or 16, got " + flags.Get("texture-bits"));
-  }
   const PatternSequence seq =
       MakePatternSequence(PatternOptionsFromFlags(flags, rig.projector.size));
 

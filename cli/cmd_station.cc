@@ -562,19 +562,6 @@ int RunImport(const std::vector<std::string>& args) {
   if (positional.size() != 2) throw UsageError("expected DIR LOG (see vellum import --help)");
   Scan scan;
   Status s = ReadScan(positional[0], &scan);
-  if (s.ok() && scan.texture.depth() != CV_8U) {
-    // The bus carries 8-bit images (the station's cameras give 8 bits).
-    s = Status::Error(positional[0] +
-                      "/texture.png: a 16-bit texture cannot go on the bus (its images are "
-                      "8-bit); process the folder with vellum process instead");
-  }
-  for (const ScanLight& light : scan.lights) {
-    if (s.ok() && light.image.depth() != CV_8U) {
-      s = Status::Error(positional[0] + "/" + LightFileName(light.name) +
-                        ": a 16-bit light's image cannot go on the bus (its images are 8-bit); "
-                        "process the folder with vellum process instead");
-    }
-  }
   calibration_t calibration{};
   bool has_calibration = false;
   std::string calib_path = flags.Get("calibration");

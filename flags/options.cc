@@ -59,6 +59,10 @@ std::vector<Flags::Spec> SimFlagSpecs(const std::string& prefix) {
       {"centre", "X,Y", prefix + "where the page's centre lies on the table, mm", "0,0"},
       {"noise", "DN", prefix + "camera noise sigma, DN", "1.5"},
       {"seed", "N", prefix + "noise seed (the same seed gives the same images)", "1"},
+      {"texture-bits", "N",
+       prefix + "bits a sample of the studio-light texture and the lights' images: 8, or 16 as "
+                "a camera that gives more than 8 (the structured-light frames stay 8-bit)",
+       "8"},
       {"scene", "NAME",
        prefix + "what the page lies on: table, support (a board as bright as paper), frame (a "
                 "paper mount around the leaf) or spread (an open book: two pages and a gutter)",
@@ -121,6 +125,10 @@ Status SimOptionsFromFlags(const Flags& flags, PageOptions* page, TextureOptions
   }
   page->centre_mm = cv::Vec2d(centre[0], centre[1]);
   light->noise_dn = flags.GetDouble("noise", 0, 100);
+  light->texture_bits = flags.GetInt("texture-bits", 8, 16);
+  if (light->texture_bits != 8 && light->texture_bits != 16) {
+    throw UsageError("--texture-bits must be 8 or 16, got " + flags.Get("texture-bits"));
+  }
   double pose[6];
   char end = 0;
   if (std::sscanf(flags.Get("pose").c_str(), "%lf,%lf,%lf,%lf,%lf,%lf%c", &pose[0], &pose[1],

@@ -11,6 +11,7 @@
 #include <map>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/depth.h"
 #include "core/common/text.h"
 #include "core/report/pictures.h"
 #include "io/calibration_io.h"
@@ -52,7 +53,7 @@ class Stage {
     Status s = MakeDirectories((fs::path(results) / "report").string());
     if (!s.ok()) return s;
     cv::Mat out = image;
-    if (out.depth() != CV_8U) out.convertTo(out, CV_8U, 1.0 / 257);
+    out = EightBit(out);
     if (out.cols > 1400) {
       const double scale = 1400.0 / out.cols;
       cv::resize(out, out, cv::Size(), scale, scale, cv::INTER_AREA);

@@ -11,6 +11,7 @@
 #include "vellum/scan_started_v2_t.hpp"
 #include "vellum/scan_started_v3_t.hpp"
 #include "vellum/scan_started_v4_t.hpp"
+#include "vellum/texture_v1_t.hpp"
 
 namespace vellum::station {
 
@@ -124,6 +125,30 @@ bool SafeDecode(const void* data, int64_t size, pattern_shown_t* msg) {
   msg->light_count = old.light_count;
   msg->light = old.light;
   return true;  // handed_utime 0: not said.
+}
+
+bool SafeDecode(const void* data, int64_t size, texture_t* msg) {
+  if (SafeDecode<texture_t>(data, size, msg)) return true;
+  texture_v1_t old;
+  if (!SafeDecode<texture_v1_t>(data, size, &old)) return false;
+  *msg = texture_t{};
+  msg->utime = old.utime;
+  msg->seq = old.seq;
+  msg->station = old.station;
+  msg->scan_id = old.scan_id;
+  msg->chunk_index = old.chunk_index;
+  msg->chunk_count = old.chunk_count;
+  msg->width = old.width;
+  msg->height = old.height;
+  msg->row_begin = old.row_begin;
+  msg->row_count = old.row_count;
+  msg->channels = old.channels;
+  msg->bits = 8;  // All it could be.
+  msg->size = old.size;
+  msg->data = std::move(old.data);
+  msg->light_count = old.light_count;
+  msg->light = old.light;
+  return true;
 }
 
 }  // namespace vellum::station

@@ -10,6 +10,7 @@
 #include "vellum/capture_t.hpp"
 #include "vellum/pattern_shown_t.hpp"
 #include "vellum/scan_started_t.hpp"
+#include "vellum/texture_t.hpp"
 
 namespace vellum::station {
 
@@ -39,5 +40,7 @@ bool SafeDecode(const void* data, int64_t size, calibration_t* msg);
 // A PATTERN_SHOWN recorded before it said when the image was handed to the display
 // (pattern_shown_v1_t): handed_utime 0, not said.
 bool SafeDecode(const void* data, int64_t size, pattern_shown_t* msg);
+// A TEXTURE or LIGHT_TEXTURE recorded before it said its samples' bits (texture_v1_t): 8.
+bool SafeDecode(const void* data, int64_t size, texture_t* msg);
 
 }  // namespace vellum::station

@@ -6,6 +6,11 @@
 
 #include "core/common/text.h"
 
+// 16-bit samples (a deep camera's texture) go on the bus as the host holds them: little-endian,
+// as image_t and texture_t say.
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
+              "the bus's 16-bit samples are little-endian");
+
 namespace vellum::station {
 namespace {
 
@@ -80,12 +85,19 @@ void SetStages(const std::vector<StageReport>& stages, Msg* m) {
 }  // namespace
 
 void ToMessage(const cv::Mat& image, image_t* msg) {
-  CV_Assert(image.depth() == CV_8U && (image.channels() == 1 || image.channels() == 3));
+  CV_Assert((image.depth() == CV_8U || image.depth() == CV_16U) &&
+            (image.channels() == 1 || image.channels() == 3));
+  const bool deep = image.depth() == CV_16U;
   msg->width = image.cols;
   msg->height = image.rows;
   msg->row_stride = static_cast<int32_t>(image.cols * image.elemSize());
-  msg->pixelformat = image.channels() == 1 ? static_cast<int32_t>(image_t::PIXEL_FORMAT_GRAY)
-                                           : static_cast<int32_t>(image_t::PIXEL_FORMAT_BGR);
+  if (image.channels() == 1) {
+    msg->pixelformat =
+        deep ? int32_t{image_t::PIXEL_FORMAT_GRAY16} : int32_t{image_t::PIXEL_FORMAT_GRAY};
+  } else {
+    msg->pixelformat =
+        deep ? int32_t{image_t::PIXEL_FORMAT_BGR48} : int32_t{image_t::PIXEL_FORMAT_BGR};
+  }
   msg->size = msg->row_stride * image.rows;
   msg->data.resize(msg->size);
   for (int y = 0; y < image.rows; ++y) {
@@ -95,25 +107,35 @@ void ToMessage(const cv::Mat& image, image_t* msg) {
 }
 
 Status FromMessage(const image_t& msg, cv::Mat* image) {
-  int channels = 0;
-  if (msg.pixelformat == image_t::PIXEL_FORMAT_GRAY) {
-    channels = 1;
-  } else if (msg.pixelformat == image_t::PIXEL_FORMAT_BGR) {
-    channels = 3;
-  } else {
-    char fourcc[5] = {0};
-    for (int k = 0; k < 4; ++k) {
-      const char c = static_cast<char>((msg.pixelformat >> (8 * k)) & 0xff);
-      fourcc[k] = c >= 32 && c < 127 ? c : '?';
+  int channels = 0, depth = CV_8U;
+  switch (msg.pixelformat) {
+    case image_t::PIXEL_FORMAT_GRAY:
+      channels = 1;
+      break;
+    case image_t::PIXEL_FORMAT_BGR:
+      channels = 3;
+      break;
+    case image_t::PIXEL_FORMAT_GRAY16:
+      channels = 1, depth = CV_16U;
+      break;
+    case image_t::PIXEL_FORMAT_BGR48:
+      channels = 3, depth = CV_16U;
+      break;
+    default: {
+      char fourcc[5] = {0};
+      for (int k = 0; k < 4; ++k) {
+        const char c = static_cast<char>((msg.pixelformat >> (8 * k)) & 0xff);
+        fourcc[k] = c >= 32 && c < 127 ? c : '?';
+      }
+      return Status::Error(std::string("image pixel format '") + fourcc +
+                           "' is not supported (GREY, BGR3, Y16 or BGR6)");
     }
-    return Status::Error(std::string("image pixel format '") + fourcc +
-                         "' is not supported (GREY or BGR3)");
   }
   if (msg.width <= 0 || msg.height <= 0 || msg.width > 65535 || msg.height > 65535) {
     return Status::Error("image size " + std::to_string(msg.width) + "x" +
                          std::to_string(msg.height) + " is not valid");
   }
-  const int64_t row_bytes = static_cast<int64_t>(msg.width) * channels;
+  const int64_t row_bytes = static_cast<int64_t>(msg.width) * channels * (depth == CV_16U ? 2 : 1);
   if (msg.row_stride < row_bytes) {
     return Status::Error("image row_stride " + std::to_string(msg.row_stride) +
                          " is less than a row of " + std::to_string(row_bytes) + " bytes");
@@ -124,7 +146,7 @@ Status FromMessage(const image_t& msg, cv::Mat* image) {
                          std::to_string(msg.width) + "x" + std::to_string(msg.height) + " needs " +
                          std::to_string(need));
   }
-  image->create(msg.height, msg.width, CV_8UC(channels));
+  image->create(msg.height, msg.width, CV_MAKETYPE(depth, channels));
   for (int y = 0; y < msg.height; ++y) {
     std::memcpy(image->ptr(y), msg.data.data() + static_cast<size_t>(y) * msg.row_stride,
                 row_bytes);
@@ -448,7 +470,8 @@ Status FromMessages(const std::vector<stage_report_t>& msgs, std::vector<StageRe
 
 std::vector<texture_t> TextureMessages(int64_t scan_id, const cv::Mat& texture, int light_count,
                                        const ScanLight* light) {
-  CV_Assert(texture.depth() == CV_8U && (texture.channels() == 1 || texture.channels() == 3));
+  CV_Assert((texture.depth() == CV_8U || texture.depth() == CV_16U) &&
+            (texture.channels() == 1 || texture.channels() == 3));
   const size_t row_bytes = texture.cols * texture.elemSize();
   const auto chunks = RowChunks(texture.rows, row_bytes);
   std::vector<texture_t> out(chunks.size());
@@ -463,6 +486,7 @@ std::vector<texture_t> TextureMessages(int64_t scan_id, const cv::Mat& texture, 
     m.row_begin = chunks[c].first;
     m.row_count = chunks[c].second;
     m.channels = texture.channels();
+    m.bits = texture.depth() == CV_16U ? 16 : 8;
     m.light_count = light_count;
     if (light) m.light = ToMessage(*light);
     m.size = static_cast<int32_t>(m.row_count * row_bytes);
@@ -478,18 +502,23 @@ Status AddChunk(const texture_t& m, cv::Mat* texture) {
   if (m.channels != 1 && m.channels != 3) {
     return Status::Error("TEXTURE: " + std::to_string(m.channels) + " channels (1 or 3)");
   }
-  if (m.size % m.channels != 0) return Status::Error("TEXTURE: size is not whole pixels");
-  Status s = CheckRows("TEXTURE", m.width, m.height, m.row_begin, m.row_count, m.size / m.channels,
+  if (m.bits != 8 && m.bits != 16) {
+    return Status::Error("TEXTURE: " + std::to_string(m.bits) + " bits a sample (8 or 16)");
+  }
+  const int pixel_bytes = m.channels * m.bits / 8;
+  if (m.size % pixel_bytes != 0) return Status::Error("TEXTURE: size is not whole pixels");
+  Status s = CheckRows("TEXTURE", m.width, m.height, m.row_begin, m.row_count, m.size / pixel_bytes,
                        m.chunk_index, m.chunk_count);
   if (!s.ok()) return s;
   const cv::Size size(m.width, m.height);
+  const int type = CV_MAKETYPE(m.bits == 16 ? CV_16U : CV_8U, m.channels);
   if (texture->empty()) {
-    texture->create(size, CV_8UC(m.channels));
-  } else if (texture->size() != size || texture->channels() != m.channels) {
+    texture->create(size, type);
+  } else if (texture->size() != size || texture->type() != type) {
     return Status::Error("TEXTURE: chunk " + std::to_string(m.chunk_index) +
-                         " disagrees with the first chunk on the size or channels");
+                         " disagrees with the first chunk on the size, channels or bits");
   }
-  const size_t row_bytes = static_cast<size_t>(m.width) * m.channels;
+  const size_t row_bytes = static_cast<size_t>(m.width) * pixel_bytes;
   for (int r = 0; r < m.row_count; ++r) {
     std::memcpy(texture->ptr(m.row_begin + r), &m.data[r * row_bytes], row_bytes);
   }

@@ -46,7 +46,8 @@ inline constexpr size_t kMaxMessageBytes = 1 << 20;
 // claims more is refused before anything that size is allocated.
 inline constexpr int64_t kMaxViewPixels = int64_t{1} << 28;
 
-// Images: 8-bit gray (GREY) or BGR (BGR3).
+// Images: gray or BGR, 8 bits a sample (GREY, BGR3) or 16 (Y16, BGR6: a deeper camera's texture
+// and lights).
 void ToMessage(const cv::Mat& image, image_t* msg);
 Status FromMessage(const image_t& msg, cv::Mat* image);  // A deep copy.
 
@@ -117,7 +118,7 @@ Status FromMessage(const stage_report_t& msg, StageReport* report);
 Status FromMessages(const std::vector<stage_report_t>& msgs, std::vector<StageReport>* reports);
 
 // The texture in chunks of rows (TEXTURE; the scan has `light_count` extra lights), or with
-// `light` an extra light's image (LIGHT_TEXTURE), and its reassembly.
+// `light` an extra light's image (LIGHT_TEXTURE), 8 or 16 bits a sample, and its reassembly.
 std::vector<texture_t> TextureMessages(int64_t scan_id, const cv::Mat& texture, int light_count = 0,
                                        const ScanLight* light = nullptr);
 Status AddChunk(const texture_t& msg, cv::Mat* texture);

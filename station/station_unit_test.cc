@@ -38,6 +38,7 @@
 #include "vellum/scan_started_v4_t.hpp"
 #include "vellum/status_t.hpp"
 #include "vellum/texture_t.hpp"
+#include "vellum/texture_v1_t.hpp"
 
 namespace vellum::station {
 namespace {
@@ -52,17 +53,33 @@ bool SameBits(const cv::Mat& a, const cv::Mat& b) {
   return true;
 }
 
-TEST(Messages, ImagesRoundTripGrayAndColourAndBadImagesAreNamed) {
-  cv::Mat gray(37, 53, CV_8U), bgr(20, 31, CV_8UC3);
+// Gray and colour at 8 and 16 bits a sample (a deeper camera's texture) come back bit for bit,
+// each under its own FourCC; the 16-bit ones little-endian as V4L2's Y16 is.
+TEST(Messages, ImagesRoundTripGrayAndColourAtEightAndSixteenBitsAndBadImagesAreNamed) {
+  cv::Mat gray(37, 53, CV_8U), bgr(20, 31, CV_8UC3), gray16(23, 17, CV_16U), bgr16(9, 14, CV_16UC3);
   cv::randu(gray, 0, 256);
   cv::randu(bgr, 0, 256);
-  for (const cv::Mat& image : {gray, bgr}) {
+  cv::randu(gray16, 0, 65536);
+  cv::randu(bgr16, 0, 65536);
+  const int32_t formats[] = {image_t::PIXEL_FORMAT_GRAY, image_t::PIXEL_FORMAT_BGR,
+                             image_t::PIXEL_FORMAT_GRAY16, image_t::PIXEL_FORMAT_BGR48};
+  const cv::Mat images[] = {gray, bgr, gray16, bgr16};
+  for (int k = 0; k < 4; ++k) {
     image_t msg;
-    ToMessage(image, &msg);
+    ToMessage(images[k], &msg);
+    EXPECT_EQ(msg.pixelformat, formats[k]) << k;
     cv::Mat back;
     ASSERT_TRUE(FromMessage(msg, &back).ok());
-    EXPECT_TRUE(SameBits(image, back));
+    EXPECT_TRUE(SameBits(images[k], back)) << k;
   }
+  image_t deep;
+  gray16.at<uint16_t>(0, 0) = 0x1234;
+  ToMessage(gray16, &deep);
+  EXPECT_EQ(deep.data[0], 0x34);  // Little-endian.
+  EXPECT_EQ(deep.data[1], 0x12);
+  deep.size -= 2;  // A 16-bit row is two bytes a sample: one sample short is named.
+  deep.data.resize(deep.size);
+  EXPECT_NE(FromMessage(deep, &gray16).message().find("needs"), std::string::npos);
   image_t msg;
   ToMessage(gray, &msg);
   msg.row_stride = 60;  // Rows padded: data too short now.
@@ -444,6 +461,48 @@ TEST(Messages, AnEarlierPatternShownReadsWithItsHandoverNotSaid) {
   const std::vector<uint8_t> current = Encode(now);
   ASSERT_TRUE(SafeDecode(current.data(), static_cast<int64_t>(current.size()), &m));
   EXPECT_EQ(m.handed_utime, 1000);
+}
+
+// A texture's chunks say their bits: a 16-bit texture comes back bit for bit; a chunk that
+// disagrees with the first on its bits, or says bits other than 8 or 16, is refused, named. A
+// TEXTURE recorded before it said them (texture_v1_t) reads as 8-bit.
+TEST(Messages, TextureChunksCarrySixteenBitsAndAnEarlierTextureReadsAsEightBit) {
+  cv::Mat texture(300, 1000, CV_16UC3);  // 1.8 MB: several chunks.
+  cv::randu(texture, 0, 65536);
+  std::vector<texture_t> chunks = TextureMessages(5, texture);
+  ASSERT_GT(chunks.size(), 1u);
+  cv::Mat back;
+  for (const texture_t& m : chunks) {
+    EXPECT_EQ(m.bits, 16);
+    ASSERT_TRUE(AddChunk(m, &back).ok());
+  }
+  EXPECT_TRUE(SameBits(texture, back));
+  cv::Mat eight(300, 1000, CV_8UC3, cv::Scalar::all(7));
+  texture_t mixed = TextureMessages(5, eight)[0];
+  cv::Mat partial;
+  ASSERT_TRUE(AddChunk(chunks[1], &partial).ok());
+  EXPECT_NE(AddChunk(mixed, &partial).message().find("bits"), std::string::npos);
+  mixed.bits = 12;
+  EXPECT_NE(AddChunk(mixed, &partial).message().find("12 bits a sample (8 or 16)"),
+            std::string::npos);
+
+  texture_v1_t v1{};
+  v1.scan_id = 6;
+  v1.chunk_count = 1;
+  v1.width = 4;
+  v1.height = 2;
+  v1.row_count = 2;
+  v1.channels = 1;
+  v1.size = 8;
+  v1.data.assign({1, 2, 3, 4, 5, 6, 7, 8});
+  const std::vector<uint8_t> bytes = Encode(v1);
+  texture_t m{};
+  ASSERT_TRUE(SafeDecode(bytes.data(), static_cast<int64_t>(bytes.size()), &m));
+  EXPECT_EQ(m.bits, 8);
+  cv::Mat old;
+  ASSERT_TRUE(AddChunk(m, &old).ok());
+  EXPECT_EQ(old.type(), CV_8U);
+  EXPECT_EQ(old.at<uint8_t>(1, 3), 8);
 }
 
 Scan SmallScan() {

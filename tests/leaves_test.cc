@@ -24,6 +24,7 @@
 #include <opencv2/imgproc.hpp>
 #include <tuple>
 
+#include "core/common/depth.h"
 #include "core/decode/decode.h"
 #include "core/geometry/rigid2d.h"
 #include "core/geometry/triangulate.h"
@@ -149,7 +150,7 @@ TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
     const int outside = MaskOffLeaf(page, to_true, pages[k], 1.5, &leaf, &off_leaf);
     if (getenv("LEAVES_DUMP")) {
       cv::Mat show = r.image.clone();
-      if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
+      show = EightBit(show);
       if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
       cv::dilate(off_leaf, off_leaf, cv::Mat());
       show.setTo(cv::Scalar(0, 0, 255), off_leaf);
@@ -505,7 +506,7 @@ TEST(Orientation, APageImageReadsTheRightWayInTheTextureAndTheRestoredPage) {
   ASSERT_TRUE(result.status.ok()) << result.status.message();
   ASSERT_EQ(result.pages.size(), 1u);
   cv::Mat restored = result.pages[0].restored.image;
-  if (restored.depth() != CV_8U) restored.convertTo(restored, CV_8U, 1.0 / 257);
+  restored = EightBit(restored);
   for (const auto& [name, picture] :
        {std::pair<std::string, cv::Mat>{"texture", scan.texture}, {"restored page", restored}}) {
     SCOPED_TRACE(name);

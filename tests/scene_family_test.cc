@@ -37,6 +37,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
+#include "core/common/depth.h"
 #include "core/sim/evaluate.h"
 #include "pipeline/process.h"
 #include "pipeline/qc.h"
@@ -66,7 +67,7 @@ uint64_t EnvNumber(const char* name, uint64_t fallback) {
 void DumpOutline(const std::string& path, const cv::Mat& texture, const cv::Mat& found,
                  const cv::Mat& truth) {
   cv::Mat show = texture;
-  if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
+  show = EightBit(show);
   if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
   show = show.clone();
   show.setTo(cv::Scalar(255, 0, 0), truth & ~found);
@@ -174,7 +175,7 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
       if (dump) {
         // The restored page with its mask's pixels off the leaf in red.
         cv::Mat show = page.restored.image;
-        if (show.depth() != CV_8U) show.convertTo(show, CV_8U, 1.0 / 257);
+        show = EightBit(show);
         if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
         show = show.clone();
         cv::dilate(off_leaf, off_leaf, cv::Mat::ones(5, 5, CV_8U));

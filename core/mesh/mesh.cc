@@ -6,6 +6,8 @@
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/depth.h"
+
 namespace vellum {
 namespace {
 
@@ -342,7 +344,7 @@ bool MeshOptions::Check(std::string* why) const {
 cv::Mat SegmentPage(const cv::Mat& texture, double fraction, bool largest_only) {
   cv::Mat gray = texture;
   if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-  if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 255.0 / 65535.0);
+  gray = EightBit(gray);
   cv::Mat smooth;
   cv::GaussianBlur(gray, smooth, cv::Size(5, 5), 0);
   // The bright level: 98th percentile of the histogram.

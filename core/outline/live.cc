@@ -4,6 +4,7 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
+#include "core/common/depth.h"
 #include "core/mesh/mesh.h"
 #include "core/outline/outline.h"
 
@@ -15,7 +16,7 @@ namespace {
 cv::Mat PaperTone(const cv::Mat& image) {
   cv::Mat gray = image;
   if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-  if (gray.depth() != CV_8U) gray.convertTo(gray, CV_8U, 255.0 / 65535.0);
+  gray = EightBit(gray);
   cv::Mat tone;
   cv::medianBlur(gray, tone, 5);
   return tone;

@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 
+#include "core/common/depth.h"
 #include "core/common/text.h"
 #include "core/mesh/mesh.h"
 #include "core/outline/steps.h"
@@ -668,7 +669,7 @@ cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline) {
   } else {
     out = texture.clone();
   }
-  if (out.depth() != CV_8U) out.convertTo(out, CV_8U, 1.0 / 257);
+  out = EightBit(out);
   const cv::Scalar colours[] = {cv::Scalar(0, 200, 255), cv::Scalar(255, 120, 0)};
   const int thickness = std::max(1, out.cols / 600);
   for (size_t k = 0; k < outline.pages.size(); ++k) {

@@ -7,12 +7,14 @@
 #include <opencv2/imgproc.hpp>
 #include <unordered_map>
 
+#include "core/common/depth.h"
+
 namespace vellum {
 namespace {
 
 cv::Mat To8BitBgr(const cv::Mat& image) {
   cv::Mat out = image;
-  if (out.depth() != CV_8U) out.convertTo(out, CV_8U, 1.0 / 257);
+  out = EightBit(out);
   if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
   return out;
 }

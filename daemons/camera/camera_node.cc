@@ -2,6 +2,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/depth.h"
 #include "core/outline/outline.h"
 #include "station/messages.h"
 #include "vellum/capture_t.hpp"
@@ -9,15 +10,6 @@
 
 namespace vellum::station {
 namespace {
-
-// The bus carries 8-bit frames (image_t: GREY, BGR3): a deeper camera's frame is scaled down
-// here, its own depth kept up to this point.
-cv::Mat EightBit(const cv::Mat& image) {
-  if (image.depth() == CV_8U) return image;
-  cv::Mat out;
-  image.convertTo(out, CV_8U, 255.0 / 65535.0);
-  return out;
-}
 
 cv::Mat Gray(const cv::Mat& image) {
   if (image.channels() == 1) return image;
@@ -254,10 +246,8 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
                                          : CheckedCapture(request, where, &image, &exposure);
   CountCameraFaults();
   if (!s.ok()) return node_->Error(where + ": " + s.message(), m.scan_id);
-  image = EightBit(image);
-  if (m.pattern_index >= 0 && !under_light && image.channels() == 3) {
-    cv::cvtColor(image, image, cv::COLOR_BGR2GRAY);
-  }
+  // The structured-light frames go as 8-bit gray (CheckedCapture); the texture and the lights at
+  // the camera's own depth, which reaches the master: 16 bits where the camera gives more than 8.
   capture_t c{};
   c.scan_id = m.scan_id;
   c.session = m.session;  // The station is stamped by Publish.
@@ -277,7 +267,7 @@ void CameraNode::OnShown(const pattern_shown_t& m) {
   c.image.seq = node_->Counter("frames captured");
   node_->Publish(channel::kCapture, &c);
   node_->Count("frames captured");
-  PublishPreview(image, exposure, m.scan_id, m.pattern_index, m.pattern_count);
+  PublishPreview(EightBit(image), exposure, m.scan_id, m.pattern_index, m.pattern_count);
   if (m.pattern_index == last) node_->SetState("idle", m.scan_id, "scan captured");
 }
 

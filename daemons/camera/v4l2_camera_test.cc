@@ -14,6 +14,7 @@
 #include <opencv2/imgproc.hpp>
 #include <thread>
 
+#include "core/common/depth.h"
 #include "daemons/camera/camera_node.h"
 #include "daemons/camera/recorded_device.h"
 #include "daemons/camera/v4l2_formats.h"
@@ -54,7 +55,7 @@ cv::Mat Expected(const cv::Mat& frame) {
   cv::Mat scene;
   cv::resize(Scene(), scene, frame.size(), 0, 0, cv::INTER_AREA);
   if (frame.channels() == 1) cv::cvtColor(scene, scene, cv::COLOR_BGR2GRAY);
-  if (frame.depth() == CV_8U) scene.convertTo(scene, CV_8U, 1.0 / 257);
+  if (frame.depth() == CV_8U) scene = EightBit(scene);
   return scene;
 }
 

@@ -308,11 +308,9 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
   std::vector<texture_t> texture =
       TextureMessages(id, scan.texture, static_cast<int>(scan.lights.size()));
   node_->PublishChunks(channel::kTexture, &texture);
-  for (const ScanLight& light : scan.lights) {
-    cv::Mat image = light.image;  // The camera's 8 bits (a 16-bit one from a scan on disk, cut).
-    if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 257);
+  for (const ScanLight& light : scan.lights) {  // At the camera's depth, as the texture.
     std::vector<texture_t> chunks =
-        TextureMessages(id, image, static_cast<int>(scan.lights.size()), &light);
+        TextureMessages(id, light.image, static_cast<int>(scan.lights.size()), &light);
     node_->PublishChunks(channel::kLightTexture, &chunks);
   }
   // Taken up as it came when the whole scan was; else read from its folder as it is decoded

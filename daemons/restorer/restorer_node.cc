@@ -3,6 +3,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
+#include "core/common/depth.h"
 #include "core/common/text.h"
 #include "io/manifest.h"
 #include "io/scan_io.h"
@@ -235,7 +236,7 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   int height = 0;
   for (const auto& [index, restored] : pages->restored) {
     cv::Mat p = restored.image;
-    if (p.depth() != CV_8U) p.convertTo(p, CV_8U, 1.0 / 257);
+    p = EightBit(p);
     if (p.channels() == 1) cv::cvtColor(p, p, cv::COLOR_GRAY2BGR);
     height = std::max(height, p.rows);
     previews.push_back(p);

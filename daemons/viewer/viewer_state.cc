@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <tuple>
 
+#include "core/common/depth.h"
 #include "core/common/text.h"
 #include "core/outline/outline.h"
 #include "io/image_file.h"
@@ -27,8 +28,7 @@ const cv::Scalar kRed(40, 40, 220), kGreen(60, 190, 60);
 // channel painted red) and its histogram (64 bins of gray); returns the share clipped. Worked
 // out once per preview, not at each redraw.
 double ClippingView(const cv::Mat& preview, cv::Mat* shown, cv::Mat* hist) {
-  cv::Mat eight = preview;
-  if (eight.depth() != CV_8U) preview.convertTo(eight, CV_8U, 1.0 / 257);
+  const cv::Mat eight = EightBit(preview);
   cv::Mat top = eight.reshape(1, eight.rows * eight.cols);
   cv::reduce(top, top, 1, cv::REDUCE_MAX);
   const cv::Mat clipped = top.reshape(1, eight.rows) >= 255;
@@ -180,7 +180,7 @@ void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now, bool of
 }
 
 void ViewerState::OnFocus(cv::Mat image) {
-  if (image.depth() != CV_8U) image.convertTo(image, CV_8U, 1.0 / 257);
+  image = EightBit(image);
   focus_sharpness_ = Sharpness(image);
   focus_peak_ = std::max(focus_peak_, focus_sharpness_);
   if (image.channels() == 1) cv::cvtColor(image, image, cv::COLOR_GRAY2BGR);
