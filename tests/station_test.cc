@@ -584,7 +584,10 @@ TEST_F(StationTest, WithoutTheDisplayLagMixedFramesAreNamedAndTheScanFailsRestor
 // photometric normals of the three directed ones, file for file as `vellum process` of the
 // recorded scan does. Given the projector's flat field and the lamps' studio field, it writes
 // the page's albedo and reflectance as `vellum process` with the same files does, byte for byte.
-TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes) {
+// The camera gives more than 8 bits (the sim's texture and lights at 16): the texture and the
+// lights cross the bus and reach the scan's folder at 16 bits, the structured-light frames at 8,
+// and the masters (restored.tif, archival.tif, each light's) are 16-bit, as `vellum process`'s.
+TEST_F(StationTest, ADeepCamerasExtraLightsAreCapturedAndRestoredAtSixteenBitsAsVellumProcessDoes) {
   // Fields as `vellum calibrate flatfield` and `vellum calibrate studio` write them, even (the
   // files must only be the same for both).
   Calibration rig;
@@ -614,7 +617,8 @@ TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes
     }
     out << "  - { name: uv, channel: " << channel << " }\n";
   }
-  Start(Daemon("vellum-camera"), {"--backend", "sim", "--rig", kRig, "--page", "curl"});
+  Start(Daemon("vellum-camera"),
+        {"--backend", "sim", "--rig", kRig, "--page", "curl", "--texture-bits", "16"});
   Start(Daemon("vellum-projector"),
         {"--calibration", kRig, "--fullscreen", "false", "--capture-timeout", kSimCaptureTimeout,
          "--lights", lights_file},
@@ -641,6 +645,16 @@ TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes
   }
   EXPECT_EQ(recorded.lights[3].name, "uv");
   EXPECT_FALSE(recorded.lights[3].directed());
+  EXPECT_EQ(recorded.texture.depth(), CV_16U);
+  for (const ScanLight& light : recorded.lights)
+    EXPECT_EQ(light.image.depth(), CV_16U) << light.name;
+  for (const cv::Mat& frame : recorded.frames) ASSERT_EQ(frame.depth(), CV_8U);
+  // 16 bits that are the camera's, not 8 bits shifted up: most samples are not multiples of 257.
+  cv::Mat rest;
+  cv::Mat(recorded.texture.reshape(1)).convertTo(rest, CV_32S);
+  int fine = 0;
+  for (auto it = rest.begin<int>(); it != rest.end<int>(); ++it) fine += *it % 257 != 0;
+  EXPECT_GT(fine, static_cast<int>(rest.total() / 2));
   // Each light's frame is its own: lit from its side, not the texture or another light's.
   for (int k = 0; k < 4; ++k) {
     const cv::Mat& image = recorded.lights[k].image;
@@ -663,6 +677,13 @@ TEST_F(StationTest, ExtraLightsAreSwitchedCapturedAndRestoredAsVellumProcessDoes
   }
   EXPECT_EQ(ReadText(results + "/normals.tif"), ReadText(processed + "/normals.tif"));
   EXPECT_TRUE(fs::exists(results + "/report/relief.png"));
+  std::vector<std::string> masters = {"restored.tif", "archival.tif"};
+  for (const ScanLight& light : recorded.lights) masters.push_back("lights/" + light.name + ".tif");
+  for (const std::string& master : masters) {
+    EXPECT_EQ(cv::imread(results + "/" + master, cv::IMREAD_UNCHANGED).depth(), CV_16U) << master;
+  }
+  EXPECT_EQ(ReadText(results + "/archival.tif").size(),
+            ReadText(processed + "/archival.tif").size());
 }
 
 // The default rig: 1600x1200 frames, a 17-chunk correspondence map and a 23-chunk point cloud
