@@ -159,8 +159,7 @@ void ProjectorNode::Flash(int index) {
   m.window_us = 120000;  // Lags of a few refreshes, and a frame of the new level.
   m.projector_width = sequence_.projector_size.width;
   m.projector_height = sequence_.projector_size.height;
-  m.refresh_hz =
-      static_cast<float>(options_.refresh_hz > 0 ? options_.refresh_hz : projector_->refresh_hz());
+  m.refresh_hz = static_cast<float>(RefreshHz());
   FlashFrames f;
   f.handed_us = m.handed_utime;
   f.white = white;
@@ -180,11 +179,14 @@ void ProjectorNode::OnLatencySeen(const latency_seen_t& m) {
   EndLatency("");
 }
 
+double ProjectorNode::RefreshHz() const {
+  return options_.refresh_hz > 0 ? options_.refresh_hz : projector_->refresh_hz();
+}
+
 void ProjectorNode::EndLatency(const std::string& failure) {
   projector_->Show(black_);
-  const double refresh = options_.refresh_hz > 0 ? options_.refresh_hz : projector_->refresh_hz();
   DisplayLag lag;
-  if (failure.empty()) lag = EstimateDisplayLag(latency_.seen, refresh);
+  if (failure.empty()) lag = EstimateDisplayLag(latency_.seen, RefreshHz());
   latency_ = Latency();
   node_->SetState("idle");
   if (!failure.empty() || !lag.status.ok()) {

@@ -86,6 +86,8 @@ class ProjectorNode {
   void StartLatency(int64_t session, int flashes);
   void Flash(int index);
   void EndLatency(const std::string& failure);
+  // The display's refresh rate: --refresh-hz where given, else as SDL knows it.
+  double RefreshHz() const;
   void ShowPattern(int index);
   void RequestLight(int k);  // k -1: all off.
   int Patterns() const { return static_cast<int>(sequence_.patterns.size()); }
