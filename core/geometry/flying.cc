@@ -13,6 +13,9 @@ int RejectFlyingPoints(cv::Mat* points, double max_off_mm, int reach) {
   const int w = p.cols, h = p.rows;
   const float limit2 = static_cast<float>(max_off_mm * max_off_mm);
   cv::Mat flying = cv::Mat::zeros(p.size(), CV_8U);
+  const ptrdiff_t stride = static_cast<ptrdiff_t>(p.step1() / 3);  // Points from a row to the next.
+  // Each direction's step through the map (du, dv below): +1 column, +1 row, and the diagonals.
+  const ptrdiff_t offset[4] = {1, stride, stride + 1, 1 - stride};
   std::atomic<int> total{0};
   cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& range) {
     const float nan = std::numeric_limits<float>::quiet_NaN();
@@ -20,9 +23,24 @@ int RejectFlyingPoints(cv::Mat* points, double max_off_mm, int reach) {
     for (int v = range.start; v < range.end; ++v) {
       const cv::Vec3f* row = p.ptr<cv::Vec3f>(v);
       uint8_t* out = flying.ptr<uint8_t>(v);
+      // Rows and columns 3 * reach from every border: each look lies inside the map.
+      const bool inner_row = v >= 3 * reach && v < h - 3 * reach;
       for (int u = 0; u < w; ++u) {
         const cv::Vec3f at0 = row[u];
         if (!std::isfinite(at0[2])) continue;
+        if (inner_row && u >= 3 * reach && u < w - 3 * reach) {
+          // Most points: on the surface before them along every direction, two looks each
+          // without bounds, no root. The same test as side(-1) and off() below: a miss within
+          // the limit is never off, and a point on one side's surface everywhere is kept.
+          bool on_everywhere = true;
+          for (int d = 0; d < 4 && on_everywhere; ++d) {
+            const cv::Vec3f near = row[u - reach * offset[d]], far = row[u - 2 * reach * offset[d]];
+            const cv::Vec3f miss = at0 - (2 * near - far);
+            on_everywhere =
+                std::isfinite(near[2]) && std::isfinite(far[2]) && miss.dot(miss) <= limit2;
+          }
+          if (on_everywhere) continue;
+        }
         const int du[4] = {1, 0, 1, 1}, dv[4] = {0, 1, 1, -1};
         int directions = 0;
         for (int d = 0; d < 4; ++d) {
