@@ -214,19 +214,31 @@ void BM_Vellum_EstimateAlbedo(benchmark::State& state) {
   }
 }
 
-BENCHMARK(BM_Baseline_RestoreTexture)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK(BM_Vellum_RestoreTextureAndAlbedo)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK(BM_Vellum_RestoreTextureAndTwoLights)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK(BM_Vellum_RestoreTextureAlbedoAndTwoLights)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK(BM_Baseline_RestoreStage)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK(BM_Vellum_RestoreStageAlbedoAndTwoLights)->Unit(benchmark::kMillisecond)->MinTime(2.0);
-BENCHMARK(BM_Vellum_EstimateAlbedo)->Unit(benchmark::kMillisecond)->MinTime(2.0);
+BENCHMARK(BM_Baseline_RestoreTexture)->Unit(benchmark::kMillisecond)->MinTime(0.5)->Apply(Repeated);
+BENCHMARK(BM_Vellum_RestoreTextureAndAlbedo)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Apply(Repeated);
+BENCHMARK(BM_Vellum_RestoreTextureAndTwoLights)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Apply(Repeated);
+BENCHMARK(BM_Vellum_RestoreTextureAlbedoAndTwoLights)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Apply(Repeated);
+BENCHMARK(BM_Baseline_RestoreStage)->Unit(benchmark::kMillisecond)->MinTime(0.5)->Apply(Repeated);
+BENCHMARK(BM_Vellum_RestoreStageAlbedoAndTwoLights)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(0.5)
+    ->Apply(Repeated);
+BENCHMARK(BM_Vellum_EstimateAlbedo)->Unit(benchmark::kMillisecond)->MinTime(0.5)->Apply(Repeated);
 
 }  // namespace
 }  // namespace vellum
 
 int main(int argc, char** argv) {
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   const double base = reporter.Time("BM_Baseline_RestoreTexture");

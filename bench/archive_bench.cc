@@ -144,19 +144,56 @@ void BM_TiffLzw(benchmark::State& s) { WriteImage(s, ".tif", {}); }
 BENCHMARK(BM_Baseline_FrameInterval5fps)
     ->Unit(benchmark::kMillisecond)
     ->UseManualTime()
-    ->Iterations(1);
-BENCHMARK(BM_LogAppendRaw)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(5);
-BENCHMARK(BM_PngDefault)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_PngLevel0)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_PngLevel1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_TiffNone)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_TiffLzw)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_PngUnfiltered0)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_PngUnfiltered1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
-BENCHMARK(BM_PngHuffmanOnly)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
+    ->Iterations(1)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_LogAppendRaw)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(5)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_PngDefault)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_PngLevel0)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_PngLevel1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_TiffNone)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_TiffLzw)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_PngUnfiltered0)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_PngUnfiltered1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_PngHuffmanOnly)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3)
+    ->Apply(vellum::Repeated);
 
 int main(int argc, char** argv) {
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   if (VIPS_INIT(argv[0]) != 0) return 1;
   vellum::RatioReporter reporter;
   Frame();  // Made before the clock runs.

@@ -156,25 +156,31 @@ void BM_OpenCV_GrayCodeDecode(benchmark::State& state) {
   state.counters["valid_frac"] = s.valid_fraction;
 }
 
-BENCHMARK(BM_Vellum_DecodeTriangulate)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_DecodeTriangulate)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5)
+    ->Apply(Repeated);
 BENCHMARK(BM_Vellum_Decode)
     ->Arg(1)
     ->Arg(0)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->MinTime(2.0);
+    ->MinTime(0.5)
+    ->Apply(Repeated);
 BENCHMARK(BM_OpenCV_GrayCodeDecode)
     ->Arg(1)
     ->Arg(2)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->MinTime(2.0);
+    ->MinTime(0.5)
+    ->Apply(Repeated);
 
 }  // namespace
 }  // namespace vellum
 
 int main(int argc, char** argv) {
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg.rfind("--rig=", 0) != 0) {

@@ -246,42 +246,63 @@ void BM_CGAL_ARAP_45x45(benchmark::State& state) {
   }
   Record(state, flat);
 }
-BENCHMARK(BM_CGAL_ARAP_45x45)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_CGAL_ARAP_45x45)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5)
+    ->Apply(Repeated);
 #endif
 
-BENCHMARK(BM_Vellum_GaussNewton_45x45)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Vellum_GaussNewton_45x45)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5)
+    ->Apply(Repeated);
 BENCHMARK(BM_Vellum_GaussNewton_200x150)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->Iterations(3);
-BENCHMARK(BM_Factor_Frontal_200x150)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
+    ->Iterations(3)
+    ->Apply(Repeated);
+BENCHMARK(BM_Factor_Frontal_200x150)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.3)
+    ->Apply(Repeated);
 BENCHMARK(BM_Factor_EigenSimplicialLDLT_200x150)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->MinTime(1.0);
+    ->MinTime(0.3)
+    ->Apply(Repeated);
 BENCHMARK(BM_Factor_Frontal)
     ->DenseRange(0, 2)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->MinTime(1.0);
+    ->MinTime(0.3)
+    ->Apply(Repeated);
 BENCHMARK(BM_Factor_CholmodSupernodal)
     ->DenseRange(0, 2)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->MinTime(1.0);
+    ->MinTime(0.3)
+    ->Apply(Repeated);
 BENCHMARK(BM_Vellum_Simulator_45x45)
     ->Arg(0)
     ->Arg(1)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->Iterations(3);
-BENCHMARK(BM_Vellum_Restore_200dpi)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+    ->Iterations(3)
+    ->Apply(Repeated);
+BENCHMARK(BM_Vellum_Restore_200dpi)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5)
+    ->Apply(Repeated);
 
 }  // namespace
 }  // namespace vellum
 
 int main(int argc, char** argv) {
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   reporter.PrintRatio("BM_Vellum_GaussNewton_45x45", "vellum gauss-newton 45x45",

@@ -110,30 +110,24 @@ void BM_Vellum_LeafInPreview(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(LeafInPreview(preview).mask.data);
 }
 
-// Each benchmark is repeated, the repetitions of all five interleaved in random order (main), and
-// the medians compared: this machine is shared, and its speed drifts over a run.
-void Repeated(benchmark::internal::Benchmark* b) {
-  b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.4)->Repetitions(9);
-  b->ReportAggregatesOnly(true);
+// Each benchmark is repeated, the repetitions of all interleaved in random order (main), and the
+// medians compared: this machine is shared, and its speed drifts over a run.
+void Timed(benchmark::internal::Benchmark* b) {
+  b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.4)->Apply(Timed);
 }
-BENCHMARK(BM_Baseline_SegmentPage)->Apply(Repeated);
-BENCHMARK(BM_Baseline_SegmentPage_Sheet45)->Apply(Repeated);
-BENCHMARK(BM_Baseline_FindLeafV1)->Apply(Repeated);
-BENCHMARK(BM_Vellum_FindLeaf)->Apply(Repeated);
-BENCHMARK(BM_Vellum_FindLeaf_SheetAuto)->Apply(Repeated);
-BENCHMARK(BM_Baseline_SegmentPage_Preview)->Apply(Repeated);
-BENCHMARK(BM_Vellum_LeafInPreview)->Apply(Repeated);
+BENCHMARK(BM_Baseline_SegmentPage)->Apply(Timed);
+BENCHMARK(BM_Baseline_SegmentPage_Sheet45)->Apply(Timed);
+BENCHMARK(BM_Baseline_FindLeafV1)->Apply(Timed);
+BENCHMARK(BM_Vellum_FindLeaf)->Apply(Timed);
+BENCHMARK(BM_Vellum_FindLeaf_SheetAuto)->Apply(Timed);
+BENCHMARK(BM_Baseline_SegmentPage_Preview)->Apply(Timed);
+BENCHMARK(BM_Vellum_LeafInPreview)->Apply(Timed);
 
 }  // namespace
 }  // namespace vellum
 
 int main(int argc, char** argv) {
-  std::vector<char*> args(argv, argv + argc);
-  char interleave[] = "--benchmark_enable_random_interleaving=true";
-  args.insert(args.begin() + 1, interleave);  // A flag given after it still wins.
-  argc = static_cast<int>(args.size());
-  argv = args.data();
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   const double base = reporter.Median("BM_Baseline_SegmentPage_Sheet45");

@@ -180,17 +180,23 @@ BENCHMARK(BM_Baseline_ReadFrames)
     ->Unit(benchmark::kMillisecond)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
-    ->MinTime(3.0);
+    ->MinTime(0.8)
+    ->Apply(vellum::Repeated);
 BENCHMARK(BM_Vellum_ProcessEndToEnd)
     ->Unit(benchmark::kMillisecond)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
-    ->MinTime(5.0);
-BENCHMARK(BM_Vellum_ProcessCommand)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+    ->MinTime(1.0)
+    ->Apply(vellum::Repeated);
+BENCHMARK(BM_Vellum_ProcessCommand)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2)
+    ->Apply(vellum::Repeated);
 
 int main(int argc, char** argv) {
   Launcher::Start();  // While this process is small.
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     const Status s =

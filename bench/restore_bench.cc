@@ -96,14 +96,19 @@ void BM_Vellum_Restore24MpAt400Ppi(benchmark::State& state) {
 
 }  // namespace
 
-BENCHMARK(BM_Peer_OpenCvRemap)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(2.0);
+BENCHMARK(BM_Peer_OpenCvRemap)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MinTime(0.5)
+    ->Apply(vellum::Repeated);
 BENCHMARK(BM_Vellum_Restore24MpAt400Ppi)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->MinTime(2.0);
+    ->MinTime(0.5)
+    ->Apply(vellum::Repeated);
 
 int main(int argc, char** argv) {
-  benchmark::Initialize(&argc, argv);
+  vellum::InitializeInterleaved(&argc, &argv);
   vellum::RatioReporter reporter;
   Get();  // Set up before the clock runs.
   benchmark::RunSpecifiedBenchmarks(&reporter);
