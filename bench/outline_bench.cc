@@ -130,8 +130,8 @@ int main(int argc, char** argv) {
   vellum::InitializeInterleaved(&argc, &argv);
   vellum::RatioReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  const double base = reporter.Median("BM_Baseline_SegmentPage_Sheet45");
-  const double ours = reporter.Median("BM_Vellum_FindLeaf_SheetAuto");
+  const double base = reporter.Time("BM_Baseline_SegmentPage_Sheet45");
+  const double ours = reporter.Time("BM_Vellum_FindLeaf_SheetAuto");
   if (base > 0 && ours > 0) {
     std::printf(
         "finding the leaf by its shape and its sheet (medians): %.1f ms against %.1f ms for the "
@@ -139,16 +139,16 @@ int main(int argc, char** argv) {
         "rule and a 45x45 sheet: %.1f ms added (bar: 50 ms), ratio %.2fx\n",
         ours, base, ours - base, ours / base);
   }
-  const double bright = reporter.Median("BM_Baseline_SegmentPage_Preview");
-  const double live = reporter.Median("BM_Vellum_LeafInPreview");
+  const double bright = reporter.Time("BM_Baseline_SegmentPage_Preview");
+  const double live = reporter.Time("BM_Vellum_LeafInPreview");
   if (bright > 0 && live > 0) {
     std::printf(
         "the live outline on a 640x480 preview (medians): %.2f ms against %.2f ms for the "
         "brightness rule, ratio %.2fx (bar: 50 ms, a tenth of the 2 Hz preview's period)\n",
         live, bright, live / bright);
   }
-  const double flood = reporter.Median("BM_Baseline_FindLeafV1");
-  const double cut = reporter.Median("BM_Vellum_FindLeaf/");
+  const double flood = reporter.Time("BM_Baseline_FindLeafV1");
+  const double cut = reporter.Time("BM_Vellum_FindLeaf/");
   if (flood > 0 && cut > 0) {
     std::printf(
         "finding the leaf by every cue at once (medians): %.1f ms against %.1f ms for the height "

@@ -58,7 +58,6 @@ class RatioReporter : public benchmark::ConsoleReporter {
   double Time(const std::string& prefix) const { return Figure(times_, prefix, "median"); }
   // Likewise its CPU time: every thread's when the benchmark measures the process's CPU time.
   double CpuTime(const std::string& prefix) const { return Figure(cpu_, prefix, "median"); }
-  double Median(const std::string& prefix) const { return Time(prefix); }
   // The spread of its real time: the slowest repetition over the fastest (1 for one run).
   double Spread(const std::string& prefix) const {
     const double lo = Figure(times_, prefix, "min"), hi = Figure(times_, prefix, "max");

@@ -52,8 +52,7 @@ class Stage {
   Status Picture(const std::string& results, const std::string& stem, const cv::Mat& image) {
     Status s = MakeDirectories((fs::path(results) / "report").string());
     if (!s.ok()) return s;
-    cv::Mat out = image;
-    out = EightBit(out);
+    cv::Mat out = EightBit(image);
     if (out.cols > 1400) {
       const double scale = 1400.0 / out.cols;
       cv::resize(out, out, cv::Size(), scale, scale, cv::INTER_AREA);

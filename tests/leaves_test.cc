@@ -149,9 +149,7 @@ TEST_P(Leaves, RestoredAsTheFlatLeafWouldBe) {
     cv::Mat off_leaf;
     const int outside = MaskOffLeaf(page, to_true, pages[k], 1.5, &leaf, &off_leaf);
     if (getenv("LEAVES_DUMP")) {
-      cv::Mat show = r.image.clone();
-      show = EightBit(show);
-      if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
+      cv::Mat show = EightBitBgr(r.image).clone();
       cv::dilate(off_leaf, off_leaf, cv::Mat());
       show.setTo(cv::Scalar(0, 0, 255), off_leaf);
       cv::imwrite(std::string(getenv("LEAVES_DUMP")) + "/" + scene.name + page.name + ".png", show);
@@ -505,8 +503,7 @@ TEST(Orientation, APageImageReadsTheRightWayInTheTextureAndTheRestoredPage) {
   const ProcessResult& result = run.result;
   ASSERT_TRUE(result.status.ok()) << result.status.message();
   ASSERT_EQ(result.pages.size(), 1u);
-  cv::Mat restored = result.pages[0].restored.image;
-  restored = EightBit(restored);
+  const cv::Mat restored = EightBit(result.pages[0].restored.image);
   for (const auto& [name, picture] :
        {std::pair<std::string, cv::Mat>{"texture", scan.texture}, {"restored page", restored}}) {
     SCOPED_TRACE(name);

@@ -66,10 +66,7 @@ uint64_t EnvNumber(const char* name, uint64_t fallback) {
 // A picture of the found outline (blue: leaf missed; red: taken beyond the leaf) on the texture.
 void DumpOutline(const std::string& path, const cv::Mat& texture, const cv::Mat& found,
                  const cv::Mat& truth) {
-  cv::Mat show = texture;
-  show = EightBit(show);
-  if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
-  show = show.clone();
+  cv::Mat show = EightBitBgr(texture).clone();
   show.setTo(cv::Scalar(255, 0, 0), truth & ~found);
   show.setTo(cv::Scalar(0, 0, 255), found & ~truth);
   cv::imwrite(path, show);
@@ -174,10 +171,7 @@ Outcome ScanAndMeasure(const FamilyScene& s) {
       missed << name << off << " restored mask pixels off the leaf; ";
       if (dump) {
         // The restored page with its mask's pixels off the leaf in red.
-        cv::Mat show = page.restored.image;
-        show = EightBit(show);
-        if (show.channels() == 1) cv::cvtColor(show, show, cv::COLOR_GRAY2BGR);
-        show = show.clone();
+        cv::Mat show = EightBitBgr(page.restored.image).clone();
         cv::dilate(off_leaf, off_leaf, cv::Mat::ones(5, 5, CV_8U));
         show.setTo(cv::Scalar(0, 0, 255), off_leaf);
         fs::create_directories(std::string(dump) + "/" + std::to_string(s.seed));

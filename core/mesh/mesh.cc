@@ -342,9 +342,7 @@ bool MeshOptions::Check(std::string* why) const {
 }
 
 cv::Mat SegmentPage(const cv::Mat& texture, double fraction, bool largest_only) {
-  cv::Mat gray = texture;
-  if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-  gray = EightBit(gray);
+  const cv::Mat gray = EightBitGray(texture);
   cv::Mat smooth;
   cv::GaussianBlur(gray, smooth, cv::Size(5, 5), 0);
   // The bright level: 98th percentile of the histogram.

@@ -14,11 +14,8 @@ namespace {
 // Tone of a preview: 8-bit gray, median-smoothed so that ink (under half of any 5 x 5
 // neighbourhood on a page of text) takes the paper's tone, and a region is its material's.
 cv::Mat PaperTone(const cv::Mat& image) {
-  cv::Mat gray = image;
-  if (gray.channels() == 3) cv::cvtColor(gray, gray, cv::COLOR_BGR2GRAY);
-  gray = EightBit(gray);
   cv::Mat tone;
-  cv::medianBlur(gray, tone, 5);
+  cv::medianBlur(EightBitGray(image), tone, 5);
   return tone;
 }
 

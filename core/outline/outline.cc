@@ -663,13 +663,7 @@ Outline FindLeaf(const cv::Mat& points, const cv::Mat& texture, const OutlineOpt
 }
 
 cv::Mat DrawOutline(const cv::Mat& texture, const Outline& outline) {
-  cv::Mat out;
-  if (texture.channels() == 1) {
-    cv::cvtColor(texture, out, cv::COLOR_GRAY2BGR);
-  } else {
-    out = texture.clone();
-  }
-  out = EightBit(out);
+  cv::Mat out = EightBitBgr(texture).clone();  // Drawn on: never the texture itself.
   const cv::Scalar colours[] = {cv::Scalar(0, 200, 255), cv::Scalar(255, 120, 0)};
   const int thickness = std::max(1, out.cols / 600);
   for (size_t k = 0; k < outline.pages.size(); ++k) {

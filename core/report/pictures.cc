@@ -12,13 +12,6 @@
 namespace vellum {
 namespace {
 
-cv::Mat To8BitBgr(const cv::Mat& image) {
-  cv::Mat out = image;
-  out = EightBit(out);
-  if (out.channels() == 1) cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
-  return out;
-}
-
 // A vertical colour bar beside a picture of `height` pixels: its `title` (what and in which
 // unit) on top, then the ramp for [lo, hi] labelled at its ends and middle, each label beside
 // its own level (the ramp is inset so that no label is cut at the picture's edge). The
@@ -180,7 +173,7 @@ cv::Mat SamplingPicture(const cv::Mat& sampling) {
 cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
                      const RestoreResult& restored, const CameraModel& camera, int step) {
   const auto to_pixel = RestoredPixel(restored, camera);
-  cv::Mat picture = To8BitBgr(restored.image).clone();
+  cv::Mat picture = EightBitBgr(restored.image).clone();
   const int thickness = std::max(1, picture.cols / 600);
   auto line = [&](int a, int b) {
     if (!mesh.Active(a) || !mesh.Active(b)) return;
@@ -198,7 +191,7 @@ cv::Mat GridOverPage(const Mesh& mesh, const std::vector<cv::Point2d>& flat,
 }
 
 cv::Mat RestoredWithScaleBar(const RestoreResult& restored, int max_width, double* bar_mm) {
-  cv::Mat page = To8BitBgr(restored.image);
+  cv::Mat page = EightBitBgr(restored.image);
   double scale = 1;
   if (page.cols > max_width) {
     scale = static_cast<double>(max_width) / page.cols;
@@ -249,7 +242,7 @@ cv::Mat BeforeAfter(const cv::Mat& texture, const Mesh& mesh, const std::vector<
         std::hypot(k % mesh.cols - 0.5 * (mesh.cols - 1), k / mesh.cols - 0.5 * (mesh.rows - 1));
     if (d < best) best = d, centre = k;
   }
-  cv::Mat before = To8BitBgr(texture), after = To8BitBgr(restored.image);
+  cv::Mat before = EightBitBgr(texture), after = EightBitBgr(restored.image);
   if (centre < 0) return before;
   const auto to_pixel = RestoredPixel(restored, camera);
   // Window sizes in pixels from the local scale of each image (pixels per mm).

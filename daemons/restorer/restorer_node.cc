@@ -235,9 +235,7 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   std::vector<cv::Mat> previews;
   int height = 0;
   for (const auto& [index, restored] : pages->restored) {
-    cv::Mat p = restored.image;
-    p = EightBit(p);
-    if (p.channels() == 1) cv::cvtColor(p, p, cv::COLOR_GRAY2BGR);
+    cv::Mat p = EightBitBgr(restored.image);
     height = std::max(height, p.rows);
     previews.push_back(p);
   }
