@@ -126,12 +126,26 @@ void Supervisor::OnStatus(const status_t& msg) {
         msg.process + " restarted");
   }
   seen.pid = msg.pid;
-  // Scans in the ledger that no one holds (the station stopped, or a daemon had not started
-  // yet) go again once every processing daemon listens.
+  // Once every processing daemon listens, scans in the ledger that no one holds (the station
+  // stopped) go again. A scan this process sent is not: it is on its way, its daemons' statuses
+  // having come in behind it (or lost on a loaded bus), and sent again it would be flattened and
+  // restored twice at once, into the same folder. Its product is announced again instead: a
+  // daemon that was not listening when it went asks for it again, from the daemon that holds it
+  // (Assembler::AwaitAnnounced), and one that has it lets the announcement pass.
   if (!sent_at_start_ && daemons_.size() == kChainLength - 1) {
     sent_at_start_ = true;
-    SendAgain([](int64_t) { return true; },
-              "the chain was not whole (the station stopped, or a daemon had not started)");
+    for (const auto& [id, index] : reached_) {
+      if (index >= 0 && static_cast<size_t>(index) + 1 < kChainLength) {
+        AnnounceHandedOn(node_, id, kChain[index].product);
+        node_->Count("products announced again");
+      }
+    }
+    SendAgain(
+        [this](int64_t id) {
+          auto it = reached_.find(id);
+          return it == reached_.end() || it->second < 0;
+        },
+        "the chain was not whole (the station stopped, or a daemon had not started)");
   }
   const int64_t products_lost = StatusCounter(msg, counter::kProductsLost);
   const bool lost_on_bus = seen.error_utime != -1 && products_lost > seen.products_lost;

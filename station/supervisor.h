@@ -16,11 +16,12 @@
 // When a processing daemon restarts, the scans it held, or that were on their way to it (handed
 // on by the daemon before it and not yet by itself), are sent again from disk: a scan already
 // past it is not. When the decoder itself starts, once every processing daemon is heard, every
-// scan in the ledger is sent again (the station stopped, or a daemon had not started). A scan is
-// sent at most kMaxAttempts times: one that lost its daemon twice (a scan that crashes or hangs
-// a daemon), or whose captures cannot be read back, is parked: out of the ledger, marked failed
-// on disk (raw/failed.txt, with the reason), reported with a message naming its raw captures,
-// and never sent again, even after a restart.
+// scan in the ledger that no one holds is sent again (the station stopped); one this process
+// sent has its last product announced again instead (a daemon that had not started asks for
+// it). A scan is sent at most kMaxAttempts times: one that lost its daemon twice (a scan that
+// crashes or hangs a daemon), or whose captures cannot be read back, is parked: out of the
+// ledger, marked failed on disk (raw/failed.txt, with the reason), reported with a message
+// naming its raw captures, and never sent again, even after a restart.
 #pragma once
 
 #include <cstdint>

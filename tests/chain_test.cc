@@ -135,9 +135,7 @@ TEST_P(Chain, TheDaemonsInMemoryWriteWhatVellumProcessWrites) {
   RestorerNode restorer(&restorer_node, r);
   auto restored = bus.Record<restored_t>(channel::kRestored);
   // As at a station: the scan comes once every daemon has been heard (Node::Run's heartbeat,
-  // which these in-memory nodes do not run, so each says its state once). Sent sooner, the
-  // decoder's supervisor finds the chain not whole and sends the scan down it a second time
-  // while the first is in flight, and the first RESTORED is followed by another.
+  // which these in-memory nodes do not run, so each says its state once).
   for (Node* node : {&decoder_node, &triangulator_node, &flattener_node, &restorer_node}) {
     node->SetState("idle");
   }

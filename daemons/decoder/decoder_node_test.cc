@@ -380,6 +380,63 @@ TEST_F(DecoderNodeTest, ARestartedDaemonIsSentAgainOnlyTheScansItHeld) {
   EXPECT_EQ(sent(41), 2);
 }
 
+// The chain is first whole when the last processing daemon is heard (its status may come in
+// behind a scan's captures, or be lost on a loaded bus). A scan this process sent is not sent
+// again then (it would be flattened and restored beside the first send, into the same folder):
+// its last product is announced again, and a daemon that was not listening asks for it again.
+TEST_F(DecoderNodeTest, WhenTheChainIsFirstWholeTheScansOnTheirWayAreAnnouncedNotSentAgain) {
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
+  DecoderNode decoder(&node, options_);
+  auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
+  auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
+  auto announced = [&](int64_t id, const std::string& product) {
+    return std::count_if(progress->begin(), progress->end(), [&](const scan_progress_t& m) {
+      return m.scan_id == id && m.product == product;
+    });
+  };
+  // Scan 51 is sent before any processing daemon is heard; scan 52 once two are, and the
+  // triangulator hands it on.
+  PublishScan(51);
+  ASSERT_TRUE(bus_.RunUntil([&] { return Sent(*correspondence, 51) == 1; }));
+  Heartbeat("vellum-triangulator", 100);
+  Heartbeat("vellum-flattener", 200);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("processing daemons heard") == 2; }));
+  PublishScan(52);
+  ASSERT_TRUE(bus_.RunUntil([&] { return Sent(*correspondence, 52) == 1; }));
+  scan_progress_t handed{};
+  handed.scan_id = 52;
+  handed.process = "vellum-triangulator";
+  handed.pid = 100;
+  handed.product = channel::kPointCloud;
+  bus_.probe().Publish(channel::kScanProgress, &handed);
+  ASSERT_TRUE(bus_.RunUntil([&] { return announced(52, channel::kPointCloud) == 1; }));
+  Heartbeat("vellum-restorer", 300);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("products announced again") == 2; }));
+  // Each scan's last product again: 51's CORRESPONDENCE (from the decoder), 52's POINT_CLOUD.
+  ASSERT_TRUE(bus_.RunUntil([&] {
+    return announced(51, channel::kCorrespondence) == 2 && announced(52, channel::kPointCloud) == 2;
+  }));
+  // A mark published from the decoder's worker after that: every send before it has come.
+  auto mark = bus_.Record<scan_progress_t>("TEST_MARK");
+  node.Post([&] {
+    scan_progress_t m{};
+    bus_.probe().Publish("TEST_MARK", &m);
+  });
+  ASSERT_TRUE(bus_.RunUntil([&] { return !mark->empty(); }));
+  EXPECT_EQ(node.Counter("scans sent again"), 0);
+  EXPECT_EQ(Sent(*correspondence, 51), 1) << "a scan on its way was sent down the chain again";
+  EXPECT_EQ(Sent(*correspondence, 52), 1) << "a scan on its way was sent down the chain again";
+  EXPECT_EQ(PendingAttempts(ScanFolder::For(data_, 51)), 1);
+  // The triangulator had not heard 51: it asks for the whole product, which the decoder holds.
+  resend_request_t ask{};
+  ask.process = "vellum-triangulator";
+  ask.channel = channel::kCorrespondence;
+  ask.scan_id = 51;
+  bus_.probe().Publish(channel::kResend, &ask);
+  ASSERT_TRUE(bus_.RunUntil([&] { return Sent(*correspondence, 51) == 2; }));
+  EXPECT_EQ(PendingAttempts(ScanFolder::For(data_, 51)), 1);  // The same attempt, made whole.
+}
+
 // A scan that loses its daemon twice (a scan that crashes or hangs the restorer each time) is
 // parked: marked failed on disk with the reason, out of the ledger, reported, and not sent again
 // after another restart of the daemon or of the decoder itself.
