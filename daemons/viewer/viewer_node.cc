@@ -151,6 +151,13 @@ void ViewerNode::Tick() {
   if (real < next_draw_) return;
   next_draw_ = real + std::chrono::milliseconds(100);
   window_->Show(DrawViewer(state_, window_->size(), node_->Now(), &layout_));
+  // A restored page newly on the screen: its scan goes on the status (scan_id), which is when
+  // the operator sees it (bench/station_bench times it).
+  if (!state_.results().empty() && state_.results().back().scan_id != shown_) {
+    shown_ = state_.results().back().scan_id;
+    node_->Count("restored pages shown");
+    node_->SetState("idle", shown_, readiness_);
+  }
   SaveSessionAndReadiness();
 }
 
@@ -182,7 +189,7 @@ void ViewerNode::SaveSessionAndReadiness() {
   const std::string readiness = refused.empty() ? "ready to scan" : "cannot scan: " + refused;
   if (readiness != readiness_ && !state_.editing()) {
     readiness_ = readiness;
-    node_->SetState("idle", 0, readiness);
+    node_->SetState("idle", shown_, readiness);
   }
   const std::string& file = options_.session_file;
   if (file.empty()) return;

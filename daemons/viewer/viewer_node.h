@@ -71,7 +71,7 @@ class ViewerNode {
   void Do(ViewerState::Action action);
   void LoadSession();
   // Writes the session when it changed (whole: a new file renamed over the old), and says on
-  // the status whether a scan can be asked for, and if not why.
+  // the status whether a scan can be asked for, and if not why (with the scan last shown).
   void SaveSessionAndReadiness();
 
   Node* node_;
@@ -80,6 +80,7 @@ class ViewerNode {
   ViewerState state_;
   std::string saved_session_;    // As last written.
   std::string readiness_;        // As last said on the status.
+  int64_t shown_ = 0;            // The scan whose restored page was last drawn (its status).
   ViewerLayout layout_;          // Of the last draw (the mouse reads it).
   cv::Point drag_from_{-1, -1};  // Where a drag on the preview began (window pixels).
   std::chrono::steady_clock::time_point next_draw_;  // Real time: the drawing's pace.

@@ -80,9 +80,13 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
   ViewerNode viewer(&node, std::move(owned));
   bus_.AddTick([&] { viewer.Tick(); });
   auto requests = bus_.Record<scan_request_t>(channel::kScanRequest);
+  bus_.Watch("vellum-viewer");
   restored_t r = Restored(12);
   bus_.probe().Publish(channel::kRestored, &r);
   ASSERT_TRUE(bus_.RunUntil([&] { return viewer.state().results().size() == 1u; }));
+  // Once drawn, the viewer's status names the scan on the screen (what the operator waits for).
+  ASSERT_TRUE(bus_.RunUntil([&] { return bus_.Status("vellum-viewer").scan_id == 12; }, 10));
+  EXPECT_EQ(node.Counter("restored pages shown"), 1);
   EXPECT_NE(viewer.state().progress().find("scan 12: restored, 300x400 at 41 dpi"),
             std::string::npos)
       << viewer.state().progress();
