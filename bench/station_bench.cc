@@ -1,0 +1,404 @@
+// What the operator waits for: from the last frame captured to the restored page on the
+// viewer's screen. A scan log is played into the real processing daemons (vellum-decoder,
+// -triangulator, -flattener, -restorer) and vellum-viewer (drawing offscreen), started afresh
+// for each repetition on a private udpm bus, at its recording's own pace. Measured on the bus,
+// by this program's clock:
+//  - capture: the first CAPTURE to the last (the scan's own time at the gantry: the baseline);
+//  - the wait: the last CAPTURE to RESTORED, and to the viewer's status naming the scan as drawn;
+//  - each stage's part of the wait, from SCAN_PROGRESS (when each daemon handed the scan on).
+// The benchmark's time is the wait to RESTORED; the table after it gives medians and spreads,
+// the wait as a fraction of the capture time in the same run, and each stage's share.
+//
+// Cases: the recorded demo leaf (tests/data/demo_leaf.lcmlog, 1440 x 1080, as it was recorded),
+// and the virtual gantry's curled leaf on the default rig (1600 x 1200) and on the 24 MP rig
+// (config/hires_rig.yaml), written as logs at the demo recording's pace or the camera link's
+// (SimulatedLog). The program runs
+// itself inside scripts/netns-run.sh: the bus never leaves a private loopback.
+//
+//   ./build/bench/station_bench [--benchmark_filter=...]
+#include <benchmark/benchmark.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <lcm/lcm-cpp.hpp>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench/ratio_reporter.h"
+#include "core/sim/evaluate.h"
+#include "io/calibration_io.h"
+#include "station/messages.h"
+#include "station/node.h"
+#include "station/scan_log.h"
+#include "vellum/restored_t.hpp"
+#include "vellum/scan_progress_t.hpp"
+#include "vellum/status_t.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace vellum;
+using Clock = std::chrono::steady_clock;
+
+constexpr char kUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216";
+constexpr char kViewer[] = "vellum-viewer";
+const std::vector<std::string> kProcessing = {"vellum-decoder", "vellum-triangulator",
+                                              "vellum-flattener", "vellum-restorer"};
+// The stages of the wait, in order: each ends when its daemon hands the scan on (the viewer's
+// when it says the page is drawn).
+const std::vector<std::string> kStages = {"vellum-decoder", "vellum-triangulator",
+                                          "vellum-flattener", "vellum-restorer", kViewer};
+
+double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+const fs::path& WorkDir() {
+  static const fs::path dir = [] {
+    const fs::path d =
+        fs::temp_directory_path() / ("vellum_station_bench_" + std::to_string(getpid()));
+    fs::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+// The CAPTUREs of a log: how many, and the median time between them.
+struct Pace {
+  int captures = 0;
+  int64_t interval_us = 0;
+};
+
+Pace LogPace(const std::string& path) {
+  lcm::LogFile log(path, "r");
+  Pace pace;
+  if (!log.good()) return pace;
+  std::vector<int64_t> times;
+  for (const lcm::LogEvent* e = log.readNextEvent(); e; e = log.readNextEvent()) {
+    if (e->channel == station::channel::kCapture) times.push_back(e->timestamp);
+  }
+  pace.captures = static_cast<int>(times.size());
+  std::vector<int64_t> gaps;
+  for (size_t k = 1; k < times.size(); ++k) gaps.push_back(times[k] - times[k - 1]);
+  if (!gaps.empty()) {
+    std::nth_element(gaps.begin(), gaps.begin() + gaps.size() / 2, gaps.end());
+    pace.interval_us = gaps[gaps.size() / 2];
+  }
+  return pace;
+}
+
+// A camera link's bytes per second: GigE Vision's gigabit, less its framing (a 24 MP 8-bit
+// frame takes 0.2 s; USB3 cameras are faster, but few 24 MP ones).
+constexpr double kLinkBytesPerSecond = 119e6;
+
+// A log of the virtual gantry's curled leaf on `rig` (made once), at the demo recording's pace,
+// or as fast as the camera's link carries its frames if that is slower.
+std::string SimulatedLog(const std::string& name, const Calibration& rig) {
+  const std::string path = (WorkDir() / (name + ".lcmlog")).string();
+  if (fs::exists(path)) return path;
+  const double frame_bytes = static_cast<double>(rig.camera.size.area());
+  const int64_t interval =
+      std::max<int64_t>(LogPace(VELLUM_DEMO_LOG).interval_us,
+                        static_cast<int64_t>(1e6 * frame_bytes / kLinkBytesPerSecond));
+  calibration_t calibration{};
+  station::ToMessage(rig, &calibration);
+  const Status s = station::WriteScanLog(path, AsScan(SimulateScan(rig, PageShape::kCurl, 5)),
+                                         1000 + name.size(), "vellum", &calibration, interval);
+  if (!s.ok()) {
+    std::fprintf(stderr, "station_bench: %s\n", s.message().c_str());
+    std::exit(1);
+  }
+  return path;
+}
+
+// A daemon of the build, its output in `log`; SIGTERM and a wait when it goes.
+class Daemon {
+ public:
+  Daemon(const std::string& name, const std::vector<std::string>& flags, const std::string& log) {
+    pid_ = fork();
+    if (pid_ != 0) return;
+    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (fd >= 0) {
+      dup2(fd, 1);
+      dup2(fd, 2);
+    }
+    setenv("SDL_VIDEODRIVER", "offscreen", 1);
+    const std::string path = std::string(VELLUM_BUILD_DIR) + "/daemons/" + name;
+    std::vector<std::string> args = {path, "--url", kUrl};
+    args.insert(args.end(), flags.begin(), flags.end());
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv(path.c_str(), argv.data());
+    _exit(127);
+  }
+  ~Daemon() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGTERM);
+    waitpid(pid_, nullptr, 0);
+  }
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+ private:
+  pid_t pid_ = -1;
+};
+
+// What this program hears on the bus, by its clock.
+class Ear {
+ public:
+  Ear() : lcm_(kUrl) {
+    for (const std::string& p : kStages) {
+      lcm_.subscribe(station::StatusChannel(p), &Ear::OnStatus, this);
+    }
+    lcm_.subscribe(station::channel::kScanProgress, &Ear::OnProgress, this);
+    lcm_.subscribe(station::channel::kRestored, &Ear::OnRestored, this);
+    thread_ = std::thread([this] {
+      while (!stop_) lcm_.handleTimeout(20);
+    });
+  }
+  ~Ear() {
+    stop_ = true;
+    thread_.join();
+  }
+  bool good() { return lcm_.good(); }
+  lcm::LCM& lcm() { return lcm_; }
+
+  // Waits until `done` holds (under the lock) or `timeout_s` passes.
+  template <class F>
+  bool Await(F done, double timeout_s) {
+    const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+    for (;;) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (done()) return true;
+      }
+      if (Clock::now() >= end) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+  }
+  bool Heard(const std::string& process) { return heard_.count(process) > 0; }
+  // When `stage` was done with scan `id` (zero time: not yet).
+  Clock::time_point Done(const std::string& stage) { return done_[stage]; }
+  Clock::time_point restored() { return restored_; }
+  const std::string& error() { return error_; }  // The first a daemon reported.
+  std::mutex& mutex() { return mutex_; }
+  void Forget() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    done_.clear();
+    restored_ = {};
+  }
+
+ private:
+  void OnStatus(const lcm::ReceiveBuffer*, const std::string&, const status_t* m) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    heard_.insert(m->process);
+    if (m->errors > 0 && error_.empty()) error_ = m->process + ": " + m->last_error;
+    if (m->process == kViewer && m->scan_id != 0 && done_[kViewer] == Clock::time_point()) {
+      done_[kViewer] = Clock::now();
+    }
+  }
+  void OnProgress(const lcm::ReceiveBuffer*, const std::string&, const scan_progress_t* m) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (done_[m->process] == Clock::time_point()) done_[m->process] = Clock::now();
+  }
+  void OnRestored(const lcm::ReceiveBuffer*, const std::string&, const restored_t*) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (restored_ == Clock::time_point()) restored_ = Clock::now();
+  }
+
+  lcm::LCM lcm_;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::mutex mutex_;
+  std::set<std::string> heard_;
+  std::map<std::string, Clock::time_point> done_;
+  Clock::time_point restored_;
+  std::string error_;
+};
+
+// One repetition's figures, seconds.
+struct Sample {
+  double capture = 0, restored = 0, shown = 0;
+  std::map<std::string, double> stage;  // Each stage's part of the wait.
+};
+std::map<std::string, std::vector<Sample>>& Samples() {
+  static std::map<std::string, std::vector<Sample>> samples;
+  return samples;
+}
+std::map<std::string, Pace>& Paces() {  // Each case's log.
+  static std::map<std::string, Pace> paces;
+  return paces;
+}
+
+// Plays `log` into a fresh station; false (with `why`) when the page does not come.
+bool PlayOnce(const std::string& log, const std::string& dir, Sample* out, std::string* why) {
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  Ear ear;
+  if (!ear.good()) {
+    *why = "cannot open the bus";
+    return false;
+  }
+  std::vector<std::unique_ptr<Daemon>> daemons;
+  for (const std::string& p : kProcessing) {
+    daemons.push_back(std::make_unique<Daemon>(p, std::vector<std::string>{"--data", dir},
+                                               dir + "/" + p + ".log"));
+  }
+  daemons.push_back(std::make_unique<Daemon>(kViewer, std::vector<std::string>{"--data", dir},
+                                             dir + "/" + kViewer + ".log"));
+  if (!ear.Await(
+          [&] {
+            return std::all_of(kStages.begin(), kStages.end(),
+                               [&](const std::string& p) { return ear.Heard(p); });
+          },
+          60)) {
+    *why = "the daemons did not answer within 60 s (logs in " + dir + ")";
+    return false;
+  }
+  // The log, at its own pace.
+  lcm::LogFile file(log, "r");
+  if (!file.good()) {
+    *why = "cannot read " + log;
+    return false;
+  }
+  Clock::time_point start, first, last;
+  int64_t t0 = -1;
+  for (const lcm::LogEvent* e = file.readNextEvent(); e; e = file.readNextEvent()) {
+    if (t0 < 0) {
+      t0 = e->timestamp;
+      start = Clock::now();
+    }
+    std::this_thread::sleep_until(start + std::chrono::microseconds(e->timestamp - t0));
+    if (!ear.Await([&] { return ear.error().empty(); }, 0)) break;  // Failed already.
+    ear.lcm().publish(e->channel, e->data, static_cast<unsigned>(e->datalen));
+    if (e->channel == station::channel::kCapture) {
+      last = Clock::now();
+      if (first == Clock::time_point()) first = last;
+    }
+  }
+  if (!ear.Await([&] { return ear.Done(kViewer) != Clock::time_point() || !ear.error().empty(); },
+                 600)) {
+    *why = "no restored page drawn within 600 s (logs in " + dir + ")";
+    return false;
+  }
+  std::lock_guard<std::mutex> lock(ear.mutex());
+  if (!ear.error().empty()) {
+    *why = ear.error();
+    return false;
+  }
+  out->capture = Seconds(last - first);
+  out->restored = Seconds(ear.restored() - last);
+  out->shown = Seconds(ear.Done(kViewer) - last);
+  Clock::time_point before = last;
+  for (const std::string& stage : kStages) {
+    const Clock::time_point done = ear.Done(stage);
+    out->stage[stage] = Seconds(done - before);
+    before = done;
+  }
+  return true;
+}
+
+void BM_Station_LastFrameToRestored(benchmark::State& state, const std::string& name,
+                                    const std::string& log) {
+  for (auto _ : state) {
+    Sample s;
+    std::string why;
+    if (!PlayOnce(log, (WorkDir() / ("station_" + name)).string(), &s, &why)) {
+      state.SkipWithError(why.c_str());
+      break;
+    }
+    state.SetIterationTime(s.restored);
+    state.counters["capture_s"] = s.capture;
+    state.counters["to_shown_s"] = s.shown;
+    Samples()[name].push_back(s);
+  }
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0 : v[v.size() / 2];
+}
+
+void PrintSummary() {
+  std::printf(
+      "\nThe operator's wait (medians over the repetitions; spread = slowest / fastest):\n");
+  std::printf("%-10s %14s %9s %11s %7s %10s %7s %9s   %s\n", "scan", "captures", "capture",
+              "->RESTORED", "spread", "of capture", "->drawn", "spread",
+              "shares of the wait to drawn");
+  for (const auto& [name, samples] : Samples()) {
+    if (samples.empty()) continue;
+    std::vector<double> capture, restored, shown;
+    std::map<std::string, std::vector<double>> share;
+    for (const Sample& s : samples) {
+      capture.push_back(s.capture);
+      restored.push_back(s.restored);
+      shown.push_back(s.shown);
+      for (const auto& [stage, t] : s.stage) share[stage].push_back(t / s.shown);
+    }
+    auto spread = [](const std::vector<double>& v) {
+      return *std::max_element(v.begin(), v.end()) / *std::min_element(v.begin(), v.end());
+    };
+    const Pace& pace = Paces()[name];
+    std::printf("%-10s %3d, %4.0f ms/f %8.2fs %10.3fs %6.2fx %9.0f%% %6.3fs %8.2fx  ", name.c_str(),
+                pace.captures, pace.interval_us / 1e3, Median(capture), Median(restored),
+                spread(restored), 100 * Median(restored) / Median(capture), Median(shown),
+                spread(shown));
+    for (const std::string& stage : kStages) {
+      std::printf(" %s %.0f%%", stage.substr(7).c_str(), 100 * Median(share[stage]));
+    }
+    std::printf("\n");
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // On a private loopback: the program runs itself again inside scripts/netns-run.sh.
+  const char* in_netns = std::getenv("VELLUM_IN_NETNS");
+  if (in_netns == nullptr || std::string(in_netns) != "1") {
+    std::string script = std::string(VELLUM_SOURCE_DIR) + "/scripts/netns-run.sh";
+    std::vector<char*> args = {script.data()};
+    for (int k = 0; k < argc; ++k) args.push_back(argv[k]);
+    args.push_back(nullptr);
+    execv(script.c_str(), args.data());
+    std::perror("station_bench: scripts/netns-run.sh");
+    return 1;
+  }
+  Calibration hires;
+  if (!ReadCalibration(std::string(VELLUM_SOURCE_DIR) + "/config/hires_rig.yaml", &hires).ok()) {
+    std::fprintf(stderr, "station_bench: cannot read config/hires_rig.yaml\n");
+    return 1;
+  }
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"demo", VELLUM_DEMO_LOG},
+      {"1600x1200", SimulatedLog("1600x1200", DefaultRig())},
+      {"24MP", SimulatedLog("24MP", hires)},
+  };
+  for (const auto& [name, log] : cases) {
+    Paces()[name] = LogPace(log);
+    benchmark::RegisterBenchmark(("BM_Station_LastFrameToRestored/" + name).c_str(),
+                                 BM_Station_LastFrameToRestored, name, log)
+        ->Apply(vellum::Repeated)
+        ->Iterations(1)
+        ->UseManualTime()
+        ->Unit(benchmark::kMillisecond);
+  }
+  vellum::InitializeInterleaved(&argc, &argv);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  PrintSummary();
+  fs::remove_all(WorkDir());
+  return 0;
+}
