@@ -212,6 +212,7 @@ bool DecoderNode::Begin(int64_t scan_id) {
                     held.frames[k]);
       }
     }
+    if (set_.Has(-1)) SendTexture(scan_id, held.texture);
   }
   set_.KeepFrames(false);
   node_->Log(
@@ -245,6 +246,7 @@ void DecoderNode::OnCapture(const capture_t& msg) {
       return;
     }
     Stream(msg, image);
+    if (msg.pattern_index < 0) SendTexture(msg.scan_id, image);
   }
   waiting_ = true;
   node_->SetState(
@@ -303,11 +305,19 @@ void DecoderNode::StreamFrame(int64_t scan_id, cv::Size projector, int count, in
   }
 }
 
+void DecoderNode::SendTexture(int64_t id, const cv::Mat& texture) {
+  std::vector<texture_t> chunks = TextureMessages(id, texture, started_.light_count);
+  node_->PublishChunks(channel::kTexture, &chunks);
+  texture_sent_ = id;
+}
+
 Status DecoderNode::Send(int64_t id, const Scan& scan) {
   node_->SetState("busy", id, "decoding");
-  std::vector<texture_t> texture =
-      TextureMessages(id, scan.texture, static_cast<int>(scan.lights.size()));
-  node_->PublishChunks(channel::kTexture, &texture);
+  // The texture went on as it was recorded, unless this is a send from the folder.
+  if (texture_sent_ != id || static_cast<int>(scan.lights.size()) != started_.light_count) {
+    SendTexture(id, scan.texture);
+  }
+  texture_sent_ = 0;
   for (const ScanLight& light : scan.lights) {  // At the camera's depth, as the texture.
     std::vector<texture_t> chunks =
         TextureMessages(id, light.image, static_cast<int>(scan.lights.size()), &light);

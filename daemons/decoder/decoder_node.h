@@ -1,10 +1,12 @@
 // vellum-decoder's node: records each scan's captures to disk as they arrive (the scan's raw
 // folder: captures.lcmlog and the scan directory of docs/formats.md): only the scans this station's
 // projector started, each pattern once, never a scan that is over (station/scan_gate.h). A scan
-// given up is marked so on disk (raw/failed.txt, with the reason). Once a scan is complete it
-// sends it down the chain: TEXTURE, then the decoded CORRESPONDENCE (in row chunks) with the
-// decode stage's report. It hosts the station's supervisor (station/supervisor.h), which sends
-// a scan again when a processing daemon died holding it.
+// given up is marked so on disk (raw/failed.txt, with the reason). Its TEXTURE goes on as soon
+// as it is recorded; once the scan is complete the decoder sends it down the chain: the extra
+// lights' images, then the decoded CORRESPONDENCE (in row chunks) with the decode stage's
+// report (and the TEXTURE first when the scan is sent again from its folder). It hosts the
+// station's supervisor (station/supervisor.h), which sends a scan again when a processing daemon
+// died holding it.
 #pragma once
 
 #include <atomic>
@@ -61,6 +63,9 @@ class DecoderNode {
   void Stop();                                         // No scan is being recorded.
   void Complete();
   Status Send(int64_t id, const Scan& scan);  // Decodes and publishes (the supervisor's Send).
+  // Publishes a scan's TEXTURE: as its capture is recorded (the processing daemons have it
+  // before the last frame), or with the rest when the scan is sent from its folder.
+  void SendTexture(int64_t id, const cv::Mat& texture);
   // Takes a pattern capture up into the decoder as it comes, while the scan is the station's own
   // sequence (MakePatternSequence for its projector) and every capture came to this process;
   // otherwise (a scan resumed from its log, another sequence) the decoder reads the frames from
@@ -75,7 +80,8 @@ class DecoderNode {
   // Worker thread only:
   Decoder decoder_;  // Keeps its buffers between scans.
   DecodeResult decoded_;
-  int64_t stream_id_ = 0;  // The scan the decoder takes up as it comes; 0: none.
+  int64_t stream_id_ = 0;     // The scan the decoder takes up as it comes; 0: none.
+  int64_t texture_sent_ = 0;  // The scan whose TEXTURE went on as it was recorded; 0: none.
   bool stream_begun_ = false;
   PatternSequence stream_sequence_;  // Its sequence, as the station's projector shows it.
   CaptureSet set_;
