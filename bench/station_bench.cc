@@ -331,7 +331,21 @@ double Median(std::vector<double> v) {
   return v.empty() ? 0 : v[v.size() / 2];
 }
 
+// The kernel's cap on a socket's receive buffer, bytes (0 if unknown).
+long RmemMax() {
+  long bytes = 0;
+  if (FILE* f = std::fopen("/proc/sys/net/core/rmem_max", "r")) {
+    if (std::fscanf(f, "%ld", &bytes) != 1) bytes = 0;
+    std::fclose(f);
+  }
+  return bytes;
+}
+
 void PrintSummary() {
+  std::printf(
+      "\nnet.core.rmem_max: %.1f MB (an installed station sets 16 MB, systemd/60-vellum.conf: "
+      "below that, udpm loses the 24 MP rig's frames)\n",
+      RmemMax() / 1048576.0);
   std::printf(
       "\nThe operator's wait (medians over the repetitions; spread = slowest / fastest):\n");
   std::printf("%-10s %14s %9s %11s %7s %10s %7s %9s   %s\n", "scan", "captures", "capture",
