@@ -15,7 +15,7 @@
 // (SimulatedLog). The program runs
 // itself inside scripts/netns-run.sh: the bus never leaves a private loopback.
 //
-//   ./build/bench/station_bench [--benchmark_filter=...]
+//   ./build/bench/station_bench [--paces=MB/S,...] [--benchmark_filter=...]
 #include <benchmark/benchmark.h>
 #include <fcntl.h>
 #include <signal.h>
@@ -28,11 +28,13 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <set>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -193,6 +195,13 @@ class Ear {
   Clock::time_point Done(const std::string& stage) { return done_[stage]; }
   Clock::time_point restored() { return restored_; }
   const std::string& error() { return error_; }  // The first a daemon reported.
+  // Chunks and whole products the daemons asked again (the bus lost them), as their statuses
+  // last said.
+  int64_t AskedAgain() {
+    int64_t n = 0;
+    for (const auto& [process, asked] : asked_) n += asked;
+    return n;
+  }
   std::mutex& mutex() { return mutex_; }
   void Forget() {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -204,6 +213,9 @@ class Ear {
   void OnStatus(const lcm::ReceiveBuffer*, const std::string&, const status_t* m) {
     std::lock_guard<std::mutex> lock(mutex_);
     heard_.insert(m->process);
+    int64_t& asked = asked_[m->process];
+    asked = std::max(asked, station::StatusCounter(*m, "chunks asked again") +
+                                station::StatusCounter(*m, "products asked again"));
     if (m->errors > 0 && error_.empty()) error_ = m->process + ": " + m->last_error;
     if (m->process == kViewer && m->scan_id != 0 && done_[kViewer] == Clock::time_point()) {
       done_[kViewer] = Clock::now();
@@ -226,11 +238,13 @@ class Ear {
   std::map<std::string, Clock::time_point> done_;
   Clock::time_point restored_;
   std::string error_;
+  std::map<std::string, int64_t> asked_;
 };
 
 // One repetition's figures, seconds.
 struct Sample {
   double capture = 0, restored = 0, shown = 0;
+  int64_t asked_again = 0;  // Chunks or products the bus lost and the daemons asked again.
   std::map<std::string, double> stage;  // Each stage's part of the wait.
 };
 std::map<std::string, std::vector<Sample>>& Samples() {
@@ -242,8 +256,10 @@ std::map<std::string, Pace>& Paces() {  // Each case's log.
   return paces;
 }
 
-// Plays `log` into a fresh station; false (with `why`) when the page does not come.
-bool PlayOnce(const std::string& log, const std::string& dir, Sample* out, std::string* why) {
+// Plays `log` into a fresh station whose daemons send their chunked products at `pace` MB/s
+// (empty: their default); false (with `why`) when the page does not come.
+bool PlayOnce(const std::string& log, const std::string& pace, const std::string& dir, Sample* out,
+              std::string* why) {
   fs::remove_all(dir);
   fs::create_directories(dir);
   Ear ear;
@@ -253,8 +269,9 @@ bool PlayOnce(const std::string& log, const std::string& dir, Sample* out, std::
   }
   std::vector<std::unique_ptr<Daemon>> daemons;
   for (const std::string& p : kProcessing) {
-    daemons.push_back(std::make_unique<Daemon>(p, std::vector<std::string>{"--data", dir},
-                                               dir + "/" + p + ".log"));
+    std::vector<std::string> flags = {"--data", dir};
+    if (!pace.empty()) flags.insert(flags.end(), {"--pace", pace});
+    daemons.push_back(std::make_unique<Daemon>(p, flags, dir + "/" + p + ".log"));
   }
   daemons.push_back(std::make_unique<Daemon>(kViewer, std::vector<std::string>{"--data", dir},
                                              dir + "/" + kViewer + ".log"));
@@ -301,6 +318,7 @@ bool PlayOnce(const std::string& log, const std::string& dir, Sample* out, std::
   out->capture = Seconds(last - first);
   out->restored = Seconds(ear.restored() - last);
   out->shown = Seconds(ear.Done(kViewer) - last);
+  out->asked_again = ear.AskedAgain();
   Clock::time_point before = last;
   for (const std::string& stage : kStages) {
     const Clock::time_point done = ear.Done(stage);
@@ -310,18 +328,29 @@ bool PlayOnce(const std::string& log, const std::string& dir, Sample* out, std::
   return true;
 }
 
+// A case's log, made on its first repetition (the 24 MP one takes a minute and 1.4 GB).
+using LogMaker = std::function<std::string()>;
+
 void BM_Station_LastFrameToRestored(benchmark::State& state, const std::string& name,
-                                    const std::string& log) {
+                                    const std::string& scan, const LogMaker& make,
+                                    const std::string& pace) {
+  static std::map<std::string, std::string> logs;
+  if (logs.count(scan) == 0) {
+    logs[scan] = make();
+    Paces()[scan] = LogPace(logs[scan]);
+  }
+  const std::string& log = logs[scan];
   for (auto _ : state) {
     Sample s;
     std::string why;
-    if (!PlayOnce(log, (WorkDir() / ("station_" + name)).string(), &s, &why)) {
+    if (!PlayOnce(log, pace, (WorkDir() / ("station_" + name)).string(), &s, &why)) {
       state.SkipWithError(why.c_str());
       break;
     }
     state.SetIterationTime(s.restored);
     state.counters["capture_s"] = s.capture;
     state.counters["to_shown_s"] = s.shown;
+    state.counters["asked_again"] = static_cast<double>(s.asked_again);
     Samples()[name].push_back(s);
   }
 }
@@ -347,15 +376,18 @@ void PrintSummary() {
       "below that, udpm loses the 24 MP rig's frames)\n",
       RmemMax() / 1048576.0);
   std::printf(
-      "\nThe operator's wait (medians over the repetitions; spread = slowest / fastest):\n");
-  std::printf("%-10s %14s %9s %11s %7s %10s %7s %9s   %s\n", "scan", "captures", "capture",
-              "->RESTORED", "spread", "of capture", "->drawn", "spread",
+      "\nThe operator's wait (medians over the repetitions; spread = slowest / fastest; asked: "
+      "chunks and products the bus lost and the daemons asked again, all repetitions):\n");
+  std::printf("%-14s %14s %9s %11s %7s %10s %7s %9s %6s   %s\n", "scan", "captures", "capture",
+              "->RESTORED", "spread", "of capture", "->drawn", "spread", "asked",
               "shares of the wait to drawn");
   for (const auto& [name, samples] : Samples()) {
     if (samples.empty()) continue;
     std::vector<double> capture, restored, shown;
     std::map<std::string, std::vector<double>> share;
+    int64_t asked = 0;  // Over every repetition.
     for (const Sample& s : samples) {
+      asked += s.asked_again;
       capture.push_back(s.capture);
       restored.push_back(s.restored);
       shown.push_back(s.shown);
@@ -364,11 +396,11 @@ void PrintSummary() {
     auto spread = [](const std::vector<double>& v) {
       return *std::max_element(v.begin(), v.end()) / *std::min_element(v.begin(), v.end());
     };
-    const Pace& pace = Paces()[name];
-    std::printf("%-10s %3d, %4.0f ms/f %8.2fs %10.3fs %6.2fx %9.0f%% %6.3fs %8.2fx  ", name.c_str(),
-                pace.captures, pace.interval_us / 1e3, Median(capture), Median(restored),
-                spread(restored), 100 * Median(restored) / Median(capture), Median(shown),
-                spread(shown));
+    const Pace& pace = Paces()[name.substr(0, name.find('@'))];
+    std::printf("%-14s %3d, %4.0f ms/f %8.2fs %10.3fs %6.2fx %9.0f%% %6.3fs %8.2fx %6lld  ",
+                name.c_str(), pace.captures, pace.interval_us / 1e3, Median(capture),
+                Median(restored), spread(restored), 100 * Median(restored) / Median(capture),
+                Median(shown), spread(shown), static_cast<long long>(asked));
     for (const std::string& stage : kStages) {
       std::printf(" %s %.0f%%", stage.substr(7).c_str(), 100 * Median(share[stage]));
     }
@@ -395,19 +427,38 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "station_bench: cannot read config/hires_rig.yaml\n");
     return 1;
   }
-  const std::vector<std::pair<std::string, std::string>> cases = {
-      {"demo", VELLUM_DEMO_LOG},
-      {"1600x1200", SimulatedLog("1600x1200", DefaultRig())},
-      {"24MP", SimulatedLog("24MP", hires)},
+  const std::vector<std::pair<std::string, LogMaker>> cases = {
+      {"demo", [] { return std::string(VELLUM_DEMO_LOG); }},
+      {"1600x1200", [] { return SimulatedLog("1600x1200", DefaultRig()); }},
+      {"24MP", [hires] { return SimulatedLog("24MP", hires); }},
   };
-  for (const auto& [name, log] : cases) {
-    Paces()[name] = LogPace(log);
-    benchmark::RegisterBenchmark(("BM_Station_LastFrameToRestored/" + name).c_str(),
-                                 BM_Station_LastFrameToRestored, name, log)
-        ->Apply(vellum::Repeated)
-        ->Iterations(1)
-        ->UseManualTime()
-        ->Unit(benchmark::kMillisecond);
+  // --paces=MB/S,MB/S,...: each case at each of these daemon paces (`--pace`), side by side in
+  // the same run; without it, at the daemons' default.
+  std::vector<std::string> paces = {""};
+  std::vector<char*> args;
+  for (int k = 0; k < argc; ++k) {
+    const std::string a = argv[k];
+    if (a.rfind("--paces=", 0) != 0) {
+      args.push_back(argv[k]);
+      continue;
+    }
+    paces.clear();
+    std::stringstream list(a.substr(8));
+    for (std::string p; std::getline(list, p, ',');) paces.push_back(p);
+  }
+  argc = static_cast<int>(args.size());
+  args.push_back(nullptr);
+  argv = args.data();
+  for (const auto& [scan, make] : cases) {
+    for (const std::string& pace : paces) {
+      const std::string name = pace.empty() ? scan : scan + "@" + pace;
+      benchmark::RegisterBenchmark(("BM_Station_LastFrameToRestored/" + name).c_str(),
+                                   BM_Station_LastFrameToRestored, name, scan, make, pace)
+          ->Apply(vellum::Repeated)
+          ->Iterations(1)
+          ->UseManualTime()
+          ->Unit(benchmark::kMillisecond);
+    }
   }
   vellum::InitializeInterleaved(&argc, &argv);
   benchmark::RunSpecifiedBenchmarks();
