@@ -124,10 +124,24 @@ std::string SimulatedLog(const std::string& name, const Calibration& rig) {
   return path;
 }
 
-// A daemon of the build, its output in `log`; SIGTERM and a wait when it goes.
+// A daemon of the build, its output in `log`; SIGTERM and a wait when it goes. Everything the
+// child needs is made before fork (this process has threads: the child may only open, dup2 and
+// exec).
 class Daemon {
  public:
   Daemon(const std::string& name, const std::vector<std::string>& flags, const std::string& log) {
+    const std::string path = std::string(VELLUM_BUILD_DIR) + "/daemons/" + name;
+    std::vector<std::string> args = {path, "--url", kUrl};
+    args.insert(args.end(), flags.begin(), flags.end());
+    std::vector<std::string> env = {"SDL_VIDEODRIVER=offscreen"};
+    for (char** e = environ; *e != nullptr; ++e) {
+      if (std::string(*e).rfind("SDL_VIDEODRIVER=", 0) != 0) env.push_back(*e);
+    }
+    std::vector<char*> argv, envp;
+    for (std::string& a : args) argv.push_back(a.data());
+    for (std::string& e : env) envp.push_back(e.data());
+    argv.push_back(nullptr);
+    envp.push_back(nullptr);
     pid_ = fork();
     if (pid_ != 0) return;
     const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
@@ -135,14 +149,7 @@ class Daemon {
       dup2(fd, 1);
       dup2(fd, 2);
     }
-    setenv("SDL_VIDEODRIVER", "offscreen", 1);
-    const std::string path = std::string(VELLUM_BUILD_DIR) + "/daemons/" + name;
-    std::vector<std::string> args = {path, "--url", kUrl};
-    args.insert(args.end(), flags.begin(), flags.end());
-    std::vector<char*> argv;
-    for (std::string& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    execv(path.c_str(), argv.data());
+    execve(path.c_str(), argv.data(), envp.data());
     _exit(127);
   }
   ~Daemon() {
