@@ -212,7 +212,7 @@ bool DecoderNode::Begin(int64_t scan_id) {
                     held.frames[k]);
       }
     }
-    if (set_.Has(-1)) SendTexture(scan_id, held.texture);
+    if (set_.Has(-1)) SendTexture(scan_id, held.texture, started_.light_count);
   }
   set_.KeepFrames(false);
   node_->Log(
@@ -246,7 +246,7 @@ void DecoderNode::OnCapture(const capture_t& msg) {
       return;
     }
     Stream(msg, image);
-    if (msg.pattern_index < 0) SendTexture(msg.scan_id, image);
+    if (msg.pattern_index < 0) SendTexture(msg.scan_id, image, started_.light_count);
   }
   waiting_ = true;
   node_->SetState(
@@ -305,8 +305,8 @@ void DecoderNode::StreamFrame(int64_t scan_id, cv::Size projector, int count, in
   }
 }
 
-void DecoderNode::SendTexture(int64_t id, const cv::Mat& texture) {
-  std::vector<texture_t> chunks = TextureMessages(id, texture, started_.light_count);
+void DecoderNode::SendTexture(int64_t id, const cv::Mat& texture, int light_count) {
+  std::vector<texture_t> chunks = TextureMessages(id, texture, light_count);
   node_->PublishChunks(channel::kTexture, &chunks);
   texture_sent_ = id;
 }
@@ -314,13 +314,11 @@ void DecoderNode::SendTexture(int64_t id, const cv::Mat& texture) {
 Status DecoderNode::Send(int64_t id, const Scan& scan) {
   node_->SetState("busy", id, "decoding");
   // The texture went on as it was recorded, unless this is a send from the folder.
-  if (texture_sent_ != id || static_cast<int>(scan.lights.size()) != started_.light_count) {
-    SendTexture(id, scan.texture);
-  }
+  const int lights = static_cast<int>(scan.lights.size());
+  if (texture_sent_ != id || lights != started_.light_count) SendTexture(id, scan.texture, lights);
   texture_sent_ = 0;
   for (const ScanLight& light : scan.lights) {  // At the camera's depth, as the texture.
-    std::vector<texture_t> chunks =
-        TextureMessages(id, light.image, static_cast<int>(scan.lights.size()), &light);
+    std::vector<texture_t> chunks = TextureMessages(id, light.image, lights, &light);
     node_->PublishChunks(channel::kLightTexture, &chunks);
   }
   // Taken up as it came when the whole scan was; else read from its folder as it is decoded

@@ -63,9 +63,10 @@ class DecoderNode {
   void Stop();                                         // No scan is being recorded.
   void Complete();
   Status Send(int64_t id, const Scan& scan);  // Decodes and publishes (the supervisor's Send).
-  // Publishes a scan's TEXTURE: as its capture is recorded (the processing daemons have it
-  // before the last frame), or with the rest when the scan is sent from its folder.
-  void SendTexture(int64_t id, const cv::Mat& texture);
+  // Publishes a scan's TEXTURE, announcing `light_count` extra lights to follow: as its capture
+  // is recorded (the processing daemons have it before the last frame), or with the rest when
+  // the scan is sent from its folder (which may be another scan than the one being recorded).
+  void SendTexture(int64_t id, const cv::Mat& texture, int light_count);
   // Takes a pattern capture up into the decoder as it comes, while the scan is the station's own
   // sequence (MakePatternSequence for its projector) and every capture came to this process;
   // otherwise (a scan resumed from its log, another sequence) the decoder reads the frames from
