@@ -42,6 +42,7 @@
 #include "bench/ratio_reporter.h"
 #include "core/sim/evaluate.h"
 #include "io/calibration_io.h"
+#include "station/chain.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "station/scan_log.h"
@@ -55,14 +56,16 @@ namespace fs = std::filesystem;
 using namespace vellum;
 using Clock = std::chrono::steady_clock;
 
-constexpr char kUrl[] = "udpm://239.255.76.67:7667?ttl=0&recv_buf_size=16777216";
+constexpr const char* kUrl = station::kDefaultUrl;
 constexpr char kViewer[] = "vellum-viewer";
-const std::vector<std::string> kProcessing = {"vellum-decoder", "vellum-triangulator",
-                                              "vellum-flattener", "vellum-restorer"};
-// The stages of the wait, in order: each ends when its daemon hands the scan on (the viewer's
-// when it says the page is drawn).
-const std::vector<std::string> kStages = {"vellum-decoder", "vellum-triangulator",
-                                          "vellum-flattener", "vellum-restorer", kViewer};
+// The stages of the wait, in order: the processing chain's daemons, each ending when it hands
+// the scan on, and the viewer, when it says the page is drawn.
+const std::vector<std::string> kStages = [] {
+  std::vector<std::string> stages;
+  for (const station::ChainLink& link : station::kChain) stages.push_back(link.process);
+  stages.push_back(kViewer);
+  return stages;
+}();
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
@@ -198,7 +201,7 @@ class Ear {
     }
   }
   bool Heard(const std::string& process) { return heard_.count(process) > 0; }
-  // When `stage` was done with scan `id` (zero time: not yet).
+  // When `stage` was done with the scan (zero time: not yet).
   Clock::time_point Done(const std::string& stage) { return done_[stage]; }
   Clock::time_point restored() { return restored_; }
   const std::string& error() { return error_; }  // The first a daemon reported.
@@ -210,19 +213,14 @@ class Ear {
     return n;
   }
   std::mutex& mutex() { return mutex_; }
-  void Forget() {
-    std::lock_guard<std::mutex> lock(mutex_);
-    done_.clear();
-    restored_ = {};
-  }
 
  private:
   void OnStatus(const lcm::ReceiveBuffer*, const std::string&, const status_t* m) {
     std::lock_guard<std::mutex> lock(mutex_);
     heard_.insert(m->process);
     int64_t& asked = asked_[m->process];
-    asked = std::max(asked, station::StatusCounter(*m, "chunks asked again") +
-                                station::StatusCounter(*m, "products asked again"));
+    asked = std::max(asked, station::StatusCounter(*m, station::counter::kChunksAskedAgain) +
+                                station::StatusCounter(*m, station::counter::kProductsAskedAgain));
     if (m->errors > 0 && error_.empty()) error_ = m->process + ": " + m->last_error;
     if (m->process == kViewer && m->scan_id != 0 && done_[kViewer] == Clock::time_point()) {
       done_[kViewer] = Clock::now();
@@ -275,7 +273,8 @@ bool PlayOnce(const std::string& log, const std::string& pace, const std::string
     return false;
   }
   std::vector<std::unique_ptr<Daemon>> daemons;
-  for (const std::string& p : kProcessing) {
+  for (const station::ChainLink& link : station::kChain) {
+    const std::string p = link.process;
     std::vector<std::string> flags = {"--data", dir};
     if (!pace.empty()) flags.insert(flags.end(), {"--pace", pace});
     daemons.push_back(std::make_unique<Daemon>(p, flags, dir + "/" + p + ".log"));

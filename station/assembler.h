@@ -101,7 +101,7 @@ class Assembler {
       }
       if (now - it->asked > Seconds(ask_after_s_)) {
         Request(it->scan_id, 0, {});  // All of it.
-        node_->Count("products asked again");
+        node_->Count(counter::kProductsAskedAgain);
         it->asked = now;
         ++it->asks;
       }
@@ -124,7 +124,7 @@ class Assembler {
 
   void Ask() {
     std::vector<int32_t> missing = chunks_.MissingIndices();
-    node_->Count("chunks asked again", static_cast<int64_t>(missing.size()));
+    node_->Count(counter::kChunksAskedAgain, static_cast<int64_t>(missing.size()));
     Request(chunks_.scan_id(), known_seq_, std::move(missing));
     asked_ = node_->Now();
     ++asks_;

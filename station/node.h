@@ -72,6 +72,10 @@ namespace counter {
 // A product the bus lost that could not be had again (Assembler): the supervisor makes the
 // scan again from disk.
 inline constexpr char kProductsLost[] = "products lost";
+// Chunks of a product, and whole products announced and never come, that the bus lost and a
+// receiver asked again (Assembler): station_bench reports them beside its times.
+inline constexpr char kChunksAskedAgain[] = "chunks asked again";
+inline constexpr char kProductsAskedAgain[] = "products asked again";
 // Scans this process failed (counted before the error that names the scan goes out): the
 // projector stops a scan the decoder failed.
 inline constexpr char kScansFailed[] = "scans failed";
