@@ -15,7 +15,10 @@
 // (SimulatedLog). The program runs
 // itself inside scripts/netns-run.sh: the bus never leaves a private loopback.
 //
-//   ./build/bench/station_bench [--paces=MB/S,...] [--benchmark_filter=...]
+//   ./build/bench/station_bench [--paces=MB/S,...] [--keep] [--benchmark_filter=...]
+//
+// --keep leaves the work folder (each case's last station: its scan folder, the daemons' logs)
+// for a look at what the station wrote, and names it.
 #include <benchmark/benchmark.h>
 #include <fcntl.h>
 #include <signal.h>
@@ -442,8 +445,13 @@ int main(int argc, char** argv) {
   // the same run; without it, at the daemons' default.
   std::vector<std::string> paces = {""};
   std::vector<char*> args;
+  bool keep = false;
   for (int k = 0; k < argc; ++k) {
     const std::string a = argv[k];
+    if (a == "--keep") {
+      keep = true;
+      continue;
+    }
     if (a.rfind("--paces=", 0) != 0) {
       args.push_back(argv[k]);
       continue;
@@ -470,6 +478,10 @@ int main(int argc, char** argv) {
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
   PrintSummary();
-  fs::remove_all(WorkDir());
+  if (keep) {
+    std::printf("kept: %s\n", WorkDir().c_str());
+  } else {
+    fs::remove_all(WorkDir());
+  }
   return 0;
 }

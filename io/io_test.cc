@@ -746,6 +746,78 @@ TEST_F(IoTest, TheManifestProvesAScanWholeAndNamesWhatChanged) {
 
 // A symbolic link under a scan's folder is reported wherever it lies and whatever it points to
 // (a file, a folder, nothing): the manifest cannot vouch for what it points to.
+// Hashes recorded as the files were written spare the manifest reading them again, and give the
+// same manifest as hashing at the end: a log hashed in pieces as it grew (and once after it was
+// cut), files written whole. A file changed after it was recorded (rewritten, or appended to) is
+// hashed again, never vouched for with its old hash.
+TEST_F(IoTest, HashesRecordedAsFilesAreWrittenMakeTheSameManifestAndChangesAreHashedAgain) {
+  fs::create_directories(dir_ / "raw");
+  fs::create_directories(dir_ / "results");
+  const auto append = [&](const std::string& rel, const std::string& text) {
+    std::ofstream(dir_ / rel, std::ios::binary | std::ios::app) << text;
+  };
+  HashRecord record(dir_.string());
+  std::string log;
+  for (int k = 0; k < 5; ++k) {
+    // Pieces across the hasher's 1 MB reads.
+    const std::string piece(700000 + 13 * k, static_cast<char>('a' + k));
+    append("raw/captures.lcmlog", piece);
+    log += piece;
+    ASSERT_TRUE(record.Grow("raw/captures.lcmlog").ok()) << k;
+    const std::string frame = "raw/frame_00" + std::to_string(k) + ".png";
+    append(frame, std::string(1000 + k, static_cast<char>('A' + k)));
+    ASSERT_TRUE(record.Add(frame).ok()) << frame;
+    if (k == 2) {  // Cut (a torn tail trimmed) and written again: hashed afresh.
+      fs::resize_file(dir_ / "raw" / "captures.lcmlog", 10);
+      log.resize(10);
+      ASSERT_TRUE(record.Grow("raw/captures.lcmlog").ok());
+    }
+  }
+  append("raw/frame_009.png", "later");  // Written after the record: not in it.
+  ASSERT_TRUE(record.Save().ok());
+  std::ifstream saved(dir_ / kRecordedHashesName);
+  std::string line;
+  int lines = 0;
+  while (std::getline(saved, line)) ++lines;
+  EXPECT_EQ(lines, 6);  // The log and five frames.
+  append("results/restored.tif", "tiff");
+  ASSERT_TRUE(WriteManifest(dir_.string(), {"raw", "results"}).ok());
+  const auto manifest = [&] {
+    std::ifstream in(dir_ / kManifestName);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string with_record = manifest();
+  EXPECT_NE(with_record.find(Sha256OfBytes(log) + "  raw/captures.lcmlog"), std::string::npos)
+      << with_record;
+  EXPECT_EQ(with_record.find(kRecordedHashesName), std::string::npos) << with_record;
+  std::vector<std::string> problems;
+  ASSERT_TRUE(CheckManifest(dir_.string(), &problems).ok());
+  EXPECT_TRUE(problems.empty()) << problems.front();
+  fs::rename(dir_ / kRecordedHashesName, dir_ / "aside.txt");
+  ASSERT_TRUE(WriteManifest(dir_.string(), {"raw", "results"}).ok());
+  EXPECT_EQ(manifest(), with_record);  // The same, every file read.
+  // The record is used: a hash put in it by hand for a file of that size and time is taken.
+  std::ifstream in(dir_ / "aside.txt");
+  std::string text(std::istreambuf_iterator<char>(in), {});
+  const std::string real = Sha256OfBytes(std::string(1000, 'A'));
+  const std::string fake(64, '0');
+  ASSERT_NE(text.find(real), std::string::npos) << text;
+  text.replace(text.find(real), 64, fake);
+  std::ofstream(dir_ / kRecordedHashesName, std::ios::binary | std::ios::trunc) << text;
+  ASSERT_TRUE(WriteManifest(dir_.string(), {"raw", "results"}).ok());
+  EXPECT_NE(manifest().find(fake + "  raw/frame_000.png"), std::string::npos) << manifest();
+  // Changed since (same size, later time; or appended to): hashed again.
+  const fs::path frame = dir_ / "raw" / "frame_000.png";
+  const auto recorded_time = fs::last_write_time(frame);
+  std::ofstream(frame, std::ios::binary | std::ios::trunc) << std::string(1000, 'Z');
+  fs::last_write_time(frame, recorded_time + std::chrono::seconds(1));  // Whatever the clock.
+  append("raw/captures.lcmlog", "more");
+  ASSERT_TRUE(WriteManifest(dir_.string(), {"raw", "results"}).ok());
+  EXPECT_EQ(manifest().find(fake), std::string::npos) << manifest();
+  ASSERT_TRUE(CheckManifest(dir_.string(), &problems).ok());
+  EXPECT_TRUE(problems.empty()) << problems.front();
+}
+
 TEST_F(IoTest, TheManifestCheckReportsEverySymbolicLink) {
   fs::create_directories(dir_ / "raw");
   fs::create_directories(dir_ / "results");

@@ -1,8 +1,10 @@
 #include "io/manifest.h"
 
 #include <openssl/evp.h>
+#include <sys/stat.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -28,7 +30,10 @@ std::vector<std::string> FilesUnder(const std::string& dir) {
   for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     if (it->is_symlink() || !it->is_regular_file()) continue;  // Links: SymlinksUnder.
     const std::string rel = fs::relative(it->path(), dir).generic_string();
-    if (rel == kManifestName || rel == std::string(kManifestName) + ".tmp") continue;
+    if (rel == kManifestName || rel == std::string(kManifestName) + ".tmp" ||
+        rel == kRecordedHashesName || rel == std::string(kRecordedHashesName) + ".tmp") {
+      continue;
+    }
     files.push_back(rel);
   }
   std::sort(files.begin(), files.end());
@@ -60,10 +65,19 @@ class Sha256 {
   void Add(const char* data, size_t size) {
     if (ok_) EVP_DigestUpdate(ctx_.get(), data, size);
   }
-  std::string Hex() {
+  std::string Hex() { return HexOf(ctx_.get()); }
+  // The hash of what was added so far, which can still be added to.
+  std::string HexSoFar() const {
+    std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> copy(EVP_MD_CTX_new(), EVP_MD_CTX_free);
+    if (!ok_ || !copy || EVP_MD_CTX_copy_ex(copy.get(), ctx_.get()) != 1) return "";
+    return HexOf(copy.get());
+  }
+
+ private:
+  std::string HexOf(EVP_MD_CTX* ctx) const {
     unsigned char digest[EVP_MAX_MD_SIZE];
     unsigned int length = 0;
-    if (ok_) EVP_DigestFinal_ex(ctx_.get(), digest, &length);
+    if (ok_) EVP_DigestFinal_ex(ctx, digest, &length);
     std::string hex;
     char two[3];
     for (unsigned int i = 0; i < length; ++i) {
@@ -73,12 +87,111 @@ class Sha256 {
     return hex;
   }
 
- private:
   std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx_;
   bool ok_ = false;
 };
 
+// A regular file's size and modification time (ns since the epoch); false when it is none.
+bool Stat(const std::string& path, int64_t* size, int64_t* mtime_ns) {
+  struct stat st;
+  if (::stat(path.c_str(), &st) != 0 || !S_ISREG(st.st_mode)) return false;
+  *size = static_cast<int64_t>(st.st_size);
+  *mtime_ns = static_cast<int64_t>(st.st_mtim.tv_sec) * 1000000000 + st.st_mtim.tv_nsec;
+  return true;
+}
+
+// Adds bytes [from, to) of `path` to `sha`.
+Status HashRange(const std::string& path, int64_t from, int64_t to, Sha256* sha) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in || !in.seekg(from)) return Status::Error(path + ": cannot read");
+  std::vector<char> buffer(1 << 20);
+  for (int64_t left = to - from; left > 0;) {
+    const int64_t want = std::min<int64_t>(left, static_cast<int64_t>(buffer.size()));
+    in.read(buffer.data(), static_cast<std::streamsize>(want));
+    if (in.gcount() != want) return Status::Error(path + ": read error");
+    sha->Add(buffer.data(), static_cast<size_t>(want));
+    left -= want;
+  }
+  return Status::Ok();
+}
+
+// <dir>/recorded-sha256.txt, by relative path: {hex, size, mtime}; empty when there is none
+// (or it cannot be read: the files are hashed instead).
+std::map<std::string, std::array<std::string, 3>> ReadRecorded(const std::string& dir) {
+  std::map<std::string, std::array<std::string, 3>> recorded;
+  std::ifstream in(fs::path(dir) / kRecordedHashesName);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string hex, size, mtime, rel;
+    if (!(fields >> hex >> size >> mtime) || hex.size() != 64) continue;
+    std::getline(fields >> std::ws, rel);
+    if (!rel.empty()) recorded[rel] = {hex, size, mtime};
+  }
+  return recorded;
+}
+
 }  // namespace
+
+struct HashRecord::Growing {
+  Sha256 sha;
+  int64_t hashed = 0;  // Bytes added to sha.
+};
+
+Status HashRecord::Add(const std::string& rel) {
+  const std::string path = (fs::path(dir_) / rel).string();
+  Entry e;
+  int64_t size = 0, mtime = 0;
+  if (!Stat(path, &e.size, &e.mtime_ns)) return Status::Error(path + ": cannot read");
+  const Status s = Sha256OfFile(path, &e.hex);
+  if (!s.ok()) return s;
+  // Changed while it was read: left to the manifest.
+  if (!Stat(path, &size, &mtime) || size != e.size || mtime != e.mtime_ns) return Status::Ok();
+  done_[rel] = e;
+  return Status::Ok();
+}
+
+Status HashRecord::Grow(const std::string& rel) {
+  const std::string path = (fs::path(dir_) / rel).string();
+  int64_t size = 0, mtime = 0;
+  if (!Stat(path, &size, &mtime)) return Status::Error(path + ": cannot read");
+  std::shared_ptr<Growing>& g = growing_[rel];
+  if (!g || size < g->hashed) g = std::make_shared<Growing>();  // New, or cut.
+  if (!g->sha.ok()) return Status::Error(path + ": SHA-256 not available");
+  // Only up to the size seen: what is appended meanwhile is for the next call.
+  const Status s = HashRange(path, g->hashed, size, &g->sha);
+  if (!s.ok()) {
+    growing_.erase(rel);
+    return s;
+  }
+  g->hashed = size;
+  done_[rel] = {g->sha.HexSoFar(), size, mtime};
+  return Status::Ok();
+}
+
+Status HashRecord::Save() const {
+  std::ostringstream text;
+  for (const auto& [rel, e] : done_) {
+    int64_t size = 0, mtime = 0;
+    if (!Stat((fs::path(dir_) / rel).string(), &size, &mtime) || size != e.size ||
+        mtime != e.mtime_ns) {
+      continue;
+    }
+    text << e.hex << "  " << e.size << "  " << e.mtime_ns << "  " << rel << "\n";
+  }
+  const fs::path path = fs::path(dir_) / kRecordedHashesName;
+  const fs::path tmp = path.string() + ".tmp";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out << text.str();
+    out.flush();
+    if (!out) return Status::Error(tmp.string() + ": cannot write");
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) return Status::Error(path.string() + ": cannot write: " + ec.message());
+  return Status::Ok();
+}
 
 Status Sha256OfFile(const std::string& path, std::string* hex) {
   std::ifstream in(path, std::ios::binary);
@@ -109,10 +222,19 @@ Status WriteManifest(const std::string& dir, const std::vector<std::string>& par
       paths.push_back(rel);
     }
   }
+  const auto recorded = ReadRecorded(dir);
   for (const std::string& rel : paths) {
+    const std::string file = (fs::path(dir) / rel).string();
     std::string hex;
-    const Status s = Sha256OfFile((fs::path(dir) / rel).string(), &hex);
-    if (!s.ok()) return s;
+    const auto known = recorded.find(rel);
+    int64_t size = 0, mtime = 0;
+    if (known != recorded.end() && Stat(file, &size, &mtime) &&
+        known->second[1] == std::to_string(size) && known->second[2] == std::to_string(mtime)) {
+      hex = known->second[0];  // Hashed as it was written, unchanged since.
+    } else {
+      const Status s = Sha256OfFile(file, &hex);
+      if (!s.ok()) return s;
+    }
     text << hex << "  " << rel << "\n";
   }
   const fs::path path = fs::path(dir) / kManifestName;

@@ -4,6 +4,9 @@
 // unchanged years later. Hashed with OpenSSL's libcrypto.
 #pragma once
 
+#include <cstdint>
+#include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -18,10 +21,43 @@ Status Sha256OfFile(const std::string& path, std::string* hex);
 // The SHA-256 of bytes in memory, as 64 lower-case hex digits.
 std::string Sha256OfBytes(const std::string& bytes);
 
-// Writes <dir>/manifest-sha256.txt over every regular file under `dir` but itself, or only
-// under its subfolders `parts` when given (a station's scan: raw and results, not the
-// supervisor's ledger beside them); written whole to a temporary name, then renamed. `files`
-// (optional) gets how many it lists.
+// The SHA-256s of a folder's files taken as they were written (a scan's raw captures, hashed
+// by the decoder while the next frames arrive), so that the manifest written at the end need
+// not read them again: <dir>/recorded-sha256.txt, one line per file, "<64 hex digits>  <size in
+// bytes>  <modification time, ns since the epoch>  <path relative to dir>". A file is hashed
+// from disk, what the manifest vouches for; one that grows (an appended log) in pieces as it
+// grows. WriteManifest takes a recorded hash only while the file's size and modification time
+// are still those recorded, and hashes the file again otherwise.
+inline constexpr const char* kRecordedHashesName = "recorded-sha256.txt";
+
+class HashRecord {
+ public:
+  explicit HashRecord(std::string dir = "") : dir_(std::move(dir)) {}
+  // Hashes what the file `rel` (relative to the folder) holds now: one written whole.
+  Status Add(const std::string& rel);
+  // Hashes what was appended to `rel` since the last call (all of it the first time, or when
+  // it is shorter than what was hashed: cut and written again).
+  Status Grow(const std::string& rel);
+  // Writes <dir>/recorded-sha256.txt (to a temporary name, then renamed): the files as they
+  // are now; one that changed since it was hashed is left out (WriteManifest hashes it).
+  Status Save() const;
+
+ private:
+  struct Growing;
+  struct Entry {
+    std::string hex;
+    int64_t size = 0, mtime_ns = 0;
+  };
+  std::string dir_;
+  std::map<std::string, Entry> done_;
+  std::map<std::string, std::shared_ptr<Growing>> growing_;
+};
+
+// Writes <dir>/manifest-sha256.txt over every regular file under `dir` but itself (and
+// recorded-sha256.txt), or only under its subfolders `parts` when given (a station's scan: raw
+// and results, not the supervisor's ledger beside them); written whole to a temporary name,
+// then renamed. Files whose hashes <dir>/recorded-sha256.txt holds, unchanged since, are not
+// read again. `files` (optional) gets how many it lists.
 Status WriteManifest(const std::string& dir, const std::vector<std::string>& parts = {},
                      int* files = nullptr);
 

@@ -351,9 +351,18 @@ static Status WriteCaptureImage(const std::string& path, const capture_t& c, con
   return frame ? WriteFrameImage(path, image) : WriteImage(path, image);
 }
 
+void ScanRecorder::Hash(const std::string& path) {
+  const auto rel = [&](const std::string& p) {
+    return fs::path(p).lexically_relative(folder_.root).generic_string();
+  };
+  hashes_.Add(rel(path)).ok();
+  if (PathExists(folder_.log())) hashes_.Grow(rel(folder_.log())).ok();
+}
+
 Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed,
                           int* count, scan_started_t* started_out) {
   folder_ = folder;
+  hashes_ = HashRecord(folder.root);
   *count = 0;
   Status s = MakeDirectories(folder.raw());
   if (!s.ok()) return s;
@@ -395,16 +404,26 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
 }
 
 Status ScanRecorder::Write(const capture_t& capture, const cv::Mat& image) {
-  return WriteCaptureImage((fs::path(folder_.raw()) / ImageName(capture)).string(), capture, image);
+  const std::string path = (fs::path(folder_.raw()) / ImageName(capture)).string();
+  const Status s = WriteCaptureImage(path, capture, image);
+  if (s.ok()) Hash(path);
+  return s;
 }
 
 Status ScanRecorder::Write(const calibration_t& calibration) {
   Calibration c;
   Status s = FromMessage(calibration, &c);
-  if (!s.ok()) return s;
-  return WriteCalibration(folder_.calibration(), c);
+  if (s.ok()) s = WriteCalibration(folder_.calibration(), c);
+  if (s.ok()) Hash(folder_.calibration());
+  return s;
 }
 
-Status ScanRecorder::Finish(const Scan& scan) { return WriteScanYaml(folder_.raw(), scan); }
+Status ScanRecorder::Finish(const Scan& scan) {
+  const Status s = WriteScanYaml(folder_.raw(), scan);
+  if (!s.ok()) return s;
+  Hash(folder_.scan_yaml());
+  hashes_.Save().ok();  // Without it the manifest reads raw/ again: slower, as sound.
+  return s;
+}
 
 }  // namespace vellum::station

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "io/manifest.h"
 #include "io/scan_io.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
@@ -155,7 +156,9 @@ class CaptureLog {
 
 // The rest of a scan's folder, on the worker thread: each capture as raw/texture.png,
 // raw/frame_NNN.png or raw/light_<name>.png, raw/calibration.yaml, and raw/scan.yaml once
-// complete.
+// complete. Each file, and the log as it grows, is hashed as it is written (while the next
+// frames arrive), and the hashes kept in the scan's recorded-sha256.txt once it is complete,
+// so that the manifest written when it is restored need not read raw/ again (io/manifest.h).
 class ScanRecorder {
  public:
   // Opens the scan's folder. When its log already holds captures of this scan that were not
@@ -169,7 +172,12 @@ class ScanRecorder {
   Status Finish(const Scan& scan);
 
  private:
+  // Hashes `path` (in raw/) as written, and what the log gained: a file that cannot be hashed
+  // now is hashed by the manifest.
+  void Hash(const std::string& path);
+
   ScanFolder folder_;
+  HashRecord hashes_;
 };
 
 }  // namespace vellum::station

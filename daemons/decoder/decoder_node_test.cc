@@ -16,6 +16,7 @@
 #include <stdexcept>
 
 #include "io/calibration_io.h"
+#include "io/manifest.h"
 #include "io/scan_io.h"
 #include "station/daemon.h"
 #include "station/messages.h"
@@ -105,6 +106,20 @@ TEST_F(DecoderNodeTest, RecordsAScanAndSendsItDownTheChain) {
   ASSERT_TRUE(ReadScanLog(folder.log(), 11, &logged, &has_calibration, &calibration, &id).ok());
   EXPECT_FALSE(has_calibration);
   EXPECT_TRUE(fs::exists(folder.pending())) << "in the supervisor's ledger until RESTORED";
+  // Every raw file was hashed as it was written (the manifest need not read raw/ again after
+  // the last frame), each hash the file's own.
+  std::ifstream recorded_hashes(fs::path(folder.root) / kRecordedHashesName);
+  std::set<std::string> hashed;
+  for (std::string hex, size, mtime, rel; recorded_hashes >> hex >> size >> mtime >> rel;) {
+    std::string real;
+    ASSERT_TRUE(Sha256OfFile((fs::path(folder.root) / rel).string(), &real).ok()) << rel;
+    EXPECT_EQ(hex, real) << rel;
+    hashed.insert(rel);
+  }
+  for (const auto& entry : fs::directory_iterator(folder.raw())) {
+    const std::string rel = "raw/" + entry.path().filename().string();
+    EXPECT_TRUE(hashed.count(rel)) << rel << " was not hashed as it was recorded";
+  }
 
   // The texture went whole, and the correspondences with the decode stage's report.
   cv::Mat sent_texture;
