@@ -51,6 +51,7 @@ CalibrationBook::CalibrationBook(Node* node, const Calibration* fallback,
     std::lock_guard<std::mutex> lock(mutex_);
     by_scan_[msg.scan_id] = c;
     KeepRecent(&by_scan_);
+    if (heard_) heard_(msg.scan_id, c);
   });
 }
 

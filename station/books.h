@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -30,6 +31,12 @@ class CalibrationBook {
   // `fallback` may be null (then a scan without a CALIBRATION message fails).
   CalibrationBook(Node* node, const Calibration* fallback, const std::string& data_dir);
   Status Get(int64_t scan_id, Calibration* calibration) const;
+  // Calls `heard` (on the LCM thread) with each scan's calibration as it is taken: a daemon
+  // prepares what it makes from it while the scan is captured (the triangulator's rays).
+  void OnTaken(std::function<void(int64_t scan_id, const Calibration&)> heard) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    heard_ = std::move(heard);
+  }
 
  private:
   Node* node_;
@@ -38,6 +45,7 @@ class CalibrationBook {
   Calibration fallback_;
   mutable std::mutex mutex_;  // Guards by_scan_: filled on the LCM thread, read on the worker.
   std::map<int64_t, Calibration> by_scan_;
+  std::function<void(int64_t, const Calibration&)> heard_;
 };
 
 // The texture of each recent scan, reassembled from TEXTURE chunks, and with `lights` the images

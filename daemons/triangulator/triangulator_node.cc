@@ -42,6 +42,17 @@ TriangulatorNode::TriangulatorNode(Node* node, const TriangulatorNodeOptions& op
             Process(id, last);
           }) {
   assembler_.AwaitAnnounced(channel::kCorrespondence);
+  // The rays of a scan's calibration are made while it is captured, not after its last frame.
+  calibrations_.OnTaken([this](int64_t, const Calibration& calibration) {
+    node_->Post([this, calibration] { Prepare(calibration); }, "preparing a calibration's rays");
+  });
+}
+
+void TriangulatorNode::Prepare(const Calibration& calibration) {
+  if (!triangulator_ || !SameCalibration(triangulator_->calibration(), calibration)) {
+    triangulator_ = std::make_unique<Triangulator>(calibration);
+    node_->Count("calibrations' rays made");
+  }
 }
 
 void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
@@ -65,9 +76,7 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
                 SizeText(calibration.projector.size) + " projector, the scan has " +
                 SizeText(decoded.projector_x.size()) + " and " + SizeText(product_.projector));
   }
-  if (!triangulator_ || !SameCalibration(triangulator_->calibration(), calibration)) {
-    triangulator_ = std::make_unique<Triangulator>(calibration);
-  }
+  Prepare(calibration);
   const std::string results = ScanFolder::For(options_.data_dir, id).results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());

@@ -40,6 +40,8 @@ class TriangulatorNode {
     cv::Size projector;
   };
   void Process(int64_t id, const correspondence_t& last);  // Worker thread.
+  // Makes the calibration's rays unless they are those made last (worker thread).
+  void Prepare(const Calibration& calibration);
 
   Node* node_;
   TriangulatorNodeOptions options_;

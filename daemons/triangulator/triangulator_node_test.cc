@@ -57,8 +57,12 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
   auto clouds = bus_.Record<point_cloud_t>(channel::kPointCloud);
   auto progress = bus_.Record<scan_progress_t>(channel::kScanProgress);
   PublishCalibration(5, QuickRig());
+  // The calibration's rays are made as it is heard (while the scan is captured), before any
+  // correspondence, and not again for the scan.
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("calibrations' rays made") == 1; }));
   PublishChunks(Chunks(5));
   ASSERT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
+  EXPECT_EQ(node.Counter("calibrations' rays made"), 1);
   EXPECT_EQ(progress->back().product, "POINT_CLOUD");
   cv::Mat points;
   for (const point_cloud_t& m : *clouds) ASSERT_TRUE(AddChunk(m, &points).ok());
