@@ -135,6 +135,7 @@ bool Pipeline::Skipped(Step step, const ScanWork& work) const {
 }
 
 Status Pipeline::Run(Step from, Step to, ScanWork* work, const PipelineProgress& progress) const {
+  const WritesDuring writes(work->writes.get());  // The pictures, while the steps go on.
   const bool slow = options_.flatten.solver != FlattenSolver::kGaussNewton;
   auto told = [&](Step step, double done) {
     if (progress) progress(ToString(step), done);
@@ -169,6 +170,7 @@ Status Pipeline::Run(Step from, Step to, ScanWork* work, const PipelineProgress&
 }
 
 Status Pipeline::RunPage(size_t k, Step from, Step to, ScanWork* work) const {
+  const WritesDuring writes(work->writes.get());
   MakePages(work);
   if (k >= work->pages.size()) {
     return Status::Error("page " + std::to_string(k) + " of a scan of " +

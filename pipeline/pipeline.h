@@ -50,7 +50,8 @@ class Pipeline {
   // Runs the steps `from` .. `to` in order, the page steps for every page of work->outline
   // (work->pages made from it when empty), page after page. Stops at the first step that
   // fails, with its error (naming work->name, but for the triangulation's, which names its own);
-  // every step's report is in work->stages.
+  // every step's report is in work->stages. The report's pictures may still be being written
+  // when it returns: work->writes->Wait() before the files are needed on disk.
   Status Run(Step from, Step to, ScanWork* work, const PipelineProgress& progress = nullptr) const;
   // The page steps `from` .. `to` of page `k` alone (a daemon's page as it came).
   Status RunPage(size_t k, Step from, Step to, ScanWork* work) const;

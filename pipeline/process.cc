@@ -58,6 +58,8 @@ ProcessResult RunStages(const ProcessInput& input, const PipelineOptions& option
   if (!out.status.ok()) return out;
   const Step last = options.points_only ? Step::kTriangulate : Step::kArchive;
   out.status = pipeline.Run(Step::kDecode, last, &work, progress);
+  const Status written = work.writes->Wait();  // The pictures, before the reports name them.
+  if (out.status.ok()) out.status = written;
   report.stages = std::move(work.stages);
   out.map = std::move(work.map);
   out.outline = std::move(work.outline);

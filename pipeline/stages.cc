@@ -59,7 +59,14 @@ class Stage {
     }
     const std::string file =
         "report/" + stem + (report_.page.empty() ? "" : "-" + report_.page) + ".png";
-    return Output(file, WriteImage((fs::path(results) / file).string(), out));
+    const std::string path = (fs::path(results) / file).string();
+    if (FileWrites* writes = CurrentFileWrites()) {
+      // Written while the steps go on, from a copy of its own (the image may change meanwhile).
+      if (out.data == image.data) out = out.clone();
+      writes->Add([path, out] { return WriteImage(path, out); });
+      return Output(file, Status::Ok());
+    }
+    return Output(file, WriteImage(path, out));
   }
 
  private:
@@ -250,18 +257,20 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
                  "order, or a camera or projector that moved during the scan; scan again");
     }
   }
+  // The pictures first: they are written while the points are.
+  Status s = stage.Picture(results, "valid", ValidMask(map->points));
+  double bar_min = 0, bar_max = 0;
+  if (s.ok()) {
+    s = stage.Picture(results, "depth", DepthWithColourBar(map->points, &bar_min, &bar_max));
+  }
+  if (!s.ok()) return stage.Finish(s);
   double z_min = 0, z_max = 0;
-  Status s = WritePointProducts(results, map->points, &z_min, &z_max);
+  s = WritePointProducts(results, map->points, &z_min, &z_max);
   if (!s.ok()) return stage.Finish(s);
   r.outputs.push_back("points.ply");
   r.outputs.push_back("depth.png");
   r.Number("height_mm", "min", z_min);
   r.Number("height_mm", "max", z_max);
-  s = stage.Picture(results, "valid", ValidMask(map->points));
-  double bar_min = 0, bar_max = 0;
-  if (s.ok()) {
-    s = stage.Picture(results, "depth", DepthWithColourBar(map->points, &bar_min, &bar_max));
-  }
   return stage.Finish(s);
 }
 

@@ -3,6 +3,7 @@
 // for each page read the scan's part and write their page's.
 #pragma once
 
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@
 #include "core/shading/photometric.h"
 #include "pipeline/context.h"
 #include "pipeline/report.h"
+#include "pipeline/writes.h"
 
 namespace vellum {
 
@@ -66,6 +68,9 @@ struct ScanWork {
   Outline outline;
   std::vector<PageResult> pages;    // The outline's pages, as their steps run.
   std::vector<StageReport> stages;  // Every step's report, in the order they ran.
+  // The steps' pictures still being written (pipeline/writes.h): wait for them before the
+  // files are needed on disk.
+  std::shared_ptr<FileWrites> writes = std::make_shared<FileWrites>();
 };
 
 }  // namespace vellum

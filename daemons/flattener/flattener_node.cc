@@ -71,6 +71,7 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
       node_->SetState("busy", id, "flattening the sheet" + of);
       s = pipeline.RunPage(k, Step::kFlatten, Step::kFlatten, &work);
     }
+    if (s.ok()) s = work.writes->Wait();  // Its files on disk before the sheet goes on.
     if (!s.ok()) return node_->FailScan(id, s.message());
     const PageResult& page = work.pages[k];
     SheetPage sheet;

@@ -163,6 +163,8 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
                         (name.empty() ? std::string() : " of the " + name + " page"));
     s = pipeline.RunPage(k, Step::kAlbedo, Step::kLights, &work);
   }
+  const Status written = work.writes->Wait();
+  if (s.ok()) s = written;
   if (!s.ok()) {
     scans_.erase(id);
     return node_->FailScan(id, s.message());
@@ -200,6 +202,8 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   Status s = textures_.Get(id, &work.scan.texture);
   if (s.ok()) {
     s = Pipeline(options_.pipeline).Run(Step::kArchive, Step::kArchive, &work);
+    const Status written = work.writes->Wait();
+    if (s.ok()) s = written;
     report.stages.insert(report.stages.end(), work.stages.begin(), work.stages.end());
   }
   if (s.ok()) s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);

@@ -96,6 +96,8 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   std::swap(work.decoded, product_.decoded);
   std::swap(work.map, map_);
   s = Pipeline(options).Run(Step::kTriangulate, Step::kTriangulate, &work);
+  const Status written = work.writes->Wait();  // Its files on disk before the points go on.
+  if (s.ok()) s = written;
   std::swap(work.map, map_);
   if (!s.ok()) return node_->FailScan(id, s.message());
   std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, amplitude, context, work.stages);

@@ -1,0 +1,41 @@
+#include "pipeline/writes.h"
+
+namespace vellum {
+namespace {
+
+thread_local FileWrites* t_writes = nullptr;
+
+}  // namespace
+
+FileWrites::~FileWrites() {
+  // None left running; whoever needed them waited and heard of a failure (a run that ends in
+  // an error of its own may leave them unasked).
+  static_cast<void>(Wait());
+}
+
+void FileWrites::Add(std::function<Status()> write) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  pending_.push_back(std::async(std::launch::async, std::move(write)));
+}
+
+Status FileWrites::Wait() {
+  std::vector<std::future<Status>> pending;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending.swap(pending_);
+  }
+  Status first = Status::Ok();
+  for (std::future<Status>& f : pending) {
+    const Status s = f.get();
+    if (first.ok() && !s.ok()) first = s;
+  }
+  return first;
+}
+
+FileWrites* CurrentFileWrites() { return t_writes; }
+
+WritesDuring::WritesDuring(FileWrites* writes) : before_(t_writes) { t_writes = writes; }
+
+WritesDuring::~WritesDuring() { t_writes = before_; }
+
+}  // namespace vellum
