@@ -1,5 +1,7 @@
 #include "station/contact_sheet.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -79,25 +81,65 @@ SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t i
   return e;
 }
 
-void Collect(const fs::path& dir, const std::string& prefix, bool retaken,
-             std::vector<SheetEntry>* out) {
+// Every file ReadEntry looks at, by size and modification time ("-" for one not there).
+std::string Signature(const fs::path& dir) {
+  static const char* const kRead[] = {"raw/scan.yaml",
+                                      "raw/captures.lcmlog",
+                                      "raw/failed.txt",
+                                      "pending",
+                                      "results/report.json",
+                                      "results/report/restored.png",
+                                      "results/restored.tif",
+                                      "results/report/restored-left.png",
+                                      "results/pages/left/restored.tif"};
+  std::string signature;
+  for (const char* rel : kRead) {
+    struct stat st;
+    if (::stat((dir / rel).c_str(), &st) != 0) {
+      signature += "-;";
+      continue;
+    }
+    signature += std::to_string(st.st_size) + ":" + std::to_string(st.st_mtim.tv_sec) + "." +
+                 std::to_string(st.st_mtim.tv_nsec) + ";";
+  }
+  return signature;
+}
+
+void Collect(const fs::path& dir, const std::string& prefix, bool retaken, SheetCache* cache,
+             std::map<std::string, SheetCache::Kept>* kept, std::vector<SheetEntry>* out) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const std::string name = it->path().filename().string();
     const int64_t id = ScanFolderId(name);
     if (id == 0 || !it->is_directory(ec)) continue;
-    SheetEntry e = ReadEntry(it->path(), prefix + name, id);
-    e.retaken = retaken;
-    out->push_back(std::move(e));
+    if (!cache) {
+      out->push_back(ReadEntry(it->path(), prefix + name, id));
+      out->back().retaken = retaken;
+      continue;
+    }
+    const std::string path = it->path().string();
+    const std::string signature = Signature(it->path());
+    auto was = cache->folders.find(path);
+    if (was == cache->folders.end() || was->second.signature != signature) {
+      ++cache->reads;
+      SheetEntry e = ReadEntry(it->path(), prefix + name, id);
+      e.retaken = retaken;
+      (*kept)[path] = {signature, std::move(e)};
+    } else {
+      (*kept)[path] = std::move(was->second);
+    }
+    out->push_back((*kept)[path].entry);
   }
 }
 
 }  // namespace
 
-std::vector<SheetEntry> ReadSheet(const std::string& data_dir) {
+std::vector<SheetEntry> ReadSheet(const std::string& data_dir, SheetCache* cache) {
   std::vector<SheetEntry> entries;
-  Collect(data_dir, "", false, &entries);
-  Collect(fs::path(data_dir) / "retaken", "retaken/", true, &entries);
+  std::map<std::string, SheetCache::Kept> kept;  // The folders there now (gone ones dropped).
+  Collect(data_dir, "", false, cache, &kept, &entries);
+  Collect(fs::path(data_dir) / "retaken", "retaken/", true, cache, &kept, &entries);
+  if (cache) cache->folders.swap(kept);
   std::sort(entries.begin(), entries.end(), [](const SheetEntry& a, const SheetEntry& b) {
     if (a.retaken != b.retaken) return !a.retaken;
     return a.scan_id > b.scan_id;
@@ -105,8 +147,8 @@ std::vector<SheetEntry> ReadSheet(const std::string& data_dir) {
   return entries;
 }
 
-Status WriteContactSheet(const std::string& data_dir) {
-  const std::vector<SheetEntry> entries = ReadSheet(data_dir);
+Status WriteContactSheet(const std::string& data_dir, SheetCache* cache) {
+  const std::vector<SheetEntry> entries = ReadSheet(data_dir, cache);
   std::ostringstream h;
   h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n"
     << "<title>vellum: scans in " << HtmlEscape(data_dir) << "</title>\n<style>\n"

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -26,10 +27,24 @@ struct SheetEntry {
   bool retaken = false;   // An earlier attempt, set aside.
 };
 
-// Every scan folder of `data_dir` (and of its retaken/), newest first, retaken ones last.
-std::vector<SheetEntry> ReadSheet(const std::string& data_dir);
+// What the sheet read of each scan folder, kept so that a folder whose files are unchanged since
+// (each file the entry is read from, by size and modification time) is not read again: the
+// restorer writes the sheet before every RESTORED, and a data folder holds a day's scans and
+// more (500 scans took 0.4 s to read, on every scan).
+struct SheetCache {
+  struct Kept {
+    std::string signature;  // The sizes and times of the files the entry was read from.
+    SheetEntry entry;
+  };
+  std::map<std::string, Kept> folders;  // By the folder's path.
+  int64_t reads = 0;                    // Folders read, not taken from here.
+};
+
+// Every scan folder of `data_dir` (and of its retaken/), newest first, retaken ones last; with
+// `cache`, a folder unchanged since the last call is taken from it.
+std::vector<SheetEntry> ReadSheet(const std::string& data_dir, SheetCache* cache = nullptr);
 
 // Writes <data_dir>/index.html (whole or not at all); errors name the file.
-Status WriteContactSheet(const std::string& data_dir);
+Status WriteContactSheet(const std::string& data_dir, SheetCache* cache = nullptr);
 
 }  // namespace vellum::station

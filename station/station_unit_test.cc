@@ -728,6 +728,54 @@ TEST(ContactSheet, ARestoredScanIsNotPendingAndAFailedOneKeepsItsIdentity) {
   fs::remove_all(dir);
 }
 
+// The restorer writes the sheet before every RESTORED: a folder unchanged since the last sheet
+// is not read again, and any change to what its entry is read from is seen (a verdict, a
+// failure, a scan moved to retaken/, one gone), the same as a sheet read afresh.
+TEST(ContactSheet, AScanFolderIsReadAgainOnlyWhenItChanged) {
+  const fs::path dir =
+      fs::temp_directory_path() / ("vellum_sheet_cache_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  const auto report = [&](int id, const std::string& verdict) {
+    const fs::path results = dir / ("scan-" + std::to_string(id)) / "results";
+    fs::create_directories(results);
+    std::ofstream(results / "report.json") << R"({"qc": {"verdict": ")" + verdict + R"("}})";
+  };
+  for (int id = 50; id < 60; ++id) report(id, "pass");
+  const auto same_as_afresh = [&](const std::vector<SheetEntry>& cached) {
+    const std::vector<SheetEntry> afresh = ReadSheet(dir.string());
+    if (cached.size() != afresh.size()) return false;
+    for (size_t k = 0; k < afresh.size(); ++k) {
+      const SheetEntry &a = cached[k], &b = afresh[k];
+      if (a.scan_id != b.scan_id || a.folder != b.folder || a.state != b.state ||
+          a.detail != b.detail || a.retaken != b.retaken) {
+        return false;
+      }
+    }
+    return true;
+  };
+  SheetCache cache;
+  EXPECT_TRUE(same_as_afresh(ReadSheet(dir.string(), &cache)));
+  EXPECT_EQ(cache.reads, 10);
+  EXPECT_TRUE(same_as_afresh(ReadSheet(dir.string(), &cache)));
+  EXPECT_EQ(cache.reads, 10) << "nothing changed: nothing read again";
+  report(53, "warn (a longer verdict: another size)");
+  std::ofstream(dir / "scan-55" / "failed.txt");
+  fs::create_directories(dir / "scan-56" / "raw");
+  std::ofstream(dir / "scan-56" / "raw" / "failed.txt") << "no capture for 30 s\n";
+  fs::create_directories(dir / "retaken");
+  fs::rename(dir / "scan-57", dir / "retaken" / "scan-57");
+  fs::remove_all(dir / "scan-58");
+  report(60, "fail");
+  std::vector<SheetEntry> sheet = ReadSheet(dir.string(), &cache);
+  EXPECT_TRUE(same_as_afresh(sheet));
+  EXPECT_EQ(cache.reads, 14) << "53, 56, the retaken 57 and the new 60";
+  ASSERT_EQ(sheet.size(), 10u);
+  EXPECT_EQ(sheet[0].scan_id, 60);
+  EXPECT_EQ(sheet[0].state, "fail");
+  EXPECT_EQ(cache.folders.size(), 10u) << "the one gone is dropped";
+  fs::remove_all(dir);
+}
+
 TEST(ScanStore, PendingScansAreFoundWithTheirAttemptsUntilCleared) {
   const fs::path dir = fs::temp_directory_path() / ("vellum_pending_" + std::to_string(getpid()));
   fs::remove_all(dir);

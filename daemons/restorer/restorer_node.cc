@@ -258,7 +258,7 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   scans_.erase(id);
   // The session's contact sheet, with this scan in it (before RESTORED: whoever hears it finds
   // the sheet up to date).
-  const Status sheet = WriteContactSheet(options_.data_dir);
+  const Status sheet = WriteContactSheet(options_.data_dir, &contact_sheet_);
   if (!sheet.ok()) node_->Log("contact sheet: " + sheet.message());
   node_->Count("scans restored");
   node_->Publish(channel::kRestored, &out);

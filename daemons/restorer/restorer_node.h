@@ -15,6 +15,7 @@
 #include "pipeline/pipeline.h"
 #include "station/assembler.h"
 #include "station/books.h"
+#include "station/contact_sheet.h"
 #include "station/messages.h"
 #include "station/node.h"
 
@@ -87,6 +88,7 @@ class RestorerNode {
   // Worker thread only:
   Sheet sheet_;
   std::map<int64_t, Pages> scans_;   // Scans with pages still to come.
+  SheetCache contact_sheet_;         // The contact sheet's scans, read again only when changed.
   std::map<int64_t, Cloud> clouds_;  // The newest scans' point maps (with NeedsCloud()).
   std::map<int64_t, WaitingScan> waiting_;
 };
