@@ -1,5 +1,7 @@
 #include "pipeline/writes.h"
 
+#include <system_error>
+
 namespace vellum {
 namespace {
 
@@ -14,8 +16,17 @@ FileWrites::~FileWrites() {
 }
 
 void FileWrites::Add(std::function<Status()> write) {
+  std::future<Status> done;
+  try {
+    done = std::async(std::launch::async, write);
+  } catch (const std::system_error&) {
+    // No thread to be had (the process's limit): written here, at once.
+    std::promise<Status> now;
+    now.set_value(write());
+    done = now.get_future();
+  }
   std::lock_guard<std::mutex> lock(mutex_);
-  pending_.push_back(std::async(std::launch::async, std::move(write)));
+  pending_.push_back(std::move(done));
 }
 
 Status FileWrites::Wait() {

@@ -21,7 +21,7 @@ class FileWrites {
   FileWrites& operator=(const FileWrites&) = delete;
   ~FileWrites();
 
-  // Runs `write` on a thread of its own.
+  // Runs `write` on a thread of its own (at once, here, when no thread can be had).
   void Add(std::function<Status()> write);
   // Waits for every write added so far; the first error of them, else ok.
   Status Wait();
