@@ -13,6 +13,9 @@
 #include <set>
 #include <sstream>
 
+#include "io/json.h"
+#include "io/write_whole.h"
+
 namespace vellum {
 namespace fs = std::filesystem;
 namespace {
@@ -30,8 +33,8 @@ std::vector<std::string> FilesUnder(const std::string& dir) {
   for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     if (it->is_symlink() || !it->is_regular_file()) continue;  // Links: SymlinksUnder.
     const std::string rel = fs::relative(it->path(), dir).generic_string();
-    if (rel == kManifestName || rel == std::string(kManifestName) + ".tmp" ||
-        rel == kRecordedHashesName || rel == std::string(kRecordedHashesName) + ".tmp") {
+    if (rel == kManifestName || rel == PartName(kManifestName) || rel == kRecordedHashesName ||
+        rel == PartName(kRecordedHashesName)) {
       continue;
     }
     files.push_back(rel);
@@ -179,18 +182,7 @@ Status HashRecord::Save() const {
     }
     text << e.hex << "  " << e.size << "  " << e.mtime_ns << "  " << rel << "\n";
   }
-  const fs::path path = fs::path(dir_) / kRecordedHashesName;
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text.str();
-    out.flush();
-    if (!out) return Status::Error(tmp.string() + ": cannot write");
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) return Status::Error(path.string() + ": cannot write: " + ec.message());
-  return Status::Ok();
+  return WriteTextFile((fs::path(dir_) / kRecordedHashesName).string(), text.str());
 }
 
 Status Sha256OfFile(const std::string& path, std::string* hex) {
@@ -237,17 +229,8 @@ Status WriteManifest(const std::string& dir, const std::vector<std::string>& par
     }
     text << hex << "  " << rel << "\n";
   }
-  const fs::path path = fs::path(dir) / kManifestName;
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text.str();
-    out.flush();
-    if (!out) return Status::Error(tmp.string() + ": cannot write");
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) return Status::Error(path.string() + ": cannot write: " + ec.message());
+  const Status s = WriteTextFile((fs::path(dir) / kManifestName).string(), text.str());
+  if (!s.ok()) return s;
   if (files) *files = static_cast<int>(paths.size());
   return Status::Ok();
 }
