@@ -113,7 +113,7 @@ void BM_Vellum_LeafInPreview(benchmark::State& state) {
 // Each benchmark is repeated, the repetitions of all interleaved in random order (main), and the
 // medians compared: this machine is shared, and its speed drifts over a run.
 void Timed(benchmark::internal::Benchmark* b) {
-  b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.4)->Apply(Timed);
+  b->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(0.4)->Apply(Repeated);
 }
 BENCHMARK(BM_Baseline_SegmentPage)->Apply(Timed);
 BENCHMARK(BM_Baseline_SegmentPage_Sheet45)->Apply(Timed);
