@@ -15,32 +15,6 @@
 namespace vellum {
 namespace fs = std::filesystem;
 
-cv::Mat DepthPicture(const cv::Mat& points, double* z_min_mm, double* z_max_mm) {
-  std::vector<cv::Mat> planes;
-  cv::split(points, planes);
-  const cv::Mat valid = planes[2] == planes[2];  // Not NaN.
-  *z_min_mm = 0;
-  *z_max_mm = 1;
-  if (cv::countNonZero(valid) > 0) {
-    cv::minMaxLoc(planes[2], z_min_mm, z_max_mm, nullptr, nullptr, valid);
-  }
-  cv::Mat z8;
-  const double range = std::max(*z_max_mm - *z_min_mm, 1e-3);
-  planes[2].convertTo(z8, CV_8U, 255.0 / range, -*z_min_mm * 255.0 / range);
-  cv::Mat color;
-  cv::applyColorMap(z8, color, cv::COLORMAP_TURBO);
-  color.setTo(cv::Scalar::all(0), ~valid);
-  return color;
-}
-
-Status WritePointProducts(const std::string& dir, const cv::Mat& points, double* z_min_mm,
-                          double* z_max_mm) {
-  Status s = WritePointsPly((fs::path(dir) / "points.ply").string(), points);
-  if (!s.ok()) return s;
-  return WriteImage((fs::path(dir) / "depth.png").string(),
-                    DepthPicture(points, z_min_mm, z_max_mm));
-}
-
 Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat) {
   std::vector<int> index(mesh.kind.size(), -1);
   std::vector<cv::Vec3f> before, after;

@@ -1,6 +1,7 @@
-// What processing a scan writes (docs/formats.md, `vellum process`): points.ply and depth.png,
-// mesh.ply and flat.ply, restored.tif and restored.json. One writer for each, called by the
-// pipeline's stages (pipeline/stages.h) for `vellum process` and the daemons alike.
+// What processing a scan writes (docs/formats.md, `vellum process`): mesh.ply and flat.ply,
+// restored.tif and restored.json, the masters. One writer for each, called by the pipeline's
+// stages (pipeline/stages.h) for `vellum process` and the daemons alike; points.ply
+// (io/ply.h) and depth.png (core/report/pictures.h) are written by the triangulate stage.
 #pragma once
 
 #include <map>
@@ -17,13 +18,6 @@
 
 namespace vellum {
 
-// The height map as a picture: z over the valid points' range in colour, invalid black; sets
-// the range in mm.
-cv::Mat DepthPicture(const cv::Mat& points, double* z_min_mm, double* z_max_mm);
-
-// points.ply and depth.png of an organised point map (CV_32FC3, NaN where invalid).
-Status WritePointProducts(const std::string& dir, const cv::Mat& points, double* z_min_mm,
-                          double* z_max_mm);
 // mesh.ply (3D) and flat.ply (z = 0): the sheet's active nodes in the same order, quad faces.
 Status WriteSheets(const std::string& dir, const Mesh& mesh, const std::vector<cv::Point2d>& flat);
 // The archival master: the texture as captured (unflattened, the camera's own pixels), as

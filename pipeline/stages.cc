@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <future>
 #include <limits>
 #include <map>
@@ -18,6 +19,7 @@
 #include "io/iiif.h"
 #include "io/image_file.h"
 #include "io/json.h"
+#include "io/ply.h"
 #include "io/products.h"
 #include "io/ptm.h"
 #include "io/scan_io.h"
@@ -47,29 +49,49 @@ class Stage {
     if (written.ok()) report_.outputs.push_back(name);
     return written;
   }
+  // Writes one of the stage's files (`name`, relative to the results folder) with `write`,
+  // given its path: on the run's writes' threads while the steps go on when the pipeline runs
+  // the stage (its failure then fails the run where the writes are waited for), else at once.
+  // `write` holds what it writes by value: it may run after the stage has returned.
+  Status File(const std::string& results, const std::string& name,
+              std::function<Status(const std::string& path)> write) {
+    const std::string path = (fs::path(results) / name).string();
+    if (FileWrites* writes = CurrentFileWrites()) {
+      writes->Add([path, write = std::move(write)] { return write(path); });
+      return Output(name, Status::Ok());
+    }
+    return Output(name, write(path));
+  }
   // A picture for report.html in <results>/report/ (<stem>-<page>.png for a page of a
   // spread): at most 1400 pixels across, 8-bit.
   Status Picture(const std::string& results, const std::string& stem, const cv::Mat& image) {
+    cv::Mat out = ReportSized(image);
+    // Written from a copy of its own (the image may change meanwhile).
+    if (out.data == image.data) out = out.clone();
+    return PictureDrawn(results, stem, [out] { return out; });
+  }
+  // The same, drawn by `draw` where it is written (File): what it draws from, it holds by value.
+  Status PictureDrawn(const std::string& results, const std::string& stem,
+                      std::function<cv::Mat()> draw) {
     Status s = MakeDirectories((fs::path(results) / "report").string());
     if (!s.ok()) return s;
+    const std::string file =
+        "report/" + stem + (report_.page.empty() ? "" : "-" + report_.page) + ".png";
+    return File(results, file, [draw = std::move(draw)](const std::string& path) {
+      return WriteImage(path, ReportSized(draw()));
+    });
+  }
+
+ private:
+  static cv::Mat ReportSized(const cv::Mat& image) {
     cv::Mat out = EightBit(image);
     if (out.cols > 1400) {
       const double scale = 1400.0 / out.cols;
       cv::resize(out, out, cv::Size(), scale, scale, cv::INTER_AREA);
     }
-    const std::string file =
-        "report/" + stem + (report_.page.empty() ? "" : "-" + report_.page) + ".png";
-    const std::string path = (fs::path(results) / file).string();
-    if (FileWrites* writes = CurrentFileWrites()) {
-      // Written while the steps go on, from a copy of its own (the image may change meanwhile).
-      if (out.data == image.data) out = out.clone();
-      writes->Add([path, out] { return WriteImage(path, out); });
-      return Output(file, Status::Ok());
-    }
-    return Output(file, WriteImage(path, out));
+    return out;
   }
 
- private:
   std::chrono::steady_clock::time_point start_;
   StageReport report_;
 };
@@ -257,18 +279,25 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
                  "order, or a camera or projector that moved during the scan; scan again");
     }
   }
-  // The pictures first: they are written while the points are.
-  Status s = stage.Picture(results, "valid", ValidMask(map->points));
-  double bar_min = 0, bar_max = 0;
+  // The heights' range for the report here; the files on the writes' threads (File), while the
+  // points go on.
+  double z_min = 0, z_max = 0;
+  const cv::Mat depth = DepthPicture(map->points, &z_min, &z_max);
+  const cv::Mat points = map->points;
+  Status s = stage.PictureDrawn(results, "valid", [points] { return ValidMask(points); });
   if (s.ok()) {
-    s = stage.Picture(results, "depth", DepthWithColourBar(map->points, &bar_min, &bar_max));
+    s = stage.PictureDrawn(results, "depth",
+                           [depth, z_min, z_max] { return WithHeightBar(depth, z_min, z_max); });
+  }
+  if (s.ok()) {
+    s = stage.File(results, "points.ply",
+                   [points](const std::string& path) { return WritePointsPly(path, points); });
+  }
+  if (s.ok()) {
+    s = stage.File(results, "depth.png",
+                   [depth](const std::string& path) { return WriteImage(path, depth); });
   }
   if (!s.ok()) return stage.Finish(s);
-  double z_min = 0, z_max = 0;
-  s = WritePointProducts(results, map->points, &z_min, &z_max);
-  if (!s.ok()) return stage.Finish(s);
-  r.outputs.push_back("points.ply");
-  r.outputs.push_back("depth.png");
   r.Number("height_mm", "min", z_min);
   r.Number("height_mm", "max", z_max);
   return stage.Finish(s);
@@ -453,7 +482,13 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
   }
   for (const OutlineDoubt& doubt : outline->doubts) r.Warn(doubt.code, doubt.message);
   Status s = stage.Picture(results, "texture", texture);
-  if (s.ok()) s = stage.Picture(results, "outline", DrawOutline(texture, *outline));
+  if (s.ok()) {
+    // Drawn where it is written, from its own copy of the pages.
+    Outline drawn;
+    for (const cv::Mat& page : outline->pages) drawn.pages.push_back(page.clone());
+    s = stage.PictureDrawn(results, "outline",
+                           [texture, drawn] { return DrawOutline(texture, drawn); });
+  }
   return stage.Finish(s);
 }
 
@@ -719,15 +754,24 @@ StageReport RestoreStage(const ScanWork& work, const PipelineOptions& o, PageRes
   double bar_mm = 0;
   s = stage.Picture(results, "restored", RestoredWithScaleBar(*restored, 1400, &bar_mm));
   r.Number("restored", "scale_bar_mm", bar_mm);
-  if (s.ok()) s = stage.Picture(results, "grid", GridOverPage(mesh, flat, *restored, camera));
-  if (s.ok()) {
-    s = stage.Picture(results, "strain", StrainPicture(mesh, flat, *restored, camera));
-  }
-  if (s.ok()) {
-    s = stage.Picture(results, "before_after", BeforeAfter(texture, mesh, flat, *restored, camera));
-  }
-  if (s.ok() && !restored->sampling.empty()) {
-    s = stage.Picture(results, "sampling", SamplingPicture(restored->sampling));
+  // The others drawn where they are written, from copies (the sheet is small; the images'
+  // pixels are shared, and nothing changes them).
+  auto drawn = [&](const char* stem, auto draw) {
+    if (s.ok()) {
+      s = stage.PictureDrawn(results, stem, [draw, mesh, flat, restored = *restored, camera] {
+        return draw(mesh, flat, restored, camera);
+      });
+    }
+  };
+  drawn("grid", [](const Mesh& m, const std::vector<cv::Point2d>& f, const RestoreResult& r,
+                   const CameraModel& c) { return GridOverPage(m, f, r, c); });
+  drawn("strain", StrainPicture);
+  drawn("before_after",
+        [texture](const Mesh& m, const std::vector<cv::Point2d>& f, const RestoreResult& r,
+                  const CameraModel& c) { return BeforeAfter(texture, m, f, r, c); });
+  if (!restored->sampling.empty()) {
+    drawn("sampling", [](const Mesh&, const std::vector<cv::Point2d>&, const RestoreResult& r,
+                         const CameraModel&) { return SamplingPicture(r.sampling); });
   }
   const Status pyramid_written = stage.Output(PageFile(page, kPyramidName), pyramid.get());
   return stage.Finish(pyramid_written.ok() ? s : pyramid_written);

@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/common/status.h"
 #include "station/clock.h"
 #include "station/message_versions.h"
 #include "vellum/calibration_t.hpp"
@@ -179,9 +180,22 @@ class Node {
   // go again byte for byte ("chunks sent again").
   template <class Msg>
   void PublishChunks(const std::string& channel, std::vector<Msg>* chunks) {
+    static_cast<void>(PublishChunks(channel, chunks, nullptr));
+  }
+  // The same, with `before_last` run before the last chunk goes: a sender's files written while
+  // its other chunks travel are on disk before a receiver can have the whole product. When it
+  // fails, the last chunk is not sent, nothing is held, and its status is returned (a receiver
+  // never has that product whole).
+  template <class Msg>
+  Status PublishChunks(const std::string& channel, std::vector<Msg>* chunks,
+                       const std::function<Status()>& before_last) {
     HeldProduct held;
     held.channel = channel;
     for (Msg& m : *chunks) {
+      if (before_last && &m == &chunks->back()) {
+        const Status ready = before_last();
+        if (!ready.ok()) return ready;
+      }
       const auto start = std::chrono::steady_clock::now();
       Stamp(channel, &m);
       std::vector<uint8_t> bytes(static_cast<size_t>(m.getEncodedSize()));
@@ -194,6 +208,7 @@ class Node {
           start + std::chrono::duration<double>(held.chunks.back().size() / pace_));
     }
     Hold(std::move(held));
+    return Status::Ok();
   }
   void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
   // What is held for RESEND: the products of each channel's newest kHoldScans scans, sent in

@@ -991,6 +991,58 @@ TEST(Assembler, ChunksTheBusLostAreAskedAgainAndTheProductIsRecovered) {
   EXPECT_EQ(r.node.Counter("lost messages"), 1);
 }
 
+// A sender's work before its last chunk (its files put on disk while the others travel) runs
+// when every other chunk has gone and before the last: no receiver has the product whole
+// before it is done. When it fails, the last chunk never goes and nothing is held, so the
+// product is never whole anywhere: the receiver asks again, no one answers, and it gives up.
+TEST(Assembler, TheWorkBeforeTheLastChunkRunsBeforeItAndWhenItFailsTheProductNeverCompletes) {
+  lcm::LCM bus("memq://");
+  Node sender("vellum-sender", &bus);
+  sender.SetPace(1e12);
+  cv::Mat texture(1200, 1600, CV_8UC3);
+  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  std::vector<texture_t> chunks = TextureMessages(16, texture);
+  ASSERT_GE(chunks.size(), 3u);
+  TextureReceiver r(&bus);
+  int chunks_seen = 0;
+  r.node.Subscribe<texture_t>("TEXTURE", [&](const texture_t&) { ++chunks_seen; });
+  auto handle_all = [&] {
+    while (bus.handleTimeout(0) > 0) {
+    }
+  };
+  int seen_before_last = -1;
+  Status s = sender.PublishChunks("TEXTURE", &chunks, [&] {
+    handle_all();
+    seen_before_last = chunks_seen;
+    r.node.Drain();
+    EXPECT_TRUE(r.Products().empty()) << "whole before the sender's work was done";
+    return Status::Ok();
+  });
+  ASSERT_TRUE(s.ok()) << s.message();
+  EXPECT_EQ(seen_before_last, static_cast<int>(chunks.size()) - 1);
+  ASSERT_EQ(r.TickUntilWhole(&bus).size(), 1u);
+  EXPECT_EQ(cv::norm(r.Products()[0], texture, cv::NORM_INF), 0.0);
+
+  // Failing: the last chunk stays here, and no one can send it again.
+  std::vector<texture_t> failing = TextureMessages(17, texture);
+  chunks_seen = 0;
+  s = sender.PublishChunks("TEXTURE", &failing, [] { return Status::Error("disk full"); });
+  EXPECT_FALSE(s.ok());
+  EXPECT_EQ(s.message(), "disk full");
+  handle_all();
+  EXPECT_EQ(chunks_seen, static_cast<int>(failing.size()) - 1);
+  for (int k = 0; k < 80; ++k) {  // 20 s on the receiver's clock: past its 10 s timeout.
+    handle_all();
+    r.assembler.Tick();
+    r.node.Drain();
+    r.clock.Advance(0.25);
+  }
+  EXPECT_EQ(r.Products().size(), 1u) << "the failed product came whole";
+  EXPECT_GE(r.node.Counter("chunks asked again"), 1);
+  EXPECT_EQ(sender.Counter("chunks sent again"), 0);
+  EXPECT_EQ(r.node.Counter("products lost"), 1);
+}
+
 // A product of which no chunk came (the bus lost it all) is known by its sender's announcement
 // on SCAN_PROGRESS: it is asked again whole and comes, as sent.
 TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {

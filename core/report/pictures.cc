@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 #include <unordered_map>
 
@@ -57,25 +58,53 @@ cv::Mat WithBar(const cv::Mat& picture, double lo, double hi, const char* format
 }  // namespace
 
 cv::Mat ValidMask(const cv::Mat& points) {
-  std::vector<cv::Mat> planes;
-  cv::split(points, planes);
-  return planes[2] == planes[2];
+  CV_Assert(points.type() == CV_32FC3);
+  cv::Mat mask(points.size(), CV_8U);
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    uint8_t* out = mask.ptr<uint8_t>(v);
+    for (int u = 0; u < points.cols; ++u) out[u] = std::isnan(p[u][2]) ? 0 : 255;
+  }
+  return mask;
 }
 
-cv::Mat DepthWithColourBar(const cv::Mat& points, double* z_min_mm, double* z_max_mm) {
-  std::vector<cv::Mat> planes;
-  cv::split(points, planes);
-  const cv::Mat valid = planes[2] == planes[2];
-  *z_min_mm = 0;
-  *z_max_mm = 1;
-  if (cv::countNonZero(valid) > 0)
-    cv::minMaxLoc(planes[2], z_min_mm, z_max_mm, nullptr, nullptr, valid);
+cv::Mat DepthPicture(const cv::Mat& points, double* z_min_mm, double* z_max_mm) {
+  CV_Assert(points.type() == CV_32FC3);
+  float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    for (int u = 0; u < points.cols; ++u) {
+      const float z = p[u][2];
+      if (std::isnan(z)) continue;
+      lo = std::min(lo, z);
+      hi = std::max(hi, z);
+    }
+  }
+  *z_min_mm = lo <= hi ? lo : 0.0;
+  *z_max_mm = lo <= hi ? hi : 1.0;
+  // As convertTo to 8 bits (rounded, saturated) and then the turbo colour map.
   const double range = std::max(*z_max_mm - *z_min_mm, 1e-3);
-  cv::Mat z8, colour;
-  planes[2].convertTo(z8, CV_8U, 255.0 / range, -*z_min_mm * 255.0 / range);
-  cv::applyColorMap(z8, colour, cv::COLORMAP_TURBO);
-  colour.setTo(cv::Scalar::all(0), ~valid);
-  return WithBar(colour, *z_min_mm, *z_min_mm + range, "%.1f", "height, mm");
+  const double scale = 255.0 / range, shift = -*z_min_mm * 255.0 / range;
+  cv::Mat levels(1, 256, CV_8U), turbo;
+  for (int k = 0; k < 256; ++k) levels.at<uint8_t>(k) = static_cast<uint8_t>(k);
+  cv::applyColorMap(levels, turbo, cv::COLORMAP_TURBO);
+  const cv::Vec3b* colour = turbo.ptr<cv::Vec3b>(0);
+  cv::Mat out(points.size(), CV_8UC3);
+  for (int v = 0; v < points.rows; ++v) {
+    const cv::Vec3f* p = points.ptr<cv::Vec3f>(v);
+    cv::Vec3b* o = out.ptr<cv::Vec3b>(v);
+    for (int u = 0; u < points.cols; ++u) {
+      const float z = p[u][2];
+      o[u] = std::isnan(z) ? cv::Vec3b(0, 0, 0)
+                           : colour[cv::saturate_cast<uint8_t>(z * scale + shift)];
+    }
+  }
+  return out;
+}
+
+cv::Mat WithHeightBar(const cv::Mat& depth, double z_min_mm, double z_max_mm) {
+  const double range = std::max(z_max_mm - z_min_mm, 1e-3);
+  return WithBar(depth, z_min_mm, z_min_mm + range, "%.1f", "height, mm");
 }
 
 std::function<cv::Point2d(const cv::Point2d&)> RestoredPixel(const RestoreResult& restored,

@@ -13,9 +13,14 @@
 
 namespace vellum {
 
-// Height (z) of the valid points of a point map (CV_32FC3, NaN where invalid) in colour, with a
-// colour bar labelled in mm on the right; sets the range.
-cv::Mat DepthWithColourBar(const cv::Mat& points, double* z_min_mm, double* z_max_mm);
+// The height map of a point map (CV_32FC3, NaN where invalid) as a picture: z over the valid
+// points' range in colour (turbo), black where invalid; sets the range in mm (0 to 1 when no
+// point is valid). One pass to find the range, one to colour.
+cv::Mat DepthPicture(const cv::Mat& points, double* z_min_mm, double* z_max_mm);
+
+// A DepthPicture with its colour bar labelled in mm on the right (`z_min_mm`, `z_max_mm`: the
+// range DepthPicture gave).
+cv::Mat WithHeightBar(const cv::Mat& depth, double z_min_mm, double z_max_mm);
 
 // 255 where the point map is valid, 0 elsewhere (CV_8U).
 cv::Mat ValidMask(const cv::Mat& points);

@@ -96,12 +96,13 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   std::swap(work.decoded, product_.decoded);
   std::swap(work.map, map_);
   s = Pipeline(options).Run(Step::kTriangulate, Step::kTriangulate, &work);
-  const Status written = work.writes->Wait();  // Its files on disk before the points go on.
-  if (s.ok()) s = written;
   std::swap(work.map, map_);
   if (!s.ok()) return node_->FailScan(id, s.message());
   std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, amplitude, context, work.stages);
-  node_->PublishChunks(channel::kPointCloud, &chunks);
+  // Its files (points.ply, the pictures) are written while the points travel, and are on disk
+  // before their last chunk goes: before the next stage can start.
+  s = node_->PublishChunks(channel::kPointCloud, &chunks, [&work] { return work.writes->Wait(); });
+  if (!s.ok()) return node_->FailScan(id, s.message());
   node_->Count("scans triangulated");
   AnnounceHandedOn(node_, id, channel::kPointCloud);
   node_->Log("scan " + std::to_string(id) + ": " + std::to_string(map_.valid) + " points in " +
