@@ -156,6 +156,7 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   page.mesh = std::move(sheet_.mesh);
   page.flat = std::move(sheet_.flat);
   const size_t before = work.stages.size();
+  if (s.ok()) StartArchive(id, work);
   if (s.ok()) s = pipeline.RunPage(k, Step::kRestore, Step::kRestore, &work);
   if (s.ok() && (NeedsCloud() || !work.scan.lights.empty())) {
     node_->SetState("busy", id,
@@ -181,8 +182,33 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   if (static_cast<int>(pages.names.size()) < sheet_page.count) pages.names.resize(sheet_page.count);
   pages.names[sheet_page.index] = name;
   pages.context = work.context;
+  if (static_cast<int>(pages.restored.size()) == sheet_page.count) {
+    StartArchive(id, work);  // Begun already, unless its scan was put aside meanwhile.
+    Finish(id, &pages);
+  }
   while (scans_.size() > 8) scans_.erase(scans_.begin());  // Scans whose pages stopped.
-  if (static_cast<int>(pages.restored.size()) == sheet_page.count) Finish(id, &pages);
+}
+
+void RestorerNode::StartArchive(int64_t id, const ScanWork& page_work) {
+  Pages& pages = scans_[id];
+  if (pages.archive.valid()) return;  // Begun with another page of the scan.
+  // On a thread when one can be had, else where the report asks for it.
+  pages.archive =
+      std::async(std::launch::async | std::launch::deferred,
+                 [options = options_.pipeline, texture = page_work.scan.texture,
+                  context = page_work.context, results = page_work.results] {
+                   ScanWork work;
+                   work.scan.texture = texture;
+                   work.context = context;
+                   work.results = results;
+                   const Status s = Pipeline(options).Run(Step::kArchive, Step::kArchive, &work);
+                   const Status written = work.writes->Wait();
+                   StageReport report = work.stages.empty() ? StageReport() : work.stages.back();
+                   if (work.stages.empty()) report.stage = "archive";
+                   if (report.status.ok() && !s.ok()) report.status = s;
+                   if (report.status.ok() && !written.ok()) report.status = written;
+                   return report;
+                 });
 }
 
 void RestorerNode::Finish(int64_t id, Pages* pages) {
@@ -195,17 +221,10 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   report.scan = folder.raw();
   report.calibration = folder.calibration();
   report.target = options_.pipeline.target;
-  // The archival master, once the pages are restored: the pipeline's last step.
-  ScanWork work;
-  work.context = pages->context;
-  work.results = folder.results();
-  Status s = textures_.Get(id, &work.scan.texture);
-  if (s.ok()) {
-    s = Pipeline(options_.pipeline).Run(Step::kArchive, Step::kArchive, &work);
-    const Status written = work.writes->Wait();
-    if (s.ok()) s = written;
-    report.stages.insert(report.stages.end(), work.stages.begin(), work.stages.end());
-  }
+  // The archival master (the pipeline's last step), written while the pages were restored.
+  const StageReport archive = pages->archive.get();
+  report.stages.push_back(archive);
+  Status s = archive.status;
   if (s.ok()) s = WriteReports(folder.results(), "scan " + std::to_string(id), &report);
   // The archive's proof that the scan is whole: a SHA-256 of every file of raw/ and results/,
   // in the scan's folder (manifest-sha256.txt; `vellum manifest check` verifies it).

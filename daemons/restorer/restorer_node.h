@@ -6,6 +6,7 @@
 #pragma once
 
 #include <chrono>
+#include <future>
 #include <map>
 #include <memory>
 #include <optional>
@@ -59,6 +60,9 @@ class RestorerNode {
     std::map<int, RestoreResult> restored;
     std::vector<std::string> names;
     ScanContext context;  // The scan's (for the archival master).
+    // The archival master's stage, run on a thread of its own from the scan's first page on:
+    // it needs only the texture and the scan's identity, not the restored pages.
+    std::future<StageReport> archive;
   };
   // The point map of a scan and the projector's light, for the albedo and reflectance.
   struct Cloud {
@@ -75,8 +79,10 @@ class RestorerNode {
   };
   bool NeedsCloud() const;                       // With a flat field or a studio field.
   void Process(int64_t id, const mesh_t& last);  // Worker thread.
-  void Finish(int64_t id, Pages* pages);         // Every page is in: the report, RESTORED.
-  void CloudDone(int64_t id, Cloud* cloud);      // Worker thread.
+  // Begins the scan's archival master (Pages::archive) from a page's work, unless begun.
+  void StartArchive(int64_t id, const ScanWork& page_work);
+  void Finish(int64_t id, Pages* pages);     // Every page is in: the report, RESTORED.
+  void CloudDone(int64_t id, Cloud* cloud);  // Worker thread.
   void GiveUpWaiting();  // Worker thread: fails a scan whose point map did not come in 30 s.
 
   Node* node_;
