@@ -389,14 +389,16 @@ Status ScanRecorder::Open(const ScanFolder& folder, int64_t scan_id, CaptureSet*
   }
   // A complete scan in the log was processed before: this is the scan again (a replay).
   if (earlier.Complete()) return Status::Ok();
+  // Each capture's file written (or there already, from before a restart) and hashed, as the
+  // captures that come next are.
   for (const capture_t& c : taken) {
     const std::string path = (fs::path(folder.raw()) / ImageName(c)).string();
-    if (PathExists(path)) continue;
     cv::Mat image;
-    if (FromMessage(c.image, &image).ok()) {
+    if (!PathExists(path) && FromMessage(c.image, &image).ok()) {
       s = WriteCaptureImage(path, c, image);
       if (!s.ok()) return s;
     }
+    if (PathExists(path)) Hash(path);
   }
   *resumed = earlier;
   *count = static_cast<int>(taken.size());

@@ -163,7 +163,8 @@ class ScanRecorder {
  public:
   // Opens the scan's folder. When its log already holds captures of this scan that were not
   // processed (the decoder restarted in the middle of the scan), they are taken up: added to
-  // *resumed (*count of them), their images written if missing; and its SCAN_STARTED (the
+  // *resumed (*count of them), their images written if missing and hashed (as Write hashes
+  // what comes next: io/manifest.h HashRecord); and its SCAN_STARTED (the
   // identity and leaf hint it carried), into *started.
   Status Open(const ScanFolder& folder, int64_t scan_id, CaptureSet* resumed, int* count,
               scan_started_t* started);
