@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite under AddressSanitizer (with LeakSanitizer) and UndefinedBehaviorSanitizer:
-# a RelWithDebInfo build in build-asan/ whose tests start the sanitized daemons too. Two labels
-# are left out: `scenes` (the full-size scene tests, outline_test, leaves_test and the family,
+# a RelWithDebInfo build in build-asan/ whose tests start the sanitized daemons too. Three labels
+# are left out: `heavy` (long numeric runs, each named by the HEAVY filter in its CMakeLists
+# beside the smaller test that runs its code sanitized), `scenes` (the full-size scene tests, outline_test, leaves_test and the family,
 # half an hour sanitized) and `accuracy` (bars on whole-page accuracy: accuracy_test, the
 # flattening bars, the calibration, albedo and studio-field bars: 340 s of test time more
 # than a clean-clone CI spent here in 790 s). Their code runs sanitized in smaller tests, each named beside
@@ -26,4 +27,4 @@ fi
 VELLUM_LOAD_SCANS=10 VELLUM_TEST_PACE=25 ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
   LSAN_OPTIONS=suppressions=$PWD/../tests/lsan.supp \
   UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-  ctest --output-on-failure -j2 --timeout 1800 --label-exclude 'scenes|accuracy'
+  ctest --output-on-failure -j2 --timeout 1800 --label-exclude 'scenes|accuracy|heavy'
