@@ -5,10 +5,12 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 #include <tuple>
+#include <vector>
 
 #include "core/common/depth.h"
 #include "core/common/text.h"
@@ -61,8 +63,8 @@ double Sharpness(const cv::Mat& image) {
 }
 
 // A picture of the scan's report (the first of `names` there), or none.
-cv::Mat ReportPicture(const std::string& results, std::initializer_list<const char*> names) {
-  for (const char* name : names) {
+cv::Mat ReportPicture(const std::string& results, const std::vector<std::string>& names) {
+  for (const std::string& name : names) {
     const fs::path p = fs::path(results) / "report" / name;
     cv::Mat picture;
     if (fs::exists(p) && ReadColourImage(p.string(), &picture).ok()) return picture;
@@ -299,10 +301,18 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
   r.quality = m.qc;
   // The other pictures from the scan's report (the restorer writes it before RESTORED): the
   // texture with the leaf's outline, and a spread's left page for its strain.
-  r.texture = ReportPicture(m.results, {"outline.png", "texture.png"});
-  r.depth = ReportPicture(m.results, {"depth.png"});
+  // Read side by side (each is mostly a PNG's inflate): the page is drawn once all are in.
+  const auto read = [&m](std::vector<std::string> names) {
+    return std::async(
+        std::launch::async | std::launch::deferred,
+        [results = m.results, names = std::move(names)] { return ReportPicture(results, names); });
+  };
+  std::future<cv::Mat> texture = read({"outline.png", "texture.png"});
+  std::future<cv::Mat> depth = read({"depth.png"});
   r.strain = ReportPicture(m.results, {"strain.png", "strain-left.png"});
   r.identity = ReportIdentity(m.results);
+  r.texture = texture.get();
+  r.depth = depth.get();
   if (const Asked* a = asked(m.scan_id)) {
     r.identity = a->identity;
     r.attempt = a->attempt;

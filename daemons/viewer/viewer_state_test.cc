@@ -5,16 +5,20 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <opencv2/imgproc.hpp>
 
 #include "daemons/viewer/viewer_draw.h"
+#include "io/image_file.h"
 #include "station/chain.h"
+#include "station/testing.h"
 
 namespace vellum::station {
 namespace {
 
 using Action = ViewerState::Action;
 using Kind = ViewerState::Command::Kind;
+namespace fs = std::filesystem;
 
 // A heartbeat of `process`, with its last error (about scan `scan`, at `utime`).
 status_t Status(const std::string& process, const std::string& error = "", int64_t scan = 0,
@@ -69,6 +73,45 @@ restored_t Restored(int64_t id, const std::string& qc) {
   m.qc = qc;
   m.results = "/nowhere/scan-" + std::to_string(id) + "/results";
   return m;
+}
+
+// The panels beside the restored page come from the scan's report pictures, read side by side:
+// the outline (else the bare texture), the depth map, the strain (a spread's left page's).
+TEST(ViewerState, ThePanelsAreTheScansReportPictures) {
+  const std::string results = testing::TestDir("viewer_panels");
+  fs::create_directories(fs::path(results) / "report");
+  auto picture = [](int rows, int cols, int seed) {
+    cv::Mat m(rows, cols, CV_8UC3);
+    cv::randu(m, cv::Scalar::all(0), cv::Scalar::all(256 - seed));
+    return m;
+  };
+  const cv::Mat texture = picture(30, 40, 1), depth = picture(31, 41, 2),
+                strain = picture(32, 42, 3);
+  auto write = [&](const char* name, const cv::Mat& m) {
+    ASSERT_TRUE(WriteImage((fs::path(results) / "report" / name).string(), m).ok());
+  };
+  write("texture.png", texture);
+  write("depth.png", depth);
+  write("strain-left.png", strain);
+  ViewerState v;
+  restored_t m = Restored(61, "pass");
+  m.results = results;
+  v.OnRestored(m, cv::Mat());
+  const ViewerState::Result& r = v.results().back();
+  ASSERT_EQ(r.texture.size(), texture.size());
+  EXPECT_EQ(cv::norm(r.texture, texture, cv::NORM_INF), 0);
+  ASSERT_EQ(r.depth.size(), depth.size());
+  EXPECT_EQ(cv::norm(r.depth, depth, cv::NORM_INF), 0);
+  ASSERT_EQ(r.strain.size(), strain.size());
+  EXPECT_EQ(cv::norm(r.strain, strain, cv::NORM_INF), 0);
+  // With its outline drawn, the outline is shown instead; a scan without a report has none.
+  const cv::Mat outline = picture(33, 43, 4);
+  write("outline.png", outline);
+  v.OnRestored(m, cv::Mat());
+  EXPECT_EQ(v.results().back().texture.size(), outline.size());
+  v.OnRestored(Restored(62, "pass"), cv::Mat());
+  EXPECT_TRUE(v.results().back().texture.empty());
+  EXPECT_TRUE(v.results().back().depth.empty());
 }
 
 TEST(ViewerState, TheFormSetsTheIdentityEachScanAdvancesItAndUndoTakesTheAdvanceBack) {
