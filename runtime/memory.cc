@@ -9,6 +9,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/core/mat.hpp>
 #include <unordered_map>
+#include <vector>
 
 namespace vellum {
 namespace {
@@ -86,20 +87,32 @@ class HugePageMatAllocator final : public cv::MatAllocator {
   }
 
  private:
-  // A block of `bytes`: a kept one no more than a quarter larger, else a new one.
+  // A block of `bytes`: the smallest kept one that holds it, its tail beyond `bytes` given
+  // back; else a new one, and as many kept blocks (the smallest first) given back as it takes,
+  // so that what is kept never adds to the most the process holds: the kept and the used
+  // together grow only when the used do.
   uchar* Take(size_t bytes) const {
+    std::vector<std::pair<uchar*, size_t>> give_back;
+    uchar* block = nullptr;
     {
       const std::lock_guard<std::mutex> lock(mutex_);
       auto it = kept_.lower_bound(bytes);
-      if (it != kept_.end() && it->first <= bytes + bytes / 4) {
-        uchar* block = it->second;
+      if (it != kept_.end()) {
+        block = it->second;
+        if (it->first > bytes) give_back.emplace_back(block + bytes, it->first - bytes);
         kept_bytes_ -= it->first;
-        in_use_[block] = it->first;
         kept_.erase(it);
-        return block;
+      } else {
+        size_t freed = 0;
+        for (auto k = kept_.begin(); k != kept_.end() && freed < bytes; k = kept_.erase(k)) {
+          give_back.emplace_back(k->second, k->first);
+          freed += k->first;
+          kept_bytes_ -= k->first;
+        }
       }
     }
-    uchar* block = MapHuge(bytes);
+    for (const auto& [start, size] : give_back) munmap(start, size);
+    if (!block) block = MapHuge(bytes);
     if (block) {
       const std::lock_guard<std::mutex> lock(mutex_);
       in_use_[block] = bytes;

@@ -12,7 +12,9 @@ namespace vellum {
 // Sets this process up for one run of the pipeline over a scan (`vellum process`):
 // - every cv::Mat of 2 MB or more asks the kernel for transparent huge pages: its block is
 //   aligned to 2 MB and advised MADV_HUGEPAGE, and a freed block is kept (up to 256 MB in all)
-//   for the next Mat of about its size, so a stage's images reuse the last stage's pages. Where
+//   for the next Mat it holds (the block's tail beyond that Mat given back), so a stage's images
+//   reuse the last stage's pages. A Mat that no kept block holds gives back as many kept bytes
+//   as it maps, the smallest blocks first: the kept never raise the process's peak. Where
 //   the kernel gives no huge pages (policy `never`) only the alignment and the reuse remain;
 // - glibc keeps the rest of what is freed (buffers under 32 MB come from its heap, which is not
 //   given back under 256 MB) instead of mapping every buffer of 128 kB and up apart.

@@ -2,6 +2,9 @@
 #include "runtime/memory.h"
 
 #include <gtest/gtest.h>
+#include <sys/mman.h>
+
+#include <cerrno>
 
 #include <cstdint>
 #include <opencv2/core.hpp>
@@ -37,6 +40,42 @@ TEST(HugePages, LargeImagesAreAlignedAndTheirBlocksReused) {
   EXPECT_EQ(wrapped.data, reinterpret_cast<uchar*>(owned.data()));
   cv::Mat copy = wrapped.clone();
   EXPECT_EQ(copy.at<float>(600, 800), 5.0f);
+}
+
+// Whether any page of [start, start + bytes) is mapped in this process.
+bool Mapped(const uchar* start, size_t bytes) {
+  std::vector<unsigned char> resident((bytes + 4095) / 4096);
+  return mincore(const_cast<uchar*>(start), bytes, resident.data()) == 0 || errno != ENOMEM;
+}
+
+// A kept block serves a smaller image from its head, its tail given back; an image no kept
+// block holds gives kept blocks back, so kept and used memory never pass the most ever used.
+// The sizes are larger than any other test's images, whose kept blocks may be there too.
+TEST(HugePages, KeptBlocksNeverRaiseThePeak) {
+  UseMemoryForOneRun();
+  constexpr size_t kMb = size_t{1} << 20;
+  const uchar* head = nullptr;
+  {
+    cv::Mat big(100, kMb, CV_8U);  // 100 MB.
+    head = big.data;
+  }
+  ASSERT_TRUE(Mapped(head, 100 * kMb)) << "a freed block is kept";
+  {
+    cv::Mat smaller(60, kMb, CV_8U);
+    EXPECT_EQ(smaller.data, head) << "the kept block serves a smaller image from its head";
+    EXPECT_FALSE(Mapped(head + 60 * kMb, 40 * kMb)) << "its tail is given back";
+  }
+  cv::Mat larger(130, kMb, CV_8U);  // No kept block holds it: 130 MB of new pages.
+  // The kernel may map the new block over the given-back one's addresses; elsewhere they are
+  // unmapped.
+  for (size_t at = 0; at < 60 * kMb; at += 2 * kMb) {
+    const uchar* page = head + at;
+    if (page >= larger.data && page < larger.data + 130 * kMb) continue;
+    EXPECT_FALSE(Mapped(page, 2 * kMb)) << "the kept block is given back for the new one, at "
+                                        << at / kMb << " MB";
+  }
+  larger.setTo(cv::Scalar(9));
+  EXPECT_EQ(larger.at<uchar>(129, kMb - 1), 9);
 }
 
 }  // namespace
