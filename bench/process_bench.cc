@@ -1,15 +1,16 @@
 // `vellum process` end to end on the default 1600 x 1200 scan (58 frames, a curled
 // leaf rendered by the virtual gantry and written as a scan directory of PNGs before the clock
 // runs), beside reading the scan alone (ReadScan: scan.yaml, texture and frames, PNG decoding in
-// parallel). We ask the whole within 1.5 times the reading. `vellum process` decodes
+// parallel). Issue 38 asks the whole within 4 times the reading (1.5 before the frames were
+// stored without deflate, when reading took eight times as long). `vellum process` decodes
 // each frame as it is read (ReadProcessInput reads the header; RunPipeline the frames). Both
 // also report their CPU time over every thread, beside the most the bar's wall time can hold
 // on this machine's cores.
 //
 // The `vellum process` command itself is run too, as a child process, for its wall time and peak
 // resident memory (wait4's ru_maxrss), beside the bytes of the scan's frames alone (what a
-// decoder that holds every frame needs before any work). With --rig=config/hires_rig.yaml the
-// scan is the 24 MP one (bar: peak under 2.5 GB).
+// decoder that holds every frame needs before any work); bar: peak under 300 MB. With
+// --rig=config/hires_rig.yaml the scan is the 24 MP one (bars: 5 s, peak under 2.5 GB).
 //
 //   ./build/bench/process_bench [--rig=FILE] [--benchmark_filter=...]
 #include <benchmark/benchmark.h>
@@ -214,7 +215,7 @@ int main(int argc, char** argv) {
   vellum::RatioReporter reporter;
   ScanDir();  // Rendered and written before the clock runs.
   benchmark::RunSpecifiedBenchmarks(&reporter);
-  constexpr double kBar = 1.5;  // Ours: the whole within this many times the reading.
+  constexpr double kBar = 4.0;  // Issue 38's: the whole within this many times the reading.
   const double read = reporter.Time("BM_Baseline_ReadFrames");
   const double all = reporter.Time("BM_Vellum_ProcessEndToEnd");
   if (read > 0 && all > 0) {

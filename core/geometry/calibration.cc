@@ -128,32 +128,57 @@ cv::Point2d CameraModel::Project(const cv::Vec3d& world) const {
 }
 
 cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel) const {
+  cv::Point2d shift(0, 0);
+  return Normalize(pixel, &shift);
+}
+
+cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel, cv::Point2d* shift) const {
   const double yd = (pixel.y - matrix(1, 2)) / matrix(1, 1);
   const double xd = (pixel.x - matrix(0, 2) - matrix(0, 1) * yd) / matrix(0, 0);
   if (!HasDistortion()) return {xd, yd};
   // Newton's inversion of the distortion, refined until it reproduces the pixel: three or four
-  // rounds where the fixed-point iteration x -= D(x) - xd took ten or more at a wide lens's
-  // corners (the ray table of every camera pixel is made this way for each triangulation).
-  double x = xd, y = yd;
-  for (int i = 0; i < 20; ++i) {
-    cv::Matx22d j;
-    const cv::Point2d d = Distort(distortion, x, y, &j);
-    const double ex = d.x - xd, ey = d.y - yd;
-    if (ex * ex + ey * ey < 1e-24) break;
-    const double det = j(0, 0) * j(1, 1) - j(0, 1) * j(1, 0);
-    if (!(std::fabs(det) > 1e-12)) {  // Past the model's fold: the plain step.
-      x -= ex;
-      y -= ey;
-      continue;
+  // rounds from the distorted point where the fixed-point iteration x -= D(x) - xd took ten or
+  // more at a wide lens's corners; one from a neighbour's shift (the ray table of every camera
+  // pixel is made this way for each triangulation). A start that does not reproduce the pixel
+  // gives way to the distorted point.
+  auto invert = [&](double x, double y, cv::Point2d* ideal) {
+    for (int i = 0; i < 20; ++i) {
+      cv::Matx22d j;
+      const cv::Point2d d = Distort(distortion, x, y, &j);
+      const double ex = d.x - xd, ey = d.y - yd;
+      if (ex * ex + ey * ey < 1e-24) {
+        *ideal = cv::Point2d(x, y);
+        return true;
+      }
+      const double det = j(0, 0) * j(1, 1) - j(0, 1) * j(1, 0);
+      if (!(std::fabs(det) > 1e-12)) {  // Past the model's fold: the plain step.
+        x -= ex;
+        y -= ey;
+        continue;
+      }
+      x -= (j(1, 1) * ex - j(0, 1) * ey) / det;
+      y -= (j(0, 0) * ey - j(1, 0) * ex) / det;
     }
-    x -= (j(1, 1) * ex - j(0, 1) * ey) / det;
-    y -= (j(0, 0) * ey - j(1, 0) * ex) / det;
+    *ideal = cv::Point2d(x, y);
+    return false;
+  };
+  cv::Point2d ideal;
+  const bool warm = shift->x != 0 || shift->y != 0;
+  if ((warm && invert(xd + shift->x, yd + shift->y, &ideal)) || invert(xd, yd, &ideal)) {
+    *shift = ideal - cv::Point2d(xd, yd);
+  } else {
+    *shift = cv::Point2d(0, 0);  // Not reproduced: the next starts from its distorted point.
   }
-  return {x, y};
+  return ideal;
 }
 
 cv::Vec3d CameraModel::RayDirection(const cv::Point2d& pixel) const {
-  const cv::Point2d n = Normalize(pixel);
+  cv::Point2d shift(0, 0);
+  return RayDirection(pixel, &shift);
+}
+
+cv::Vec3d CameraModel::RayDirection(const cv::Point2d& pixel, cv::Point2d* shift) const {
+  const cv::Point2d n = Normalize(pixel, shift);
   return cv::normalize(rotation.t() * cv::Vec3d(n.x, n.y, 1.0));
 }
 

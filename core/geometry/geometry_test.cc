@@ -31,6 +31,35 @@ TEST(CameraModel, ProjectInvertsRayDirectionWithDistortion) {
   }
 }
 
+// Started from a neighbour's shift, as the ray table and the triangulation do along a row, the
+// inversion gives the cold start's point to its tolerance (1e-12 in the distorted coordinates:
+// 1e-9 is a thousandth of a micrometre at a metre), and leaves this pixel's shift. A start that
+// leads nowhere (a shift of 50, or not a number) gives way to the cold start.
+TEST(CameraModel, NormalizeFromANeighboursShiftGivesTheSamePoint) {
+  CameraModel cam = DefaultRig().camera;
+  cam.distortion = cv::Vec<double, 5>(-0.3, 0.12, -0.002, 0.003, -0.02);
+  double worst = 0;
+  for (int v = 0; v < cam.size.height; v += 37) {
+    cv::Point2d shift(0, 0);
+    for (int u = 0; u < cam.size.width; ++u) {
+      const cv::Point2d warm = cam.Normalize(cv::Point2d(u, v), &shift);
+      const cv::Point2d cold = cam.Normalize(cv::Point2d(u, v));
+      worst = std::max(worst, cv::norm(warm - cold));
+      cv::Point2d from_zero(0, 0);
+      cam.Normalize(cv::Point2d(u, v), &from_zero);
+      ASSERT_LT(cv::norm(shift - from_zero), 1e-9) << "the shift is this pixel's, at " << u << ", "
+                                                    << v;
+    }
+  }
+  EXPECT_LT(worst, 1e-9);
+  const cv::Point2d corner(3, 4);
+  for (const cv::Point2d bad : {cv::Point2d(50, -50), cv::Point2d(NAN, 0)}) {
+    cv::Point2d shift = bad;
+    EXPECT_LT(cv::norm(cam.Normalize(corner, &shift) - cam.Normalize(corner)), 1e-9);
+    EXPECT_TRUE(std::isfinite(shift.x) && std::isfinite(shift.y)) << bad;
+  }
+}
+
 TEST(CameraModel, CheckRejectsAMirroredRotation) {
   CameraModel cam = DefaultRig().projector;
   cam.rotation = cam.rotation * cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, 1);

@@ -64,7 +64,8 @@ Triangulator::Triangulator(const Calibration& calibration) : calibration_(calibr
   cv::parallel_for_(cv::Range(0, cam.size.height), [&](const cv::Range& range) {
     for (int v = range.start; v < range.end; ++v) {
       cv::Vec3f* row = rays_.ptr<cv::Vec3f>(v);
-      for (int u = 0; u < cam.size.width; ++u) row[u] = cam.RayDirection(cv::Point2d(u, v));
+      cv::Point2d shift(0, 0);  // Each pixel's inversion starts from its left neighbour's.
+      for (int u = 0; u < cam.size.width; ++u) row[u] = cam.RayDirection(cv::Point2d(u, v), &shift);
     }
   });
 }
@@ -145,6 +146,7 @@ inline void TriangulateRow(const Meeting& m, int width, const uint8_t* ok, const
   const CameraModel& prj = *m.projector;
   const bool cols = m.cols, rows = m.rows, undistort = m.undistort;
   const double nan = std::numeric_limits<double>::quiet_NaN();
+  cv::Point2d shift(0, 0);  // The last inversion's, the start of the next (a nearby point).
   for (int u = 0; u < width; ++u) {
     point[u] = cv::Vec3f(NAN, NAN, NAN);
     res[u] = NAN;
@@ -160,7 +162,8 @@ inline void TriangulateRow(const Meeting& m, int width, const uint8_t* ok, const
     for (int round = 0; round < rounds; ++round) {
       double mx = raw_x, my = raw_y;
       if (undistort) {
-        const cv::Point2d n = prj.Normalize({cols ? raw_x : guess_x, rows ? raw_y : guess_y});
+        const cv::Point2d n =
+            prj.Normalize({cols ? raw_x : guess_x, rows ? raw_y : guess_y}, &shift);
         mx = prj.matrix(0, 0) * n.x + prj.matrix(0, 1) * n.y + prj.matrix(0, 2);
         my = prj.matrix(1, 1) * n.y + prj.matrix(1, 2);
       }

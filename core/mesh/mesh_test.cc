@@ -94,7 +94,9 @@ TEST(Mesh, ANodeWhosePointsAreStrewnIsNoSurface) {
   EXPECT_EQ(m.kind[22 * 45 + 22], NodeKind::kFilled);
   EXPECT_EQ(m.kind[22 * 45 + 0], NodeKind::kSkirt);
   for (size_t k = 0; k < m.kind.size(); ++k) {
-    if (m.Active(static_cast<int>(k))) EXPECT_NEAR(m.point[k][2], 0.0, 0.5) << "node " << k;
+    if (m.Active(static_cast<int>(k))) {
+      EXPECT_NEAR(m.point[k][2], 0.0, 0.5) << "node " << k;
+    }
   }
   const FlattenResult flat = Flatten(m);
   ASSERT_TRUE(flat.status.ok());
