@@ -5,7 +5,6 @@
 #include <sys/mman.h>
 
 #include <cerrno>
-
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <vector>
@@ -80,8 +79,8 @@ TEST(HugePages, KeptBlocksNeverRaiseThePeak) {
   for (size_t at = 0; at < 60 * kMb; at += 2 * kMb) {
     const uchar* page = head + at;
     if (page >= larger.data && page < larger.data + 130 * kMb) continue;
-    EXPECT_TRUE(NoneMapped(page, 2 * kMb)) << "the kept block is given back for the new one, at "
-                                        << at / kMb << " MB";
+    EXPECT_TRUE(NoneMapped(page, 2 * kMb))
+        << "the kept block is given back for the new one, at " << at / kMb << " MB";
   }
   larger.setTo(cv::Scalar(9));
   EXPECT_EQ(larger.at<uchar>(129, kMb - 1), 9);

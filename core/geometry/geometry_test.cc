@@ -47,8 +47,8 @@ TEST(CameraModel, NormalizeFromANeighboursShiftGivesTheSamePoint) {
       worst = std::max(worst, cv::norm(warm - cold));
       cv::Point2d from_zero(0, 0);
       cam.Normalize(cv::Point2d(u, v), &from_zero);
-      ASSERT_LT(cv::norm(shift - from_zero), 1e-9) << "the shift is this pixel's, at " << u << ", "
-                                                    << v;
+      ASSERT_LT(cv::norm(shift - from_zero), 1e-9)
+          << "the shift is this pixel's, at " << u << ", " << v;
     }
   }
   EXPECT_LT(worst, 1e-9);
