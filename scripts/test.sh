@@ -8,12 +8,21 @@
 # The daily tier: cd build && ctest -L unit (a few minutes).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Each phase's start and the seconds since the run began, so that a slow run says where.
+phase() { echo "test.sh: $1 at $(date +%T), ${SECONDS} s in"; }
+phase "installing"
 bash scripts/install-deps.sh
+phase "checking"
 bash scripts/check-format.sh
 bash scripts/check-docs.sh
 bash scripts/check-options.sh
 bash scripts/check-function-length.sh
+phase "building"
 bash scripts/build.sh
+phase "testing"
 (cd build && ctest --output-on-failure -j2 --timeout 900 -LE 'family_full|station')
+phase "fuzzing"
 bash scripts/fuzz.sh --ci
+phase "the sanitized build and tests"
 bash scripts/sanitize.sh
+phase "done"
