@@ -138,7 +138,7 @@ cv::Point2d CameraModel::Normalize(const cv::Point2d& pixel, cv::Point2d* shift)
   if (!HasDistortion()) return {xd, yd};
   // Newton's inversion of the distortion, refined until it reproduces the pixel: three or four
   // rounds from the distorted point where the fixed-point iteration x -= D(x) - xd took ten or
-  // more at a wide lens's corners; one from a neighbour's shift (the ray table of every camera
+  // more at a wide lens's corners; fewer from a neighbour's shift (the ray table of every camera
   // pixel is made this way for each triangulation). A start that does not reproduce the pixel
   // gives way to the distorted point.
   auto invert = [&](double x, double y, cv::Point2d* ideal) {

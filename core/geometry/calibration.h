@@ -26,8 +26,8 @@ struct CameraModel {
   cv::Point2d Normalize(const cv::Point2d& pixel) const;
   // The same, the distortion's inversion started from `shift`: the ideal point less the
   // distorted one of a nearby pixel (whose shift differs little from this one's), and left with
-  // this pixel's. Along a row of pixels that is one Newton round where a cold start takes three
-  // or four; the result is the same to the inversion's tolerance (1e-12).
+  // this pixel's. Along a row of pixels the inversion starts nearer its answer and takes fewer
+  // Newton rounds; the result is the same to the inversion's tolerance (1e-12).
   cv::Point2d Normalize(const cv::Point2d& pixel, cv::Point2d* shift) const;
   // Unit ray direction in world coordinates through an image pixel (`shift` as above).
   cv::Vec3d RayDirection(const cv::Point2d& pixel) const;
