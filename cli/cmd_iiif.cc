@@ -14,10 +14,10 @@ namespace {
 
 // The URL of a file under the served root.
 std::string UrlOf(const std::string& base, const std::string& root, const fs::path& file) {
-  std::string rel;
-  const Status s = PathUnderRoot(root, file.string(), &rel);
+  std::string url;
+  const Status s = UrlUnderRoot(base, root, file.string(), &url);
   if (!s.ok()) throw UsageError(s.message());
-  return base + "/" + rel;
+  return url;
 }
 
 }  // namespace

@@ -19,6 +19,7 @@ int RunWatch(const std::vector<std::string>& args);
 int RunSheet(const std::vector<std::string>& args);
 int RunManifest(const std::vector<std::string>& args);
 int RunIiif(const std::vector<std::string>& args);
+int RunCollection(const std::vector<std::string>& args);
 int RunExport(const std::vector<std::string>& args);
 int RunImport(const std::vector<std::string>& args);
 int RunCalibrate(const std::vector<std::string>& args);

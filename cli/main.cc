@@ -23,6 +23,7 @@ constexpr char kUsage[] =
     "  sheet      write the contact sheet of a station's data folder (DATA/index.html)\n"
     "  manifest   write or check a folder's SHA-256 manifest (manifest write|check DIR)\n"
     "  iiif       write IIIF manifests of restored scans, for an image server\n"
+    "  collection reprocess a folder of scans by provenance (plan | run | status)\n"
     "  export     write a recorded scan log as a scan directory (vellum export LOG DIR)\n"
     "  import     write a scan directory as a scan log (vellum import DIR LOG)\n"
     "  calibrate  calibrate camera, projector and table from board poses, the display's lag\n"
@@ -50,6 +51,7 @@ int main(int argc, char** argv) {
     if (command == "sheet") return vellum::RunSheet(args);
     if (command == "manifest") return vellum::RunManifest(args);
     if (command == "iiif") return vellum::RunIiif(args);
+    if (command == "collection") return vellum::RunCollection(args);
     if (command == "export") return vellum::RunExport(args);
     if (command == "import") return vellum::RunImport(args);
     if (command == "calibrate") return vellum::RunCalibrate(args);

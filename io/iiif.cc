@@ -85,6 +85,15 @@ Status PathUnderRoot(const std::string& root, const std::string& file, std::stri
   return Status::Ok();
 }
 
+Status UrlUnderRoot(const std::string& base, const std::string& root, const std::string& file,
+                    std::string* url) {
+  std::string rel;
+  const Status s = PathUnderRoot(root, file, &rel);
+  if (!s.ok()) return s;
+  *url = base + "/" + rel;
+  return Status::Ok();
+}
+
 Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid) {
   Status s = StartVips();
   if (!s.ok()) return s;

@@ -33,6 +33,11 @@ Status WritePyramidalTiff(const std::string& tif, const std::string& pyramid);
 // and the image server see it; an error when it does not lie under `root`.
 Status PathUnderRoot(const std::string& root, const std::string& file, std::string* relative);
 
+// The URL of `file` under the served folder `root`, whose web server's URL is `base`
+// ("http://host:8080"): base + "/" + its relative path; an error when it does not lie under `root`.
+Status UrlUnderRoot(const std::string& base, const std::string& root, const std::string& file,
+                    std::string* url);
+
 // One restored page as a canvas.
 struct IiifCanvas {
   std::string label;     // "MS 12, 3 recto", "MS 12, 3v-4r, left"

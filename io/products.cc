@@ -10,6 +10,7 @@
 #include "io/json.h"
 #include "io/ply.h"
 #include "io/scan_io.h"
+#include "io/version.h"
 #include "io/xmp.h"
 
 namespace vellum {
@@ -53,7 +54,7 @@ Status WriteTiffMaster(const std::string& tif, const cv::Mat& image, double dpi,
   if (!written.ok()) return written;
   XmpFields xmp;
   xmp.identity = identity;
-  xmp.creator_tool = std::string("vellum ") + VELLUM_VERSION;
+  xmp.creator_tool = std::string("vellum ") + VellumVersion();
   xmp.figures = std::move(figures);
   xmp.icc_channels = profile ? image.channels() : 0;
   xmp.icc_profile = icc;

@@ -1,5 +1,8 @@
 #include "io/write_whole.h"
 
+#include <fcntl.h>  // AT_FDCWD
+#include <stdio.h>  // renameat2, RENAME_EXCHANGE (glibc 2.28)
+
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -41,6 +44,12 @@ Status ReplaceFolder(const std::string& part, const std::string& folder) {
   std::error_code ec;
   fs::remove_all(old, ec);  // A killed run's.
   const bool had = fs::exists(target, ec);
+  // One step where the filesystem can swap two names (Linux's renameat2): at every instant
+  // `folder` is wholly the old one or wholly the new, even if the process is killed between.
+  if (had && renameat2(AT_FDCWD, part.c_str(), AT_FDCWD, folder.c_str(), RENAME_EXCHANGE) == 0) {
+    fs::remove_all(part, ec);  // Now the old one.
+    return Status::Ok();
+  }
   if (had) {
     fs::rename(target, old, ec);
     if (ec)

@@ -18,10 +18,13 @@ Status WriteWhole(const std::string& path,
 // The temporary name WriteWhole gives `path`.
 std::string PartName(const std::string& path);
 
-// Puts the folder `part` (written whole beside `folder`, under PartName(folder)) in the place of
-// `folder`: renamed into place when `folder` is absent; else `folder` is moved aside (hidden,
-// ".old-<name>"), `part` renamed in, and the old one removed. On a failure `folder` is left as
-// it was; the caller removes `part`.
+// Puts the folder `part` (written beside `folder`, on the same filesystem) in the place of
+// `folder`: renamed into place when `folder` is absent; else the two are swapped in one step
+// (renameat2's RENAME_EXCHANGE: a reader, or a process killed at any instant, sees `folder`
+// wholly old or wholly new) and the old one, now under `part`'s name, removed. Where the
+// filesystem cannot swap (some network filesystems), `folder` is moved aside (hidden,
+// ".old-<name>"), `part` renamed in, and the old one removed. On a failure `folder` is left as it
+// was; the caller removes `part`.
 Status ReplaceFolder(const std::string& part, const std::string& folder);
 
 }  // namespace vellum

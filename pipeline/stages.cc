@@ -23,6 +23,7 @@
 #include "io/products.h"
 #include "io/ptm.h"
 #include "io/scan_io.h"
+#include "io/version.h"
 
 namespace vellum {
 namespace fs = std::filesystem;
@@ -243,6 +244,7 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
   r.Number("options", "max_flying_mm", options.max_flying_mm);
   const Calibration& c = triangulator.calibration();
   r.Text("provenance", "calibration_sha256", CalibrationSha256(c));
+  r.Text("provenance", "vellum_version", VellumVersion());
   if (std::isfinite(c.scale_error_percent))
     r.Number("provenance", "calibration_scale_error_percent", c.scale_error_percent);
   r.Number("options", "volume_low_mm",

@@ -60,9 +60,10 @@ class CliTest : public ::testing::Test {
 fs::path CliTest::root_;
 
 TEST_F(CliTest, EveryCommandHasHelp) {
-  for (const char* cmd : {"--help", "patterns --help", "render --help", "process --help",
-                          "manifest --help", "iiif --help", "calibrate flatfield --help",
-                          "calibrate studio --help", "calibrate solve --help"}) {
+  for (const char* cmd :
+       {"--help", "patterns --help", "render --help", "process --help", "manifest --help",
+        "iiif --help", "collection --help", "calibrate flatfield --help", "calibrate studio --help",
+        "calibrate solve --help"}) {
     const Result r = RunVellum(cmd);
     EXPECT_EQ(r.exit_code, 0) << cmd;
     EXPECT_NE(r.output.find("usage: vellum"), std::string::npos) << r.output;
