@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <string>
 #include <thread>
@@ -18,8 +19,10 @@
 #include "cli/commands.h"
 #include "cli/progress.h"
 #include "collection/collection.h"
+#include "collection/slurm.h"
 #include "flags/options.h"
 #include "io/iiif.h"
+#include "io/json.h"
 #include "runtime/memory.h"
 #include "station/contact_sheet.h"
 
@@ -59,9 +62,19 @@ std::vector<Flags::Spec> Specs() {
           {"iiif-base", "URL",
            "run: the web server's URL for ROOT, for the collection's IIIF manifest", ""},
           {"label", "TEXT", "run: the IIIF manifest's label", "vellum collection"},
-          {"list", "", "status: a line for every scan", ""},
+          {"all", "", "status: a line for every scan", ""},
+          {"slurm", "", "run: as a Slurm job array (sbatch), followed with squeue", ""},
+          {"chunk", "N", "run --slurm: scans per task", "10"},
+          {"partition", "NAME", "run --slurm: the partition (else the cluster's default)", ""},
+          {"account", "NAME", "run --slurm: the account to charge (else yours)", ""},
+          {"cpus-per-task", "N", "run --slurm: cores per task", "2"},
+          {"resubmit", "N",
+           "run --slurm: times the scans of a failed or cancelled task are submitted again", "1"},
+          {"sbatch", "FLAGS", "run --slurm: more sbatch flags, ';' between (--qos=long;...)", ""},
           {"scan", "FOLDER", "one: the scan folder's name under ROOT", ""},
-          {"job", "TEXT", "one: who runs it, for the ledger", "local"},
+          {"job", "TEXT", "one, task: who runs it, for the ledger", "local"},
+          {"list", "FILE", "task: the array's scans, one folder a line", ""},
+          {"index", "K", "task: this task's chunk of the list (chunk K)", "0"},
       },
       PipelineFlagSpecs());
 }
@@ -127,7 +140,7 @@ int RunStatus(const std::string& root, const Flags& flags) {
   std::printf("processed by collection runs:");
   for (const auto& [runs, scans] : by_runs) std::printf(" %d scan(s) %d time(s);", scans, runs);
   std::printf("\n");
-  if (flags.Has("list")) {
+  if (flags.Has("all")) {
     for (const PlannedScan& p : plan) {
       std::printf("%s  %s  runs %d\n", p.folder.c_str(), collection::StateName(p.state), p.runs);
     }
@@ -204,30 +217,18 @@ bool RebuildViews(const std::string& root, const Flags& flags,
   return ok;
 }
 
-int RunLocal(const std::string& root, const Flags& flags) {
-  collection::CleanUp(root);
-  const collection::RunSettings run = Settings(flags);
-  std::vector<PlannedScan> plan;
-  Status s = collection::Plan(root, run.options, false, &plan);
-  if (!s.ok()) throw std::runtime_error(s.message());
-  std::vector<std::string> todo;
-  for (const PlannedScan& p : plan) {
-    if (p.state == State::kStale || (p.state == State::kFailed && run.retry_failed)) {
-      todo.push_back(p.folder);
-    }
-  }
-  int jobs = flags.GetInt("jobs", 0, 256);
-  if (jobs == 0) jobs = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  std::printf("%zu scan(s) to process, %d at a time\n", todo.size(), jobs);
-  std::fflush(stdout);
+// Processes `folders` in worker processes, `jobs` at a time, a line for each as it finishes and
+// a progress bar with the rate and the time left. Returns how many failed.
+int RunPool(const std::string& root, const std::vector<std::string>& folders, int jobs,
+            const collection::RunSettings& run) {
   Progress progress;
   const auto start = std::chrono::steady_clock::now();
   std::map<pid_t, std::string> workers;
   size_t next = 0, finished = 0;
   int failed = 0;
-  while (next < todo.size() || !workers.empty()) {
-    while (next < todo.size() && static_cast<int>(workers.size()) < jobs) {
-      workers[StartWorker(root, todo[next], run)] = todo[next];
+  while (next < folders.size() || !workers.empty()) {
+    while (next < folders.size() && static_cast<int>(workers.size()) < jobs) {
+      workers[StartWorker(root, folders[next], run)] = folders[next];
       ++next;
     }
     int status = 0;
@@ -252,16 +253,197 @@ int RunLocal(const std::string& root, const Flags& flags) {
     std::fflush(stdout);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    progress.Update(std::to_string(finished) + "/" + std::to_string(todo.size()) + " scans, " +
+    progress.Update(std::to_string(finished) + "/" + std::to_string(folders.size()) + " scans, " +
                         std::to_string(static_cast<int>(finished * 3600 / seconds)) + " per hour",
-                    static_cast<double>(finished) / todo.size());
+                    static_cast<double>(finished) / folders.size());
   }
   progress.Clear();
-  s = collection::Plan(root, run.options, false, &plan);
+  return failed;
+}
+
+// The stale scans (and the failed ones, when they are to be tried again).
+std::vector<PlannedScan> ToDo(const std::vector<PlannedScan>& plan,
+                              const collection::RunSettings& run) {
+  std::vector<PlannedScan> todo;
+  for (const PlannedScan& p : plan) {
+    if (p.state == State::kStale || (p.state == State::kFailed && run.retry_failed)) {
+      todo.push_back(p);
+    }
+  }
+  return todo;
+}
+
+// The end of a run: the views rebuilt, the counts said; the exit status.
+int Finish(const std::string& root, const Flags& flags, const collection::RunSettings& run,
+           bool failures) {
+  std::vector<PlannedScan> plan;
+  const Status s = collection::Plan(root, run.options, false, &plan);
   if (!s.ok()) throw std::runtime_error(s.message());
   const bool views = RebuildViews(root, flags, plan);
   PrintCounts(plan);
-  return failed > 0 || !views ? 1 : 0;
+  return failures || !views ? 1 : 0;
+}
+
+int RunLocal(const std::string& root, const Flags& flags) {
+  collection::CleanUp(root);
+  const collection::RunSettings run = Settings(flags);
+  std::vector<PlannedScan> plan;
+  const Status s = collection::Plan(root, run.options, false, &plan);
+  if (!s.ok()) throw std::runtime_error(s.message());
+  std::vector<std::string> todo;
+  for (const PlannedScan& p : ToDo(plan, run)) todo.push_back(p.folder);
+  int jobs = flags.GetInt("jobs", 0, 256);
+  if (jobs == 0) jobs = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  std::printf("%zu scan(s) to process, %d at a time\n", todo.size(), jobs);
+  std::fflush(stdout);
+  const int failed = RunPool(root, todo, jobs, run);
+  return Finish(root, flags, run, failed > 0);
+}
+
+// A task of a Slurm array: its chunk of the list, one scan after the other.
+int RunTask(const std::string& root, const Flags& flags) {
+  const std::string list = flags.Require("list");
+  std::ifstream in(list);
+  if (!in) throw std::runtime_error(list + ": cannot read");
+  std::vector<std::string> all;
+  for (std::string line; std::getline(in, line);) {
+    if (!line.empty()) all.push_back(line);
+  }
+  const int chunk = flags.GetInt("chunk", 1, 1 << 20);
+  const int index = flags.GetInt("index", 0, 1 << 20);
+  const size_t from = static_cast<size_t>(index) * chunk;
+  if (from >= all.size()) throw UsageError("--index " + std::to_string(index) + " is past " + list);
+  const std::vector<std::string> mine(all.begin() + from,
+                                      all.begin() + std::min(all.size(), from + chunk));
+  std::printf("%s: scans %zu to %zu of %zu\n", flags.Get("job").c_str(), from + 1,
+              from + mine.size(), all.size());
+  std::fflush(stdout);
+  return RunPool(root, mine, 1, Settings(flags)) > 0 ? 1 : 0;
+}
+
+// This program's path, for the tasks to run: the same on every node of the cluster.
+std::string SelfPath() {
+  std::error_code ec;
+  const fs::path self = fs::read_symlink("/proc/self/exe", ec);
+  return ec ? std::string("vellum") : self.string();
+}
+
+// Follows the jobs until none of their tasks is queued; the progress of `todo` meanwhile.
+void Follow(const std::string& root, const std::vector<std::string>& jobs,
+            const std::vector<PlannedScan>& todo, const collection::RunSettings& run) {
+  Progress progress;
+  const auto start = std::chrono::steady_clock::now();
+  std::vector<std::string> queued;
+  for (;;) {
+    const Status s = collection::Queued(jobs, &queued);
+    if (!s.ok()) throw std::runtime_error(s.message());
+    if (queued.empty()) break;
+    int done = 0, running = 0;
+    for (const std::string& task : queued) running += task.find("RUNNING") != std::string::npos;
+    for (const PlannedScan& p : todo) {
+      done += collection::PlanScan(root, p.folder, run.options, false).state != State::kStale;
+    }
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    progress.Update(std::to_string(done) + "/" + std::to_string(todo.size()) + " scans, " +
+                        std::to_string(running) + " task(s) running, " +
+                        std::to_string(static_cast<int>(done * 3600 / std::max(1.0, seconds))) +
+                        " per hour",
+                    static_cast<double>(done) / std::max<size_t>(1, todo.size()));
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+  }
+  progress.Clear();
+}
+
+collection::SlurmSettings SlurmSettingsOf(const Flags& flags) {
+  collection::SlurmSettings slurm;
+  slurm.partition = flags.Get("partition");
+  slurm.account = flags.Get("account");
+  slurm.chunk = flags.GetInt("chunk", 1, 1 << 20);
+  slurm.cpus_per_task = flags.GetInt("cpus-per-task", 1, 1024);
+  slurm.vellum = SelfPath();
+  std::string extra = flags.Get("sbatch");
+  for (size_t at = 0; at < extra.size();) {
+    const size_t end = std::min(extra.find(';', at), extra.size());
+    if (end > at) slurm.extra.push_back(extra.substr(at, end - at));
+    at = end + 1;
+  }
+  return slurm;
+}
+
+// Writes and submits one array over `todo`; its job id.
+std::string SubmitArray(const std::string& root, const std::vector<PlannedScan>& todo,
+                        const collection::SlurmSettings& slurm,
+                        const collection::RunSettings& run) {
+  const collection::SlurmArray array = collection::MakeArray(todo, slurm.chunk);
+  const std::string dir = root + "/" + collection::kLedgerFolder + "/slurm/array-" +
+                          std::to_string(collection::SubmittedJobs(root).size() + 1);
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  std::ofstream list(dir + "/scans.txt");
+  for (const std::string& f : array.folders) list << f << "\n";
+  list.close();
+  const std::string script = dir + "/job.sh";
+  Status s = WriteTextFile(
+      script,
+      collection::BatchScript(root, dir + "/scans.txt", dir + "/task-%a.log", array, slurm, run));
+  std::string job;
+  if (s.ok()) s = collection::Submit(script, &job);
+  if (s.ok()) s = collection::NoteSubmitted(root, job);
+  if (!s.ok()) throw std::runtime_error(s.message());
+  std::printf("submitted job %s: %zu scan(s) in %d task(s) of %d, %lld MB and %d min each (%s)\n",
+              job.c_str(), todo.size(), array.tasks, array.chunk,
+              static_cast<long long>(array.memory_mb), array.minutes, script.c_str());
+  std::fflush(stdout);
+  return job;
+}
+
+int RunSlurm(const std::string& root, const Flags& flags) {
+  const collection::RunSettings run = Settings(flags);
+  const collection::SlurmSettings slurm = SlurmSettingsOf(flags);
+  // An earlier run's array still at work (its follower killed): followed first, never doubled.
+  std::vector<std::string> earlier = collection::SubmittedJobs(root), queued;
+  Status s = collection::Queued(earlier, &queued);
+  if (!s.ok()) throw std::runtime_error(s.message());
+  if (!queued.empty()) {
+    std::printf("following %zu task(s) submitted earlier\n", queued.size());
+    Follow(root, earlier, {}, run);
+  }
+  collection::CleanUp(root);
+  std::vector<PlannedScan> plan;
+  s = collection::Plan(root, run.options, false, &plan);
+  if (!s.ok()) throw std::runtime_error(s.message());
+  std::vector<PlannedScan> todo = ToDo(plan, run);
+  std::printf("%zu scan(s) to process on Slurm\n", todo.size());
+  // Tasks that fail or are cancelled leave their scans stale: submitted again (--resubmit times),
+  // then reported.
+  const int rounds = 1 + flags.GetInt("resubmit", 0, 10);
+  bool failed = false;
+  for (int round = 0; round < rounds && !todo.empty(); ++round) {
+    const std::string job = SubmitArray(root, todo, slurm, run);
+    Follow(root, {job}, todo, run);
+    std::vector<PlannedScan> left;
+    for (const PlannedScan& p : todo) {
+      const PlannedScan now = collection::PlanScan(root, p.folder, run.options, false);
+      if (now.state == State::kFailed) {
+        collection::LedgerEntry entry;
+        static_cast<void>(collection::ReadLedger(root, p.folder, &entry));
+        std::printf("%s: failed: %s\n", p.folder.c_str(), entry.message.c_str());
+        failed = true;
+      }
+      if (now.state == State::kStale) left.push_back(now);
+    }
+    if (!left.empty()) {
+      std::printf(
+          "%zu scan(s) not processed: their task failed or was cancelled (logs in %s/%s/"
+          "slurm)%s\n",
+          left.size(), root.c_str(), collection::kLedgerFolder,
+          round + 1 < rounds ? "; submitting them again" : "");
+    }
+    todo = left;
+  }
+  collection::CleanUp(root);
+  return Finish(root, flags, run, failed || !todo.empty());
 }
 
 }  // namespace
@@ -270,7 +452,7 @@ int RunCollection(const std::vector<std::string>& args) {
   Flags flags("vellum collection plan|run|status|one --root DIR [processing flags]", kSummary,
               Specs());
   std::vector<std::string> positional, rest;
-  SplitPositional(args, &positional, &rest, {"--verify", "--retry-failed", "--list"});
+  SplitPositional(args, &positional, &rest, {"--verify", "--retry-failed", "--all", "--slurm"});
   if (!flags.Parse(rest)) return 0;
   if (positional.size() != 1) {
     throw UsageError("give one of plan, run, status, one (see --help)");
@@ -279,9 +461,10 @@ int RunCollection(const std::vector<std::string>& args) {
   const std::string root = flags.Require("root");
   if (what == "plan") return RunPlan(root, flags);
   if (what == "status") return RunStatus(root, flags);
-  if (what == "run") return RunLocal(root, flags);
+  if (what == "run") return flags.Has("slurm") ? RunSlurm(root, flags) : RunLocal(root, flags);
   if (what == "one") return RunOne(root, flags);
-  throw UsageError("unknown subcommand '" + what + "': plan, run, status or one");
+  if (what == "task") return RunTask(root, flags);
+  throw UsageError("unknown subcommand '" + what + "': plan, run, status, one or task");
 }
 
 }  // namespace vellum

@@ -179,9 +179,9 @@ int64_t RawBytes(const fs::path& raw) {
 
 // One scan folder's state against `options`.
 // `locked_here`: this process holds the scan's lock (it is not running elsewhere).
-PlannedScan PlanScan(const std::string& root, const std::string& folder,
-                     const std::map<std::string, std::string>& options, bool verify,
-                     bool locked_here = false) {
+PlannedScan PlanFolder(const std::string& root, const std::string& folder,
+                       const std::map<std::string, std::string>& options, bool verify,
+                       bool locked_here = false) {
   PlannedScan p;
   p.folder = folder;
   const fs::path dir = fs::path(root) / folder;
@@ -421,9 +421,14 @@ Status Plan(const std::string& root, const std::map<std::string, std::string>& o
   std::sort(folders.begin(), folders.end());
   plan->clear();
   for (const std::string& folder : folders) {
-    plan->push_back(PlanScan(root, folder, options, verify));
+    plan->push_back(PlanFolder(root, folder, options, verify));
   }
   return Status::Ok();
+}
+
+PlannedScan PlanScan(const std::string& root, const std::string& folder,
+                     const std::map<std::string, std::string>& options, bool verify) {
+  return PlanFolder(root, folder, options, verify);
 }
 
 Status ReadLedger(const std::string& root, const std::string& folder, LedgerEntry* e) {
@@ -455,7 +460,7 @@ Status ProcessScan(const std::string& root, const std::string& folder, const Run
   }
   const std::map<std::string, std::string>& options = run.options;
   // Planned again under the lock: another run may have processed it since this one planned.
-  const PlannedScan planned = PlanScan(root, folder, options, false, /*locked_here=*/true);
+  const PlannedScan planned = PlanFolder(root, folder, options, false, /*locked_here=*/true);
   const bool retry = planned.state == State::kFailed && run.retry_failed;
   if (planned.state != State::kStale && !retry) {
     *what = StateName(planned.state);

@@ -73,6 +73,10 @@ struct PlannedScan {
 Status Plan(const std::string& root, const std::map<std::string, std::string>& options, bool verify,
             std::vector<PlannedScan>* plan);
 
+// One scan folder's state, as Plan gives it.
+PlannedScan PlanScan(const std::string& root, const std::string& folder,
+                     const std::map<std::string, std::string>& options, bool verify);
+
 // What one scan's processing needs besides the root and the folder.
 struct RunSettings {
   std::map<std::string, std::string> options;  // OptionsOf: every processing flag.

@@ -12,6 +12,7 @@ packages=(
   libvips-dev libpng-dev iipimage-server lighttpd libimage-exiftool-perl curl
   default-jdk-headless libjchart2d-java xz-utils iproute2 util-linux nftables
   chromium xvfb xdotool clang libclang-rt-14-dev python3
+  slurm-wlm munge
 )
 missing=()
 for p in "${packages[@]}"; do

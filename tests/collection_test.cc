@@ -96,10 +96,10 @@ class CollectionTest : public ::testing::Test {
     const fs::path file = root_ / "vellum-collection" / "scans" / (folder + ".json");
     return fs::exists(file) ? JsonOf(file)["runs"].get<int>() : 0;
   }
-  // Each scan's runs as `vellum collection status --list` says them.
+  // Each scan's runs as `vellum collection status --all` says them.
   std::map<std::string, int> RunsByStatus() {
     std::map<std::string, int> runs;
-    const ShellResult r = Collection("status", "--list");
+    const ShellResult r = Collection("status", "--all");
     for (const std::string& line : LinesStarting(r.output, "scan-")) {
       const size_t space = line.find(' '), at = line.rfind("  runs ");
       if (space == std::string::npos || at == std::string::npos) continue;  // A failure's line.
@@ -174,7 +174,7 @@ TEST_F(CollectionTest, ARunProcessesWhatThePlanSaysOnceAndASecondRunNothing) {
   r = Collection("run");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("0 scan(s) to process"), std::string::npos) << r.output;
-  r = Collection("status", "--verify --list");  // The captures hashed again: still done.
+  r = Collection("status", "--verify --all");  // The captures hashed again: still done.
   EXPECT_NE(r.output.find("3 done, 0 stale"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("3 scan(s) 1 time(s)"), std::string::npos) << r.output;
   for (const char* folder : {"scan-1001", "scan-1002", "scan-2000-demo"})
