@@ -9,6 +9,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -38,16 +39,21 @@ constexpr char kSummary[] =
     "raw/ and its calibration, results/ and manifest-sha256.txt). A scan is up to date when its\n"
     "results were made from the same raw captures (their SHA-256), the same calibration, the same\n"
     "processing flags and the same vellum build (results/provenance.json); otherwise it is stale.\n"
-    "  plan    lists the stale scans and why; the failed, parked and busy ones apart\n"
+    "  plan    lists the stale scans and why; the running, failed, parked and at the station "
+    "apart\n"
     "  run     processes the stale scans, --jobs at a time, each into a new folder that takes\n"
     "          the scan's place whole (a killed run leaves every scan wholly old or wholly new);\n"
     "          a failure is recorded and the others go on; run again to finish what is left.\n"
+    "          With --slurm, as a Slurm job array (--chunk scans a task), followed with squeue;\n"
+    "          the scans of a failed or cancelled task are submitted again (--resubmit).\n"
     "          Then rebuilds the contact sheet (ROOT/index.html) and, with --iiif-base, the\n"
     "          collection's IIIF manifest (ROOT/iiif-manifest.json)\n"
     "  status  counts by state, the failures' reasons, and how often each scan was processed\n"
     "  one     processes one scan (--scan FOLDER): what each worker of run does\n"
+    "  task    processes one chunk of a Slurm array's scans (--list, --chunk, --index)\n"
     "The ledger is ROOT/vellum-collection/ (deletable: no scan depends on it). The processing\n"
-    "flags are those of `vellum process`. Exit status: 0 every scan done; 1 an error or a scan\n"
+    "flags are those of `vellum process`; give plan, run and status the same. More in\n"
+    "docs/collection.md. Exit status: 0 every scan done (the parked aside); 1 an error or a scan\n"
     "failed; 2 bad flags; 4 (plan, status) scans left to do.";
 
 constexpr int kExitLeft = 4;
@@ -81,9 +87,12 @@ std::vector<Flags::Spec> Specs() {
 
 struct Counts {
   std::map<State, int> by_state;
+  // Scans still to be done: all but the done and the parked (given up at the station).
   int Left() const {
     int n = 0;
-    for (const auto& [state, count] : by_state) n += state == State::kDone ? 0 : count;
+    for (const auto& [state, count] : by_state) {
+      n += state == State::kDone || state == State::kParked ? 0 : count;
+    }
     return n;
   }
 };
@@ -156,6 +165,9 @@ collection::RunSettings Settings(const Flags& flags) {
   return run;
 }
 
+// A worker's exit status when it left its scan alone: done meanwhile, or running elsewhere.
+constexpr int kExitLeftAlone = 5;
+
 int RunOne(const std::string& root, const Flags& flags) {
   UseMemoryForOneRun();  // One scan in this process, as `vellum process`.
   std::string what;
@@ -165,7 +177,7 @@ int RunOne(const std::string& root, const Flags& flags) {
                  s.message().c_str());
     return 1;
   }
-  return 0;
+  return what == "processed" ? 0 : kExitLeftAlone;
 }
 
 // A worker: `vellum collection one` for `folder`, killed with this process.
@@ -245,11 +257,16 @@ int RunPool(const std::string& root, const std::vector<std::string>& folders, in
     }
     collection::LedgerEntry entry;
     const bool noted = collection::ReadLedger(root, folder, &entry).ok();
-    const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-    if (!ok) ++failed;
+    const int code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    std::string said = "done";
+    if (code == kExitLeftAlone) {
+      said = "left alone: done or running elsewhere";
+    } else if (code != 0) {
+      ++failed;
+      said = "failed: " + (noted ? entry.message : "no record");
+    }
     progress.Clear();
-    std::printf("%s: %s\n", folder.c_str(),
-                ok ? "done" : ("failed: " + (noted ? entry.message : "no record")).c_str());
+    std::printf("%s: %s\n", folder.c_str(), said.c_str());
     std::fflush(stdout);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -328,21 +345,44 @@ std::string SelfPath() {
   return ec ? std::string("vellum") : self.string();
 }
 
-// Follows the jobs until none of their tasks is queued; the progress of `todo` meanwhile.
+// The UTC time now as the ledger writes it ("2026-12-07T06:36:44Z"): strings in this form
+// compare as the times do.
+std::string UtcNow() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+// How many of `todo` the ledger says were processed (done or failed) since `since`.
+int FinishedSince(const std::string& root, const std::vector<PlannedScan>& todo,
+                  const std::string& since) {
+  int n = 0;
+  for (const PlannedScan& p : todo) {
+    collection::LedgerEntry e;
+    n += collection::ReadLedger(root, p.folder, &e).ok() && !e.state.empty() && e.finished >= since;
+  }
+  return n;
+}
+
+// Follows the jobs until none of their tasks is queued, or every scan of `todo` was processed
+// since `since` (its tasks are then ending): the progress meanwhile, from the ledger.
 void Follow(const std::string& root, const std::vector<std::string>& jobs,
-            const std::vector<PlannedScan>& todo, const collection::RunSettings& run) {
+            const std::vector<PlannedScan>& todo, const std::string& since) {
   Progress progress;
   const auto start = std::chrono::steady_clock::now();
+  // squeue asks the controller: a few times a second for a small collection, less for a large.
+  const auto poll = std::chrono::milliseconds(todo.size() > 1000 ? 2000 : 250);
   std::vector<std::string> queued;
   for (;;) {
     const Status s = collection::Queued(jobs, &queued);
     if (!s.ok()) throw std::runtime_error(s.message());
-    if (queued.empty()) break;
-    int done = 0, running = 0;
+    const int done = todo.empty() ? 0 : FinishedSince(root, todo, since);
+    if (queued.empty() || (!todo.empty() && done == static_cast<int>(todo.size()))) break;
+    int running = 0;
     for (const std::string& task : queued) running += task.find("RUNNING") != std::string::npos;
-    for (const PlannedScan& p : todo) {
-      done += collection::PlanScan(root, p.folder, run.options, false).state != State::kStale;
-    }
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     progress.Update(std::to_string(done) + "/" + std::to_string(todo.size()) + " scans, " +
@@ -350,7 +390,7 @@ void Follow(const std::string& root, const std::vector<std::string>& jobs,
                         std::to_string(static_cast<int>(done * 3600 / std::max(1.0, seconds))) +
                         " per hour",
                     static_cast<double>(done) / std::max<size_t>(1, todo.size()));
-    std::this_thread::sleep_for(std::chrono::seconds(1));
+    std::this_thread::sleep_for(poll);
   }
   progress.Clear();
 }
@@ -407,7 +447,7 @@ int RunSlurm(const std::string& root, const Flags& flags) {
   if (!s.ok()) throw std::runtime_error(s.message());
   if (!queued.empty()) {
     std::printf("following %zu task(s) submitted earlier\n", queued.size());
-    Follow(root, earlier, {}, run);
+    Follow(root, earlier, {}, "");
   }
   collection::CleanUp(root);
   std::vector<PlannedScan> plan;
@@ -420,8 +460,9 @@ int RunSlurm(const std::string& root, const Flags& flags) {
   const int rounds = 1 + flags.GetInt("resubmit", 0, 10);
   bool failed = false;
   for (int round = 0; round < rounds && !todo.empty(); ++round) {
+    const std::string since = UtcNow();
     const std::string job = SubmitArray(root, todo, slurm, run);
-    Follow(root, {job}, todo, run);
+    Follow(root, {job}, todo, since);
     std::vector<PlannedScan> left;
     for (const PlannedScan& p : todo) {
       const PlannedScan now = collection::PlanScan(root, p.folder, run.options, false);

@@ -470,9 +470,12 @@ Status ProcessScan(const std::string& root, const std::string& folder, const Run
   const fs::path fresh = fs::path(root) / (kNewPrefix + folder);
   std::error_code ec;
   fs::remove_all(fresh, ec);  // A killed run's.
-  Provenance want;
-  Status s = Want(dir.string(), options, true, &want);  // The captures hashed: what is processed.
-  const std::string want_digest = WantDigest(want);
+  // What the plan compares a failure with (the captures' checksums from the manifest), and what
+  // the products are made from (the captures hashed again: what is processed).
+  Provenance planned_want, want;
+  static_cast<void>(Want(dir.string(), options, false, &planned_want));
+  const std::string want_digest = WantDigest(planned_want);
+  Status s = Want(dir.string(), options, true, &want);
   want.run = planned.runs + 1;
   if (s.ok()) s = MakeNew(dir, fresh, run, want);
   if (s.ok()) s = ReplaceFolder(fresh.string(), dir.string());

@@ -91,8 +91,8 @@ struct RunSettings {
 // instant leaves the scan wholly old or wholly new, its manifest checking. A per-scan lock in the
 // ledger keeps two runs (local or Slurm tasks) from processing one scan at once. The ledger
 // records the run (its counter, or the failure and its message). `*what` says what was done
-// ("processed", "up to date", "running elsewhere", "failed: ..."). Returns an error only when
-// the scan failed.
+// ("processed", "done", "running elsewhere", "failed: ..."). Returns an error only when the scan
+// failed.
 Status ProcessScan(const std::string& root, const std::string& folder, const RunSettings& run,
                    std::string* what);
 
