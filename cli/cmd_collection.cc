@@ -76,11 +76,15 @@ std::vector<Flags::Spec> Specs() {
           {"cpus-per-task", "N", "run --slurm: cores per task", "2"},
           {"resubmit", "N",
            "run --slurm: times the scans of a failed or cancelled task are submitted again", "1"},
+          {"steal", "yes|no",
+           "run --slurm: a task done with its chunk takes scans of tasks not yet begun", "yes"},
           {"sbatch", "FLAGS", "run --slurm: more sbatch flags, ';' between (--qos=long;...)", ""},
           {"scan", "FOLDER", "one: the scan folder's name under ROOT", ""},
           {"job", "TEXT", "one, task: who runs it, for the ledger", "local"},
           {"list", "FILE", "task: the array's scans, one folder a line", ""},
           {"index", "K", "task: this task's chunk of the list (chunk K)", "0"},
+          {"steal-for", "SECONDS",
+           "task: then take other tasks' scans not yet begun, for this long from its start", "0"},
       },
       PipelineFlagSpecs());
 }
@@ -235,12 +239,13 @@ int RunPool(const std::string& root, const std::vector<std::string>& folders, in
             const collection::RunSettings& run) {
   Progress progress;
   const auto start = std::chrono::steady_clock::now();
-  std::map<pid_t, std::string> workers;
+  std::map<pid_t, std::pair<std::string, std::chrono::steady_clock::time_point>> workers;
   size_t next = 0, finished = 0;
   int failed = 0;
   while (next < folders.size() || !workers.empty()) {
     while (next < folders.size() && static_cast<int>(workers.size()) < jobs) {
-      workers[StartWorker(root, folders[next], run)] = folders[next];
+      workers[StartWorker(root, folders[next], run)] = {folders[next],
+                                                        std::chrono::steady_clock::now()};
       ++next;
     }
     int status = 0;
@@ -248,7 +253,9 @@ int RunPool(const std::string& root, const std::vector<std::string>& folders, in
     if (pid < 0) break;
     const auto it = workers.find(pid);
     if (it == workers.end()) continue;
-    const std::string folder = it->second;
+    const std::string folder = it->second.first;
+    const double took =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - it->second.second).count();
     workers.erase(it);
     ++finished;
     if (WIFSIGNALED(status)) {
@@ -266,7 +273,7 @@ int RunPool(const std::string& root, const std::vector<std::string>& folders, in
       said = "failed: " + (noted ? entry.message : "no record");
     }
     progress.Clear();
-    std::printf("%s: %s\n", folder.c_str(), said.c_str());
+    std::printf("%s: %s (%.1f s)\n", folder.c_str(), said.c_str(), took);
     std::fflush(stdout);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -330,12 +337,29 @@ int RunTask(const std::string& root, const Flags& flags) {
   const int index = flags.GetInt("index", 0, 1 << 20);
   const size_t from = static_cast<size_t>(index) * chunk;
   if (from >= all.size()) throw UsageError("--index " + std::to_string(index) + " is past " + list);
-  const std::vector<std::string> mine(all.begin() + from,
-                                      all.begin() + std::min(all.size(), from + chunk));
-  std::printf("%s: scans %zu to %zu of %zu\n", flags.Get("job").c_str(), from + 1,
-              from + mine.size(), all.size());
+  const size_t to = std::min(all.size(), from + chunk);
+  const std::vector<std::string> mine(all.begin() + from, all.begin() + to);
+  std::printf("%s: scans %zu to %zu of %zu\n", flags.Get("job").c_str(), from + 1, to, all.size());
   std::fflush(stdout);
-  return RunPool(root, mine, 1, Settings(flags)) > 0 ? 1 : 0;
+  const auto start = std::chrono::steady_clock::now();
+  const collection::RunSettings run = Settings(flags);
+  int failed = RunPool(root, mine, 1, run);
+  // Then, for --steal-for seconds from its start, the scans of the tasks not yet begun, from the
+  // list's end: the array ends when its work does, not when its slowest chunk does. A scan another
+  // task holds or has done is left to it (ProcessScan plans it again under its lock).
+  const double steal_for = flags.GetDouble("steal-for", 0, 1e9);
+  for (size_t i = all.size(); i-- > 0 && steal_for > 0;) {
+    if (i >= from && i < to) continue;
+    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >
+        steal_for) {
+      break;
+    }
+    const State state = collection::PlanScan(root, all[i], run.options, false).state;
+    if (state == State::kStale || (state == State::kFailed && run.retry_failed)) {
+      failed += RunPool(root, {all[i]}, 1, run);
+    }
+  }
+  return failed > 0 ? 1 : 0;
 }
 
 // This program's path, for the tasks to run: the same on every node of the cluster.
@@ -380,7 +404,12 @@ void Follow(const std::string& root, const std::vector<std::string>& jobs,
     const Status s = collection::Queued(jobs, &queued);
     if (!s.ok()) throw std::runtime_error(s.message());
     const int done = todo.empty() ? 0 : FinishedSince(root, todo, since);
-    if (queued.empty() || (!todo.empty() && done == static_cast<int>(todo.size()))) break;
+    if (queued.empty()) break;
+    if (!todo.empty() && done == static_cast<int>(todo.size())) {
+      // Every scan processed: the tasks not yet begun would find nothing to do.
+      for (const std::string& job : jobs) static_cast<void>(collection::CancelPending(job));
+      break;
+    }
     int running = 0;
     for (const std::string& task : queued) running += task.find("RUNNING") != std::string::npos;
     const double seconds =
@@ -402,6 +431,9 @@ collection::SlurmSettings SlurmSettingsOf(const Flags& flags) {
   slurm.chunk = flags.GetInt("chunk", 1, 1 << 20);
   slurm.cpus_per_task = flags.GetInt("cpus-per-task", 1, 1024);
   slurm.vellum = SelfPath();
+  const std::string steal = flags.Get("steal");
+  if (steal != "yes" && steal != "no") throw UsageError("--steal must be yes or no");
+  slurm.steal = steal == "yes";
   std::string extra = flags.Get("sbatch");
   for (size_t at = 0; at < extra.size();) {
     const size_t end = std::min(extra.find(';', at), extra.size());

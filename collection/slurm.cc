@@ -112,6 +112,7 @@ std::string BatchScript(const std::string& root, const std::string& list_file,
     << Quoted(list_file) << " --chunk " << array.chunk
     << " --index \"$SLURM_ARRAY_TASK_ID\" --job \"slurm "
        "${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}\"";
+  if (slurm.steal) s << " --steal-for " << array.minutes * 20;  // A third of its time, in s.
   if (run.retry_failed) s << " --retry-failed";
   for (const auto& [name, value] : run.options) s << " " << Quoted("--" + name + "=" + value);
   s << "\n";
@@ -149,6 +150,11 @@ Status Queued(const std::vector<std::string>& jobs, std::vector<std::string>* ta
     if (!line.empty()) tasks->push_back(line);
   }
   return Status::Ok();
+}
+
+Status CancelPending(const std::string& job) {
+  std::string out;
+  return Capture({"scancel", "--state=PENDING", job}, &out);
 }
 
 std::vector<std::string> SubmittedJobs(const std::string& root) {

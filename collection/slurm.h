@@ -23,6 +23,9 @@ struct SlurmSettings {
   int chunk = 10;         // Scans per task.
   int cpus_per_task = 2;  // The pipeline's threads in each task.
   std::string vellum;     // The vellum program the tasks run: the same path on every node.
+  // A task done with its chunk takes scans of tasks not yet begun (for a third of its time limit),
+  // so that the array ends when its work does, not when its slowest chunk does.
+  bool steal = true;
   // Extra sbatch flags, one per entry ("--qos=long"), for what a site asks beyond the above.
   std::vector<std::string> extra;
 };
@@ -60,6 +63,9 @@ Status Submit(const std::string& script, std::string* job);
 // The tasks of `jobs` still in the queue (pending, running, completing): squeue's lines
 // "<job>_<task> <state>". An error when squeue cannot be run or reach the controller.
 Status Queued(const std::vector<std::string>& jobs, std::vector<std::string>* tasks);
+
+// Cancels the tasks of `job` still pending (none of them begun): `scancel --state=PENDING`.
+Status CancelPending(const std::string& job);
 
 // The job ids this collection submitted (vellum-collection/slurm/jobs), the newest last; and one
 // more noted.

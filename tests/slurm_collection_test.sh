@@ -3,8 +3,8 @@
 # slurmctld and slurmd from Debian, inside this test's private network namespace), over a
 # collection of 20 scans: 19 leaves of the virtual gantry (seeds 1 to 19) and the recorded demo
 # scan. The same collection is processed by the local pool beside it. Checks:
-#   - a task cancelled mid-way (scancel) leaves its scans wholly old; with no resubmission the run
-#     reports them, and a second run finishes exactly the rest;
+#   - a task cancelled mid-way (scancel) leaves its scans wholly old; with no resubmission and no
+#     task taking another's scans the run reports them, and a second run finishes exactly the rest;
 #   - every product equals the local run's byte for byte (but report.json and report.html, which
 #     carry the stages' times), each scan's manifest checks, and no scan was processed twice;
 #   - a new calibration for half the scans makes exactly those stale, with the reason, and a
@@ -51,9 +51,10 @@ scans=$(cd "$work/local" && ls -d scan-*)
 "$vellum" collection run --root "$work/local" >"$work/local.log" 2>&1 ||
   fail "the local run: $(cat "$work/local.log")"
 
-# The Slurm run, in 5 tasks of 4; one task cancelled while it works.
+# The Slurm run, in 5 tasks of 4; one task cancelled while it works. No task takes another's
+# scans (--steal no) and none is submitted again (--resubmit 0): the cancelled task's are left.
 root=$work/slurm
-"$vellum" collection run --slurm --chunk 4 --cpus-per-task 1 --resubmit 0 --root "$root" \
+"$vellum" collection run --slurm --chunk 4 --cpus-per-task 1 --resubmit 0 --steal no --root "$root" \
   >"$work/slurm1.log" 2>&1 &
 run=$!
 list=$root/vellum-collection/slurm/array-1/scans.txt
@@ -122,9 +123,20 @@ planned=$(grep ": stale: calibration changed: [0-9a-f]* -> [0-9a-f]*$" "$work/pl
 [ "$planned" = "$(echo "$changed" | xargs -n1 | sort | xargs)" ] ||
   fail "planned stale: '$planned', expected '$changed': $(cat "$work/plan.txt")"
 [ "$(grep -c ": stale:" "$work/plan.txt")" -eq 10 ] || fail "$(cat "$work/plan.txt")"
-"$vellum" collection run --slurm --chunk 5 --cpus-per-task 1 --root "$root" \
+"$vellum" collection run --slurm --chunk 3 --cpus-per-task 1 --root "$root" \
   >"$work/slurm3.log" 2>&1 || fail "the run after the calibration: $(cat "$work/slurm3.log")"
 grep -q "^10 scan(s) to process on Slurm" "$work/slurm3.log" || fail "$(cat "$work/slurm3.log")"
+# In 4 tasks of 3, two at a time on the node's two cores: the two that begin first take the scans
+# of those not begun (which are cancelled once every scan is done), each scan once.
+total=0
+most=0
+for task_log in "$root"/vellum-collection/slurm/array-3/task-*.log; do
+  n=$(grep -c "done (" "$task_log" || true)
+  total=$((total + n))
+  [ "$n" -gt "$most" ] && most=$n
+done
+[ "$total" -eq 10 ] || fail "the array's tasks processed $total scans, expected 10"
+[ "$most" -gt 3 ] || fail "no task took another's scans (at most $most each)"
 "$vellum" collection status --root "$root" >"$work/status.txt" || fail "$(cat "$work/status.txt")"
 grep -q "processed by collection runs: 10 scan(s) 1 time(s); 10 scan(s) 2 time(s);$" \
   "$work/status.txt" || fail "$(cat "$work/status.txt")"
