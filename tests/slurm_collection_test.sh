@@ -1,18 +1,19 @@
 #!/usr/bin/env bash
 # `vellum collection run --slurm` on a real one-node Slurm cluster (tests/slurm/cluster.sh: munged,
 # slurmctld and slurmd from Debian, inside this test's private network namespace), over a
-# collection of 20 scans: 19 leaves of the virtual gantry (seeds 1 to 19) and the recorded demo
-# scan. The same collection is processed by the local pool beside it. Checks:
+# collection of 20 scans: 18 leaves of the virtual gantry (seeds 1 to 18) and the two recorded
+# scans of tests/data (the demo leaf and the station tests' checkerboard leaf). The same collection is processed by the local pool beside it. Checks:
 #   - a task cancelled mid-way (scancel) leaves its scans wholly old; with no resubmission and no
 #     task taking another's scans the run reports them, and a second run finishes exactly the rest;
 #   - every product equals the local run's byte for byte (but report.json and report.html, which
 #     carry the stages' times), each scan's manifest checks, and no scan was processed twice;
 #   - a new calibration for half the scans makes exactly those stale, with the reason, and a
 #     Slurm run processes exactly those.
-# usage: slurm_collection_test.sh VELLUM LOG (inside scripts/netns-run.sh)
+# usage: slurm_collection_test.sh VELLUM DEMO_LOG CURL_LOG (inside scripts/netns-run.sh)
 set -euo pipefail
-vellum=${1:?usage: slurm_collection_test.sh VELLUM LOG}
-log=${2:?usage: slurm_collection_test.sh VELLUM LOG}
+vellum=${1:?usage: slurm_collection_test.sh VELLUM DEMO_LOG CURL_LOG}
+demo_log=${2:?usage: slurm_collection_test.sh VELLUM DEMO_LOG CURL_LOG}
+curl_log=${3:?usage: slurm_collection_test.sh VELLUM DEMO_LOG CURL_LOG}
 src=$(cd "$(dirname "$0")/.." && pwd)
 work=$(mktemp -d /tmp/vellum_slurm_test.XXXXXX)
 cleanup() {
@@ -39,11 +40,12 @@ SLURM_CONF=$("$src/tests/slurm/cluster.sh" start "$work/cluster")
 echo "slurm_collection_test: cluster up ($SLURM_CONF)"
 
 rig=$src/config/small_rig.yaml
-for i in $(seq 1 19); do
+for i in $(seq 1 18); do
   "$vellum" render --out "$work/local/scan-$((1000 + i))/raw" --calibration "$rig" --seed "$i" \
     --truth false >/dev/null 2>&1 || fail "render seed $i"
 done
-"$vellum" export "$log" "$work/local/scan-2000-demo/raw" >/dev/null || fail "export $log"
+"$vellum" export "$demo_log" "$work/local/scan-2000-demo/raw" >/dev/null || fail "export $demo_log"
+"$vellum" export "$curl_log" "$work/local/scan-2001-curl/raw" >/dev/null || fail "export $curl_log"
 cp -a "$work/local" "$work/slurm"
 scans=$(cd "$work/local" && ls -d scan-*)
 [ "$(echo "$scans" | wc -w)" -eq 20 ] || fail "expected 20 scans"
@@ -114,7 +116,15 @@ echo "slurm_collection_test: $compared files equal to the local run's, byte for 
 # A refined calibration for half the scans: exactly those stale, for that reason, and processed.
 changed=""
 for scan in $(echo "$scans" | awk 'NR % 2 == 1'); do
-  sed -i '0,/data: \[ 960\., 0\.,/s//data: [ 961., 0.,/' "$root/$scan/raw/calibration.yaml"
+  # The camera's focal length (the first number of camera_matrix), refined by 0.1%.
+  python3 - "$root/$scan/raw/calibration.yaml" <<'PY'
+import re, sys
+text = open(sys.argv[1]).read()
+at = text.index('data: [', text.index('camera_matrix:')) + len('data: [')
+number = re.match(r'\s*([-+0-9.eE]+)', text[at:])
+text = text[:at] + ' %r' % (float(number.group(1)) * 1.001) + text[at + number.end():]
+open(sys.argv[1], 'w').write(text)
+PY
   changed="$changed $scan"
 done
 "$vellum" collection plan --root "$root" >"$work/plan.txt" || true
