@@ -397,8 +397,11 @@ void Follow(const std::string& root, const std::vector<std::string>& jobs,
             const std::vector<PlannedScan>& todo, const std::string& since) {
   Progress progress;
   const auto start = std::chrono::steady_clock::now();
-  // squeue asks the controller: a few times a second for a small collection, less for a large.
-  const auto poll = std::chrono::milliseconds(todo.size() > 1000 ? 2000 : 250);
+  // squeue asks the controller: ten times a second for a small collection, less for a large one
+  // (the ledger is read at each look).
+  const auto poll = std::chrono::milliseconds(todo.size() > 1000  ? 2000
+                                              : todo.size() > 100 ? 500
+                                                                  : 100);
   std::vector<std::string> queued;
   for (;;) {
     const Status s = collection::Queued(jobs, &queued);
