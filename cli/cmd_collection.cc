@@ -535,6 +535,8 @@ int RunCollection(const std::vector<std::string>& args) {
   }
   const std::string& what = positional[0];
   const std::string root = flags.Require("root");
+  // A bad processing flag is said now, naming the flag, not by every scan's worker.
+  static_cast<void>(collection::PipelineOptionsOf(collection::OptionsOf(flags)));
   if (what == "plan") return RunPlan(root, flags);
   if (what == "status") return RunStatus(root, flags);
   if (what == "run") return flags.Has("slurm") ? RunSlurm(root, flags) : RunLocal(root, flags);
