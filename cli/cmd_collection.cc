@@ -498,16 +498,21 @@ int RunSlurm(const std::string& root, const Flags& flags) {
     const std::string since = UtcNow();
     const std::string job = SubmitArray(root, todo, slurm, run);
     Follow(root, {job}, todo, since);
+    // What became of each scan: the ledger's note since the submission, else (a task cancelled
+    // or killed on it, or a scan another run did) the scan planned again.
     std::vector<PlannedScan> left;
     for (const PlannedScan& p : todo) {
-      const PlannedScan now = collection::PlanScan(root, p.folder, run.options, false);
-      if (now.state == State::kFailed) {
-        collection::LedgerEntry entry;
-        static_cast<void>(collection::ReadLedger(root, p.folder, &entry));
+      collection::LedgerEntry entry;
+      const bool noted = collection::ReadLedger(root, p.folder, &entry).ok() &&
+                         !entry.state.empty() && entry.finished >= since;
+      State state = noted && entry.state == "done" ? State::kDone : State::kFailed;
+      if (!noted) state = collection::PlanScan(root, p.folder, run.options, false).state;
+      if (state == State::kFailed) {
+        if (!noted) static_cast<void>(collection::ReadLedger(root, p.folder, &entry));
         std::printf("%s: failed: %s\n", p.folder.c_str(), entry.message.c_str());
         failed = true;
       }
-      if (now.state == State::kStale) left.push_back(now);
+      if (state == State::kStale) left.push_back(p);
     }
     if (!left.empty()) {
       std::printf(
