@@ -191,9 +191,11 @@ pid_t StartWorker(const std::string& root, const std::string& folder,
                                    "--scan", folder,       "--job", run.job};
   if (run.retry_failed) args.push_back("--retry-failed");
   for (const auto& [name, value] : run.options) args.push_back("--" + name + "=" + value);
+  const pid_t parent = getpid();
   const pid_t pid = fork();
   if (pid != 0) return pid;
-  prctl(PR_SET_PDEATHSIG, SIGKILL);  // A run killed takes its workers with it.
+  prctl(PR_SET_PDEATHSIG, SIGKILL);   // A run killed takes its workers with it,
+  if (getppid() != parent) _exit(1);  // even one killed before this worker could ask so.
   std::vector<char*> argv;
   for (std::string& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
