@@ -9,7 +9,6 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
-#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -371,24 +370,13 @@ std::string SelfPath() {
   return ec ? std::string("vellum") : self.string();
 }
 
-// The UTC time now as the ledger writes it ("2026-12-07T06:36:44Z"): strings in this form
-// compare as the times do.
-std::string UtcNow() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 // How many of `todo` the ledger says were processed (done or failed) since `since`.
 int FinishedSince(const std::string& root, const std::vector<PlannedScan>& todo,
                   const std::string& since) {
   int n = 0;
   for (const PlannedScan& p : todo) {
     collection::LedgerEntry e;
-    n += collection::ReadLedger(root, p.folder, &e).ok() && !e.state.empty() && e.finished >= since;
+    n += collection::NotedSince(root, p.folder, since, &e);
   }
   return n;
 }
@@ -497,7 +485,7 @@ int RunSlurm(const std::string& root, const Flags& flags) {
   const int rounds = 1 + flags.GetInt("resubmit", 0, 10);
   bool failed = false;
   for (int round = 0; round < rounds && !todo.empty(); ++round) {
-    const std::string since = UtcNow();
+    const std::string since = collection::LedgerTime();
     const std::string job = SubmitArray(root, todo, slurm, run);
     Follow(root, {job}, todo, since);
     // What became of each scan: the ledger's note since the submission, else (a task cancelled
@@ -505,12 +493,10 @@ int RunSlurm(const std::string& root, const Flags& flags) {
     std::vector<PlannedScan> left;
     for (const PlannedScan& p : todo) {
       collection::LedgerEntry entry;
-      const bool noted = collection::ReadLedger(root, p.folder, &entry).ok() &&
-                         !entry.state.empty() && entry.finished >= since;
+      const bool noted = collection::NotedSince(root, p.folder, since, &entry);
       State state = noted && entry.state == "done" ? State::kDone : State::kFailed;
       if (!noted) state = collection::PlanScan(root, p.folder, run.options, false).state;
       if (state == State::kFailed) {
-        if (!noted) static_cast<void>(collection::ReadLedger(root, p.folder, &entry));
         std::printf("%s: failed: %s\n", p.folder.c_str(), entry.message.c_str());
         failed = true;
       }

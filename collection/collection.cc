@@ -56,15 +56,6 @@ std::string LedgerFile(const std::string& root, const std::string& folder) {
   return root + "/" + kLedgerFolder + "/scans/" + folder + ".json";
 }
 
-std::string Now() {
-  const std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
-
 std::string HostName() {
   char buf[256] = {};
   gethostname(buf, sizeof(buf) - 1);
@@ -96,7 +87,7 @@ Status Record(const std::string& root, const std::string& folder, const RunSetti
   ledger.job = run.job;
   ledger.host = HostName();
   ledger.want = want;
-  ledger.finished = Now();
+  ledger.finished = LedgerTime();
   if (outcome.ok()) {
     ledger.runs = std::max(ledger.runs + 1, runs);
     ledger.state = "done";
@@ -449,6 +440,20 @@ Status ReadLedger(const std::string& root, const std::string& folder, LedgerEntr
     return Status::Error(file + ": unreadable (" + ex.what() + ")");
   }
   return Status::Ok();
+}
+
+std::string LedgerTime() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof(buf), "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+bool NotedSince(const std::string& root, const std::string& folder, const std::string& since,
+                LedgerEntry* entry) {
+  return ReadLedger(root, folder, entry).ok() && !entry->state.empty() && entry->finished >= since;
 }
 
 Status ProcessScan(const std::string& root, const std::string& folder, const RunSettings& run,

@@ -111,6 +111,13 @@ struct LedgerEntry {
   std::string job, host, finished;
 };
 Status ReadLedger(const std::string& root, const std::string& folder, LedgerEntry* entry);
+// The UTC time now as the ledger writes `finished` ("2026-12-07T06:36:44Z"): strings in this form
+// compare as the times do.
+std::string LedgerTime();
+// Whether the ledger notes a run of the scan (done or failed) that finished at or after `since`
+// (a LedgerTime); `*entry` gets the ledger's entry whenever it can be read.
+bool NotedSince(const std::string& root, const std::string& folder, const std::string& since,
+                LedgerEntry* entry);
 
 // Leftovers of killed runs (.vellum-new-* and .old-* folders at the root, whose scans' locks no
 // one holds) removed; a scan folder a fallback swap left missing gets its old one back.
