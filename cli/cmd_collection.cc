@@ -344,10 +344,16 @@ int RunTask(const std::string& root, const Flags& flags) {
   std::fflush(stdout);
   const auto start = std::chrono::steady_clock::now();
   const collection::RunSettings run = Settings(flags);
-  int failed = RunPool(root, mine, 1, run);
+  // Each scan claimed first (collection::ClaimForArray): a task that already stole it keeps it.
+  const std::string claims = (fs::path(list).parent_path() / "claims").string();
+  int failed = 0;
+  for (const std::string& folder : mine) {
+    if (collection::ClaimForArray(claims, folder)) failed += RunPool(root, {folder}, 1, run);
+  }
   // Then, for --steal-for seconds from its start, the scans of the tasks not yet begun, from the
   // list's end: the array ends when its work does, not when its slowest chunk does. A scan another
-  // task holds or has done is left to it (ProcessScan plans it again under its lock).
+  // task of the array claimed is left to it; one done meanwhile by another run is left alone by
+  // the worker (ProcessScan plans it again under its lock).
   const double steal_for = flags.GetDouble("steal-for", 0, 1e9);
   for (size_t i = all.size(); i-- > 0 && steal_for > 0;) {
     if (i >= from && i < to) continue;
@@ -355,10 +361,7 @@ int RunTask(const std::string& root, const Flags& flags) {
         steal_for) {
       break;
     }
-    const State state = collection::PlanScan(root, all[i], run.options, false).state;
-    if (state == State::kStale || (state == State::kFailed && run.retry_failed)) {
-      failed += RunPool(root, {all[i]}, 1, run);
-    }
+    if (collection::ClaimForArray(claims, all[i])) failed += RunPool(root, {all[i]}, 1, run);
   }
   return failed > 0 ? 1 : 0;
 }
@@ -386,33 +389,39 @@ int FinishedSince(const std::string& root, const std::vector<PlannedScan>& todo,
 void Follow(const std::string& root, const std::vector<std::string>& jobs,
             const std::vector<PlannedScan>& todo, const std::string& since) {
   Progress progress;
-  const auto start = std::chrono::steady_clock::now();
-  // squeue asks the controller: ten times a second for a small collection, less for a large one
-  // (the ledger is read at each look).
-  const auto poll = std::chrono::milliseconds(todo.size() > 1000  ? 2000
+  using Clock = std::chrono::steady_clock;
+  const auto start = Clock::now();
+  // The ledger is read 20 times a second for a small collection, less often for a large one (each
+  // look reads every scan's note); squeue, which asks the controller and costs the nodes' cores a
+  // little each time, once a second at most: it is only needed to see tasks that ended early.
+  const auto look = std::chrono::milliseconds(todo.size() > 1000  ? 2000
                                               : todo.size() > 100 ? 500
-                                                                  : 100);
+                                                                  : 50);
+  const auto ask = std::max<Clock::duration>(look, std::chrono::seconds(1));
   std::vector<std::string> queued;
-  for (;;) {
-    const Status s = collection::Queued(jobs, &queued);
-    if (!s.ok()) throw std::runtime_error(s.message());
+  Clock::time_point asked;
+  for (bool first = true;; first = false) {
     const int done = todo.empty() ? 0 : FinishedSince(root, todo, since);
-    if (queued.empty()) break;
     if (!todo.empty() && done == static_cast<int>(todo.size())) {
       // Every scan processed: the tasks not yet begun would find nothing to do.
       for (const std::string& job : jobs) static_cast<void>(collection::CancelPending(job));
       break;
     }
+    if (first || Clock::now() - asked >= ask) {
+      const Status s = collection::Queued(jobs, &queued);
+      if (!s.ok()) throw std::runtime_error(s.message());
+      asked = Clock::now();
+      if (queued.empty()) break;  // The caller reads what became of each scan from the ledger.
+    }
     int running = 0;
     for (const std::string& task : queued) running += task.find("RUNNING") != std::string::npos;
-    const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
     progress.Update(std::to_string(done) + "/" + std::to_string(todo.size()) + " scans, " +
                         std::to_string(running) + " task(s) running, " +
                         std::to_string(static_cast<int>(done * 3600 / std::max(1.0, seconds))) +
                         " per hour",
                     static_cast<double>(done) / std::max<size_t>(1, todo.size()));
-    std::this_thread::sleep_for(poll);
+    std::this_thread::sleep_for(look);
   }
   progress.Clear();
 }

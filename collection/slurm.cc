@@ -1,9 +1,11 @@
 #include "collection/slurm.h"
 
+#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -150,6 +152,17 @@ Status Queued(const std::vector<std::string>& jobs, std::vector<std::string>* ta
     if (!line.empty()) tasks->push_back(line);
   }
   return Status::Ok();
+}
+
+bool ClaimForArray(const std::string& claims_dir, const std::string& folder) {
+  std::error_code ec;
+  fs::create_directories(claims_dir, ec);
+  const int fd =
+      open((claims_dir + "/" + folder).c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
+  // Another task's claim; any other failure claims nothing and leaves the scan to its lock.
+  if (fd < 0) return errno != EEXIST;
+  close(fd);
+  return true;
 }
 
 Status CancelPending(const std::string& job) {

@@ -64,6 +64,14 @@ Status Submit(const std::string& script, std::string* job);
 // "<job>_<task> <state>". An error when squeue cannot be run or reach the controller.
 Status Queued(const std::vector<std::string>& jobs, std::vector<std::string>* tasks);
 
+// A task's claim on a scan of its array: true for the first task of the array to ask, false for
+// every later one (an exclusive create of `claims_dir`/`folder`, atomic on NFS too). The tasks of
+// an array take their own chunk's scans and steal others' by claim, so that no two start the same
+// scan; the scan's lock (ProcessScan) still keeps it from being processed twice across arrays and
+// runs. A scan claimed by a task that was cancelled before finishing it stays stale, for the next
+// array.
+bool ClaimForArray(const std::string& claims_dir, const std::string& folder);
+
 // Cancels the tasks of `job` still pending (none of them begun): `scancel --state=PENDING`.
 Status CancelPending(const std::string& job);
 

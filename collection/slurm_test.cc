@@ -97,5 +97,17 @@ TEST(SlurmArray, TheBatchScriptPassesEveryWordIntact) {
   fs::remove_all(dir);
 }
 
+// The tasks of one array claim each scan once; a later array (the scans of a cancelled task, sent
+// again) claims afresh in its own folder.
+TEST(SlurmArray, EachScanIsClaimedOnceAnArray) {
+  const fs::path dir = fs::temp_directory_path() / ("vellum_claims_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  EXPECT_TRUE(ClaimForArray((dir / "array-1/claims").string(), "scan-1001"));
+  EXPECT_FALSE(ClaimForArray((dir / "array-1/claims").string(), "scan-1001"));
+  EXPECT_TRUE(ClaimForArray((dir / "array-1/claims").string(), "scan-1002"));
+  EXPECT_TRUE(ClaimForArray((dir / "array-2/claims").string(), "scan-1001"));
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace vellum::collection
