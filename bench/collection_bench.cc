@@ -1,5 +1,6 @@
 // Throughput of `vellum collection run` on the test collection of tests/slurm_collection_test.sh
-// (19 leaves of the virtual gantry on the small rig, seeds 1 to 19, and the recorded demo scan):
+// (18 leaves of the virtual gantry at the station's size, seeds 1 to 18, and the two recorded
+// scans, the demo leaf and the curl scan):
 // the local pool (one worker per core) against a real one-node Slurm cluster on this machine
 // (tests/slurm/cluster.sh: munged, slurmctld, slurmd from Debian), in the same run, their
 // repetitions interleaved. Each repetition processes the whole collection from its state before
@@ -9,10 +10,12 @@
 #include <benchmark/benchmark.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -31,12 +34,45 @@ fs::path Work() {
   return fs::temp_directory_path() / ("vellum_collection_bench_" + std::to_string(getpid()));
 }
 
+// The controller's scheduling wait of each Slurm repetition (SchedulerWait), in seconds.
+std::vector<double> g_waits;
+
 bool Run(const std::string& command) { return std::system(command.c_str()) == 0; }
+
+// Seconds since midnight of a slurmctld log line's stamp "[2026-12-07T09:48:50.504] ...".
+double StampSeconds(const std::string& line) {
+  const size_t t = line.find('T');
+  if (line.size() < 24 || line[0] != '[' || t == std::string::npos) return -1;
+  return std::stoi(line.substr(t + 1, 2)) * 3600.0 + std::stoi(line.substr(t + 4, 2)) * 60.0 +
+         std::stod(line.substr(t + 7, 6));
+}
+
+// The controller's wait for the newest job in its log: from its submission to its first task's
+// allocation, in seconds (slurmctld schedules what was submitted at its next pass, once a second);
+// -1 when the log does not say.
+double SchedulerWait(const fs::path& log) {
+  std::ifstream in(log);
+  double submitted = -1, allocated = -1;
+  std::string job;
+  for (std::string line; std::getline(in, line);) {
+    size_t at = line.find("_slurm_rpc_submit_batch_job: JobId=");
+    if (at != std::string::npos) {
+      at += 35;
+      job = line.substr(at, line.find(' ', at) - at);
+      submitted = StampSeconds(line);
+      allocated = -1;
+    } else if (allocated < 0 && !job.empty() &&
+               line.find("sched: Allocate JobId=" + job + "_") != std::string::npos) {
+      allocated = StampSeconds(line);
+    }
+  }
+  return submitted >= 0 && allocated >= submitted ? allocated - submitted : -1;
+}
 
 // The collection before any run, made once.
 bool MakePristine(const fs::path& pristine) {
-  const std::string rig = kSource + "/config/small_rig.yaml";
-  for (int i = 1; i < kScans; ++i) {
+  const std::string rig = kSource + "/config/default_calibration.yaml";
+  for (int i = 1; i <= kScans - 2; ++i) {
     const fs::path raw = pristine / ("scan-" + std::to_string(1000 + i)) / "raw";
     if (!Run(kVellum + " render --out " + raw.string() + " --calibration " + rig + " --seed " +
              std::to_string(i) + " --truth false > /dev/null 2>&1")) {
@@ -44,7 +80,9 @@ bool MakePristine(const fs::path& pristine) {
     }
   }
   return Run(kVellum + " export " + VELLUM_DEMO_LOG + " " +
-             (pristine / "scan-2000-demo/raw").string() + " > /dev/null");
+             (pristine / "scan-2000-demo/raw").string() + " > /dev/null") &&
+         Run(kVellum + " export " + VELLUM_CURL_LOG + " " +
+             (pristine / "scan-2001-curl/raw").string() + " > /dev/null");
 }
 
 // One case: `flags` given to `vellum collection run` over a fresh copy of the collection.
@@ -70,6 +108,11 @@ void BM_CollectionRun(benchmark::State& state, const std::string& flags) {
     seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   }
   state.counters["scans_per_hour"] = kScans * 3600.0 * state.iterations() / seconds;
+  if (flags.find("--slurm") != std::string::npos) {
+    const double wait = SchedulerWait(Work() / "cluster" / "slurmctld.log");
+    state.counters["scheduler_wait_s"] = wait;
+    if (wait >= 0) g_waits.push_back(wait);
+  }
 }
 
 }  // namespace
@@ -121,6 +164,14 @@ int main(int argc, char** argv) {
         "scans/h): Slurm's overhead %.1f%% (medians; bar: 15%%)\n",
         local / 1e3, reporter.Spread("BM_Collection/local"), kScans * 3600e3 / local, slurm / 1e3,
         reporter.Spread("BM_Collection/slurm"), kScans * 3600e3 / slurm, 100 * (slurm / local - 1));
+  }
+  if (!g_waits.empty()) {
+    std::sort(g_waits.begin(), g_waits.end());
+    const double wait = g_waits[g_waits.size() / 2];
+    std::printf(
+        "of which slurmctld's wait from submission to the first task's start (its scheduling "
+        "pass, once a second): median %.2f s (%.2f to %.2f s); the rest of the overhead %.1f%%\n",
+        wait, g_waits.front(), g_waits.back(), 100 * ((slurm - wait * 1e3) / local - 1));
   }
   Run(kSource + "/tests/slurm/cluster.sh stop " + (work / "cluster").string());
   fs::remove_all(work);

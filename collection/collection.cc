@@ -15,6 +15,7 @@
 #include "flags/options.h"
 #include "io/calibration_io.h"
 #include "io/manifest.h"
+#include "io/scan_io.h"
 #include "io/version.h"
 #include "io/write_whole.h"
 #include "pipeline/process.h"
@@ -29,7 +30,8 @@ constexpr char kNewPrefix[] = ".vellum-new-";
 // recorded hashes and the reason a scan was given up.
 bool IsCapture(const std::string& rel) {
   return rel.rfind("raw/", 0) == 0 && rel != "raw/calibration.yaml" &&
-         rel != std::string("raw/") + kRecordedHashesName && rel != "raw/failed.txt";
+         rel != std::string("raw/") + kRecordedHashesName &&
+         rel != std::string("raw/") + kGivenUpName;
 }
 
 std::string ReadText(const std::string& path) {
@@ -136,13 +138,6 @@ bool Locked(const std::string& root, const std::string& folder) {
   return locked;
 }
 
-std::string FirstLine(const std::string& path) {
-  std::ifstream in(path);
-  std::string line;
-  std::getline(in, line);
-  return line;
-}
-
 // The want of one scan: what processing it now would make its products from.
 Status Want(const std::string& scan_dir, const std::map<std::string, std::string>& options,
             bool verify, Provenance* want) {
@@ -180,9 +175,9 @@ PlannedScan PlanFolder(const std::string& root, const std::string& folder,
   LedgerEntry ledger;
   if (ReadLedger(root, folder, &ledger).ok()) p.runs = ledger.runs;
   p.raw_bytes = RawBytes(dir / "raw");
-  if (fs::exists(dir / "raw" / "failed.txt", ec)) {
+  if (std::string why; ReadGivenUp((dir / "raw").string(), &why)) {
     p.state = State::kParked;
-    p.reasons.push_back("given up at the station: " + FirstLine((dir / "raw/failed.txt").string()));
+    p.reasons.push_back("given up at the station: " + why);
     return p;
   }
   if (fs::exists(dir / "pending", ec) || !fs::exists(dir / "raw" / "scan.yaml", ec)) {

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <mutex>
 #include <opencv2/core.hpp>
@@ -136,6 +137,15 @@ Status WriteFrameImage(const std::string& path, const cv::Mat& frame) {
 }
 
 std::string LightFileName(const std::string& name) { return "light_" + name + ".png"; }
+
+bool ReadGivenUp(const std::string& raw_dir, std::string* why) {
+  std::ifstream in(raw_dir + "/" + kGivenUpName);
+  if (!in) return false;
+  std::string line;
+  std::getline(in, line);
+  if (why != nullptr) *why = line;
+  return true;
+}
 
 Status WriteScanYaml(const std::string& dir, const Scan& header) {
   const PatternSequence& sequence = header.sequence;

@@ -18,6 +18,13 @@ std::string PatternName(int index);  // "pattern_007.png"
 
 std::string LightFileName(const std::string& name);  // "light_raking-090.png"
 
+// A scan the station gave up (recording failed, or parked after failing twice) holds the reason
+// in raw/failed.txt (docs/formats.md).
+inline constexpr const char* kGivenUpName = "failed.txt";
+// Whether the scan whose raw folder is `raw_dir` was given up; the first line of its reason in
+// *why (when asked).
+bool ReadGivenUp(const std::string& raw_dir, std::string* why = nullptr);
+
 // Reads scan.yaml only, into *header: the pattern sequence, the camera's size (0x0 when absent),
 // the identity keys (shelfmark, folio, side, operator, note, label; any may be absent), sanitised
 // (SanitizedIdentity); the extra lights (key `lights`: a sequence of {name, direction: [x, y,

@@ -18,13 +18,6 @@ namespace vellum::station {
 namespace fs = std::filesystem;
 namespace {
 
-std::string FirstLine(const std::string& path) {
-  std::ifstream in(path);
-  std::string line;
-  std::getline(in, line);
-  return line;
-}
-
 // The entry of one scan folder (`dir`, named `name`).
 SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t id) {
   SheetEntry e;
@@ -55,9 +48,8 @@ SheetEntry ReadEntry(const fs::path& dir, const std::string& relative, int64_t i
   }
   // A restored scan's report decides, even while its folder is still marked pending (the
   // restorer writes the sheet before the decoder hears RESTORED and clears the mark).
-  if (fs::exists(raw / "failed.txt", ec)) {
+  if (ReadGivenUp(raw.string(), &e.detail)) {
     e.state = "failed";
-    e.detail = FirstLine((raw / "failed.txt").string());
   } else if (!fs::exists(results / "report.json", ec) && fs::exists(dir / "pending", ec)) {
     e.state = "pending";
   } else if (fs::exists(results / "report.json", ec)) {

@@ -18,6 +18,7 @@
 #include "io/calibration_io.h"
 #include "io/image_file.h"
 #include "io/json.h"
+#include "io/scan_io.h"
 #include "station/messages.h"
 #include "station/node.h"
 #include "vellum/scan_started_t.hpp"
@@ -99,7 +100,7 @@ std::string ScanFolder::calibration() const {
 }
 
 std::string ScanFolder::pending() const { return (fs::path(root) / "pending").string(); }
-std::string ScanFolder::failed() const { return (fs::path(raw()) / "failed.txt").string(); }
+std::string ScanFolder::failed() const { return (fs::path(raw()) / kGivenUpName).string(); }
 std::string ScanFolder::scan_yaml() const { return (fs::path(raw()) / "scan.yaml").string(); }
 
 Status MarkFailed(const ScanFolder& folder, const std::string& why) {

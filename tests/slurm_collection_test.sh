@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # `vellum collection run --slurm` on a real one-node Slurm cluster (tests/slurm/cluster.sh: munged,
 # slurmctld and slurmd from Debian, inside this test's private network namespace), over a
-# collection of 20 scans: 18 leaves of the virtual gantry (seeds 1 to 18) and the two recorded
-# scans of tests/data (the demo leaf and the station tests' checkerboard leaf). The same collection is processed by the local pool beside it. Checks:
+# collection of 20 scans: 18 leaves of the virtual gantry (seeds 1 to 18, at the station's size)
+# and the two recorded scans of tests/data (the demo leaf and the station tests' checkerboard
+# leaf). The same collection is processed by the local pool beside it. Checks:
 #   - a task cancelled mid-way (scancel) leaves its scans wholly old; with no resubmission and no
 #     task taking another's scans the run reports them, and a second run finishes exactly the rest;
 #   - every product equals the local run's byte for byte (but report.json and report.html, which
@@ -39,11 +40,12 @@ export SLURM_CONF
 SLURM_CONF=$("$src/tests/slurm/cluster.sh" start "$work/cluster")
 echo "slurm_collection_test: cluster up ($SLURM_CONF)"
 
-rig=$src/config/small_rig.yaml
-for i in $(seq 1 18); do
-  "$vellum" render --out "$work/local/scan-$((1000 + i))/raw" --calibration "$rig" --seed "$i" \
-    --truth false >/dev/null 2>&1 || fail "render seed $i"
-done
+# The leaves at the station's own size (the default rig: 1600 x 1200, 108 MB of frames a scan), as
+# a library's collection holds them; two rendered at a time.
+rig=$src/config/default_calibration.yaml
+seq 1 18 | xargs -P 2 -I{} sh -c '"$1" render --out "$2/local/scan-$((1000 + {}))/raw" \
+  --calibration "$3" --seed {} --truth false >/dev/null 2>&1 || { echo "render seed {}" >&2; exit 255; }' \
+  sh "$vellum" "$work" "$rig" || fail "rendering the leaves"
 "$vellum" export "$demo_log" "$work/local/scan-2000-demo/raw" >/dev/null || fail "export $demo_log"
 "$vellum" export "$curl_log" "$work/local/scan-2001-curl/raw" >/dev/null || fail "export $curl_log"
 cp -a "$work/local" "$work/slurm"
