@@ -10,6 +10,8 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <map>
+#include <mutex>
 #include <sstream>
 
 #include "flags/options.h"
@@ -138,13 +140,46 @@ bool Locked(const std::string& root, const std::string& folder) {
   return locked;
 }
 
+// The SHA-256 of each file the processing flags name (their value name is FILE), by flag. Read
+// once a process for each file as it is now (its size and time): a plan of thousands of scans
+// hashes a flat field once.
+Status FilesOf(const std::map<std::string, std::string>& options,
+               std::map<std::string, std::string>* files) {
+  static std::mutex mutex;
+  static std::map<std::string, std::pair<std::string, std::string>> hashed;  // path: (stamp, hex)
+  files->clear();
+  for (const Flags::Spec& spec : PipelineFlagSpecs()) {
+    const auto it = options.find(spec.name);
+    if (spec.value_name != "FILE" || it == options.end() || it->second.empty()) continue;
+    const std::string& path = it->second;
+    std::error_code ec;
+    const auto size = fs::file_size(path, ec);
+    const auto time = fs::last_write_time(path, ec);
+    if (ec)
+      return Status::Error("--" + spec.name + " " + path + ": cannot read (" + ec.message() + ")");
+    const std::string stamp =
+        std::to_string(size) + "@" + std::to_string(time.time_since_epoch().count());
+    std::lock_guard<std::mutex> lock(mutex);
+    auto& [was, hex] = hashed[path];
+    if (was != stamp || hex.empty()) {
+      const Status s = Sha256OfFile(path, &hex);
+      if (!s.ok()) return Status::Error("--" + spec.name + ": " + s.message());
+      was = stamp;
+    }
+    (*files)[spec.name] = hex;
+  }
+  return Status::Ok();
+}
+
 // The want of one scan: what processing it now would make its products from.
 Status Want(const std::string& scan_dir, const std::map<std::string, std::string>& options,
             bool verify, Provenance* want) {
   want->vellum_version = VellumVersion();
   want->options = options;
+  Status s = FilesOf(options, &want->files);
+  if (!s.ok()) return s;
   Calibration calibration;
-  Status s = ReadCalibration(scan_dir + "/raw/calibration.yaml", &calibration);
+  s = ReadCalibration(scan_dir + "/raw/calibration.yaml", &calibration);
   if (!s.ok()) return s;
   want->calibration_sha256 = CalibrationSha256(calibration);
   return RawDigest(scan_dir, verify, &want->raw_sha256);
@@ -279,6 +314,9 @@ Json ProvenanceJson(const Provenance& p) {
   Json options = Json::object();
   for (const auto& [name, value] : p.options) options[name] = value;
   j["options"] = options;
+  Json files = Json::object();
+  for (const auto& [name, hex] : p.files) files[name] = hex;
+  j["files"] = files;
   if (p.run > 0) j["run"] = p.run;
   return j;
 }
@@ -292,6 +330,10 @@ Status ReadProvenance(const std::string& file, Provenance* p) {
     p->options.clear();
     for (const auto& [name, value] : j.at("options").items()) {
       p->options[name] = value.get<std::string>();
+    }
+    p->files.clear();
+    if (j.contains("files")) {
+      for (const auto& [name, hex] : j.at("files").items()) p->files[name] = hex.get<std::string>();
     }
     p->run = j.value("run", 0);
   } catch (const std::exception& e) {
@@ -317,6 +359,15 @@ std::vector<std::string> StaleReasons(const Provenance& made, const Provenance& 
     const std::string a = was == made.options.end() ? "(none)" : was->second;
     const std::string b = now == want.options.end() ? "(none)" : now->second;
     if (a != b) why.push_back("option --" + name + " changed: " + a + " -> " + b);
+  }
+  // A file changed under the same name (a new name is an option's change, said above).
+  for (const auto& [name, hex] : want.files) {
+    const auto was = made.files.find(name);
+    const std::string a = was == made.files.end() ? "(none)" : was->second.substr(0, 12);
+    if (made.options.count(name) && made.options.at(name) == want.options.at(name) &&
+        a != hex.substr(0, 12)) {
+      why.push_back("file of --" + name + " changed: " + a + " -> " + hex.substr(0, 12));
+    }
   }
   return why;
 }

@@ -23,12 +23,15 @@ inline constexpr char kLedgerFolder[] = "vellum-collection";
 // What a scan's products were made from, in its results folder.
 inline constexpr char kProvenanceName[] = "provenance.json";
 
-// What a scan's products were made from: the same four, and the scan is up to date.
+// What a scan's products were made from: the same five, and the scan is up to date.
 struct Provenance {
   std::string vellum_version;                  // io/version.h
   std::string raw_sha256;                      // RawDigest: the raw captures' checksums, as one.
   std::string calibration_sha256;              // Of the calibration's values (CalibrationSha256).
   std::map<std::string, std::string> options;  // Every processing flag and its value.
+  // The SHA-256 of each file a processing flag names (--camera-icc, --flatfield, --studio-field),
+  // by flag: a file changed under the same name makes the scan stale too.
+  std::map<std::string, std::string> files;
   // The how-manyth time the scan was processed (1 the first): the ledger's counter, kept with the
   // products too, so that a run killed between the swap and the ledger's note miscounts nothing.
   // Not compared by StaleReasons.

@@ -2,7 +2,6 @@
 // and bad input (missing frame, mixed sizes, non-image, wrong calibration) giving one clear
 // error that names the file and the problem, a non-zero exit, and never a crash.
 #include <gtest/gtest.h>
-#include <lcms2.h>
 #include <sys/wait.h>
 
 #include <cmath>
@@ -19,6 +18,7 @@
 #include "io/ply.h"
 #include "io/scan_io.h"
 #include "io/xmp.h"
+#include "tests/icc_profile.h"
 #include "tests/shell.h"
 
 namespace vellum {
@@ -521,29 +521,6 @@ void ExpectCleanError(const Result& r, const std::string& file, const std::strin
   EXPECT_NE(r.output.find(problem), std::string::npos) << r.output;
   // One clear line, not a stack of messages.
   EXPECT_LE(std::count(r.output.begin(), r.output.end(), '\n'), 2) << r.output;
-}
-
-// Writes an ICC profile as a colour target's software would for a camera: gray (the gantry's
-// camera is gray) or RGB (Adobe RGB (1998) primaries), gamma 2.2, D65 white, named `name`.
-void WriteCameraProfile(const fs::path& file, bool rgb, const char* name) {
-  cmsToneCurve* gamma = cmsBuildGamma(nullptr, 2.2);
-  cmsCIExyY d65;
-  cmsWhitePointFromTemp(&d65, 6504);
-  cmsHPROFILE profile = nullptr;
-  if (rgb) {
-    const cmsCIExyYTRIPLE primaries = {{0.64, 0.33, 1}, {0.21, 0.71, 1}, {0.15, 0.06, 1}};
-    cmsToneCurve* curves[3] = {gamma, gamma, gamma};
-    profile = cmsCreateRGBProfile(&d65, &primaries, curves);
-  } else {
-    profile = cmsCreateGrayProfile(&d65, gamma);
-  }
-  cmsMLU* description = cmsMLUalloc(nullptr, 1);
-  cmsMLUsetASCII(description, "en", "US", name);
-  cmsWriteTag(profile, cmsSigProfileDescriptionTag, description);
-  cmsMLUfree(description);
-  ASSERT_TRUE(cmsSaveProfileToFile(profile, file.c_str()));
-  cmsCloseProfile(profile);
-  cmsFreeToneCurve(gamma);
 }
 
 // The camera's own ICC profile (--camera-icc) goes as is into the production and the

@@ -20,6 +20,8 @@
 #include <thread>
 #include <vector>
 
+#include "io/xmp.h"
+#include "tests/icc_profile.h"
 #include "tests/shell.h"
 
 namespace vellum {
@@ -228,6 +230,39 @@ TEST_F(CollectionTest, ANewCalibrationMakesExactlyItsScansStaleWithTheReason) {
   EXPECT_EQ(Runs("scan-1001"), 2);
   EXPECT_EQ(Runs("scan-1002"), 1);
   ExpectManifestsCheck();
+}
+
+// A file a processing flag names is part of what the products were made from: the camera's
+// profile (embedded in the masters) refined under the same name makes every scan stale, with the
+// reason, and the next run embeds the new one.
+TEST_F(CollectionTest, AProfileRefinedUnderTheSameNameMakesEveryScanStale) {
+  fs::remove_all(root_ / "scan-2000-demo");  // A colour scan: the gantry's leaves are gray.
+  const fs::path icc = root_.string() + "_camera.icc";
+  WriteCameraProfile(icc, false, "Gantry camera 7, gray, gamma 2.2");
+  const std::string flag = "--camera-icc " + icc.string();
+  ShellResult r = Collection("run", flag);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  r = Collection("plan", flag);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+
+  WriteCameraProfile(icc, false, "Gantry camera 7, gray, gamma 2.2, refined");
+  r = Collection("plan", flag);
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  const std::vector<std::string> stale = LinesStarting(r.output, "scan-");
+  EXPECT_EQ(stale.size(), 4u) << r.output;
+  for (const std::string& line : stale) {
+    EXPECT_NE(line.find(": stale: file of --camera-icc changed: "), std::string::npos) << line;
+    EXPECT_EQ(line.find(';'), std::string::npos) << line;  // That reason alone.
+  }
+  r = Collection("run", flag);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("4 scan(s) to process"), std::string::npos) << r.output;
+  std::string embedded;
+  ASSERT_TRUE(ReadIccProfile((root_ / "scan-1002/results/restored.tif").string(), &embedded).ok());
+  EXPECT_EQ(embedded, Text(icc));
+  EXPECT_EQ(Collection("plan", flag).exit_code, 0);
+  ExpectManifestsCheck();
+  fs::remove(icc);
 }
 
 // A scan that cannot be processed is recorded with its message; the others are done; a second
