@@ -155,8 +155,9 @@ Status FilesOf(const std::map<std::string, std::string>& options,
     std::error_code ec;
     const auto size = fs::file_size(path, ec);
     const auto time = fs::last_write_time(path, ec);
-    if (ec)
+    if (ec) {
       return Status::Error("--" + spec.name + " " + path + ": cannot read (" + ec.message() + ")");
+    }
     const std::string stamp =
         std::to_string(size) + "@" + std::to_string(time.time_since_epoch().count());
     std::lock_guard<std::mutex> lock(mutex);
@@ -364,8 +365,10 @@ std::vector<std::string> StaleReasons(const Provenance& made, const Provenance& 
   for (const auto& [name, hex] : want.files) {
     const auto was = made.files.find(name);
     const std::string a = was == made.files.end() ? "(none)" : was->second.substr(0, 12);
-    if (made.options.count(name) && made.options.at(name) == want.options.at(name) &&
-        a != hex.substr(0, 12)) {
+    const auto named = made.options.find(name), naming = want.options.find(name);
+    const bool same_name = named != made.options.end() && naming != want.options.end() &&
+                           named->second == naming->second;
+    if (same_name && a != hex.substr(0, 12)) {
       why.push_back("file of --" + name + " changed: " + a + " -> " + hex.substr(0, 12));
     }
   }
