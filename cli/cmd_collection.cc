@@ -344,12 +344,13 @@ int RunTask(const std::string& root, const Flags& flags) {
   std::fflush(stdout);
   const auto start = std::chrono::steady_clock::now();
   const collection::RunSettings run = Settings(flags);
-  // Each scan claimed first (collection::ClaimForArray): a task that already stole it keeps it.
+  // Each scan claimed first (collection::ClaimForArray): a task that already took it keeps it.
   const std::string claims = (fs::path(list).parent_path() / "claims").string();
   int failed = 0;
-  for (const std::string& folder : mine) {
+  auto take = [&](const std::string& folder) {
     if (collection::ClaimForArray(claims, folder)) failed += RunPool(root, {folder}, 1, run);
-  }
+  };
+  for (const std::string& folder : mine) take(folder);
   // Then, for --steal-for seconds from its start, the scans of the tasks not yet begun, from the
   // list's end: the array ends when its work does, not when its slowest chunk does. A scan another
   // task of the array claimed is left to it; one done meanwhile by another run is left alone by
@@ -361,7 +362,7 @@ int RunTask(const std::string& root, const Flags& flags) {
         steal_for) {
       break;
     }
-    if (collection::ClaimForArray(claims, all[i])) failed += RunPool(root, {all[i]}, 1, run);
+    take(all[i]);
   }
   return failed > 0 ? 1 : 0;
 }

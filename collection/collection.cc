@@ -154,7 +154,7 @@ Status FilesOf(const std::map<std::string, std::string>& options,
     const std::string& path = it->second;
     std::error_code ec;
     const auto size = fs::file_size(path, ec);
-    const auto time = fs::last_write_time(path, ec);
+    const auto time = ec ? fs::file_time_type() : fs::last_write_time(path, ec);
     if (ec) {
       return Status::Error("--" + spec.name + " " + path + ": cannot read (" + ec.message() + ")");
     }
@@ -364,11 +364,11 @@ std::vector<std::string> StaleReasons(const Provenance& made, const Provenance& 
   // A file changed under the same name (a new name is an option's change, said above).
   for (const auto& [name, hex] : want.files) {
     const auto was = made.files.find(name);
-    const std::string a = was == made.files.end() ? "(none)" : was->second.substr(0, 12);
     const auto named = made.options.find(name), naming = want.options.find(name);
     const bool same_name = named != made.options.end() && naming != want.options.end() &&
                            named->second == naming->second;
-    if (same_name && a != hex.substr(0, 12)) {
+    if (same_name && (was == made.files.end() || was->second != hex)) {
+      const std::string a = was == made.files.end() ? "(none)" : was->second.substr(0, 12);
       why.push_back("file of --" + name + " changed: " + a + " -> " + hex.substr(0, 12));
     }
   }
