@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <opencv2/core/utility.hpp>
+#include <vector>
 
 namespace vellum {
 namespace {
@@ -180,6 +182,74 @@ cv::Vec3d CameraModel::RayDirection(const cv::Point2d& pixel) const {
 cv::Vec3d CameraModel::RayDirection(const cv::Point2d& pixel, cv::Point2d* shift) const {
   const cv::Point2d n = Normalize(pixel, shift);
   return cv::normalize(rotation.t() * cv::Vec3d(n.x, n.y, 1.0));
+}
+
+cv::Mat CameraModel::RayTable() const {
+  const int step = kRayTableStep;
+  const int cols = (size.width - 1 + step - 1) / step + 1;  // Nodes to the last pixel or past.
+  const int rows = (size.height - 1 + step - 1) / step + 1;
+  // The ideal coordinates at every node, each row's inversion started from its left neighbour.
+  cv::Mat nodes(rows, cols, CV_64FC2);
+  cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
+    for (int j = range.start; j < range.end; ++j) {
+      cv::Point2d shift(0, 0);
+      auto* row = nodes.ptr<cv::Point2d>(j);
+      for (int i = 0; i < cols; ++i) row[i] = Normalize(cv::Point2d(i * step, j * step), &shift);
+    }
+  });
+  const cv::Matx33d to_world = rotation.t();
+  const double fx = matrix(0, 0), skew = matrix(0, 1), cx = matrix(0, 2);
+  const double fy = matrix(1, 1), cy = matrix(1, 2);
+  const double near = kRayTableStartPx / std::max(fx, fy);
+  cv::Mat rays(size, CV_32FC3);
+  cv::parallel_for_(cv::Range(0, rows - 1), [&](const cv::Range& range) {
+    std::vector<double> left_x(cols), left_y(cols);
+    std::vector<uint8_t> near_enough(cols);
+    for (int j = range.start; j < range.end; ++j) {
+      const cv::Point2d* top = nodes.ptr<cv::Point2d>(j);
+      const cv::Point2d* bottom = nodes.ptr<cv::Point2d>(j + 1);
+      const int v0 = j * step, v1 = std::min(size.height, v0 + step);
+      // A cell whose bilinear start strays at its centre (where a bilinear's error is largest)
+      // beyond kRayTableStartPx is inverted pixel by pixel.
+      for (int i = 0; i + 1 < cols; ++i) {
+        const cv::Point2d centre = 0.25 * (top[i] + top[i + 1] + bottom[i] + bottom[i + 1]);
+        const cv::Point2d exact = Normalize(cv::Point2d((i + 0.5) * step, (j + 0.5) * step));
+        near_enough[i] = cv::norm(centre - exact) <= near;
+      }
+      for (int v = v0; v < v1; ++v) {
+        const double t = double(v - v0) / step;
+        for (int i = 0; i < cols; ++i) {
+          left_x[i] = (1 - t) * top[i].x + t * bottom[i].x;
+          left_y[i] = (1 - t) * top[i].y + t * bottom[i].y;
+        }
+        const double yd = (v - cy) / fy;
+        auto* out = rays.ptr<cv::Vec3f>(v);
+        for (int u = 0; u < size.width; ++u) {
+          const int i = u / step;
+          const double s = double(u - i * step) / step;
+          const double xd = (u - cx - skew * yd) / fx;
+          double x = (1 - s) * left_x[i] + s * left_x[i + 1];
+          double y = (1 - s) * left_y[i] + s * left_y[i + 1];
+          cv::Matx22d jac;
+          const cv::Point2d d = Distort(distortion, x, y, &jac);
+          const double ex = d.x - xd, ey = d.y - yd;
+          const double inv_det = 1.0 / (jac(0, 0) * jac(1, 1) - jac(0, 1) * jac(1, 0));
+          x -= (jac(1, 1) * ex - jac(0, 1) * ey) * inv_det;
+          y -= (jac(0, 0) * ey - jac(1, 0) * ex) * inv_det;
+          out[u] = cv::normalize(to_world * cv::Vec3d(x, y, 1.0));
+        }
+        for (int i = 0; i + 1 < cols; ++i) {
+          if (near_enough[i]) continue;
+          cv::Point2d shift(0, 0);
+          for (int u = i * step; u < std::min(size.width, (i + 1) * step); ++u) {
+            const cv::Point2d n = Normalize(cv::Point2d(u, v), &shift);
+            out[u] = cv::normalize(to_world * cv::Vec3d(n.x, n.y, 1.0));
+          }
+        }
+      }
+    }
+  });
+  return rays;
 }
 
 bool Calibration::Check(std::string* why) const {

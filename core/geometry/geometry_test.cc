@@ -60,6 +60,41 @@ TEST(CameraModel, NormalizeFromANeighboursShiftGivesTheSamePoint) {
   }
 }
 
+// The ray table against each pixel's exact ray rounded to the float the table stores: the same
+// float, or at a rounding's tie the next one (a float's step is some 1e-4 px of the default
+// camera; the decoder's own precision some 0.02 px), for the default camera, a mild lens with
+// tangential terms and a wide lens of strong barrel distortion, on both sides of the table's
+// cells, out to the last row and column.
+TEST(CameraModel, RayTableHoldsEveryPixelsRay) {
+  for (const cv::Vec<double, 5>& distortion :
+       {DefaultRig().camera.distortion, cv::Vec<double, 5>(-0.08, 0.03, 0.001, -0.0005, 0.002),
+        cv::Vec<double, 5>(-0.3, 0.12, -0.002, 0.003, -0.02)}) {
+    CameraModel cam = DefaultRig().camera;
+    cam.distortion = distortion;
+    const cv::Mat table = cam.RayTable();
+    ASSERT_EQ(table.size(), cam.size);
+    ASSERT_EQ(table.type(), CV_32FC3);
+    int pixels = 0, ties = 0, off = 0;
+    for (int v = 0; v < cam.size.height; v += (v % 8 == 7 ? 13 : 1)) {
+      cv::Point2d shift(0, 0);
+      for (int u = 0; u < cam.size.width; ++u, ++pixels) {
+        const cv::Vec3f exact(cam.RayDirection(cv::Point2d(u, v), &shift));
+        const cv::Vec3f held = table.at<cv::Vec3f>(v, u);
+        if (held == exact) continue;
+        ++ties;
+        for (int k = 0; k < 3; ++k) {
+          if (held[k] != exact[k] && held[k] != std::nextafter(exact[k], 2.0f) &&
+              held[k] != std::nextafter(exact[k], -2.0f)) {
+            ++off;
+          }
+        }
+      }
+    }
+    EXPECT_EQ(off, 0) << "distortion " << distortion;
+    EXPECT_LT(ties, pixels / 100) << "distortion " << distortion;
+  }
+}
+
 TEST(CameraModel, CheckRejectsAMirroredRotation) {
   CameraModel cam = DefaultRig().projector;
   cam.rotation = cam.rotation * cv::Matx33d(-1, 0, 0, 0, 1, 0, 0, 0, 1);

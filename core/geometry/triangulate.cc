@@ -60,14 +60,7 @@ Triangulator::Triangulator(const Calibration& calibration) : calibration_(calibr
   std::string why;
   VELLUM_DEMAND(calibration_.Check(&why));
   const CameraModel& cam = calibration_.camera;
-  rays_.create(cam.size, CV_32FC3);
-  cv::parallel_for_(cv::Range(0, cam.size.height), [&](const cv::Range& range) {
-    for (int v = range.start; v < range.end; ++v) {
-      cv::Vec3f* row = rays_.ptr<cv::Vec3f>(v);
-      cv::Point2d shift(0, 0);  // Each pixel's inversion starts from its left neighbour's.
-      for (int u = 0; u < cam.size.width; ++u) row[u] = cam.RayDirection(cv::Point2d(u, v), &shift);
-    }
-  });
+  rays_ = cam.RayTable();
 }
 
 PointMap Triangulator::Triangulate(const DecodeResult& decoded,
