@@ -28,7 +28,7 @@ std::vector<Flags::Spec> DaemonFlagSpecs(bool with_data) {
     specs.push_back({"pace", "MB/S",
                      "publish chunked products at most this fast: below the slowest link and "
                      "what every receiver drains (udpm drops a message with any lost fragment)",
-                     "200"});
+                     "800"});
   }
   return specs;
 }

@@ -300,7 +300,7 @@ class Node {
   // Taken back when the node goes, so that a bus outliving it (a test's) never calls into it.
   std::vector<lcm::Subscription*> subscriptions_;
   std::atomic<bool> stop_{false};
-  double pace_ = 200e6;  // Bytes per second of chunked products (--pace).
+  double pace_ = 800e6;  // Bytes per second of chunked products (--pace).
 
   // Guards the sequence numbers, the status (state, detail, errors) and the counters below:
   // the LCM thread and the worker both report.
