@@ -19,8 +19,8 @@ bool FiniteMatx(const double* v, int n) {
 
 // Applies OpenCV's distortion model to ideal normalised coordinates; with `jacobian`, also its
 // derivatives there (d distorted / d (x, y): symmetric, both off-diagonal terms the same).
-cv::Point2d Distort(const cv::Vec<double, 5>& d, double x, double y,
-                    cv::Matx22d* jacobian = nullptr) {
+inline cv::Point2d Distort(const cv::Vec<double, 5>& d, double x, double y,
+                           cv::Matx22d* jacobian = nullptr) {
   const double r2 = x * x + y * y;
   const double radial = 1 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
   if (jacobian) {
@@ -202,8 +202,9 @@ cv::Mat CameraModel::RayTable() const {
   const double fy = matrix(1, 1), cy = matrix(1, 2);
   const double near = kRayTableStartPx / std::max(fx, fy);
   cv::Mat rays(size, CV_32FC3);
+  const int width = size.width;
   cv::parallel_for_(cv::Range(0, rows - 1), [&](const cv::Range& range) {
-    std::vector<double> left_x(cols), left_y(cols);
+    std::vector<double> left_x(cols), left_y(cols), xs(width), ys(width);
     std::vector<uint8_t> near_enough(cols);
     for (int j = range.start; j < range.end; ++j) {
       const cv::Point2d* top = nodes.ptr<cv::Point2d>(j);
@@ -223,25 +224,34 @@ cv::Mat CameraModel::RayTable() const {
           left_y[i] = (1 - t) * top[i].y + t * bottom[i].y;
         }
         const double yd = (v - cy) / fy;
-        auto* out = rays.ptr<cv::Vec3f>(v);
-        for (int u = 0; u < size.width; ++u) {
+        // Branch-free passes over the row, so that each vectorises: the starts, one Newton
+        // round, the rays.
+        for (int u = 0; u < width; ++u) {
           const int i = u / step;
           const double s = double(u - i * step) / step;
-          const double xd = (u - cx - skew * yd) / fx;
-          double x = (1 - s) * left_x[i] + s * left_x[i + 1];
-          double y = (1 - s) * left_y[i] + s * left_y[i + 1];
+          xs[u] = (1 - s) * left_x[i] + s * left_x[i + 1];
+          ys[u] = (1 - s) * left_y[i] + s * left_y[i + 1];
+        }
+        for (int u = 0; u < width; ++u) {
+          const double x = xs[u], y = ys[u];
           cv::Matx22d jac;
           const cv::Point2d d = Distort(distortion, x, y, &jac);
-          const double ex = d.x - xd, ey = d.y - yd;
+          const double ex = d.x - (u - cx - skew * yd) / fx, ey = d.y - yd;
           const double inv_det = 1.0 / (jac(0, 0) * jac(1, 1) - jac(0, 1) * jac(1, 0));
-          x -= (jac(1, 1) * ex - jac(0, 1) * ey) * inv_det;
-          y -= (jac(0, 0) * ey - jac(1, 0) * ex) * inv_det;
-          out[u] = cv::normalize(to_world * cv::Vec3d(x, y, 1.0));
+          xs[u] = x - (jac(1, 1) * ex - jac(0, 1) * ey) * inv_det;
+          ys[u] = y - (jac(0, 0) * ey - jac(1, 0) * ex) * inv_det;
+        }
+        auto* out = rays.ptr<cv::Vec3f>(v);
+        for (int u = 0; u < width; ++u) {
+          const cv::Vec3d r = to_world * cv::Vec3d(xs[u], ys[u], 1.0);
+          const double inv = 1.0 / std::sqrt(r.dot(r));
+          out[u] = cv::Vec3f(static_cast<float>(r[0] * inv), static_cast<float>(r[1] * inv),
+                             static_cast<float>(r[2] * inv));
         }
         for (int i = 0; i + 1 < cols; ++i) {
           if (near_enough[i]) continue;
           cv::Point2d shift(0, 0);
-          for (int u = i * step; u < std::min(size.width, (i + 1) * step); ++u) {
+          for (int u = i * step; u < std::min(width, (i + 1) * step); ++u) {
             const cv::Point2d n = Normalize(cv::Point2d(u, v), &shift);
             out[u] = cv::normalize(to_world * cv::Vec3d(n.x, n.y, 1.0));
           }
