@@ -157,9 +157,30 @@ void Node::Hold(HeldProduct product) {
   }
   std::deque<HeldProduct> kept;
   for (size_t i = 0; i < held_.size(); ++i) {
-    if (keep[i]) kept.push_back(std::move(held_[i]));
+    if (keep[i]) {
+      kept.push_back(std::move(held_[i]));
+      continue;
+    }
+    for (std::vector<uint8_t>& chunk : held_[i].chunks) {
+      if (spare_bytes_ + chunk.capacity() > kSpareBytes) break;
+      spare_bytes_ += chunk.capacity();
+      spare_.push_back(std::move(chunk));
+    }
   }
   held_.swap(kept);
+}
+
+std::vector<uint8_t> Node::SpareBuffer() {
+  std::vector<uint8_t> buffer;
+  {
+    std::lock_guard<std::mutex> lock(held_mutex_);
+    if (spare_.empty()) return buffer;
+    buffer = std::move(spare_.back());
+    spare_.pop_back();
+    spare_bytes_ -= buffer.capacity();
+  }
+  Count("chunk buffers reused");
+  return buffer;
 }
 
 void Node::OnResend(const resend_request_t& msg) {

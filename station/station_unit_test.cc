@@ -1043,6 +1043,37 @@ TEST(Assembler, TheWorkBeforeTheLastChunkRunsBeforeItAndWhenItFailsTheProductNev
   EXPECT_EQ(r.node.Counter("products lost"), 1);
 }
 
+// A product sent once the oldest held ones are let go is encoded into their buffers (their
+// pages already in memory): every product, larger or smaller than the one before, comes whole
+// and as sent, and so do its chunks sent again from those buffers.
+TEST(Assembler, ProductsEncodedIntoTheBuffersOfOnesLetGoComeAsSent) {
+  lcm::LCM bus("memq://");
+  Node sender("vellum-sender", &bus);
+  sender.SetPace(1e12);
+  const std::vector<cv::Size> sizes = {{800, 600},  {800, 600}, {800, 600},
+                                       {1200, 900}, {640, 480}, {800, 600}};
+  std::vector<cv::Mat> sent;
+  for (size_t k = 0; k < sizes.size(); ++k) {
+    cv::Mat texture(sizes[k], CV_8UC3);
+    cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+    sent.push_back(texture);
+    std::vector<texture_t> chunks = TextureMessages(static_cast<int64_t>(20 + k), texture);
+    TextureReceiver r(&bus);
+    sender.PublishChunks("TEXTURE", &chunks);
+    const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
+    ASSERT_EQ(products.size(), 1u) << "product " << k;
+    EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0) << "product " << k;
+  }
+  EXPECT_GT(sender.Counter("chunk buffers reused"), 0);
+  // The newest, held in reused buffers, asked again whole by a receiver that missed it.
+  TextureReceiver late(&bus);
+  late.assembler.AwaitAnnounced("TEXTURE");
+  AnnounceHandedOn(&sender, 25, "TEXTURE");
+  const std::vector<cv::Mat> again = late.TickUntilWhole(&bus);
+  ASSERT_EQ(again.size(), 1u) << "not sent again";
+  EXPECT_EQ(cv::norm(again[0], sent.back(), cv::NORM_INF), 0.0);
+}
+
 // A product of which no chunk came (the bus lost it all) is known by its sender's announcement
 // on SCAN_PROGRESS: it is asked again whole and comes, as sent.
 TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
