@@ -186,8 +186,9 @@ cv::Vec3d CameraModel::RayDirection(const cv::Point2d& pixel, cv::Point2d* shift
 
 cv::Mat CameraModel::RayTable() const {
   const int step = kRayTableStep;
-  const int cols = (size.width - 1 + step - 1) / step + 1;  // Nodes to the last pixel or past.
-  const int rows = (size.height - 1 + step - 1) / step + 1;
+  // Nodes to the last pixel or past, at least one cell across and down.
+  const int cols = std::max(2, (size.width - 1 + step - 1) / step + 1);
+  const int rows = std::max(2, (size.height - 1 + step - 1) / step + 1);
   // The ideal coordinates at every node, each row's inversion started from its left neighbour.
   cv::Mat nodes(rows, cols, CV_64FC2);
   cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {

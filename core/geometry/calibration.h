@@ -35,7 +35,7 @@ struct CameraModel {
   // Every pixel's RayDirection (CV_32FC3, `size`), on both cores. The distortion is inverted
   // from scratch at every kRayTableStep-th pixel across and down; between them each pixel's
   // inversion starts from the bilinear of those and takes one Newton round (from a start within
-  // kRayTableStartPx the round leaves an error of some 1e-6 px). A cell whose bilinear strays
+  // kRayTableStartPx the round leaves an error well under 1e-6 px). A cell whose bilinear strays
   // further at its centre is inverted pixel by pixel.
   cv::Mat RayTable() const;
   static constexpr int kRayTableStep = 8;
