@@ -1081,6 +1081,7 @@ TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
       {"%YAML:1.0\n   rows: 3\n* v-m\n", "indented"},
       {"%YAML:1.0\na: 1\n...\n-x\n", "\"...\""},
       {"%YAML:1.0\n---  rows: 3\n* v-m\n", "an entry on a \"---\" line"},
+      {"%YAML:1.0\n---\n %YAML:1.0\n-x--\n", "\"%\" directive"},
   };
   for (const auto& c : cases) {
     const std::string path = (dir / "calibration.yaml").string();
@@ -1093,6 +1094,14 @@ TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
     Scan header;
     EXPECT_FALSE(ReadScanYaml(dir.string(), &header).ok());
   }
+  // The same in a station's lights file, as the fuzzer found it (its first byte picks the file).
+  const std::string lights = FuzzFileSeed("regression-opencv-yaml-indented-directive-hang");
+  ASSERT_FALSE(lights.empty());
+  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights;
+  StationLights station;
+  const Status refused = ReadLightsFile((dir / "lights.yaml").string(), &station);
+  EXPECT_FALSE(refused.ok());
+  EXPECT_NE(refused.message().find("directive"), std::string::npos) << refused.message();
   // The header OpenCV writes, comments and blank lines before the first entry are fine.
   Calibration calibration;
   ASSERT_TRUE(WriteCalibration((dir / "ok.yaml").string(), DefaultRig()).ok());

@@ -24,8 +24,8 @@ inline bool MatrixNodeAtMost(const cv::FileNode& node, double max_elements) {
 
 // Checks that `path` is a text file of a sane size, with nothing known to hang OpenCV 4.6's
 // YAML parser, before OpenCV parses it: the parser loops forever on a NUL byte, on a second
-// document not started by "---", and on a "---" line with an entry after it (all found by
-// fuzz/fuzz_files). Returns "" when fine, else what is wrong.
+// document not started by "---", on a "---" line with an entry after it, and on a "%" directive
+// after "---" (all found by fuzz/fuzz_files). Returns "" when fine, else what is wrong.
 inline std::string YamlTextProblem(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return "cannot open";
@@ -38,7 +38,7 @@ inline std::string YamlTextProblem(const std::string& path) {
   // OpenCV 4.6's parser also loops forever when a second YAML document follows the first one
   // and does not start with "---" (found by fuzz/fuzz_files): the first document must be at
   // column 0 (so it runs to the end of the file), and "..." (end of document) is refused.
-  bool content = false;
+  bool content = false, begun = false;  // An entry seen; a "---" seen.
   for (size_t start = 0; start < text.size();) {
     size_t end = text.find('\n', start);
     if (end == std::string::npos) end = text.size();
@@ -54,6 +54,12 @@ inline std::string YamlTextProblem(const std::string& path) {
       if (rest != std::string::npos && line[rest] != '#') {
         return "an entry on a \"---\" line is not supported (start it on the next line)";
       }
+      begun = true;
+    }
+    // A directive ("%YAML:1.0") opens the file, at column 0: after "---" or an entry, or
+    // indented, the parser may never return.
+    if (line[first] == '%' && (first != 0 || begun || content)) {
+      return "a \"%\" directive after the start of the document is not supported";
     }
     if (content || line[first] == '%' || line.compare(first, 3, "---") == 0) continue;
     if (first != 0) return "the first entry is indented (it must start at column 0)";
