@@ -1043,6 +1043,16 @@ std::string FuzzFileSeed(const std::string& name) {
   return bytes.empty() ? bytes : bytes.substr(1);
 }
 
+// A fuzz_files seed read as a station's lights file, `dir`/lights.yaml (an empty seed, as a
+// missing one reads, fails the test).
+Status ReadLightsSeed(const std::string& name, const std::filesystem::path& dir) {
+  const std::string lights = FuzzFileSeed(name);
+  EXPECT_FALSE(lights.empty()) << name;
+  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights;
+  StationLights station;
+  return ReadLightsFile((dir / "lights.yaml").string(), &station);
+}
+
 // Inputs the fuzzers found that made OpenCV's YAML reader throw std::length_error (not a
 // cv::Exception), which ended the reading process; now they are errors naming the file.
 TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
@@ -1058,11 +1068,7 @@ TEST(IoFuzzRegressions, YamlThatMakesOpenCvThrowIsAnError) {
   EXPECT_FALSE(ReadCalibration((dir / "calibration.yaml").string(), &calibration).ok());
   // The same throw from the station's lights file ended the process (its reader caught only
   // cv::Exception; found once fuzz_files read lights files).
-  const std::string lights = FuzzFileSeed("regression-lights-yaml-length-error");
-  ASSERT_FALSE(lights.empty());
-  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights;
-  StationLights station;
-  const Status s = ReadLightsFile((dir / "lights.yaml").string(), &station);
+  const Status s = ReadLightsSeed("regression-lights-yaml-length-error", dir);
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("lights.yaml: cannot parse"), std::string::npos) << s.message();
   std::filesystem::remove_all(dir);
@@ -1095,11 +1101,7 @@ TEST(IoFuzzRegressions, YamlThatHangsOpenCvIsRefusedFirst) {
     EXPECT_FALSE(ReadScanYaml(dir.string(), &header).ok());
   }
   // The same in a station's lights file, as the fuzzer found it (its first byte picks the file).
-  const std::string lights = FuzzFileSeed("regression-opencv-yaml-indented-directive-hang");
-  ASSERT_FALSE(lights.empty());
-  std::ofstream(dir / "lights.yaml", std::ios::binary) << lights;
-  StationLights station;
-  const Status refused = ReadLightsFile((dir / "lights.yaml").string(), &station);
+  const Status refused = ReadLightsSeed("regression-opencv-yaml-indented-directive-hang", dir);
   EXPECT_FALSE(refused.ok());
   EXPECT_NE(refused.message().find("directive"), std::string::npos) << refused.message();
   // The header OpenCV writes, comments and blank lines before the first entry are fine.

@@ -253,8 +253,7 @@ cv::Mat CameraModel::RayTable() const {
           if (near_enough[i]) continue;
           cv::Point2d shift(0, 0);
           for (int u = i * step; u < std::min(width, (i + 1) * step); ++u) {
-            const cv::Point2d n = Normalize(cv::Point2d(u, v), &shift);
-            out[u] = cv::normalize(to_world * cv::Vec3d(n.x, n.y, 1.0));
+            out[u] = RayDirection(cv::Point2d(u, v), &shift);
           }
         }
       }
