@@ -203,6 +203,14 @@ class Ear {
       std::this_thread::sleep_for(std::chrono::milliseconds(2));
     }
   }
+  // From now on, hears only scan `id`'s progress, RESTORED and drawing (each scan of a session
+  // is timed on its own).
+  void Expect(int64_t id) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    id_ = id;
+    done_.clear();
+    restored_ = Clock::time_point();
+  }
   bool Heard(const std::string& process) { return heard_.count(process) > 0; }
   // When `stage` was done with the scan (zero time: not yet).
   Clock::time_point Done(const std::string& stage) { return done_[stage]; }
@@ -225,16 +233,18 @@ class Ear {
     asked = std::max(asked, station::StatusCounter(*m, station::counter::kChunksAskedAgain) +
                                 station::StatusCounter(*m, station::counter::kProductsAskedAgain));
     if (m->errors > 0 && error_.empty()) error_ = m->process + ": " + m->last_error;
-    if (m->process == kViewer && m->scan_id != 0 && done_[kViewer] == Clock::time_point()) {
+    if (m->process == kViewer && m->scan_id == id_ && done_[kViewer] == Clock::time_point()) {
       done_[kViewer] = Clock::now();
     }
   }
   void OnProgress(const lcm::ReceiveBuffer*, const std::string&, const scan_progress_t* m) {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (m->scan_id != id_) return;
     if (done_[m->process] == Clock::time_point()) done_[m->process] = Clock::now();
   }
-  void OnRestored(const lcm::ReceiveBuffer*, const std::string&, const restored_t*) {
+  void OnRestored(const lcm::ReceiveBuffer*, const std::string&, const restored_t* m) {
     std::lock_guard<std::mutex> lock(mutex_);
+    if (m->scan_id != id_) return;
     if (restored_ == Clock::time_point()) restored_ = Clock::now();
   }
 
@@ -242,6 +252,7 @@ class Ear {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::mutex mutex_;
+  int64_t id_ = -1;  // The scan timed.
   std::set<std::string> heard_;
   std::map<std::string, Clock::time_point> done_;
   Clock::time_point restored_;
@@ -249,13 +260,19 @@ class Ear {
   std::map<std::string, int64_t> asked_;
 };
 
-// One repetition's figures, seconds.
+// One scan's figures, seconds.
 struct Sample {
   double capture = 0, restored = 0, shown = 0;
   int64_t asked_again = 0;  // Chunks or products the bus lost and the daemons asked again.
   std::map<std::string, double> stage;  // Each stage's part of the wait.
 };
+// By case: each repetition's scan in session (the operator's wait on every scan but a
+// station's first), and its first scan (the daemons just started).
 std::map<std::string, std::vector<Sample>>& Samples() {
+  static std::map<std::string, std::vector<Sample>> samples;
+  return samples;
+}
+std::map<std::string, std::vector<Sample>>& FirstSamples() {
   static std::map<std::string, std::vector<Sample>> samples;
   return samples;
 }
@@ -264,36 +281,74 @@ std::map<std::string, Pace>& Paces() {  // Each case's log.
   return paces;
 }
 
-// Plays `log` into a fresh station whose daemons send their chunked products at `pace` MB/s
-// (empty: their default); false (with `why`) when the page does not come.
-bool PlayOnce(const std::string& log, const std::string& pace, const std::string& dir, Sample* out,
-              std::string* why) {
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  Ear ear;
-  if (!ear.good()) {
-    *why = "cannot open the bus";
+// A case's scans: the log timed, and the one played before it into the same daemons (the same
+// captures, written again under another scan id, at the log's pace).
+struct Session {
+  std::string first, timed;
+  int64_t first_id = 0, timed_id = 0;
+};
+
+Session MakeSession(const std::string& log) {
+  Session session;
+  session.timed = log;
+  Scan scan;
+  bool has_calibration = false;
+  calibration_t calibration{};
+  Status s = station::ReadScanLog(log, 0, &scan, &has_calibration, &calibration, &session.timed_id);
+  session.first_id = session.timed_id - 1;
+  session.first = (WorkDir() / ("first_of_" + fs::path(log).filename().string())).string();
+  if (s.ok()) {
+    s = station::WriteScanLog(session.first, scan, session.first_id, "vellum",
+                              has_calibration ? &calibration : nullptr, LogPace(log).interval_us);
+  }
+  if (!s.ok()) {
+    std::fprintf(stderr, "station_bench: %s\n", s.message().c_str());
+    std::exit(1);
+  }
+  return session;
+}
+
+// A station's processing daemons and viewer on a fresh data folder `dir`, sending their chunked
+// products at `pace` MB/s (empty: their default), once each has said it is there.
+class Station {
+ public:
+  Station(Ear* ear, const std::string& pace, const std::string& dir) : ear_(ear), dir_(dir) {
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    for (const station::ChainLink& link : station::kChain) {
+      const std::string p = link.process;
+      std::vector<std::string> flags = {"--data", dir};
+      if (!pace.empty()) flags.insert(flags.end(), {"--pace", pace});
+      daemons_.push_back(std::make_unique<Daemon>(p, flags, dir + "/" + p + ".log"));
+    }
+    daemons_.push_back(std::make_unique<Daemon>(kViewer, std::vector<std::string>{"--data", dir},
+                                                dir + "/" + kViewer + ".log"));
+  }
+  bool Ready(std::string* why) {
+    if (ear_->Await(
+            [&] {
+              return std::all_of(kStages.begin(), kStages.end(),
+                                 [&](const std::string& p) { return ear_->Heard(p); });
+            },
+            60)) {
+      return true;
+    }
+    *why = "the daemons did not answer within 60 s (logs in " + dir_ + ")";
     return false;
   }
-  std::vector<std::unique_ptr<Daemon>> daemons;
-  for (const station::ChainLink& link : station::kChain) {
-    const std::string p = link.process;
-    std::vector<std::string> flags = {"--data", dir};
-    if (!pace.empty()) flags.insert(flags.end(), {"--pace", pace});
-    daemons.push_back(std::make_unique<Daemon>(p, flags, dir + "/" + p + ".log"));
-  }
-  daemons.push_back(std::make_unique<Daemon>(kViewer, std::vector<std::string>{"--data", dir},
-                                             dir + "/" + kViewer + ".log"));
-  if (!ear.Await(
-          [&] {
-            return std::all_of(kStages.begin(), kStages.end(),
-                               [&](const std::string& p) { return ear.Heard(p); });
-          },
-          60)) {
-    *why = "the daemons did not answer within 60 s (logs in " + dir + ")";
-    return false;
-  }
-  // The log, at its own pace.
+  // Plays scan `id`'s `log` at its own pace and times it; false (with `why`) when its page
+  // does not come.
+  bool Play(const std::string& log, int64_t id, Sample* out, std::string* why);
+
+ private:
+  Ear* ear_;
+  std::string dir_;
+  std::vector<std::unique_ptr<Daemon>> daemons_;
+};
+
+bool Station::Play(const std::string& log, int64_t id, Sample* out, std::string* why) {
+  Ear& ear = *ear_;
+  ear.Expect(id);
   lcm::LogFile file(log, "r");
   if (!file.good()) {
     *why = "cannot read " + log;
@@ -316,7 +371,7 @@ bool PlayOnce(const std::string& log, const std::string& pace, const std::string
   }
   if (!ear.Await([&] { return ear.Done(kViewer) != Clock::time_point() || !ear.error().empty(); },
                  600)) {
-    *why = "no restored page drawn within 600 s (logs in " + dir + ")";
+    *why = "no restored page drawn within 600 s (logs in " + dir_ + ")";
     return false;
   }
   std::lock_guard<std::mutex> lock(ear.mutex());
@@ -340,27 +395,37 @@ bool PlayOnce(const std::string& log, const std::string& pace, const std::string
 // A case's log, made on its first repetition (the 24 MP one takes a minute and 1.4 GB).
 using LogMaker = std::function<std::string()>;
 
+// Each repetition starts a station afresh and plays it two scans, one after the other as an
+// operator would: its first, then the one timed.
 void BM_Station_LastFrameToRestored(benchmark::State& state, const std::string& name,
                                     const std::string& scan, const LogMaker& make,
                                     const std::string& pace) {
-  static std::map<std::string, std::string> logs;
-  if (logs.count(scan) == 0) {
-    logs[scan] = make();
-    Paces()[scan] = LogPace(logs[scan]);
+  static std::map<std::string, Session> sessions;
+  if (sessions.count(scan) == 0) {
+    sessions[scan] = MakeSession(make());
+    Paces()[scan] = LogPace(sessions[scan].timed);
   }
-  const std::string& log = logs[scan];
+  const Session& session = sessions[scan];
   for (auto _ : state) {
-    Sample s;
+    Sample first, timed;
     std::string why;
-    if (!PlayOnce(log, pace, (WorkDir() / ("station_" + name)).string(), &s, &why)) {
+    Ear ear;
+    bool ok = ear.good();
+    if (!ok) why = "cannot open the bus";
+    Station station(&ear, pace, (WorkDir() / ("station_" + name)).string());
+    ok = ok && station.Ready(&why) && station.Play(session.first, session.first_id, &first, &why) &&
+         station.Play(session.timed, session.timed_id, &timed, &why);
+    if (!ok) {
       state.SkipWithError(why.c_str());
       break;
     }
-    state.SetIterationTime(s.restored);
-    state.counters["capture_s"] = s.capture;
-    state.counters["to_shown_s"] = s.shown;
-    state.counters["asked_again"] = static_cast<double>(s.asked_again);
-    Samples()[name].push_back(s);
+    state.SetIterationTime(timed.restored);
+    state.counters["capture_s"] = timed.capture;
+    state.counters["to_shown_s"] = timed.shown;
+    state.counters["first_scan_s"] = first.restored;
+    state.counters["asked_again"] = static_cast<double>(timed.asked_again);
+    Samples()[name].push_back(timed);
+    FirstSamples()[name].push_back(first);
   }
 }
 
@@ -379,6 +444,34 @@ long RmemMax() {
   return bytes;
 }
 
+// One line of the summary: case `name`'s samples, labelled `label`.
+void PrintRow(const std::string& name, const std::string& label,
+              const std::vector<Sample>& samples) {
+  if (samples.empty()) return;
+  std::vector<double> capture, restored, shown;
+  std::map<std::string, std::vector<double>> share;
+  int64_t asked = 0;  // Over every repetition.
+  for (const Sample& s : samples) {
+    asked += s.asked_again;
+    capture.push_back(s.capture);
+    restored.push_back(s.restored);
+    shown.push_back(s.shown);
+    for (const auto& [stage, t] : s.stage) share[stage].push_back(t / s.shown);
+  }
+  auto spread = [](const std::vector<double>& v) {
+    return *std::max_element(v.begin(), v.end()) / *std::min_element(v.begin(), v.end());
+  };
+  const Pace& pace = Paces()[name.substr(0, name.find('@'))];
+  std::printf("%-19s %3d, %4.0f ms/f %8.2fs %10.3fs %6.2fx %9.0f%% %6.3fs %8.2fx %6lld  ",
+              label.c_str(), pace.captures, pace.interval_us / 1e3, Median(capture),
+              Median(restored), spread(restored), 100 * Median(restored) / Median(capture),
+              Median(shown), spread(shown), static_cast<long long>(asked));
+  for (const std::string& stage : kStages) {
+    std::printf(" %s %.0f%%", stage.substr(7).c_str(), 100 * Median(share[stage]));
+  }
+  std::printf("\n");
+}
+
 void PrintSummary() {
   std::printf(
       "\nnet.core.rmem_max: %.1f MB (an installed station sets 16 MB, systemd/60-vellum.conf: "
@@ -387,34 +480,16 @@ void PrintSummary() {
   std::printf(
       "\nThe operator's wait (medians over the repetitions; spread = slowest / fastest; asked: "
       "chunks and products the bus lost and the daemons asked again, all repetitions):\n");
-  std::printf("%-14s %14s %9s %11s %7s %10s %7s %9s %6s   %s\n", "scan", "captures", "capture",
+  std::printf("%-19s %14s %9s %11s %7s %10s %7s %9s %6s   %s\n", "scan", "captures", "capture",
               "->RESTORED", "spread", "of capture", "->drawn", "spread", "asked",
               "shares of the wait to drawn");
   for (const auto& [name, samples] : Samples()) {
-    if (samples.empty()) continue;
-    std::vector<double> capture, restored, shown;
-    std::map<std::string, std::vector<double>> share;
-    int64_t asked = 0;  // Over every repetition.
-    for (const Sample& s : samples) {
-      asked += s.asked_again;
-      capture.push_back(s.capture);
-      restored.push_back(s.restored);
-      shown.push_back(s.shown);
-      for (const auto& [stage, t] : s.stage) share[stage].push_back(t / s.shown);
-    }
-    auto spread = [](const std::vector<double>& v) {
-      return *std::max_element(v.begin(), v.end()) / *std::min_element(v.begin(), v.end());
-    };
-    const Pace& pace = Paces()[name.substr(0, name.find('@'))];
-    std::printf("%-14s %3d, %4.0f ms/f %8.2fs %10.3fs %6.2fx %9.0f%% %6.3fs %8.2fx %6lld  ",
-                name.c_str(), pace.captures, pace.interval_us / 1e3, Median(capture),
-                Median(restored), spread(restored), 100 * Median(restored) / Median(capture),
-                Median(shown), spread(shown), static_cast<long long>(asked));
-    for (const std::string& stage : kStages) {
-      std::printf(" %s %.0f%%", stage.substr(7).c_str(), 100 * Median(share[stage]));
-    }
-    std::printf("\n");
+    PrintRow(name, name, samples);
+    PrintRow(name, name + ", 1st", FirstSamples()[name]);
   }
+  std::printf(
+      "(1st: a station's first scan, its daemons just started; the other: the scan after it, as "
+      "every scan of a session but the first)\n");
 }
 
 }  // namespace
