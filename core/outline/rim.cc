@@ -5,6 +5,7 @@
 #include <limits>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <type_traits>
 #include <vector>
 
 #include "core/outline/steps.h"
@@ -350,6 +351,62 @@ int ViewSidesReached(const cv::Mat& mask, int border) {
 
 namespace vellum::outline {
 
+cv::Mat MeanColour3x3(const cv::Mat& colour, cv::Rect box) {
+  box &= cv::Rect(0, 0, colour.cols, colour.rows);
+  cv::Mat mean(box.size(), CV_8UC3);
+  if (box.empty()) return mean;
+  // Columns box.x - 1 .. box.br().x, as far as the image has them; each its 3 rows' sums.
+  const int x0 = std::max(0, box.x - 1), x1 = std::min(colour.cols, box.br().x + 1);
+  const int span = 3 * (x1 - x0);
+  std::vector<int> column(span);
+  for (int v = 0; v < box.height; ++v) {
+    const int y = box.y + v;
+    const int y0 = std::max(0, y - 1), y1 = std::min(colour.rows - 1, y + 1);
+    std::fill(column.begin(), column.end(), 0);
+    for (int r = y0; r <= y1; ++r) {
+      const uint8_t* in = colour.ptr<uint8_t>(r) + 3 * x0;
+      for (int k = 0; k < span; ++k) column[k] += in[k];
+    }
+    const int rows = y1 - y0 + 1;
+    uint8_t* out = mean.ptr<uint8_t>(v);
+    // The image's first and last columns have fewer neighbours; all others three.
+    auto edge = [&](int u) {
+      const int x = box.x + u;
+      const int left = std::max(0, x - 1), right = std::min(colour.cols - 1, x + 1);
+      const int n = rows * (right - left + 1);
+      const int* c = column.data() + 3 * (left - x0);
+      for (int ch = 0; ch < 3; ++ch) {
+        int sum = 0;
+        for (int k = 0; k <= right - left; ++k) sum += c[3 * k + ch];
+        out[3 * u + ch] = static_cast<uint8_t>(sum / n);
+      }
+    };
+    const int first = box.x == 0 ? 1 : 0;
+    const int last = box.br().x == colour.cols ? box.width - 1 : box.width;
+    if (first > 0) edge(0);
+    // Inner pixels: channel k of pixel u sums column entries 3 (u - 1) + k .. 3 (u + 1) + k.
+    const int* c = column.data() + 3 * (box.x + first - 1 - x0);
+    uint8_t* o = out + 3 * first;
+    const int n = 3 * (last - first);
+    // Divided by a constant, each case its own loop: 3 rows inside the image, 2 at its top or
+    // bottom, 1 when it is a single row.
+    auto inner = [&](auto divisor) {
+      for (int k = 0; k < n; ++k) {
+        o[k] = static_cast<uint8_t>((c[k] + c[k + 3] + c[k + 6]) / decltype(divisor)::value);
+      }
+    };
+    if (rows == 3) {
+      inner(std::integral_constant<int, 9>());
+    } else if (rows == 2) {
+      inner(std::integral_constant<int, 6>());
+    } else {
+      inner(std::integral_constant<int, 3>());
+    }
+    if (last < box.width) edge(box.width - 1);
+  }
+  return mean;
+}
+
 int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reach,
                 double min_look) {
   const int b = std::max(1, border);
@@ -372,6 +429,14 @@ int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reac
       cv::Rect(0, 0, leaf.cols, leaf.rows);
   cv::Mat apart;
   cv::distanceTransform(~leaf(box), apart, cv::DIST_L1, 3, CV_8U);
+  // Every pixel's 3 x 3 mean colour, once, over all that is looked at: the box and the strips
+  // of the sides the leaf comes near.
+  cv::Rect looked = box;
+  for (int side = 0; side < 4; ++side) {
+    if (near[side]) looked |= strips[side];
+  }
+  const cv::Mat mean = MeanColour3x3(colour, looked);
+  auto mean_at = [&](int u, int v) { return mean.at<cv::Vec3b>(v - looked.y, u - looked.x); };
   Look leaf_look;
   std::array<Look, 4> beside;
   for (int v = box.y + box.y % 2; v < box.y + box.height; v += 2) {  // Even rows and columns.
@@ -379,11 +444,11 @@ int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reac
     const uint8_t* d = apart.ptr<uint8_t>(v - box.y) - box.x;
     for (int u = box.x + box.x % 2; u < box.x + box.width; u += 2) {
       if (l[u]) {
-        leaf_look.Add(Look::Bin(Mean3x3(colour, u, v)), 1);
+        leaf_look.Add(Look::Bin(mean_at(u, v)), 1);
         continue;
       }
       if (d[u] <= 3 || d[u] > reach) continue;
-      const int bin = Look::Bin(Mean3x3(colour, u, v));
+      const int bin = Look::Bin(mean_at(u, v));
       for (int side = 0; side < 4; ++side) {
         if (near[side] && !strips[side].contains(cv::Point(u, v))) beside[side].Add(bin, 1);
       }
@@ -418,7 +483,7 @@ int LookRunsOff(const cv::Mat& leaf, const cv::Mat& colour, int border, int reac
           continue;
         }
         const int x = strip.x + u, y = strip.y + v;
-        const int bin = Look::Bin(Mean3x3(colour, x, y));
+        const int bin = Look::Bin(mean_at(x, y));
         if (besideish[bin]) continue;
         const bool at_edge = side == 0   ? x < b
                              : side == 1 ? x >= leaf.cols - b

@@ -172,6 +172,9 @@ inline cv::Vec3b Mean3x3(const cv::Mat& colour, int u, int v) {
   }
   return cv::Vec3b(sum[0] / n, sum[1] / n, sum[2] / n);
 }
+// Mean3x3 of every pixel of `box` (within the image) at once, as a CV_8UC3 image of its size:
+// the same values, in separable passes, for a step that looks at most pixels of a region.
+cv::Mat MeanColour3x3(const cv::Mat& colour, cv::Rect box);
 
 // A cut: leaf (255) against surround (0) over the blocks, and the looks it learned.
 struct Cut {

@@ -763,6 +763,30 @@ namespace {
 // text too), the rows it runs on along are counted; where the table lies between (a 20 px
 // gap), or a light mount of its own, grey look that lies beside the leaf on its other sides
 // too, nothing is. Asymmetric on purpose: only the right side is near the leaf.
+TEST(MeanColour3x3, IsMean3x3AtEveryPixelOfTheBoxEdgesAndCornersToo) {
+  cv::RNG rng(7);
+  for (const cv::Size size :
+       {cv::Size(1, 1), cv::Size(1, 5), cv::Size(6, 1), cv::Size(2, 2), cv::Size(37, 23)}) {
+    cv::Mat colour(size, CV_8UC3);
+    rng.fill(colour, cv::RNG::UNIFORM, 0, 256);
+    const cv::Rect whole(0, 0, size.width, size.height);
+    // The whole image, an inner box, a box hanging over the image's corner (clipped to it).
+    for (const cv::Rect box :
+         {whole, cv::Rect(1, 1, size.width - 2, size.height - 2),
+          cv::Rect(size.width / 2, size.height / 2, size.width, size.height)}) {
+      const cv::Rect in = box & whole;
+      const cv::Mat mean = outline::MeanColour3x3(colour, box);
+      ASSERT_EQ(mean.size(), in.size());
+      for (int v = 0; v < in.height; ++v) {
+        for (int u = 0; u < in.width; ++u) {
+          ASSERT_EQ(mean.at<cv::Vec3b>(v, u), outline::Mean3x3(colour, in.x + u, in.y + v))
+              << size << " box " << box << " at " << u << "," << v;
+        }
+      }
+    }
+  }
+}
+
 TEST(LookRunsOff, CountsTheLeafsLookRunningOnToTheEdgeAndNotATableOrAMount) {
   const cv::Size size(300, 200);
   const cv::Scalar paper(200, 215, 225), table(50, 50, 50), mount(170, 170, 170);
