@@ -495,10 +495,45 @@ void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues
   // with one the refinement left out are the surround (a burnt edge's bays, a hole).
   out->measured_share = static_cast<double>(cv::countNonZero(leaf & measured)) /
                         std::max(1, cv::countNonZero(leaf | (full_cut & ~measured)));
-  out->confidence = RimConfidence(leaf, cues, options.rim_look_px, options.rim_look_contrast);
-  // What the cut found well inside its outline (beyond the block and band the refinement may move
-  // it by) and the outline at the pixel left out, its holes aside: part of the leaf lost.
-  const double lost = LostInside(full_cut, leaf, block + options.band_px);
+  // The checks below read the leaf and share nothing: two sets of them side by side, about
+  // equal in time (the look at the view's sides is the longest of them).
+  double lost = 0;
+  int unseen = 0;
+  const int longer = std::max(leaf.cols, leaf.rows);
+  auto at_the_sides = [&] {
+    out->touches_border =
+        TouchesBorder(leaf, options.border_px) ||
+        LookRunsOff(leaf, cues.colour, options.border_px,
+                    static_cast<int>(options.off_view_reach_share * longer),
+                    options.unseen_look) >= std::max(3.0, options.off_view_share * longer);
+    out->confidence = RimConfidence(leaf, cues, options.rim_look_px, options.rim_look_contrast);
+  };
+  auto around_the_rim = [&] {
+    // What the cut found well inside its outline (beyond the block and band the refinement may
+    // move it by) and the outline at the pixel left out, its holes aside: part of the leaf lost.
+    lost = LostInside(full_cut, leaf, block + options.band_px);
+    std::optional<ProjectorSight> sight;
+    if (rig && !c.planes.empty()) sight.emplace(*rig, points, c.planes, options.unseen_clear_mm);
+    unseen = UnseenBeside(leaf, measured, cues.colour, c.found.look_leaf, c.found.look_surround,
+                          options.unseen_reach_px, options.unseen_look, sight ? &*sight : nullptr);
+    if (rig) {
+      out->edge_on_share =
+          EdgeOnShare(leaf, points, c.planes, rig->camera, options.edge_on_height_mm,
+                      options.edge_on_deg, options.edge_on_band_px);
+    }
+  };
+  cv::parallel_for_(
+      cv::Range(0, 2),
+      [&](const cv::Range& sets) {
+        for (int set = sets.start; set < sets.end; ++set) {
+          if (set == 0) {
+            at_the_sides();
+          } else {
+            around_the_rim();
+          }
+        }
+      },
+      2);
   if (lost > options.max_lost_share) {
     out->doubts.push_back(
         {"outline_uncertain",
@@ -508,13 +543,7 @@ void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues
              "(--leaf-hint) and scan again"});
   }
   const int leaf_px = std::max(1, cv::countNonZero(leaf));
-  std::optional<ProjectorSight> sight;
-  if (rig && !c.planes.empty()) sight.emplace(*rig, points, c.planes, options.unseen_clear_mm);
-  out->unseen_share =
-      static_cast<double>(UnseenBeside(leaf, measured, cues.colour, c.found.look_leaf,
-                                       c.found.look_surround, options.unseen_reach_px,
-                                       options.unseen_look, sight ? &*sight : nullptr)) /
-      leaf_px;
+  out->unseen_share = static_cast<double>(unseen) / leaf_px;
   if (out->unseen_share > options.max_unseen_share) {
     out->doubts.push_back(
         {"edge_unmeasured",
@@ -522,10 +551,6 @@ void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues
              "% more of the leaf (by its look) has no 3D point: an edge curled up edge-on to the "
              "projector, or a slope facing away from it; it is left out of the restored page: "
              "lay that edge flatter or turn the leaf towards the projector and scan again"});
-  }
-  if (rig) {
-    out->edge_on_share = EdgeOnShare(leaf, points, c.planes, rig->camera, options.edge_on_height_mm,
-                                     options.edge_on_deg, options.edge_on_band_px);
   }
   if (out->edge_on_share > options.max_edge_on_share) {
     out->doubts.push_back(
@@ -538,12 +563,6 @@ void JudgeLeaf(const cv::Mat& leaf, const cv::Mat& full_cut, const outline::Cues
              "of it and the leaf beneath is missing from the restored page; lay that edge "
              "flatter, or turn it towards the camera, and scan again"});
   }
-  const int longer = std::max(leaf.cols, leaf.rows);
-  out->touches_border =
-      TouchesBorder(leaf, options.border_px) ||
-      LookRunsOff(leaf, cues.colour, options.border_px,
-                  static_cast<int>(options.off_view_reach_share * longer),
-                  options.unseen_look) >= std::max(3.0, options.off_view_share * longer);
   // Plausibility: a leaf lies inside the view; what fills most of it, or reaches two or more of
   // its sides, is more likely the table or a support.
   const int sides = SidesTouched(leaf, options.border_px);
