@@ -5,9 +5,11 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <map>
 #include <memory>
 #include <set>
@@ -215,19 +217,39 @@ Status WriteManifest(const std::string& dir, const std::vector<std::string>& par
     }
   }
   const auto recorded = ReadRecorded(dir);
-  for (const std::string& rel : paths) {
-    const std::string file = (fs::path(dir) / rel).string();
-    std::string hex;
-    const auto known = recorded.find(rel);
-    int64_t size = 0, mtime = 0;
-    if (known != recorded.end() && Stat(file, &size, &mtime) &&
-        known->second[1] == std::to_string(size) && known->second[2] == std::to_string(mtime)) {
-      hex = known->second[0];  // Hashed as it was written, unchanged since.
+  std::vector<std::string> hexes(paths.size());
+  std::vector<size_t> to_hash;  // The files not hashed as they were written, largest first.
+  std::vector<int64_t> sizes(paths.size(), 0);
+  for (size_t k = 0; k < paths.size(); ++k) {
+    const auto known = recorded.find(paths[k]);
+    int64_t mtime = 0;
+    const bool stat = Stat((fs::path(dir) / paths[k]).string(), &sizes[k], &mtime);
+    if (known != recorded.end() && stat && known->second[1] == std::to_string(sizes[k]) &&
+        known->second[2] == std::to_string(mtime)) {
+      hexes[k] = known->second[0];  // Hashed as it was written, unchanged since.
     } else {
-      const Status s = Sha256OfFile(file, &hex);
-      if (!s.ok()) return s;
+      to_hash.push_back(k);
     }
-    text << hex << "  " << rel << "\n";
+  }
+  std::stable_sort(to_hash.begin(), to_hash.end(),
+                   [&](size_t a, size_t b) { return sizes[a] > sizes[b]; });
+  // Hashed on two threads, each taking the largest file left: mostly the reading and the
+  // hashing of one large file (a point map) beside all the others.
+  std::vector<Status> hashed(paths.size(), Status::Ok());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t n = next++; n < to_hash.size(); n = next++) {
+      const size_t k = to_hash[n];
+      hashed[k] = Sha256OfFile((fs::path(dir) / paths[k]).string(), &hexes[k]);
+    }
+  };
+  std::future<void> second;
+  if (to_hash.size() > 1) second = std::async(std::launch::async, work);
+  work();
+  if (second.valid()) second.get();
+  for (size_t k = 0; k < paths.size(); ++k) {
+    if (!hashed[k].ok()) return hashed[k];  // The first by path.
+    text << hexes[k] << "  " << paths[k] << "\n";
   }
   const Status s = WriteTextFile((fs::path(dir) / kManifestName).string(), text.str());
   if (!s.ok()) return s;
