@@ -15,7 +15,8 @@
 // (SimulatedLog). The program runs
 // itself inside scripts/netns-run.sh: the bus never leaves a private loopback.
 //
-//   ./build/bench/station_bench [--paces=MB/S,...] [--keep] [--benchmark_filter=...]
+//   ./build/bench/station_bench [--paces=MB/S,...] [--builds=DIR,...] [--keep]
+//                               [--benchmark_filter=...]
 //
 // --keep leaves the work folder (each case's last station: its scan folder, the daemons' logs)
 // for a look at what the station wrote, and names it.
@@ -135,8 +136,11 @@ std::string SimulatedLog(const std::string& name, const Calibration& rig) {
 // exec).
 class Daemon {
  public:
-  Daemon(const std::string& name, const std::vector<std::string>& flags, const std::string& log) {
-    const std::string path = std::string(VELLUM_BUILD_DIR) + "/daemons/" + name;
+  // `build`: the build folder whose daemons run (empty: this program's).
+  Daemon(const std::string& name, const std::vector<std::string>& flags, const std::string& log,
+         const std::string& build) {
+    const std::string path =
+        (build.empty() ? std::string(VELLUM_BUILD_DIR) : build) + "/daemons/" + name;
     std::vector<std::string> args = {path, "--url", kUrl};
     args.insert(args.end(), flags.begin(), flags.end());
     std::vector<std::string> env = {"SDL_VIDEODRIVER=offscreen"};
@@ -308,21 +312,28 @@ Session MakeSession(const std::string& log) {
   return session;
 }
 
-// A station's processing daemons and viewer on a fresh data folder `dir`, sending their chunked
-// products at `pace` MB/s (empty: their default), once each has said it is there.
+// How a case's station is run: its daemons' pace (`--pace`, MB/s; empty: their default) and the
+// build they come from (empty: this program's).
+struct Variant {
+  std::string pace, build;
+};
+
+// A station's processing daemons and viewer on a fresh data folder `dir`, once each has said it
+// is there.
 class Station {
  public:
-  Station(Ear* ear, const std::string& pace, const std::string& dir) : ear_(ear), dir_(dir) {
+  Station(Ear* ear, const Variant& variant, const std::string& dir) : ear_(ear), dir_(dir) {
+    const std::string& pace = variant.pace;
     fs::remove_all(dir);
     fs::create_directories(dir);
     for (const station::ChainLink& link : station::kChain) {
       const std::string p = link.process;
       std::vector<std::string> flags = {"--data", dir};
       if (!pace.empty()) flags.insert(flags.end(), {"--pace", pace});
-      daemons_.push_back(std::make_unique<Daemon>(p, flags, dir + "/" + p + ".log"));
+      daemons_.push_back(std::make_unique<Daemon>(p, flags, dir + "/" + p + ".log", variant.build));
     }
     daemons_.push_back(std::make_unique<Daemon>(kViewer, std::vector<std::string>{"--data", dir},
-                                                dir + "/" + kViewer + ".log"));
+                                                dir + "/" + kViewer + ".log", variant.build));
   }
   bool Ready(std::string* why) {
     if (ear_->Await(
@@ -399,7 +410,7 @@ using LogMaker = std::function<std::string()>;
 // operator would: its first, then the one timed.
 void BM_Station_LastFrameToRestored(benchmark::State& state, const std::string& name,
                                     const std::string& scan, const LogMaker& make,
-                                    const std::string& pace) {
+                                    const Variant& variant) {
   static std::map<std::string, Session> sessions;
   if (sessions.count(scan) == 0) {
     sessions[scan] = MakeSession(make());
@@ -412,7 +423,7 @@ void BM_Station_LastFrameToRestored(benchmark::State& state, const std::string& 
     Ear ear;
     bool ok = ear.good();
     if (!ok) why = "cannot open the bus";
-    Station station(&ear, pace, (WorkDir() / ("station_" + name)).string());
+    Station station(&ear, variant, (WorkDir() / ("station_" + name)).string());
     ok = ok && station.Ready(&why) && station.Play(session.first, session.first_id, &first, &why) &&
          station.Play(session.timed, session.timed_id, &timed, &why);
     if (!ok) {
@@ -517,36 +528,45 @@ int main(int argc, char** argv) {
       {"24MP", [hires] { return SimulatedLog("24MP", hires); }},
   };
   // --paces=MB/S,MB/S,...: each case at each of these daemon paces (`--pace`), side by side in
-  // the same run; without it, at the daemons' default.
-  std::vector<std::string> paces = {""};
+  // the same run; without it, at the daemons' default. --builds=DIR,DIR,...: each case with the
+  // daemons of each of these build folders (another commit's, for a change measured beside
+  // what it changed); without it, this program's.
+  std::vector<std::string> paces = {""}, builds = {""};
   std::vector<char*> args;
   bool keep = false;
   for (int k = 0; k < argc; ++k) {
     const std::string a = argv[k];
+    std::vector<std::string>* list = a.rfind("--paces=", 0) == 0    ? &paces
+                                     : a.rfind("--builds=", 0) == 0 ? &builds
+                                                                    : nullptr;
     if (a == "--keep") {
       keep = true;
-      continue;
-    }
-    if (a.rfind("--paces=", 0) != 0) {
+    } else if (list == nullptr) {
       args.push_back(argv[k]);
-      continue;
+    } else {
+      list->clear();
+      std::stringstream items(a.substr(a.find('=') + 1));
+      for (std::string item; std::getline(items, item, ',');) list->push_back(item);
     }
-    paces.clear();
-    std::stringstream list(a.substr(8));
-    for (std::string p; std::getline(list, p, ',');) paces.push_back(p);
   }
   argc = static_cast<int>(args.size());
   args.push_back(nullptr);
   argv = args.data();
   for (const auto& [scan, make] : cases) {
     for (const std::string& pace : paces) {
-      const std::string name = pace.empty() ? scan : scan + "@" + pace;
-      benchmark::RegisterBenchmark(("BM_Station_LastFrameToRestored/" + name).c_str(),
-                                   BM_Station_LastFrameToRestored, name, scan, make, pace)
-          ->Apply(vellum::Repeated)
-          ->Iterations(1)
-          ->UseManualTime()
-          ->Unit(benchmark::kMillisecond);
+      for (const std::string& build : builds) {
+        std::string name = pace.empty() ? scan : scan + "@" + pace;
+        std::string folder = build;
+        while (folder.size() > 1 && folder.back() == '/') folder.pop_back();
+        if (!folder.empty()) name += "@" + fs::path(folder).filename().string();
+        benchmark::RegisterBenchmark(("BM_Station_LastFrameToRestored/" + name).c_str(),
+                                     BM_Station_LastFrameToRestored, name, scan, make,
+                                     Variant{pace, build})
+            ->Apply(vellum::Repeated)
+            ->Iterations(1)
+            ->UseManualTime()
+            ->Unit(benchmark::kMillisecond);
+      }
     }
   }
   vellum::InitializeInterleaved(&argc, &argv);

@@ -4,11 +4,13 @@
 #include <tiffio.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <future>
 #include <iterator>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -816,6 +818,51 @@ TEST_F(IoTest, HashesRecordedAsFilesAreWrittenMakeTheSameManifestAndChangesAreHa
   EXPECT_EQ(manifest().find(fake), std::string::npos) << manifest();
   ASSERT_TRUE(CheckManifest(dir_.string(), &problems).ok());
   EXPECT_TRUE(problems.empty()) << problems.front();
+}
+
+// A daemon's own record (recorded-sha256-<name>.txt) is taken as the decoder's is, written from
+// several threads at once; records, and records being written, are never in the manifest, but a
+// file named like one inside raw/ or results/ is.
+TEST_F(IoTest, EachWritersRecordIsTakenAndNoRecordIsInTheManifest) {
+  fs::create_directories(dir_ / "raw");
+  fs::create_directories(dir_ / "results" / "report");
+  auto write = [&](const std::string& rel, const std::string& text) {
+    std::ofstream(dir_ / rel, std::ios::binary | std::ios::trunc) << text;
+  };
+  write("raw/scan.yaml", "format: vellum-scan\n");
+  HashRecord mine(dir_.string(), RecordedHashesName("triangulator"));
+  std::vector<std::string> files;
+  for (int k = 0; k < 8; ++k) {
+    files.push_back("results/report/picture_" + std::to_string(k) + ".png");
+    write(files.back(), std::string(5000 + k, static_cast<char>('a' + k)));
+  }
+  write("results/recorded-sha256-not-a-record.txt", "a result like any other");
+  std::vector<std::future<Status>> adding;
+  for (const std::string& rel : files) {
+    adding.push_back(std::async(std::launch::async, [&mine, rel] { return mine.Add(rel); }));
+  }
+  for (auto& a : adding) ASSERT_TRUE(a.get().ok());
+  ASSERT_TRUE(mine.Save().ok());
+  write(".part-recorded-sha256-flattener.txt", "a record being written when the manifest is");
+  // The record's hash of one picture replaced by another: the manifest takes the record's.
+  std::ifstream in(dir_ / RecordedHashesName("triangulator"));
+  std::string text(std::istreambuf_iterator<char>(in), {});
+  in.close();
+  const std::string real = Sha256OfBytes(std::string(5003, 'd'));
+  const std::string fake(64, 'f');
+  ASSERT_NE(text.find(real), std::string::npos) << text;
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 8) << text;
+  text.replace(text.find(real), 64, fake);
+  write(RecordedHashesName("triangulator"), text);
+  int listed = 0;
+  ASSERT_TRUE(WriteManifest(dir_.string(), {}, &listed).ok());
+  std::ifstream m(dir_ / kManifestName);
+  const std::string manifest(std::istreambuf_iterator<char>(m), {});
+  EXPECT_EQ(listed, 10) << manifest;  // scan.yaml, 8 pictures, the result named like a record.
+  EXPECT_NE(manifest.find(fake + "  results/report/picture_3.png"), std::string::npos) << manifest;
+  EXPECT_NE(manifest.find("results/recorded-sha256-not-a-record.txt"), std::string::npos);
+  EXPECT_EQ(manifest.find("  recorded-sha256"), std::string::npos) << manifest;
+  EXPECT_EQ(manifest.find(".part-"), std::string::npos) << manifest;
 }
 
 TEST_F(IoTest, TheManifestCheckReportsEverySymbolicLink) {

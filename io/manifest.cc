@@ -28,17 +28,25 @@ std::string TopFolder(const std::string& rel) {
   return slash == std::string::npos ? "" : rel.substr(0, slash);
 }
 
-// Every regular file under `dir` but the manifest, as relative paths with '/', sorted.
+// Whether `rel` (relative to a folder) is one of its records of hashes, or one being written.
+bool IsRecord(const std::string& rel) {
+  const std::string name = rel.rfind(".part-", 0) == 0 ? rel.substr(6) : rel;
+  const std::string stem = "recorded-sha256", ext = ".txt";
+  return name.find('/') == std::string::npos && name.rfind(stem, 0) == 0 &&
+         name.size() >= stem.size() + ext.size() &&
+         name.compare(name.size() - ext.size(), ext.size(), ext) == 0 &&
+         (name.size() == stem.size() + ext.size() || name[stem.size()] == '-');
+}
+
+// Every regular file under `dir` but the manifest and the records, as relative paths with '/',
+// sorted.
 std::vector<std::string> FilesUnder(const std::string& dir) {
   std::vector<std::string> files;
   std::error_code ec;
   for (fs::recursive_directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     if (it->is_symlink() || !it->is_regular_file()) continue;  // Links: SymlinksUnder.
     const std::string rel = fs::relative(it->path(), dir).generic_string();
-    if (rel == kManifestName || rel == PartName(kManifestName) || rel == kRecordedHashesName ||
-        rel == PartName(kRecordedHashesName)) {
-      continue;
-    }
+    if (rel == kManifestName || rel == PartName(kManifestName) || IsRecord(rel)) continue;
     files.push_back(rel);
   }
   std::sort(files.begin(), files.end());
@@ -120,23 +128,39 @@ Status HashRange(const std::string& path, int64_t from, int64_t to, Sha256* sha)
   return Status::Ok();
 }
 
-// <dir>/recorded-sha256.txt, by relative path: {hex, size, mtime}; empty when there is none
-// (or it cannot be read: the files are hashed instead).
+// The records in `dir` (recorded-sha256.txt, recorded-sha256-<name>.txt), by relative path:
+// {hex, size, mtime}; empty when there are none (or they cannot be read: the files are hashed
+// instead).
 std::map<std::string, std::array<std::string, 3>> ReadRecorded(const std::string& dir) {
+  std::vector<std::string> records;
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (IsRecord(name) && name.rfind(".part-", 0) != 0) records.push_back(name);
+  }
+  std::sort(records.begin(), records.end());
   std::map<std::string, std::array<std::string, 3>> recorded;
-  std::ifstream in(fs::path(dir) / kRecordedHashesName);
-  std::string line;
-  while (std::getline(in, line)) {
-    std::istringstream fields(line);
-    std::string hex, size, mtime, rel;
-    if (!(fields >> hex >> size >> mtime) || hex.size() != 64) continue;
-    std::getline(fields >> std::ws, rel);
-    if (!rel.empty()) recorded[rel] = {hex, size, mtime};
+  for (const std::string& record : records) {
+    std::ifstream in(fs::path(dir) / record);
+    std::string line;
+    while (std::getline(in, line)) {
+      std::istringstream fields(line);
+      std::string hex, size, mtime, rel;
+      if (!(fields >> hex >> size >> mtime) || hex.size() != 64) continue;
+      std::getline(fields >> std::ws, rel);
+      if (!rel.empty()) recorded[rel] = {hex, size, mtime};
+    }
   }
   return recorded;
 }
 
 }  // namespace
+
+std::string RecordedHashesName(const std::string& name) {
+  return "recorded-sha256-" + name + ".txt";
+}
+
+namespace {}  // namespace
 
 struct HashRecord::Growing {
   Sha256 sha;
@@ -152,6 +176,7 @@ Status HashRecord::Add(const std::string& rel) {
   if (!s.ok()) return s;
   // Changed while it was read: left to the manifest.
   if (!Stat(path, &size, &mtime) || size != e.size || mtime != e.mtime_ns) return Status::Ok();
+  const std::lock_guard<std::mutex> lock(*mutex_);
   done_[rel] = e;
   return Status::Ok();
 }
@@ -170,12 +195,14 @@ Status HashRecord::Grow(const std::string& rel) {
     return s;
   }
   g->hashed = size;
+  const std::lock_guard<std::mutex> lock(*mutex_);
   done_[rel] = {g->sha.HexSoFar(), size, mtime};
   return Status::Ok();
 }
 
 Status HashRecord::Save() const {
   std::ostringstream text;
+  const std::lock_guard<std::mutex> lock(*mutex_);
   for (const auto& [rel, e] : done_) {
     int64_t size = 0, mtime = 0;
     if (!Stat((fs::path(dir_) / rel).string(), &size, &mtime) || size != e.size ||
@@ -184,7 +211,7 @@ Status HashRecord::Save() const {
     }
     text << e.hex << "  " << e.size << "  " << e.mtime_ns << "  " << rel << "\n";
   }
-  return WriteTextFile((fs::path(dir_) / kRecordedHashesName).string(), text.str());
+  return WriteTextFile((fs::path(dir_) / file_).string(), text.str());
 }
 
 Status Sha256OfFile(const std::string& path, std::string* hex) {

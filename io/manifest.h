@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -28,18 +29,24 @@ std::string Sha256OfBytes(const std::string& bytes);
 // from disk, what the manifest vouches for; one that grows (an appended log) in pieces as it
 // grows. WriteManifest takes a recorded hash only while the file's size and modification time
 // are still those recorded, and hashes the file again otherwise.
+// A station's daemons that write results keep records of their own beside it, in the same form:
+// <dir>/recorded-sha256-<name>.txt (RecordedHashesName), each written by one process only.
 inline constexpr const char* kRecordedHashesName = "recorded-sha256.txt";
+std::string RecordedHashesName(const std::string& name);
 
 class HashRecord {
  public:
-  explicit HashRecord(std::string dir = "") : dir_(std::move(dir)) {}
-  // Hashes what the file `rel` (relative to the folder) holds now: one written whole.
+  // `file`: the record's name in `dir`.
+  explicit HashRecord(std::string dir = "", std::string file = kRecordedHashesName)
+      : dir_(std::move(dir)), file_(std::move(file)), mutex_(std::make_unique<std::mutex>()) {}
+  // Hashes what the file `rel` (relative to the folder) holds now: one written whole. Safe to
+  // call from several threads at once (files written side by side).
   Status Add(const std::string& rel);
   // Hashes what was appended to `rel` since the last call (all of it the first time, or when
   // it is shorter than what was hashed: cut and written again).
   Status Grow(const std::string& rel);
-  // Writes <dir>/recorded-sha256.txt (to a temporary name, then renamed): the files as they
-  // are now; one that changed since it was hashed is left out (WriteManifest hashes it).
+  // Writes the record (to a temporary name, then renamed): the files as they are now; one that
+  // changed since it was hashed is left out (WriteManifest hashes it).
   Status Save() const;
 
  private:
@@ -48,7 +55,8 @@ class HashRecord {
     std::string hex;
     int64_t size = 0, mtime_ns = 0;
   };
-  std::string dir_;
+  std::string dir_, file_;
+  std::unique_ptr<std::mutex> mutex_;  // Over done_ (Add on several threads).
   std::map<std::string, Entry> done_;
   std::map<std::string, std::shared_ptr<Growing>> growing_;
 };
@@ -56,8 +64,9 @@ class HashRecord {
 // Writes <dir>/manifest-sha256.txt over every regular file under `dir` but itself (and
 // recorded-sha256.txt), or only under its subfolders `parts` when given (a station's scan: raw
 // and results, not the supervisor's ledger beside them); written whole to a temporary name,
-// then renamed. Files whose hashes <dir>/recorded-sha256.txt holds, unchanged since, are not
-// read again. `files` (optional) gets how many it lists.
+// then renamed. Files whose hashes a record in <dir> holds (recorded-sha256.txt or
+// recorded-sha256-<name>.txt), unchanged since, are not read again. `files` (optional) gets how
+// many it lists.
 Status WriteManifest(const std::string& dir, const std::vector<std::string>& parts = {},
                      int* files = nullptr);
 

@@ -58,7 +58,7 @@ class Stage {
               std::function<Status(const std::string& path)> write) {
     const std::string path = (fs::path(results) / name).string();
     if (FileWrites* writes = CurrentFileWrites()) {
-      writes->Add([path, write = std::move(write)] { return write(path); });
+      writes->AddFile(path, std::move(write));
       return Output(name, Status::Ok());
     }
     return Output(name, write(path));

@@ -29,6 +29,25 @@ void FileWrites::Add(std::function<Status()> write) {
   pending_.push_back(std::move(done));
 }
 
+void FileWrites::AddFile(const std::string& path,
+                         std::function<Status(const std::string& path)> write) {
+  std::function<void(const std::string&)> written;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    written = written_;
+  }
+  Add([path, write = std::move(write), written = std::move(written)] {
+    const Status s = write(path);
+    if (s.ok() && written) written(path);
+    return s;
+  });
+}
+
+void FileWrites::AfterEachFile(std::function<void(const std::string& path)> written) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  written_ = std::move(written);
+}
+
 Status FileWrites::Wait() {
   std::vector<std::future<Status>> pending;
   {

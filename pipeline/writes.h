@@ -8,6 +8,7 @@
 #include <functional>
 #include <future>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include "core/common/status.h"
@@ -23,12 +24,18 @@ class FileWrites {
 
   // Runs `write` on a thread of its own (at once, here, when no thread can be had).
   void Add(std::function<Status()> write);
+  // The same for a file: `write(path)`, then, when it wrote it, the hook of AfterEachFile.
+  void AddFile(const std::string& path, std::function<Status(const std::string& path)> write);
+  // What to do with each file AddFile writes once it is written (on its thread): a daemon
+  // records its SHA-256 for the scan's manifest (HashRecord).
+  void AfterEachFile(std::function<void(const std::string& path)> written);
   // Waits for every write added so far; the first error of them, else ok.
   Status Wait();
 
  private:
   std::mutex mutex_;
   std::vector<std::future<Status>> pending_;
+  std::function<void(const std::string& path)> written_;
 };
 
 // The writes of the steps run on this thread (set by the pipeline while it runs a step: a

@@ -2,9 +2,13 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <future>
+#include <mutex>
+#include <string>
 #include <thread>
+#include <vector>
 
 namespace vellum {
 namespace {
@@ -54,6 +58,26 @@ TEST(FileWrites, TheOwnerWaitsForItsWritesAsItGoes) {
   }
   EXPECT_TRUE(written.load());
   release.join();
+}
+
+// A file written through AddFile is handed to the hook once it is written, on the write's
+// thread, before Wait returns; one that failed is not.
+TEST(FileWrites, EachFileWrittenIsHandedToTheHookBeforeWaitReturns) {
+  FileWrites writes;
+  std::mutex mutex;
+  std::vector<std::string> heard;
+  writes.AfterEachFile([&](const std::string& path) {
+    std::lock_guard<std::mutex> lock(mutex);
+    heard.push_back(path);
+  });
+  for (const char* name : {"points.ply", "depth.png", "report/valid.png"}) {
+    writes.AddFile(name, [](const std::string&) { return Status::Ok(); });
+  }
+  writes.AddFile("report/depth.png",
+                 [](const std::string& path) { return Status::Error(path + ": cannot write"); });
+  EXPECT_FALSE(writes.Wait().ok());
+  std::sort(heard.begin(), heard.end());
+  EXPECT_EQ(heard, (std::vector<std::string>{"depth.png", "points.ply", "report/valid.png"}));
 }
 
 // The pipeline sets the writes of the steps it runs for their duration, and puts back what was

@@ -1,6 +1,10 @@
 #include "daemons/triangulator/triangulator_node.h"
 
+#include <filesystem>
+#include <memory>
+
 #include "core/common/text.h"
+#include "io/manifest.h"
 #include "io/scan_io.h"
 #include "pipeline/pipeline.h"
 #include "station/scan_store.h"
@@ -77,7 +81,8 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
                 SizeText(decoded.projector_x.size()) + " and " + SizeText(product_.projector));
   }
   Prepare(calibration);
-  const std::string results = ScanFolder::For(options_.data_dir, id).results();
+  const ScanFolder folder = ScanFolder::For(options_.data_dir, id);
+  const std::string results = folder.results();
   s = MakeDirectories(results);
   if (!s.ok()) return node_->FailScan(id, s.message());
   // The pipeline's triangulate step, with this node's triangulator (the calibration's rays).
@@ -90,6 +95,13 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   work.results = results;
   work.triangulator = triangulator_.get();
   work.stages = std::move(stages);
+  // Its files hashed as they are written, while the points travel, so that the restorer's
+  // manifest need not read them again (points.ply is most of a scan's results).
+  auto hashes = std::make_shared<HashRecord>(folder.root, RecordedHashesName("triangulator"));
+  work.writes->AfterEachFile([hashes, root = folder.root](const std::string& path) {
+    // A file that cannot be hashed now is hashed by the manifest.
+    static_cast<void>(hashes->Add(std::filesystem::path(path).lexically_relative(root).string()));
+  });
   // With the decoder's count of the lit pixels, which the points are judged against, and its
   // amplitude, which passes on for the albedo.
   const cv::Mat amplitude = decoded.amplitude;
@@ -101,7 +113,11 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, amplitude, context, work.stages);
   // Its files (points.ply, the pictures) are written while the points travel, and are on disk
   // before their last chunk goes: before the next stage can start.
-  s = node_->PublishChunks(channel::kPointCloud, &chunks, [&work] { return work.writes->Wait(); });
+  s = node_->PublishChunks(channel::kPointCloud, &chunks, [&work, &hashes] {
+    const Status written = work.writes->Wait();
+    if (written.ok()) static_cast<void>(hashes->Save());  // Without it, the manifest reads them.
+    return written;
+  });
   if (!s.ok()) return node_->FailScan(id, s.message());
   node_->Count("scans triangulated");
   AnnounceHandedOn(node_, id, channel::kPointCloud);

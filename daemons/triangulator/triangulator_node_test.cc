@@ -9,9 +9,11 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "io/calibration_io.h"
+#include "io/manifest.h"
 #include "station/daemon.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
@@ -77,6 +79,21 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
   ASSERT_EQ(stages.size(), 2u);
   EXPECT_EQ(stages[1].stage, "triangulate");
   EXPECT_EQ(stages[1].outputs, SmallScanProducts().stages[1].outputs);
+  // Every file it wrote hashed as written, in its own record beside the scan's raw/ and results/,
+  // for the manifest: the SHA-256 the file has, its size, and its path in the scan's folder.
+  const std::string root = ScanFolder::For(options_.data_dir, 5).root;
+  std::ifstream record(root + "/" + RecordedHashesName("triangulator"));
+  std::map<std::string, std::string> recorded;  // path -> hash
+  for (std::string hex, size, mtime, rel; record >> hex >> size >> mtime >> rel;) {
+    recorded[rel] = hex;
+    EXPECT_EQ(size, std::to_string(fs::file_size(root + "/" + rel))) << rel;
+  }
+  EXPECT_EQ(recorded.size(), stages[1].outputs.size());
+  for (const std::string& file : stages[1].outputs) {
+    std::string hex;
+    ASSERT_TRUE(Sha256OfFile(results + "/" + file, &hex).ok()) << file;
+    EXPECT_EQ(recorded["results/" + file], hex) << file;
+  }
   // The scan's context came without the calibration's part and leaves with it: the points were
   // measured with this calibration. The decoder's count of lit pixels came typed, and judged.
   ScanContext context;
