@@ -15,7 +15,7 @@
 // (SimulatedLog). The program runs
 // itself inside scripts/netns-run.sh: the bus never leaves a private loopback.
 //
-//   ./build/bench/station_bench [--paces=MB/S,...] [--builds=DIR,...] [--keep]
+//   ./build/bench/station_bench [--paces=MB/S,...] [--builds=DIR,...] [--repeats=N] [--keep]
 //                               [--benchmark_filter=...]
 //
 // --keep leaves the work folder (each case's last station: its scan folder, the daemons' logs)
@@ -532,6 +532,7 @@ int main(int argc, char** argv) {
   // daemons of each of these build folders (another commit's, for a change measured beside
   // what it changed); without it, this program's.
   std::vector<std::string> paces = {""}, builds = {""};
+  int repeats = vellum::kBenchRepetitions;  // --repeats=N: more, for a small change.
   std::vector<char*> args;
   bool keep = false;
   for (int k = 0; k < argc; ++k) {
@@ -541,6 +542,8 @@ int main(int argc, char** argv) {
                                                                     : nullptr;
     if (a == "--keep") {
       keep = true;
+    } else if (a.rfind("--repeats=", 0) == 0) {
+      repeats = std::max(1, std::atoi(a.c_str() + 10));
     } else if (list == nullptr) {
       args.push_back(argv[k]);
     } else {
@@ -563,6 +566,7 @@ int main(int argc, char** argv) {
                                      BM_Station_LastFrameToRestored, name, scan, make,
                                      Variant{pace, build})
             ->Apply(vellum::Repeated)
+            ->Repetitions(repeats)
             ->Iterations(1)
             ->UseManualTime()
             ->Unit(benchmark::kMillisecond);

@@ -2,6 +2,9 @@
 
 #include <filesystem>
 #include <memory>
+#include <mutex>
+#include <utility>
+#include <vector>
 
 #include "core/common/text.h"
 #include "io/manifest.h"
@@ -95,12 +98,11 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   work.results = results;
   work.triangulator = triangulator_.get();
   work.stages = std::move(stages);
-  // Its files hashed as they are written, while the points travel, so that the restorer's
-  // manifest need not read them again (points.ply is most of a scan's results).
-  auto hashes = std::make_shared<HashRecord>(folder.root, RecordedHashesName("triangulator"));
-  work.writes->AfterEachFile([hashes, root = folder.root](const std::string& path) {
-    // A file that cannot be hashed now is hashed by the manifest.
-    static_cast<void>(hashes->Add(std::filesystem::path(path).lexically_relative(root).string()));
+  // The files it writes, noted as each is written, to be hashed once the points are handed on.
+  auto written = std::make_shared<std::pair<std::mutex, std::vector<std::string>>>();
+  work.writes->AfterEachFile([written](const std::string& path) {
+    const std::lock_guard<std::mutex> lock(written->first);
+    written->second.push_back(path);
   });
   // With the decoder's count of the lit pixels, which the points are judged against, and its
   // amplitude, which passes on for the albedo.
@@ -113,14 +115,18 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, amplitude, context, work.stages);
   // Its files (points.ply, the pictures) are written while the points travel, and are on disk
   // before their last chunk goes: before the next stage can start.
-  s = node_->PublishChunks(channel::kPointCloud, &chunks, [&work, &hashes] {
-    const Status written = work.writes->Wait();
-    if (written.ok()) static_cast<void>(hashes->Save());  // Without it, the manifest reads them.
-    return written;
-  });
+  s = node_->PublishChunks(channel::kPointCloud, &chunks, [&work] { return work.writes->Wait(); });
   if (!s.ok()) return node_->FailScan(id, s.message());
   node_->Count("scans triangulated");
   AnnounceHandedOn(node_, id, channel::kPointCloud);
+  // Its files hashed while the flattener finds the leaf, long before the restorer writes the
+  // scan's manifest, which then need not read them again (points.ply is most of a scan's
+  // results). One that cannot be hashed now, or a record not saved, the manifest hashes itself.
+  HashRecord hashes(folder.root, RecordedHashesName("triangulator"));
+  for (const std::string& path : written->second) {
+    static_cast<void>(hashes.Add(std::filesystem::path(path).lexically_relative(folder.root)));
+  }
+  static_cast<void>(hashes.Save());
   node_->Log("scan " + std::to_string(id) + ": " + std::to_string(map_.valid) + " points in " +
              std::to_string(work.stages.back().seconds) + " s");
   node_->SetState("idle");

@@ -79,10 +79,13 @@ TEST_F(TriangulatorNodeTest, TriangulatesAScanAsTheStageDoesAndHandsItOn) {
   ASSERT_EQ(stages.size(), 2u);
   EXPECT_EQ(stages[1].stage, "triangulate");
   EXPECT_EQ(stages[1].outputs, SmallScanProducts().stages[1].outputs);
-  // Every file it wrote hashed as written, in its own record beside the scan's raw/ and results/,
-  // for the manifest: the SHA-256 the file has, its size, and its path in the scan's folder.
+  // Every file it wrote hashed once the points are handed on, in its own record beside the
+  // scan's raw/ and results/, for the manifest: the SHA-256 the file has, its size, and its path
+  // in the scan's folder.
   const std::string root = ScanFolder::For(options_.data_dir, 5).root;
-  std::ifstream record(root + "/" + RecordedHashesName("triangulator"));
+  const std::string record_path = root + "/" + RecordedHashesName("triangulator");
+  ASSERT_TRUE(bus_.RunUntil([&] { return fs::exists(record_path); }));  // Saved whole, renamed.
+  std::ifstream record(record_path);
   std::map<std::string, std::string> recorded;  // path -> hash
   for (std::string hex, size, mtime, rel; record >> hex >> size >> mtime >> rel;) {
     recorded[rel] = hex;
