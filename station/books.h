@@ -56,6 +56,11 @@ class TextureBook {
  public:
   TextureBook(Node* node, const std::string& data_dir, bool lights = false);
   Status Get(int64_t scan_id, cv::Mat* texture) const;
+  // Calls `taken` (on the worker thread) with each scan's texture as it comes whole over the bus:
+  // a daemon begins what needs only the texture while the scan is still captured.
+  void OnTaken(std::function<void(int64_t scan_id, const cv::Mat& texture)> taken) {
+    taken_ = std::move(taken);
+  }
   // The scan's extra lights with their images, in the scan's order (none for a scan without).
   Status GetLights(int64_t scan_id, std::vector<ScanLight>* lights) const;
   // About once a second: gives up a texture whose chunks stopped coming.
@@ -67,6 +72,7 @@ class TextureBook {
  private:
   std::string data_dir_;
   std::map<int64_t, cv::Mat> by_scan_;
+  std::function<void(int64_t, const cv::Mat&)> taken_;
   std::map<int64_t, int> light_count_;  // What each TEXTURE announced.
   std::map<int64_t, std::vector<ScanLight>> lights_;
   Assembler<texture_t, cv::Mat> assembler_;

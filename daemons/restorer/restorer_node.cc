@@ -14,6 +14,7 @@
 #include "station/scan_store.h"
 #include "station/supervisor.h"
 #include "vellum/restored_t.hpp"
+#include "vellum/scan_started_t.hpp"
 
 namespace vellum::station {
 
@@ -41,6 +42,22 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
             Process(id, last);
           }) {
   sheets_.AwaitAnnounced(channel::kFlatMesh);
+  // The archival master is the texture as captured: begun as soon as the texture and the scan's
+  // identity are here, while the patterns are still projected.
+  node->Subscribe<scan_started_t>(channel::kScanStarted, [this](const scan_started_t& m) {
+    node_->Post(
+        [this, id = m.scan_id, identity = FromMessage(m.identity)] {
+          identities_[id] = identity;
+          while (identities_.size() > 8) identities_.erase(identities_.begin());
+        },
+        "noting a scan's identity");
+  });
+  textures_.OnTaken([this](int64_t id, const cv::Mat& texture) {
+    const auto identity = identities_.find(id);
+    if (identity == identities_.end()) return;  // Begun with its first page instead.
+    StartArchive(id, texture, identity->second);
+    node_->Count("archival masters begun at the texture");
+  });
   if (NeedsCloud()) {
     // The albedo and reflectance are made from the point map (and the projector's light, which
     // travels with it): heard as the flattener hears it.
@@ -156,7 +173,7 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   page.mesh = std::move(sheet_.mesh);
   page.flat = std::move(sheet_.flat);
   const size_t before = work.stages.size();
-  if (s.ok()) StartArchive(id, work);
+  if (s.ok()) StartArchive(id, work.scan.texture, work.context.identity);
   if (s.ok()) s = pipeline.RunPage(k, Step::kRestore, Step::kRestore, &work);
   if (s.ok() && (NeedsCloud() || !work.scan.lights.empty())) {
     node_->SetState("busy", id,
@@ -183,32 +200,40 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
   pages.names[sheet_page.index] = name;
   pages.context = work.context;
   if (static_cast<int>(pages.restored.size()) == sheet_page.count) {
-    StartArchive(id, work);  // Begun already, unless its scan was put aside meanwhile.
+    // Begun already, unless its scan was put aside meanwhile.
+    StartArchive(id, work.scan.texture, work.context.identity);
     Finish(id, &pages);
   }
   while (scans_.size() > 8) scans_.erase(scans_.begin());  // Scans whose pages stopped.
 }
 
-void RestorerNode::StartArchive(int64_t id, const ScanWork& page_work) {
+void RestorerNode::StartArchive(int64_t id, const cv::Mat& texture, const ScanIdentity& identity) {
   Pages& pages = scans_[id];
-  if (pages.archive.valid()) return;  // Begun with another page of the scan.
+  if (pages.archive.valid()) {
+    if (pages.archived == identity) return;  // Begun with the texture, or another page.
+    static_cast<void>(pages.archive.get());  // Begun with another identity: written again.
+    node_->Count("archival masters written again");
+  }
+  pages.archived = identity;
   // On a thread when one can be had, else where the report asks for it.
-  pages.archive =
-      std::async(std::launch::async | std::launch::deferred,
-                 [options = options_.pipeline, texture = page_work.scan.texture,
-                  context = page_work.context, results = page_work.results] {
-                   ScanWork work;
-                   work.scan.texture = texture;
-                   work.context = context;
-                   work.results = results;
-                   const Status s = Pipeline(options).Run(Step::kArchive, Step::kArchive, &work);
-                   const Status written = work.writes->Wait();
-                   StageReport report = work.stages.empty() ? StageReport() : work.stages.back();
-                   if (work.stages.empty()) report.stage = "archive";
-                   if (report.status.ok() && !s.ok()) report.status = s;
-                   if (report.status.ok() && !written.ok()) report.status = written;
-                   return report;
-                 });
+  pages.archive = std::async(std::launch::async | std::launch::deferred,
+                             [options = options_.pipeline, texture, identity,
+                              results = ScanFolder::For(options_.data_dir, id).results()] {
+                               ScanWork work;
+                               work.scan.texture = texture;
+                               work.context.identity = identity;
+                               work.results = results;
+                               Status s = MakeDirectories(results);
+                               if (s.ok())
+                                 s = Pipeline(options).Run(Step::kArchive, Step::kArchive, &work);
+                               const Status written = work.writes->Wait();
+                               StageReport report =
+                                   work.stages.empty() ? StageReport() : work.stages.back();
+                               if (work.stages.empty()) report.stage = "archive";
+                               if (report.status.ok() && !s.ok()) report.status = s;
+                               if (report.status.ok() && !written.ok()) report.status = written;
+                               return report;
+                             });
 }
 
 void RestorerNode::Finish(int64_t id, Pages* pages) {

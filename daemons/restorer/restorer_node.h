@@ -59,10 +59,12 @@ class RestorerNode {
     std::map<int, std::vector<StageReport>> per_page;  // Mesh, flatten, restore of each page.
     std::map<int, RestoreResult> restored;
     std::vector<std::string> names;
-    ScanContext context;  // The scan's (for the archival master).
-    // The archival master's stage, run on a thread of its own from the scan's first page on:
-    // it needs only the texture and the scan's identity, not the restored pages.
+    ScanContext context;  // The scan's.
+    // The archival master's stage, run on a thread of its own from the scan's texture on (or its
+    // first page, when the texture came before this process heard the scan start): it needs
+    // only the texture and the scan's identity, not the restored pages.
     std::future<StageReport> archive;
+    ScanIdentity archived;  // The identity it was begun with.
   };
   // The point map of a scan and the projector's light, for the albedo and reflectance.
   struct Cloud {
@@ -79,8 +81,8 @@ class RestorerNode {
   };
   bool NeedsCloud() const;                       // With a flat field or a studio field.
   void Process(int64_t id, const mesh_t& last);  // Worker thread.
-  // Begins the scan's archival master (Pages::archive) from a page's work, unless begun.
-  void StartArchive(int64_t id, const ScanWork& page_work);
+  // Begins the scan's archival master (Pages::archive) unless begun with this identity.
+  void StartArchive(int64_t id, const cv::Mat& texture, const ScanIdentity& identity);
   void Finish(int64_t id, Pages* pages);     // Every page is in: the report, RESTORED.
   void CloudDone(int64_t id, Cloud* cloud);  // Worker thread.
   void GiveUpWaiting();  // Worker thread: fails a scan whose point map did not come in 30 s.
@@ -97,6 +99,7 @@ class RestorerNode {
   SheetCache contact_sheet_;         // The contact sheet's scans, read again only when changed.
   std::map<int64_t, Cloud> clouds_;  // The newest scans' point maps (with NeedsCloud()).
   std::map<int64_t, WaitingScan> waiting_;
+  std::map<int64_t, ScanIdentity> identities_;  // Of the scans heard starting (SCAN_STARTED).
 };
 
 }  // namespace vellum::station

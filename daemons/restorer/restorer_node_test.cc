@@ -15,6 +15,7 @@
 
 #include "core/common/text.h"
 #include "station/daemon.h"
+#include "station/scan_log.h"
 #include "station/scan_store.h"
 #include "station/testing.h"
 #include "vellum/restored_t.hpp"
@@ -94,6 +95,34 @@ TEST_F(RestorerNodeTest, RestoresThePageAsTheStageDoesAndWritesTheWholeReport) {
   EXPECT_NE(std::find(report["outputs"].begin(), report["outputs"].end(), "report.html"),
             report["outputs"].end());
   EXPECT_EQ(node.Counter("scans restored"), 1);
+}
+
+// The archival master needs only the texture and the scan's identity: begun when both are here,
+// while the scan is still captured, before any page; written once, as the archive stage writes
+// it. A scan whose start this process did not hear gets it with its first page.
+TEST_F(RestorerNodeTest, TheArchivalMasterIsWrittenFromTheTextureBeforeAnyPage) {
+  Node node("vellum-restorer", &bus_.lcm(), &bus_.clock());
+  RestorerNode restorer(&node, options_);
+  auto restored = bus_.Record<restored_t>(channel::kRestored);
+  scan_started_t started = MakeScanStarted(SmallScan(), 8, 1);
+  bus_.probe().Publish(channel::kScanStarted, &started);
+  const std::string master = ScanFolder::For(options_.data_dir, 8).results() + "/archival.tif";
+  Publish(8, {});  // The texture alone, after the start (as on the bus).
+  ASSERT_TRUE(bus_.RunUntil([&] { return fs::exists(master); }));  // Written whole, renamed.
+  EXPECT_EQ(node.Counter("archival masters begun at the texture"), 1);
+  EXPECT_TRUE(restored->empty());
+  for (mesh_t& m : Sheet(8)) bus_.probe().Publish(channel::kFlatMesh, &m);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !restored->empty(); }));
+  EXPECT_EQ(node.Counter("archival masters written again"), 0);
+  // No start heard: with the first page.
+  Publish(9, Sheet(9));
+  ASSERT_TRUE(bus_.RunUntil([&] { return restored->size() == 2; }));
+  EXPECT_EQ(node.Counter("archival masters begun at the texture"), 1);
+  // The same master either way: the identity SCAN_STARTED gave is the scan's.
+  const std::string with_page =
+      ReadBytes(ScanFolder::For(options_.data_dir, 9).results() + "/archival.tif");
+  EXPECT_GT(with_page.size(), 1000u);
+  EXPECT_TRUE(ReadBytes(master) == with_page);
 }
 
 TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
