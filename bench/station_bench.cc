@@ -1,8 +1,10 @@
 // What the operator waits for: from the last frame captured to the restored page on the
 // viewer's screen. A scan log is played into the real processing daemons (vellum-decoder,
 // -triangulator, -flattener, -restorer) and vellum-viewer (drawing offscreen), started afresh
-// for each repetition on a private udpm bus, at its recording's own pace. Measured on the bus,
-// by this program's clock:
+// for each repetition on a private udpm bus, at its recording's own pace, twice: the same
+// captures first under another scan id (a station's first scan, its daemons just started), then
+// as recorded (a scan in a session, the wait an operator has on every scan but the first; the
+// benchmark's time). Each is measured on the bus, by this program's clock:
 //  - capture: the first CAPTURE to the last (the scan's own time at the gantry: the baseline);
 //  - the wait: the last CAPTURE to RESTORED, and to the viewer's status naming the scan as drawn;
 //  - each stage's part of the wait, from SCAN_PROGRESS (when each daemon handed the scan on).
@@ -18,8 +20,10 @@
 //   ./build/bench/station_bench [--paces=MB/S,...] [--builds=DIR,...] [--repeats=N] [--keep]
 //                               [--benchmark_filter=...]
 //
-// --keep leaves the work folder (each case's last station: its scan folder, the daemons' logs)
-// for a look at what the station wrote, and names it.
+// --keep leaves the work folder (each case's last station: its scan folders, the daemons' logs)
+// for a look at what the station wrote, and names it. --builds runs each case with the daemons
+// of each build folder named (another commit's: a change measured beside what it changed, in the
+// same run); --repeats=N repeats each case N times rather than five.
 #include <benchmark/benchmark.h>
 #include <fcntl.h>
 #include <signal.h>
