@@ -271,7 +271,8 @@ Status WriteManifest(const std::string& dir, const std::vector<std::string>& par
     }
   };
   std::future<void> second;
-  if (to_hash.size() > 1) second = std::async(std::launch::async, work);
+  // With no thread to be had, all on this one (the deferred second finds nothing left).
+  if (to_hash.size() > 1) second = std::async(std::launch::async | std::launch::deferred, work);
   work();
   if (second.valid()) second.get();
   for (size_t k = 0; k < paths.size(); ++k) {
