@@ -217,7 +217,8 @@ StageReport Pipeline::RunStep(Step step, ScanWork* work) const {
     }
     case Step::kOutline:
       return OutlineStage(work->map.points, work->scan.texture, work->calibration, work->context,
-                          o.outline, o.limits, work->results, &work->outline);
+                          o.outline, o.limits, work->results, work->texture_pictured,
+                          &work->outline);
     case Step::kArchive:
       return ArchiveStage(work->scan.texture, work->context.identity, o.camera_icc, work->results);
     default:

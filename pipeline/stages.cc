@@ -29,6 +29,16 @@ namespace vellum {
 namespace fs = std::filesystem;
 namespace {
 
+// An image as the report shows it: 8-bit, at most 1400 pixels across.
+cv::Mat ReportSized(const cv::Mat& image) {
+  cv::Mat out = EightBit(image);
+  if (out.cols > 1400) {
+    const double scale = 1400.0 / out.cols;
+    cv::resize(out, out, cv::Size(), scale, scale, cv::INTER_AREA);
+  }
+  return out;
+}
+
 // Starts the clock of a stage's report; Finish sets the status and the wall time.
 class Stage {
  public:
@@ -84,15 +94,6 @@ class Stage {
   }
 
  private:
-  static cv::Mat ReportSized(const cv::Mat& image) {
-    cv::Mat out = EightBit(image);
-    if (out.cols > 1400) {
-      const double scale = 1400.0 / out.cols;
-      cv::resize(out, out, cv::Size(), scale, scale, cv::INTER_AREA);
-    }
-    return out;
-  }
-
   std::chrono::steady_clock::time_point start_;
   StageReport report_;
 };
@@ -437,10 +438,16 @@ void JudgeLiveOffView(const Outline& outline, int seen, const OutlineOptions& op
 
 }  // namespace
 
+Status WriteTexturePicture(const std::string& results, const cv::Mat& texture) {
+  const Status s = MakeDirectories((fs::path(results) / "report").string());
+  if (!s.ok()) return s;
+  return WriteImage((fs::path(results) / kTexturePicture).string(), ReportSized(texture));
+}
+
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
                          const ScanContext& context, const OutlineOptions& options,
                          const WarningLimits& limits, const std::string& results,
-                         Outline* outline) {
+                         bool texture_pictured, Outline* outline) {
   Stage stage("outline");
   StageReport& r = stage.report();
   r.Number("options", "outline_step_mm", options.step_mm);
@@ -483,7 +490,8 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
                outline->method + "); check the outline in the report, or give a hint");
   }
   for (const OutlineDoubt& doubt : outline->doubts) r.Warn(doubt.code, doubt.message);
-  Status s = stage.Picture(results, "texture", texture);
+  Status s = texture_pictured ? stage.Output(kTexturePicture, Status::Ok())
+                              : stage.Picture(results, "texture", texture);
   if (s.ok()) {
     // Drawn where it is written, from its own copy of the pages.
     Outline drawn;

@@ -129,15 +129,23 @@ StageReport TriangulateStage(const DecodeResult& decoded, const Triangulator& tr
                              const TriangulateOptions& options, const WarningLimits& limits,
                              const std::string& results, PointMap* map);
 
+// The texture's picture in the report, relative to the results folder.
+inline constexpr const char* kTexturePicture = "report/texture.png";
+// Writes it from the scan's texture, as the outline stage does: a daemon writes it as soon as
+// the texture comes, while the patterns are still projected.
+Status WriteTexturePicture(const std::string& results, const cv::Mat& texture);
+
 // Outline: the leaf (or a spread's two pages) in the point map and the texture
 // (core/outline), seeded at the operator's hint for the scan (context.leaf_hint) when there is
 // one, else at options.hint, and told what the object is when the operator said
-// (context.object). Writes report/texture.png and report/outline.png. Warns of a leaf that runs
-// off the view and of an outline of low confidence. `rig` measured the points (its projector's
-// shadows are told from the leaf).
+// (context.object). Writes report/texture.png (unless `texture_pictured`: written already by
+// WriteTexturePicture) and report/outline.png. Warns of a leaf that runs off the view and of an
+// outline of low confidence. `rig` measured the points (its projector's shadows are told from
+// the leaf).
 StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Calibration& rig,
                          const ScanContext& context, const OutlineOptions& options,
-                         const WarningLimits& limits, const std::string& results, Outline* outline);
+                         const WarningLimits& limits, const std::string& results,
+                         bool texture_pictured, Outline* outline);
 
 // The stages that run once for each page take the scan as the pipeline holds it (`work`: its
 // texture, lights, calibration, context, point map, the stages' reports so far and the results

@@ -54,7 +54,10 @@ struct ScanWork {
   std::string frames_dir;
   Calibration calibration;
   ScanContext context;
-  std::string results;           // The folder the steps write to.
+  std::string results;  // The folder the steps write to.
+  // The texture's picture is in `results` already (WriteTexturePicture, by a daemon as the
+  // texture came): the outline step lists it and does not write it again.
+  bool texture_pictured = false;
   std::string name;              // What errors name (the scan's folder); "" for none.
   std::string calibration_name;  // What errors call the calibration (its file).
   // The decode step's decoder, which keeps its buffers between scans; null: one of the step's

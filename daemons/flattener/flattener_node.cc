@@ -30,6 +30,15 @@ FlattenerNode::FlattenerNode(Node* node, const FlattenerNodeOptions& options)
             Process(id, last);
           }) {
   assembler_.AwaitAnnounced(channel::kPointCloud);
+  // The texture's picture for the report needs nothing but the texture: written as it comes,
+  // while the patterns are still projected, on a thread of its own.
+  textures_.OnTaken([this](int64_t id, const cv::Mat& texture) {
+    pictured_[id] = std::async(std::launch::async | std::launch::deferred,
+                               [results = ScanFolder::For(options_.data_dir, id).results(),
+                                texture] { return WriteTexturePicture(results, texture); })
+                        .share();
+    while (pictured_.size() > 8) pictured_.erase(pictured_.begin());
+  });
 }
 
 void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
@@ -56,6 +65,11 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
   work.results = results;
   work.stages = std::move(stages);
   work.map.points = points_;
+  const auto pictured = pictured_.find(id);
+  if (pictured != pictured_.end()) {
+    work.texture_pictured = pictured->second.get().ok();  // Else written with the outline.
+    pictured_.erase(pictured);
+  }
   const Pipeline pipeline(o);
   s = pipeline.Run(Step::kOutline, Step::kOutline, &work);
   if (!s.ok()) return node_->FailScan(id, s.message());

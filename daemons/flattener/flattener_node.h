@@ -4,6 +4,8 @@
 // with the reports of the stages so far.
 #pragma once
 
+#include <future>
+#include <map>
 #include <optional>
 #include <string>
 
@@ -43,6 +45,8 @@ class FlattenerNode {
   Assembler<point_cloud_t, cv::Mat> assembler_;
   // Worker thread only:
   cv::Mat points_;
+  // The report's picture of each recent scan's texture, written as the texture came.
+  std::map<int64_t, std::shared_future<Status>> pictured_;
 };
 
 }  // namespace vellum::station

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <opencv2/imgproc.hpp>
 
@@ -80,6 +81,35 @@ TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
   EXPECT_EQ(stages[4].stage, "flatten");
   EXPECT_TRUE(fs::exists(ScanFolder::For(options_.data_dir, 5).results() + "/flat.ply"));
   EXPECT_EQ(node.Counter("scans flattened"), 1);
+}
+
+// The report's picture of the texture is written as the texture comes, before the scan's
+// points, as the outline stage writes it, and listed among the outline stage's files.
+TEST_F(FlattenerNodeTest, TheTexturesPictureIsWrittenAsTheTextureComes) {
+  Node node("vellum-flattener", &bus_.lcm(), &bus_.clock());
+  FlattenerNode flattener(&node, options_);
+  auto sheets = bus_.Record<mesh_t>(channel::kFlatMesh);
+  const std::string results = ScanFolder::For(options_.data_dir, 5).results();
+  PublishTexture(5, SmallScan().texture);
+  // Written whole (a temporary name, then renamed), with no point of the scan yet.
+  ASSERT_TRUE(bus_.RunUntil([&] { return fs::exists(results + "/report/texture.png"); }));
+  EXPECT_TRUE(sheets->empty());
+  const std::string early = ReadBytes(results + "/report/texture.png");
+  PublishPoints(5);
+  ASSERT_TRUE(bus_.RunUntil([&] { return !sheets->empty(); }));
+  std::vector<StageReport> stages;
+  ASSERT_TRUE(FromMessages(sheets->back().stages, &stages).ok());
+  ASSERT_EQ(stages[2].stage, "outline");
+  const std::vector<std::string>& files = stages[2].outputs;
+  EXPECT_NE(std::find(files.begin(), files.end(), "report/texture.png"), files.end());
+  EXPECT_NE(std::find(files.begin(), files.end(), "report/outline.png"), files.end());
+  // The picture the outline stage itself writes of the same texture.
+  const std::string own = testing::TestDir("flattener_node_own");
+  ASSERT_TRUE(WriteTexturePicture(own, SmallScan().texture).ok());
+  EXPECT_GT(early.size(), 1000u);
+  EXPECT_TRUE(early == ReadBytes(own + "/report/texture.png"));
+  EXPECT_TRUE(ReadBytes(results + "/report/texture.png") == early);
+  fs::remove_all(own);
 }
 
 TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
