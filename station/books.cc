@@ -87,7 +87,7 @@ TextureBook::TextureBook(Node* node, const std::string& data_dir, bool lights)
             light_count_[id] = last.light_count;
             KeepRecent(&light_count_);
             lights_.erase(id);  // A scan sent again: its lights come again after it.
-            if (taken_) taken_(id, by_scan_[id]);
+            if (taken_) taken_(id, *texture);
           }) {
   if (!lights) return;
   light_assembler_ = std::make_unique<Assembler<texture_t, ScanLight>>(

@@ -18,6 +18,28 @@
 
 namespace vellum::station {
 
+namespace {
+
+// The pipeline's archive step on its own: the archival master of `texture` in `results`, and the
+// step's report (its failure, or its writes', in its status).
+StageReport ArchiveStep(const PipelineOptions& options, const cv::Mat& texture,
+                        const ScanIdentity& identity, const std::string& results) {
+  ScanWork work;
+  work.scan.texture = texture;
+  work.context.identity = identity;
+  work.results = results;
+  Status s = MakeDirectories(results);
+  if (s.ok()) s = Pipeline(options).Run(Step::kArchive, Step::kArchive, &work);
+  const Status written = work.writes->Wait();
+  StageReport report = work.stages.empty() ? StageReport() : work.stages.back();
+  if (work.stages.empty()) report.stage = "archive";
+  if (report.status.ok() && !s.ok()) report.status = s;
+  if (report.status.ok() && !written.ok()) report.status = written;
+  return report;
+}
+
+}  // namespace
+
 bool RestorerNodeOptions::Check(std::string* why) const {
   if (data_dir.empty() || !(preview_pixels >= 1)) {
     *why = "restorer: data_dir must be named and preview_pixels >= 1";
@@ -216,24 +238,9 @@ void RestorerNode::StartArchive(int64_t id, const cv::Mat& texture, const ScanId
   }
   pages.archived = identity;
   // On a thread when one can be had, else where the report asks for it.
-  pages.archive = std::async(std::launch::async | std::launch::deferred,
-                             [options = options_.pipeline, texture, identity,
-                              results = ScanFolder::For(options_.data_dir, id).results()] {
-                               ScanWork work;
-                               work.scan.texture = texture;
-                               work.context.identity = identity;
-                               work.results = results;
-                               Status s = MakeDirectories(results);
-                               if (s.ok())
-                                 s = Pipeline(options).Run(Step::kArchive, Step::kArchive, &work);
-                               const Status written = work.writes->Wait();
-                               StageReport report =
-                                   work.stages.empty() ? StageReport() : work.stages.back();
-                               if (work.stages.empty()) report.stage = "archive";
-                               if (report.status.ok() && !s.ok()) report.status = s;
-                               if (report.status.ok() && !written.ok()) report.status = written;
-                               return report;
-                             });
+  pages.archive =
+      std::async(std::launch::async | std::launch::deferred, ArchiveStep, options_.pipeline,
+                 texture, identity, ScanFolder::For(options_.data_dir, id).results());
 }
 
 void RestorerNode::Finish(int64_t id, Pages* pages) {
