@@ -10,7 +10,6 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <future>
 #include <iterator>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -820,9 +819,9 @@ TEST_F(IoTest, HashesRecordedAsFilesAreWrittenMakeTheSameManifestAndChangesAreHa
   EXPECT_TRUE(problems.empty()) << problems.front();
 }
 
-// A daemon's own record (recorded-sha256-<name>.txt) is taken as the decoder's is, written from
-// several threads at once; records, and records being written, are never in the manifest, but a
-// file named like one inside raw/ or results/ is.
+// A daemon's own record (recorded-sha256-<name>.txt) is taken as the decoder's is; records, and
+// records being written, are never in the manifest, but a file named like one inside raw/ or
+// results/ is.
 TEST_F(IoTest, EachWritersRecordIsTakenAndNoRecordIsInTheManifest) {
   fs::create_directories(dir_ / "raw");
   fs::create_directories(dir_ / "results" / "report");
@@ -837,11 +836,7 @@ TEST_F(IoTest, EachWritersRecordIsTakenAndNoRecordIsInTheManifest) {
     write(files.back(), std::string(5000 + k, static_cast<char>('a' + k)));
   }
   write("results/recorded-sha256-not-a-record.txt", "a result like any other");
-  std::vector<std::future<Status>> adding;
-  for (const std::string& rel : files) {
-    adding.push_back(std::async(std::launch::async, [&mine, rel] { return mine.Add(rel); }));
-  }
-  for (auto& a : adding) ASSERT_TRUE(a.get().ok());
+  for (const std::string& rel : files) ASSERT_TRUE(mine.Add(rel).ok()) << rel;
   ASSERT_TRUE(mine.Save().ok());
   write(".part-recorded-sha256-flattener.txt", "a record being written when the manifest is");
   // The record's hash of one picture replaced by another: the manifest takes the record's.

@@ -160,8 +160,6 @@ std::string RecordedHashesName(const std::string& name) {
   return "recorded-sha256-" + name + ".txt";
 }
 
-namespace {}  // namespace
-
 struct HashRecord::Growing {
   Sha256 sha;
   int64_t hashed = 0;  // Bytes added to sha.
@@ -176,7 +174,6 @@ Status HashRecord::Add(const std::string& rel) {
   if (!s.ok()) return s;
   // Changed while it was read: left to the manifest.
   if (!Stat(path, &size, &mtime) || size != e.size || mtime != e.mtime_ns) return Status::Ok();
-  const std::lock_guard<std::mutex> lock(*mutex_);
   done_[rel] = e;
   return Status::Ok();
 }
@@ -195,14 +192,12 @@ Status HashRecord::Grow(const std::string& rel) {
     return s;
   }
   g->hashed = size;
-  const std::lock_guard<std::mutex> lock(*mutex_);
   done_[rel] = {g->sha.HexSoFar(), size, mtime};
   return Status::Ok();
 }
 
 Status HashRecord::Save() const {
   std::ostringstream text;
-  const std::lock_guard<std::mutex> lock(*mutex_);
   for (const auto& [rel, e] : done_) {
     int64_t size = 0, mtime = 0;
     if (!Stat((fs::path(dir_) / rel).string(), &size, &mtime) || size != e.size ||

@@ -7,7 +7,6 @@
 #include <cstdint>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <vector>
 
@@ -38,9 +37,8 @@ class HashRecord {
  public:
   // `file`: the record's name in `dir`.
   explicit HashRecord(std::string dir = "", std::string file = kRecordedHashesName)
-      : dir_(std::move(dir)), file_(std::move(file)), mutex_(std::make_unique<std::mutex>()) {}
-  // Hashes what the file `rel` (relative to the folder) holds now: one written whole. Safe to
-  // call from several threads at once (files written side by side).
+      : dir_(std::move(dir)), file_(std::move(file)) {}
+  // Hashes what the file `rel` (relative to the folder) holds now: one written whole.
   Status Add(const std::string& rel);
   // Hashes what was appended to `rel` since the last call (all of it the first time, or when
   // it is shorter than what was hashed: cut and written again).
@@ -56,7 +54,6 @@ class HashRecord {
     int64_t size = 0, mtime_ns = 0;
   };
   std::string dir_, file_;
-  std::unique_ptr<std::mutex> mutex_;  // Over done_ (Add on several threads).
   std::map<std::string, Entry> done_;
   std::map<std::string, std::shared_ptr<Growing>> growing_;
 };

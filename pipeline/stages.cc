@@ -490,8 +490,12 @@ StageReport OutlineStage(const cv::Mat& points, const cv::Mat& texture, const Ca
                outline->method + "); check the outline in the report, or give a hint");
   }
   for (const OutlineDoubt& doubt : outline->doubts) r.Warn(doubt.code, doubt.message);
-  Status s = texture_pictured ? stage.Output(kTexturePicture, Status::Ok())
-                              : stage.Picture(results, "texture", texture);
+  // The one writer of the texture's picture, here or in a daemon as the texture came.
+  Status s = texture_pictured
+                 ? stage.Output(kTexturePicture, Status::Ok())
+                 : stage.File(results, kTexturePicture, [results, texture](const std::string&) {
+                     return WriteTexturePicture(results, texture);
+                   });
   if (s.ok()) {
     // Drawn where it is written, from its own copy of the pages.
     Outline drawn;
