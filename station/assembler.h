@@ -1,11 +1,12 @@
 // Reassembly of a chunked product (CORRESPONDENCE, POINT_CLOUD, FLAT_MESH) on a daemon's
 // worker thread: every chunk is checked and copied in; a product is handed on when whole.
-// When its chunks stop coming before it is whole (the bus lost some: a loaded machine, this
-// daemon paused), the missing ones are asked again on RESEND, every ask_after_s, and the
-// publisher sends them again ("products recovered"). It is given up, with an error naming the
-// missing chunks ("products lost"), when the next scan's chunks begin, when nothing came for
-// timeout_s (by the node's clock), or when its chunks start again unasked (a re-send: the product
-// is then built from the new send alone, never from two).
+// When its last chunk comes with others missing, or its chunks stop coming before it is whole
+// (the bus lost some: a loaded machine, this daemon paused), the missing ones are asked again on
+// RESEND, at once and then every ask_after_s, and the publisher sends them again ("products
+// recovered"); the loss itself is logged and counted, not an error (Node::RecoversLosses). It is
+// given up, with an error naming the missing chunks ("products lost"), when the next scan's chunks
+// begin, when nothing came for timeout_s (by the node's clock), or when its chunks start again
+// unasked (a re-send: the product is then built from the new send alone, never from two).
 #pragma once
 
 #include <algorithm>
@@ -38,6 +39,7 @@ class Assembler {
         done_(std::move(done)),
         timeout_s_(timeout_s),
         ask_after_s_(ask_after_s) {
+    node->RecoversLosses(channel_);
     node->Subscribe<Msg>(channel_, [this](const Msg& msg) {
       auto copy = std::make_shared<Msg>(msg);
       node_->Post([this, copy] { OnChunk(*copy); });
@@ -188,7 +190,12 @@ class Assembler {
                    msg.scan_id);
       return;
     }
-    if (!chunks_.Complete()) return;
+    if (!chunks_.Complete()) {
+      // Chunks go in order: the last one come with others missing means those were lost. They
+      // are asked at once, not after ask_after_s of quiet: the operator is waiting.
+      if (msg.chunk_index == msg.chunk_count - 1 && asks_ == 0) Ask();
+      return;
+    }
     if (asks_ > 0) {
       node_->Count("products recovered");
       node_->Log("scan " + std::to_string(msg.scan_id) + ": " + channel_ +

@@ -248,11 +248,26 @@ void Node::CheckSequence(const std::string& channel, int64_t seq) {
     }
     heard.insert(heard.begin(), seq);
   }
-  if (lost > 0) {
-    Count("lost messages", lost);
-    Error(channel + ": " + std::to_string(lost) + " message(s) lost on the bus (seq " +
-          std::to_string(last) + " then " + std::to_string(seq) + ")");
+  if (lost == 0) return;
+  Count("lost messages", lost);
+  const std::string what = channel + ": " + std::to_string(lost) +
+                           " message(s) lost on the bus (seq " + std::to_string(last) + " then " +
+                           std::to_string(seq) + ")";
+  bool recovered = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    recovered = recovered_.count(channel) > 0;
   }
+  if (recovered) {
+    Log(what + "; asking again");
+  } else {
+    Error(what);
+  }
+}
+
+void Node::RecoversLosses(const std::string& channel) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  recovered_.insert(channel);
 }
 
 void Node::OtherStation(const std::string& channel, const std::string& station) {

@@ -16,6 +16,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 #include <type_traits>
@@ -143,7 +144,7 @@ class Node {
 
   // Calls handler with each decoded message of `channel`, on the LCM thread. Messages that do
   // not decode as Msg are reported as errors (with their size) and dropped; a jump in a
-  // publisher's seq is reported as lost messages.
+  // publisher's seq is reported as lost messages (an error, unless RecoversLosses(channel)).
   template <class Msg>
   void Subscribe(const std::string& channel, std::function<void(const Msg&)> handler) {
     SubscribeRaw(channel, [this, channel, handler](const lcm::ReceiveBuffer* buffer) {
@@ -230,6 +231,9 @@ class Node {
   void Log(const std::string& message) const;
   void Count(const std::string& counter, int64_t n = 1);
   int64_t Counter(const std::string& counter) const;
+  // What `channel` loses is asked again (its Assembler): a lost message there is logged and
+  // counted, not an error; the error comes if the product is given up.
+  void RecoversLosses(const std::string& channel);
 
   // Runs `work` on the worker thread, in the order posted. With kMaxQueuedJobs waiting, the
   // work is refused: reported as an error (naming `what`) and counted; returns false.
@@ -316,6 +320,7 @@ class Node {
   // What it hears: per channel, the publishers (each the last seq of its run), the most recently
   // heard first, a few at most (SeqStreams).
   std::map<std::string, std::vector<int64_t>> seq_in_;
+  std::set<std::string> recovered_;         // RecoversLosses's channels.
   std::vector<std::string> others_logged_;  // Other stations heard (the first few).
   std::string state_ = "starting", detail_, last_error_;
   int64_t scan_id_ = 0, errors_ = 0, last_error_utime_ = 0, last_error_scan_ = 0;
