@@ -194,7 +194,8 @@ class Node {
     HeldProduct held;
     held.channel = channel;
     for (Msg& m : *chunks) {
-      if (before_last && &m == &chunks->back()) {
+      const bool last = &m == &chunks->back();
+      if (before_last && last) {
         const Status ready = before_last();
         if (!ready.ok()) return ready;
       }
@@ -203,14 +204,21 @@ class Node {
       std::vector<uint8_t> bytes = SpareBuffer();
       bytes.resize(static_cast<size_t>(m.getEncodedSize()));  // Every byte encoded over.
       m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
-      PublishBytes(channel, bytes);
       held.scan_id = m.scan_id;
       held.seqs.push_back(m.seq);
+      if (last) {
+        // Held before the last chunk goes: a receiver that finds chunks missing when it comes
+        // asks at once (Assembler), and is answered.
+        held.chunks.push_back(bytes);
+        Hold(std::move(held));
+        PublishBytes(channel, bytes);
+        break;
+      }
+      PublishBytes(channel, bytes);
       held.chunks.push_back(std::move(bytes));
       std::this_thread::sleep_until(
           start + std::chrono::duration<double>(held.chunks.back().size() / pace_));
     }
-    Hold(std::move(held));
     return Status::Ok();
   }
   void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
