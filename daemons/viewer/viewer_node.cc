@@ -145,15 +145,17 @@ void ViewerNode::Tick() {
       state_.Type(in.text);
     }
   }
-  // Drawn at most ten times a second of real time; what it shows is as of the node's clock (a
-  // camera silent for 2 s, a daemon for 3 s).
+  // Drawn at most ten times a second of real time, but a restored page at once: the operator
+  // waits for it. What it shows is as of the node's clock (a camera silent for 2 s, a daemon for
+  // 3 s).
+  const bool new_page = !state_.results().empty() && state_.results().back().scan_id != shown_;
   const auto real = std::chrono::steady_clock::now();
-  if (real < next_draw_) return;
+  if (real < next_draw_ && !new_page) return;
   next_draw_ = real + std::chrono::milliseconds(100);
   window_->Show(DrawViewer(state_, window_->size(), node_->Now(), &layout_));
   // A restored page newly on the screen: its scan goes on the status (scan_id), which is when
   // the operator sees it (bench/station_bench times it).
-  if (!state_.results().empty() && state_.results().back().scan_id != shown_) {
+  if (new_page) {
     shown_ = state_.results().back().scan_id;
     node_->Count("restored pages shown");
     node_->SetState("idle", shown_, readiness_);

@@ -111,6 +111,20 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
   EXPECT_GT(requests->back().scan_id, 0);
 }
 
+// A restored page is drawn as soon as it comes, not at the next of the viewer's ten draws a
+// second: the test ticks the viewer itself, once to draw, then once right after the page came.
+TEST_F(ViewerNodeTest, ARestoredPageIsDrawnAtTheFirstTickAfterItCame) {
+  Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
+  ViewerNode viewer(&node, Window());
+  viewer.Tick();  // Drawn: the next draw is due a tenth of a second later.
+  restored_t r = Restored(14);
+  bus_.probe().Publish(channel::kRestored, &r);
+  for (int k = 0; k < 100 && viewer.state().results().empty(); ++k) bus_.lcm().handleTimeout(10);
+  ASSERT_EQ(viewer.state().results().size(), 1u);
+  viewer.Tick();
+  EXPECT_EQ(node.Counter("restored pages shown"), 1);
+}
+
 // A doubtful result looks doubtful: its warnings are kept, the header says so, and they are
 // written in amber (B 0, G 170, R 255) under the restored page.
 TEST_F(ViewerNodeTest, ADoubtfulResultShowsItsWarningsInAmber) {
