@@ -162,11 +162,29 @@ class Assembler {
   void StartOver() {
     chunks_.Reset();
     product_ = Product{};
+    seq_of_.clear();
     asks_ = 0;
     asked_ = {};
   }
 
+  // A chunk this receiver has, heard again with its seq: sent again for another receiver's
+  // RESEND (every receiver on the channel hears it), or asked by this one and late. Not a new
+  // send, which numbers its chunks anew.
+  bool HeardBefore(const Msg& msg) const {
+    if (chunks_.Has(msg.scan_id, msg.chunk_index) && !chunks_.Complete() &&
+        seq_of_[static_cast<size_t>(msg.chunk_index)] == msg.seq) {
+      return true;
+    }
+    return std::any_of(whole_.begin(), whole_.end(), [&](const Whole& w) {
+      return w.scan_id == msg.scan_id && msg.seq >= w.first_seq && msg.seq <= w.last_seq;
+    });
+  }
+
   void OnChunk(const Msg& msg) {
+    if (HeardBefore(msg)) {
+      node_->Count("chunks heard again");
+      return;
+    }
     if (asks_ > 0 && !chunks_.Complete() && chunks_.Has(msg.scan_id, msg.chunk_index)) {
       return;  // Asked again and came late as well: the same chunk, already in.
     }
@@ -183,7 +201,11 @@ class Assembler {
       StartOver();
     }
     Status s = chunks_.Add(msg.scan_id, msg.chunk_index, msg.chunk_count, node_->Now());
-    if (s.ok() && chunks_.received() == 1) Began(msg);
+    if (s.ok() && chunks_.received() == 1) {
+      Began(msg);
+      seq_of_.assign(static_cast<size_t>(msg.chunk_count), 0);
+    }
+    if (s.ok()) seq_of_[static_cast<size_t>(msg.chunk_index)] = msg.seq;
     if (s.ok()) s = add_(msg, &product_);
     if (!s.ok()) {
       node_->Error("scan " + std::to_string(msg.scan_id) + ": " + channel_ + ": " + s.message(),
@@ -196,6 +218,9 @@ class Assembler {
       if (msg.chunk_index == msg.chunk_count - 1 && asks_ == 0) Ask();
       return;
     }
+    whole_.push_back({msg.scan_id, *std::min_element(seq_of_.begin(), seq_of_.end()),
+                      *std::max_element(seq_of_.begin(), seq_of_.end())});
+    if (whole_.size() > 4) whole_.erase(whole_.begin());
     if (asks_ > 0) {
       node_->Count("products recovered");
       node_->Log("scan " + std::to_string(msg.scan_id) + ": " + channel_ +
@@ -217,6 +242,13 @@ class Assembler {
   Clock::time_point asked_;
   std::vector<Awaited> awaited_;  // Announced, not a chunk yet.
   std::vector<int64_t> seen_;     // The last scans of which a chunk came, oldest first.
+  std::vector<int64_t> seq_of_;   // Each chunk's seq, of the product being built.
+  // The last products made whole: a publisher numbers a product's chunks in a row, so its
+  // chunks' seqs span first_seq..last_seq.
+  struct Whole {
+    int64_t scan_id, first_seq, last_seq;
+  };
+  std::vector<Whole> whole_;
 };
 
 }  // namespace vellum::station

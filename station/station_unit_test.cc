@@ -1025,7 +1025,55 @@ TEST(Assembler, TheLastChunkComingWithOneMissingAsksForItAtOnceAndTheRecoveredLo
   EXPECT_EQ(r.node.Counter("lost messages"), 1);
   EXPECT_EQ(r.node.Counter("chunks asked again"), 1);
   EXPECT_EQ(r.node.Counter("products recovered"), 1);
+  // Chunks sent again for another receiver's ask are heard by this one too: dropped, the
+  // product not begun again nor asked for.
+  bus.publish("TEXTURE", &chunks[0]);
+  bus.publish("TEXTURE", &chunks[1]);
+  for (int round = 0; round < 3000 && r.node.Counter("chunks heard again") < 2; ++round) {
+    bus.handleTimeout(10);
+    r.node.Drain();
+  }
+  EXPECT_EQ(r.node.Counter("chunks heard again"), 2);
+  r.clock.Advance(5);  // Long past a second of quiet: nothing is being built, nothing asked.
+  for (int k = 0; k < 5; ++k) {
+    r.assembler.Tick();
+    bus.handleTimeout(10);
+    r.node.Drain();
+  }
+  EXPECT_EQ(r.node.Counter("chunks asked again"), 1);
+  EXPECT_EQ(r.Products().size(), 1u);
   r.node.SetState("idle", 0, "asked by the test");  // A status now, with the errors so far.
+  for (int round = 0; round < 3000 && statuses.empty(); ++round) bus.handleTimeout(10);
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
+}
+
+// A chunk heard twice with one seq while its product is being built (sent again for another
+// receiver) is that chunk again, not the product started over by its sender: the product is
+// made once, whole, with no error.
+TEST(Assembler, AChunkSentAgainForAnotherReceiverMidProductIsNotTakenForANewSend) {
+  lcm::LCM bus("memq://");
+  cv::Mat texture(1200, 1600, CV_8UC3);
+  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  std::vector<texture_t> chunks = TextureMessages(9, texture);
+  ASSERT_GE(chunks.size(), 3u);
+  for (size_t i = 0; i < chunks.size(); ++i) {
+    chunks[i].station = kDefaultStation;
+    chunks[i].seq = 500 + static_cast<int64_t>(i);
+  }
+  TextureReceiver r(&bus);
+  std::vector<status_t> statuses;
+  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
+  bus.publish("TEXTURE", &chunks[0]);
+  bus.publish("TEXTURE", &chunks[1]);
+  bus.publish("TEXTURE", &chunks[0]);  // Again, for someone else.
+  for (size_t i = 2; i < chunks.size(); ++i) bus.publish("TEXTURE", &chunks[i]);
+  const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
+  ASSERT_EQ(products.size(), 1u);
+  EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
+  EXPECT_EQ(r.node.Counter("chunks heard again"), 1);
+  EXPECT_EQ(r.node.Counter("chunks asked again"), 0);
+  r.node.SetState("idle", 0, "asked by the test");
   for (int round = 0; round < 3000 && statuses.empty(); ++round) bus.handleTimeout(10);
   ASSERT_FALSE(statuses.empty());
   EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
