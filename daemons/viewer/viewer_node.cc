@@ -129,7 +129,7 @@ ViewerNode::ViewerNode(Node* node, std::unique_ptr<display::Window> window,
       node_->Error("RESTORED of scan " + std::to_string(m.scan_id) + ": preview: " + s.message(),
                    m.scan_id);
     }
-    state_.OnRestored(m, preview);
+    state_.OnRestored(m, preview, /*read_pictures=*/false);  // Read once the page is drawn.
   });
 }
 
@@ -160,6 +160,9 @@ void ViewerNode::Tick() {
     node_->Count("restored pages shown");
     node_->SetState("idle", shown_, readiness_);
   }
+  // The report's pictures beside the page, read once it is on the screen, and drawn at the next
+  // tick.
+  if (state_.ReadPendingPictures()) next_draw_ = real;
   SaveSessionAndReadiness();
 }
 

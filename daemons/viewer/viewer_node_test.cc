@@ -12,6 +12,7 @@
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 
+#include "io/image_file.h"
 #include "station/chain.h"
 #include "station/daemon.h"
 #include "station/messages.h"
@@ -112,17 +113,27 @@ TEST_F(ViewerNodeTest, ListsRestoredScansAndAsksForAScanOnS) {
 }
 
 // A restored page is drawn as soon as it comes, not at the next of the viewer's ten draws a
-// second: the test ticks the viewer itself, once to draw, then once right after the page came.
-TEST_F(ViewerNodeTest, ARestoredPageIsDrawnAtTheFirstTickAfterItCame) {
+// second, and before the report's pictures beside it are read from disk (they follow at once):
+// the test ticks the viewer itself, once to draw, then once right after the page came.
+TEST_F(ViewerNodeTest, ARestoredPageIsDrawnAtTheFirstTickAfterItCameAndItsPicturesThen) {
+  const fs::path results = fs::path(::testing::TempDir()) / "viewer_first_tick" / "results";
+  fs::create_directories(results / "report");
+  cv::Mat outline(90, 120, CV_8UC3, cv::Scalar(10, 120, 250));
+  ASSERT_TRUE(WriteImage((results / "report" / "outline.png").string(), outline).ok());
   Node node("vellum-viewer", &bus_.lcm(), &bus_.clock());
   ViewerNode viewer(&node, Window());
   viewer.Tick();  // Drawn: the next draw is due a tenth of a second later.
   restored_t r = Restored(14);
+  r.results = results.string();
   bus_.probe().Publish(channel::kRestored, &r);
   for (int k = 0; k < 100 && viewer.state().results().empty(); ++k) bus_.lcm().handleTimeout(10);
   ASSERT_EQ(viewer.state().results().size(), 1u);
+  EXPECT_TRUE(viewer.state().results().back().texture.empty()) << "read before the page was drawn";
   viewer.Tick();
   EXPECT_EQ(node.Counter("restored pages shown"), 1);
+  const cv::Mat& texture = viewer.state().results().back().texture;
+  ASSERT_EQ(texture.size(), outline.size());
+  EXPECT_EQ(cv::norm(texture, outline, cv::NORM_INF), 0.0);
 }
 
 // A doubtful result looks doubtful: its warnings are kept, the header says so, and they are

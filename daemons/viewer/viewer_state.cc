@@ -286,7 +286,34 @@ Clock::time_point ViewerState::heard(const std::string& process) const {
   return it == seen_.end() ? Clock::time_point() : it->second;
 }
 
-void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
+void ViewerState::ReadPictures(Result* r) {
+  if (!r->pictures_pending) return;
+  r->pictures_pending = false;
+  // The other pictures from the scan's report (the restorer writes it before RESTORED): the
+  // texture with the leaf's outline, and a spread's left page for its strain. Read side by side
+  // (each is mostly a PNG's inflate).
+  const auto read = [r](std::vector<std::string> names) {
+    return std::async(
+        std::launch::async | std::launch::deferred,
+        [results = r->results, names = std::move(names)] { return ReportPicture(results, names); });
+  };
+  std::future<cv::Mat> texture = read({"outline.png", "texture.png"});
+  std::future<cv::Mat> depth = read({"depth.png"});
+  r->strain = ReportPicture(r->results, {"strain.png", "strain-left.png"});
+  r->texture = texture.get();
+  r->depth = depth.get();
+}
+
+bool ViewerState::ReadPendingPictures() {
+  bool read = false;
+  for (Result& r : results_) {
+    read = read || r.pictures_pending;
+    ReadPictures(&r);
+  }
+  return read;
+}
+
+void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview, bool read_pictures) {
   Result r;
   r.scan_id = m.scan_id;
   r.results = m.results;
@@ -299,20 +326,9 @@ void ViewerState::OnRestored(const restored_t& m, const cv::Mat& preview) {
   r.restored = preview;
   r.warnings = m.warnings;
   r.quality = m.qc;
-  // The other pictures from the scan's report (the restorer writes it before RESTORED): the
-  // texture with the leaf's outline, and a spread's left page for its strain.
-  // Read side by side (each is mostly a PNG's inflate): the page is drawn once all are in.
-  const auto read = [&m](std::vector<std::string> names) {
-    return std::async(
-        std::launch::async | std::launch::deferred,
-        [results = m.results, names = std::move(names)] { return ReportPicture(results, names); });
-  };
-  std::future<cv::Mat> texture = read({"outline.png", "texture.png"});
-  std::future<cv::Mat> depth = read({"depth.png"});
-  r.strain = ReportPicture(m.results, {"strain.png", "strain-left.png"});
+  r.pictures_pending = true;
+  if (read_pictures) ReadPictures(&r);
   r.identity = ReportIdentity(m.results);
-  r.texture = texture.get();
-  r.depth = depth.get();
   if (const Asked* a = asked(m.scan_id)) {
     r.identity = a->identity;
     r.attempt = a->attempt;

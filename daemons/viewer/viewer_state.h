@@ -92,6 +92,7 @@ class ViewerState {
     // the scan id.
     std::string title;
     cv::Mat texture, depth, strain, restored;  // texture: with the leaf's outline drawn.
+    bool pictures_pending = false;             // texture, depth and strain not read yet.
     std::vector<std::string> warnings;
   };
   // Results kept (the oldest go).
@@ -120,9 +121,12 @@ class ViewerState {
   void OnLightPrompt(const light_t& m);
   void OnLightOn(const light_t& m);
   void OnStatus(const status_t& m, Clock::time_point now);
-  // `preview`: RESTORED's preview, decoded (empty if it did not decode). Reads the scan's other
-  // pictures and its identity from its report on disk.
-  void OnRestored(const restored_t& m, const cv::Mat& preview);
+  // `preview`: RESTORED's preview, decoded (empty if it did not decode). Reads the scan's
+  // identity from its report on disk, and its other pictures unless `read_pictures` is false:
+  // then ReadPendingPictures reads them (the viewer draws the restored page first).
+  void OnRestored(const restored_t& m, const cv::Mat& preview, bool read_pictures = true);
+  // Reads the pictures OnRestored left; whether there were any.
+  bool ReadPendingPictures();
 
   // From the operator, at `now` (what the station was last heard to be then). `new_scan_id`
   // names the scan a kScan asks for (the station's ids are microseconds since the epoch).
@@ -215,7 +219,8 @@ class ViewerState {
   Clock::time_point heard(const std::string& process) const;
 
  private:
-  void Started(int64_t scan_id);  // A scan began: a failure and the result shown before go.
+  void Started(int64_t scan_id);        // A scan began: a failure and the result shown before go.
+  static void ReadPictures(Result* r);  // Its report's pictures, if pending.
   // A scan of this session failed (or FAILed): its folio is offered again first.
   void OfferRetake(int64_t scan_id, const std::string& why);
   Command RequestScan(int64_t scan_id, Clock::time_point now);
