@@ -1,8 +1,9 @@
 // Reassembly of a chunked product (CORRESPONDENCE, POINT_CLOUD, FLAT_MESH) on a daemon's
 // worker thread: every chunk is checked and copied in; a product is handed on when whole.
-// When its last chunk comes with others missing, or its chunks stop coming before it is whole
-// (the bus lost some: a loaded machine, this daemon paused), the missing ones are asked again on
-// RESEND, at once and then every ask_after_s, and the publisher sends them again ("products
+// When its last chunk comes with others missing, when its sender announces it sent and some are
+// missing (AwaitAnnounced), or when its chunks stop coming before it is whole (the bus lost some:
+// a loaded machine, this daemon paused), the missing ones are asked again on RESEND, at once and
+// then every ask_after_s, and the publisher sends them again ("products
 // recovered"); the loss itself is logged and counted, not an error (Node::RecoversLosses). It is
 // given up, with an error naming the missing chunks ("products lost"), when the next scan's chunks
 // begin, when nothing came for timeout_s (by the node's clock), or when its chunks start again
@@ -48,7 +49,8 @@ class Assembler {
 
   // Also awaits every product its sender announces on SCAN_PROGRESS as `product` (the
   // channel's own name, or one sent after it): one of which not a chunk came (the bus lost them
-  // all) is asked again whole, and given up after timeout_s.
+  // all) is asked again whole, and given up after timeout_s; one begun and not whole (its last
+  // chunks lost) has its missing chunks asked at once.
   void AwaitAnnounced(const std::string& product) {
     node_->Subscribe<scan_progress_t>(channel::kScanProgress,
                                       [this, product](const scan_progress_t& msg) {
@@ -81,9 +83,15 @@ class Assembler {
   };
 
   void Announced(int64_t scan_id) {
-    if ((chunks_.Started() && chunks_.scan_id() == scan_id) ||
-        std::find(seen_.begin(), seen_.end(), scan_id) != seen_.end()) {
-      return;  // It came, or is coming.
+    if (chunks_.Started() && chunks_.scan_id() == scan_id) {
+      // Its sender announces it once its last chunk has gone, and chunks are handled in the
+      // order they came: any still missing was lost. Asked at once, not after ask_after_s of
+      // quiet: nothing else tells of a lost last chunk, and the operator is waiting.
+      if (!chunks_.Complete() && asks_ == 0) Ask();
+      return;
+    }
+    if (std::find(seen_.begin(), seen_.end(), scan_id) != seen_.end()) {
+      return;  // It came.
     }
     const Clock::time_point now = node_->Now();
     awaited_.push_back({scan_id, now, now, 0});

@@ -924,6 +924,13 @@ TEST(Assembler, AProductSentAgainMidwayIsBuiltFromTheNewSendAlone) {
       << statuses.back().last_error;
 }
 
+// A texture of random pixels (a chunk put in the wrong place shows), 8-bit colour.
+cv::Mat RandomTexture(cv::Size size = {1600, 1200}) {
+  cv::Mat texture(size, CV_8UC3);
+  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  return texture;
+}
+
 // A daemon receiving TEXTURE on `bus` (asking again after 1 s, giving up after 10 s, by a clock
 // the test steps), and the products it made whole.
 struct TextureReceiver {
@@ -970,8 +977,7 @@ TEST(Assembler, ChunksTheBusLostAreAskedAgainAndTheProductIsRecovered) {
   lcm::LCM bus("memq://");
   Node sender("vellum-sender", &bus);
   sender.SetPace(1e12);
-  cv::Mat texture(1200, 1600, CV_8UC3);
-  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  const cv::Mat texture = RandomTexture();
   std::vector<texture_t> chunks = TextureMessages(9, texture);
   ASSERT_GE(chunks.size(), 4u);
   sender.PublishChunks("TEXTURE", &chunks);  // No one listens yet: every chunk is lost.
@@ -999,8 +1005,7 @@ TEST(Assembler, TheLastChunkComingWithOneMissingAsksForItAtOnceAndTheRecoveredLo
   lcm::LCM bus("memq://");
   Node sender("vellum-sender", &bus);
   sender.SetPace(1e12);
-  cv::Mat texture(1200, 1600, CV_8UC3);
-  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  const cv::Mat texture = RandomTexture();
   std::vector<texture_t> chunks = TextureMessages(9, texture);
   ASSERT_GE(chunks.size(), 3u);
   sender.PublishChunks("TEXTURE", &chunks);  // Held by the sender; no one listens yet.
@@ -1048,13 +1053,57 @@ TEST(Assembler, TheLastChunkComingWithOneMissingAsksForItAtOnceAndTheRecoveredLo
   EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
 }
 
+// A product's last chunk lost: nothing comes after it to show the loss but its sender's
+// announcement on SCAN_PROGRESS that the product went. The missing chunk is asked for when that
+// comes, with the receiver's clock standing still (no second of quiet waited for), and the
+// product is recovered with no error.
+TEST(Assembler, ALostLastChunkIsAskedForWhenItsSenderAnnouncesTheProductSent) {
+  lcm::LCM bus("memq://");
+  Node sender("vellum-sender", &bus);
+  sender.SetPace(1e12);
+  const cv::Mat texture = RandomTexture();
+  std::vector<texture_t> chunks = TextureMessages(9, texture);
+  ASSERT_GE(chunks.size(), 2u);
+  sender.PublishChunks("TEXTURE", &chunks);  // Held by the sender; no one listens yet.
+  for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
+
+  TextureReceiver r(&bus);
+  r.assembler.AwaitAnnounced("TEXTURE");
+  std::vector<status_t> statuses;
+  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
+  const Clock::time_point start = r.clock.Now();
+  for (size_t i = 0; i + 1 < chunks.size(); ++i) bus.publish("TEXTURE", &chunks[i]);
+  AnnounceHandedOn(&sender, 9, "TEXTURE");  // The last chunk lost on the way.
+  for (int round = 0; round < 3000 && r.Products().empty(); ++round) {
+    bus.handleTimeout(10);
+    r.node.Drain();
+  }
+  const std::vector<cv::Mat> products = r.Products();
+  ASSERT_EQ(products.size(), 1u) << "not recovered without the clock moving";
+  EXPECT_EQ(r.clock.Now(), start);
+  EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
+  EXPECT_EQ(r.node.Counter("chunks asked again"), 1);
+  EXPECT_EQ(r.node.Counter("products recovered"), 1);
+  // Announced again (a supervisor's start): the product is whole, nothing is asked.
+  AnnounceHandedOn(&sender, 9, "TEXTURE");
+  for (int k = 0; k < 5; ++k) {
+    bus.handleTimeout(10);
+    r.node.Drain();
+  }
+  EXPECT_EQ(r.node.Counter("chunks asked again"), 1);
+  EXPECT_EQ(r.node.Counter("products asked again"), 0);
+  r.node.SetState("idle", 0, "asked by the test");  // A status now, with the errors so far.
+  for (int round = 0; round < 3000 && statuses.empty(); ++round) bus.handleTimeout(10);
+  ASSERT_FALSE(statuses.empty());
+  EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
+}
+
 // A chunk heard twice with one seq while its product is being built (sent again for another
 // receiver) is that chunk again, not the product started over by its sender: the product is
 // made once, whole, with no error.
 TEST(Assembler, AChunkSentAgainForAnotherReceiverMidProductIsNotTakenForANewSend) {
   lcm::LCM bus("memq://");
-  cv::Mat texture(1200, 1600, CV_8UC3);
-  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  const cv::Mat texture = RandomTexture();
   std::vector<texture_t> chunks = TextureMessages(9, texture);
   ASSERT_GE(chunks.size(), 3u);
   for (size_t i = 0; i < chunks.size(); ++i) {
@@ -1087,8 +1136,7 @@ TEST(Assembler, TheWorkBeforeTheLastChunkRunsBeforeItAndWhenItFailsTheProductNev
   lcm::LCM bus("memq://");
   Node sender("vellum-sender", &bus);
   sender.SetPace(1e12);
-  cv::Mat texture(1200, 1600, CV_8UC3);
-  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  const cv::Mat texture = RandomTexture();
   std::vector<texture_t> chunks = TextureMessages(16, texture);
   ASSERT_GE(chunks.size(), 3u);
   TextureReceiver r(&bus);
@@ -1142,8 +1190,7 @@ TEST(Assembler, ProductsEncodedIntoTheBuffersOfOnesLetGoComeAsSent) {
                                        {1200, 900}, {640, 480}, {800, 600}};
   std::vector<cv::Mat> sent;
   for (size_t k = 0; k < sizes.size(); ++k) {
-    cv::Mat texture(sizes[k], CV_8UC3);
-    cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+    const cv::Mat texture = RandomTexture(sizes[k]);
     sent.push_back(texture);
     std::vector<texture_t> chunks = TextureMessages(static_cast<int64_t>(20 + k), texture);
     TextureReceiver r(&bus);
@@ -1168,8 +1215,7 @@ TEST(Assembler, AProductAnnouncedButLostWholeIsAskedAgainWhole) {
   lcm::LCM bus("memq://");
   Node sender("vellum-sender", &bus);
   sender.SetPace(1e12);
-  cv::Mat texture(600, 800, CV_8UC3);
-  cv::randu(texture, cv::Scalar::all(0), cv::Scalar::all(256));
+  const cv::Mat texture = RandomTexture({800, 600});
   std::vector<texture_t> chunks = TextureMessages(12, texture);
   sender.PublishChunks("TEXTURE", &chunks);  // No one listens: lost whole.
   for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
