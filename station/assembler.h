@@ -193,9 +193,6 @@ class Assembler {
       node_->Count("chunks heard again");
       return;
     }
-    if (asks_ > 0 && !chunks_.Complete() && chunks_.Has(msg.scan_id, msg.chunk_index)) {
-      return;  // Asked again and came late as well: the same chunk, already in.
-    }
     if (!chunks_.Complete() && chunks_.Has(msg.scan_id, msg.chunk_index)) {
       // A chunk of the product being built comes again before it is whole: its sender started
       // it over (a daemon restarted mid-send, a scan sent again). What came before is dropped,

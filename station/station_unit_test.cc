@@ -1098,6 +1098,33 @@ TEST(Assembler, ALostLastChunkIsAskedForWhenItsSenderAnnouncesTheProductSent) {
   EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
 }
 
+// A new send of a product comes while this receiver is asking for a chunk of the first (its
+// sender restarted, the scan sent again): a chunk it has, with a seq of its own, is the new send,
+// not the first one's chunk late. The product is built from the new send alone, never from two.
+TEST(Assembler, ANewSendWhileAskingForALostChunkIsBuiltAloneNotMixedWithTheFirst) {
+  lcm::LCM bus("memq://");
+  const cv::Mat first = RandomTexture(), again = RandomTexture();
+  std::vector<texture_t> a = TextureMessages(9, first), b = TextureMessages(9, again);
+  ASSERT_GE(a.size(), 3u);
+  ASSERT_EQ(a.size(), b.size());
+  TextureReceiver r(&bus);
+  for (size_t i = 0; i < a.size(); ++i) {
+    a[i].station = b[i].station = kDefaultStation;
+    a[i].seq = 100 + static_cast<int64_t>(i);
+    b[i].seq = 200 + static_cast<int64_t>(i);
+    if (i != 1) bus.publish("TEXTURE", &a[i]);  // Chunk 1 of the first send lost: asked for.
+  }
+  for (int round = 0; round < 3000 && r.node.Counter("chunks asked again") < 1; ++round) {
+    bus.handleTimeout(10);
+    r.node.Drain();
+  }
+  ASSERT_EQ(r.node.Counter("chunks asked again"), 1);
+  for (const texture_t& m : b) bus.publish("TEXTURE", &m);  // The new send, whole.
+  const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
+  ASSERT_EQ(products.size(), 1u);
+  EXPECT_EQ(cv::norm(products[0], again, cv::NORM_INF), 0.0) << "chunks of both sends mixed";
+}
+
 // A chunk heard twice with one seq while its product is being built (sent again for another
 // receiver) is that chunk again, not the product started over by its sender: the product is
 // made once, whole, with no error.
