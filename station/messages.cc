@@ -525,24 +525,27 @@ Status AddChunk(const texture_t& m, cv::Mat* texture) {
   return Status::Ok();
 }
 
-std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
-                                         cv::Size projector_size, const ScanContext& context,
-                                         const std::vector<StageReport>& stages) {
-  const scan_context_t context_message = ToMessage(context);
+ChunkMaker<correspondence_t> CorrespondenceChunks(int64_t scan_id, const DecodeResult& decoded,
+                                                  cv::Size projector_size,
+                                                  const ScanContext& context,
+                                                  const std::vector<StageReport>& stages) {
   const int width = decoded.projector_x.cols, height = decoded.projector_x.rows;
   const bool amplitude = decoded.amplitude.size() == decoded.projector_x.size();
   const auto chunks = RowChunks(height, static_cast<size_t>(width) * (amplitude ? 13 : 9));
-  std::vector<correspondence_t> out(chunks.size());
-  for (size_t c = 0; c < chunks.size(); ++c) {
-    correspondence_t& m = out[c];
+  ChunkMaker<correspondence_t> maker;
+  maker.count = static_cast<int>(chunks.size());
+  // Its maps' headers (their pixels shared, not copied) and the rest by value.
+  maker.make = [scan_id, decoded, projector_size, context_message = ToMessage(context), stages,
+                chunks, amplitude, width, height](int c, correspondence_t* out) {
+    correspondence_t& m = *out;
     m.utime = 0;
     m.scan_id = scan_id;
-    m.chunk_index = static_cast<int32_t>(c);
+    m.chunk_index = c;
     m.chunk_count = static_cast<int32_t>(chunks.size());
     m.width = width;
     m.height = height;
-    m.row_begin = chunks[c].first;
-    m.row_count = chunks[c].second;
+    m.row_begin = chunks[static_cast<size_t>(c)].first;
+    m.row_count = chunks[static_cast<size_t>(c)].second;
     m.projector_width = projector_size.width;
     m.projector_height = projector_size.height;
     m.has_columns = decoded.has_columns;
@@ -557,19 +560,23 @@ std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& de
       std::memcpy(&m.projector_y[r * width], decoded.projector_y.ptr<float>(y), width * 4);
       std::memcpy(&m.valid[r * width], decoded.valid.ptr<uint8_t>(y), width);
     }
-    if (amplitude) {
-      m.amplitude.resize(m.n);
-      for (int r = 0; r < m.row_count; ++r) {
-        std::memcpy(&m.amplitude[r * width], decoded.amplitude.ptr<float>(m.row_begin + r),
-                    width * 4);
-      }
+    m.amplitude.resize(amplitude ? m.n : 0);
+    for (int r = 0; amplitude && r < m.row_count; ++r) {
+      std::memcpy(&m.amplitude[r * width], decoded.amplitude.ptr<float>(m.row_begin + r),
+                  width * 4);
     }
     m.namplitude = static_cast<int32_t>(m.amplitude.size());
     m.lit = decoded.stats.lit;
     m.context = context_message;
     SetStages(stages, &m);
-  }
-  return out;
+  };
+  return maker;
+}
+
+std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
+                                         cv::Size projector_size, const ScanContext& context,
+                                         const std::vector<StageReport>& stages) {
+  return CorrespondenceChunks(scan_id, decoded, projector_size, context, stages).All();
 }
 
 Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* projector_size) {
@@ -621,41 +628,47 @@ Status AddChunk(const correspondence_t& m, DecodeResult* decoded, cv::Size* proj
   return Status::Ok();
 }
 
-std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
-                                      const cv::Mat& amplitude, const ScanContext& context,
-                                      const std::vector<StageReport>& stages) {
-  const scan_context_t context_message = ToMessage(context);
+ChunkMaker<point_cloud_t> PointCloudChunks(int64_t scan_id, const cv::Mat& points,
+                                           const cv::Mat& amplitude, const ScanContext& context,
+                                           const std::vector<StageReport>& stages) {
   const int width = points.cols;
   const bool with_amplitude = amplitude.size() == points.size();
   const auto chunks =
       RowChunks(points.rows, static_cast<size_t>(width) * (with_amplitude ? 16 : 12));
-  std::vector<point_cloud_t> out(chunks.size());
-  for (size_t c = 0; c < chunks.size(); ++c) {
-    point_cloud_t& m = out[c];
+  ChunkMaker<point_cloud_t> maker;
+  maker.count = static_cast<int>(chunks.size());
+  // The maps' headers (their pixels shared, not copied) and the rest by value.
+  maker.make = [scan_id, points, amplitude, context_message = ToMessage(context), stages, chunks,
+                with_amplitude, width](int c, point_cloud_t* out) {
+    point_cloud_t& m = *out;
     m.utime = 0;
     m.scan_id = scan_id;
-    m.chunk_index = static_cast<int32_t>(c);
+    m.chunk_index = c;
     m.chunk_count = static_cast<int32_t>(chunks.size());
     m.width = width;
     m.height = points.rows;
-    m.row_begin = chunks[c].first;
-    m.row_count = chunks[c].second;
+    m.row_begin = chunks[static_cast<size_t>(c)].first;
+    m.row_count = chunks[static_cast<size_t>(c)].second;
     m.nxyz = 3 * m.row_count * width;
     m.xyz.resize(m.nxyz);
     for (int r = 0; r < m.row_count; ++r) {
       std::memcpy(&m.xyz[3 * r * width], points.ptr<float>(m.row_begin + r), 12 * width);
     }
-    if (with_amplitude) {
-      m.amplitude.resize(static_cast<size_t>(m.row_count) * width);
-      for (int r = 0; r < m.row_count; ++r) {
-        std::memcpy(&m.amplitude[r * width], amplitude.ptr<float>(m.row_begin + r), 4 * width);
-      }
+    m.amplitude.resize(with_amplitude ? static_cast<size_t>(m.row_count) * width : 0);
+    for (int r = 0; with_amplitude && r < m.row_count; ++r) {
+      std::memcpy(&m.amplitude[r * width], amplitude.ptr<float>(m.row_begin + r), 4 * width);
     }
     m.namplitude = static_cast<int32_t>(m.amplitude.size());
     m.context = context_message;
     SetStages(stages, &m);
-  }
-  return out;
+  };
+  return maker;
+}
+
+std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
+                                      const cv::Mat& amplitude, const ScanContext& context,
+                                      const std::vector<StageReport>& stages) {
+  return PointCloudChunks(scan_id, points, amplitude, context, stages).All();
 }
 
 Status AddChunk(const point_cloud_t& m, cv::Mat* points, cv::Mat* amplitude) {

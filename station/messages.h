@@ -21,6 +21,7 @@
 #include "core/patterns/scan.h"
 #include "pipeline/context.h"
 #include "pipeline/report.h"
+#include "station/chunks.h"
 #include "station/clock.h"
 #include "vellum/calibration_t.hpp"
 #include "vellum/capture_t.hpp"
@@ -126,6 +127,11 @@ Status AddChunk(const texture_t& msg, cv::Mat* texture);
 // Decoded correspondences: chunks of rows, and their reassembly. A reassembled map has an ok
 // status (it decoded upstream) and the decoder's count of lit pixels. Every chunk carries the
 // scan's context and the reports of its stages so far.
+ChunkMaker<correspondence_t> CorrespondenceChunks(int64_t scan_id, const DecodeResult& decoded,
+                                                  cv::Size projector_size,
+                                                  const ScanContext& context,
+                                                  const std::vector<StageReport>& stages);
+// The same chunks, all at once.
 std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& decoded,
                                          cv::Size projector_size, const ScanContext& context,
                                          const std::vector<StageReport>& stages);
@@ -134,6 +140,10 @@ std::vector<correspondence_t> ToMessages(int64_t scan_id, const DecodeResult& de
 Status AddChunk(const correspondence_t& msg, DecodeResult* decoded, cv::Size* projector_size);
 
 // The point map, with the decoder's amplitude (for the albedo) when it is of its size.
+ChunkMaker<point_cloud_t> PointCloudChunks(int64_t scan_id, const cv::Mat& points,
+                                           const cv::Mat& amplitude, const ScanContext& context,
+                                           const std::vector<StageReport>& stages);
+// The same chunks, all at once.
 std::vector<point_cloud_t> ToMessages(int64_t scan_id, const cv::Mat& points,
                                       const cv::Mat& amplitude, const ScanContext& context,
                                       const std::vector<StageReport>& stages);

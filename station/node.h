@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "station/chunks.h"
 #include "station/clock.h"
 #include "station/message_versions.h"
 #include "vellum/calibration_t.hpp"
@@ -187,39 +188,26 @@ class Node {
   // The same, with `before_last` run before the last chunk goes: a sender's files written while
   // its other chunks travel are on disk before a receiver can have the whole product. When it
   // fails, the last chunk is not sent, nothing is held, and its status is returned (a receiver
-  // never has that product whole).
+  // never has that product whole). Each chunk is stamped where it lies in `chunks`.
   template <class Msg>
   Status PublishChunks(const std::string& channel, std::vector<Msg>* chunks,
                        const std::function<Status()>& before_last) {
-    HeldProduct held;
-    held.channel = channel;
-    for (Msg& m : *chunks) {
-      const bool last = &m == &chunks->back();
-      if (before_last && last) {
-        const Status ready = before_last();
-        if (!ready.ok()) return ready;
-      }
-      const auto start = std::chrono::steady_clock::now();
-      Stamp(channel, &m);
-      std::vector<uint8_t> bytes = SpareBuffer();
-      bytes.resize(static_cast<size_t>(m.getEncodedSize()));  // Every byte encoded over.
-      m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
-      held.scan_id = m.scan_id;
-      held.seqs.push_back(m.seq);
-      if (last) {
-        // Held before the last chunk goes: a receiver that finds chunks missing when it comes
-        // asks at once (Assembler), and is answered.
-        held.chunks.push_back(bytes);
-        Hold(std::move(held));
-        PublishBytes(channel, bytes);
-        break;
-      }
-      PublishBytes(channel, bytes);
-      held.chunks.push_back(std::move(bytes));
-      std::this_thread::sleep_until(
-          start + std::chrono::duration<double>(held.chunks.back().size() / pace_));
-    }
-    return Status::Ok();
+    return PublishEach<Msg>(
+        channel, static_cast<int>(chunks->size()),
+        [chunks](int k) -> Msg& { return (*chunks)[static_cast<size_t>(k)]; }, before_last);
+  }
+  // The same for chunks made one at a time, each encoded as it is made.
+  template <class Msg>
+  Status PublishChunks(const std::string& channel, const ChunkMaker<Msg>& chunks,
+                       const std::function<Status()>& before_last = nullptr) {
+    Msg m{};
+    return PublishEach<Msg>(
+        channel, chunks.count,
+        [&chunks, &m](int k) -> Msg& {
+          chunks.make(k, &m);
+          return m;
+        },
+        before_last);
   }
   void SetPace(double bytes_per_second) { pace_ = bytes_per_second; }
   // What is held for RESEND: the products of each channel's newest kHoldScans scans, sent in
@@ -282,6 +270,41 @@ class Node {
     std::vector<std::vector<uint8_t>> chunks;  // Each chunk's encoded message.
     std::chrono::steady_clock::time_point sent = std::chrono::steady_clock::now();
   };
+  // PublishChunks' one loop: chunk k of `count` is `at(k)`, stamped, encoded and sent.
+  template <class Msg>
+  Status PublishEach(const std::string& channel, int count, const std::function<Msg&(int)>& at,
+                     const std::function<Status()>& before_last) {
+    HeldProduct held;
+    held.channel = channel;
+    for (int k = 0; k < count; ++k) {
+      const bool last = k + 1 == count;
+      if (before_last && last) {
+        const Status ready = before_last();
+        if (!ready.ok()) return ready;
+      }
+      const auto start = std::chrono::steady_clock::now();
+      Msg& m = at(k);
+      Stamp(channel, &m);
+      std::vector<uint8_t> bytes = SpareBuffer();
+      bytes.resize(static_cast<size_t>(m.getEncodedSize()));  // Every byte encoded over.
+      m.encode(bytes.data(), 0, static_cast<int>(bytes.size()));
+      held.scan_id = m.scan_id;
+      held.seqs.push_back(m.seq);
+      if (last) {
+        // Held before the last chunk goes: a receiver that finds chunks missing when it comes
+        // asks at once (Assembler), and is answered.
+        held.chunks.push_back(bytes);
+        Hold(std::move(held));
+        PublishBytes(channel, bytes);
+        break;
+      }
+      PublishBytes(channel, bytes);
+      held.chunks.push_back(std::move(bytes));
+      std::this_thread::sleep_until(
+          start + std::chrono::duration<double>(held.chunks.back().size() / pace_));
+    }
+    return Status::Ok();
+  }
   template <class Msg>
   void Stamp(const std::string& channel, Msg* msg) {
     if constexpr (kHasStation<Msg>) msg->station = station_;

@@ -1125,6 +1125,76 @@ TEST(Assembler, ANewSendWhileAskingForALostChunkIsBuiltAloneNotMixedWithTheFirst
   EXPECT_EQ(cv::norm(products[0], again, cv::NORM_INF), 0.0) << "chunks of both sends mixed";
 }
 
+// A point map sent as its chunks are made (PublishChunks of a ChunkMaker: each chunk filled into
+// one message, its arrays reused) arrives bit for bit, NaNs and amplitude too: each chunk takes
+// its own rows and no more (the last one is shorter than the rest). A receiver that missed it
+// all asks for it whole and is sent the held chunks, as sent.
+TEST(Assembler, APointMapSentAsItsChunksAreMadeArrivesBitForBitAndIsSentAgainAsSent) {
+  lcm::LCM bus("memq://");
+  Node sender("vellum-sender", &bus);
+  sender.SetPace(1e12);
+  cv::Mat points(1201, 1600, CV_32FC3), amplitude(1201, 1600, CV_32F);
+  cv::randu(points, cv::Scalar::all(-300), cv::Scalar::all(300));
+  cv::randu(amplitude, 0, 127.5);
+  points(cv::Rect(40, 30, 200, 100))
+      .setTo(cv::Scalar::all(std::numeric_limits<float>::quiet_NaN()));
+  const ChunkMaker<point_cloud_t> maker = PointCloudChunks(5, points, amplitude, ScanContext(), {});
+  ASSERT_GE(maker.count, 3);
+  point_cloud_t first{}, last{};
+  maker.make(0, &first);
+  maker.make(maker.count - 1, &last);
+  ASSERT_LT(last.row_count, first.row_count) << "the test wants a shorter last chunk";
+
+  using Map = std::pair<cv::Mat, cv::Mat>;  // Points, amplitude.
+  struct Receiver {
+    explicit Receiver(lcm::LCM* bus)
+        : node("vellum-unit", bus, &clock),
+          assembler(
+              &node, "POINT_CLOUD",
+              [](const point_cloud_t& m, Map* map) {
+                return AddChunk(m, &map->first, &map->second);
+              },
+              [this](int64_t, Map* map, const point_cloud_t&) {
+                const std::lock_guard<std::mutex> lock(mutex);
+                maps.push_back({map->first.clone(), map->second.clone()});
+              }) {}
+    std::vector<Map> Maps() {
+      const std::lock_guard<std::mutex> lock(mutex);
+      return maps;
+    }
+    SteppedClock clock;
+    Node node;
+    std::mutex mutex;
+    std::vector<Map> maps;
+    Assembler<point_cloud_t, Map> assembler;
+  };
+  auto until_whole = [&bus](Receiver* r) {
+    for (int round = 0; round < 3000 && r->Maps().empty(); ++round) {
+      bus.handleTimeout(10);
+      r->assembler.Tick();
+      r->node.Drain();
+      r->clock.Advance(0.25);
+    }
+    return r->Maps();
+  };
+  Receiver on_time(&bus);
+  ASSERT_TRUE(sender.PublishChunks("POINT_CLOUD", maker).ok());
+  std::vector<Map> maps = until_whole(&on_time);
+  ASSERT_EQ(maps.size(), 1u);
+  EXPECT_TRUE(SameBits(maps[0].first, points));
+  EXPECT_TRUE(SameBits(maps[0].second, amplitude));
+  EXPECT_EQ(on_time.node.Counter("chunks asked again"), 0);
+
+  Receiver late(&bus);
+  late.assembler.AwaitAnnounced("POINT_CLOUD");
+  AnnounceHandedOn(&sender, 5, "POINT_CLOUD");
+  maps = until_whole(&late);
+  ASSERT_EQ(maps.size(), 1u) << "not sent again";
+  EXPECT_TRUE(SameBits(maps[0].first, points));
+  EXPECT_TRUE(SameBits(maps[0].second, amplitude));
+  EXPECT_EQ(sender.Counter("chunks sent again"), maker.count);
+}
+
 // A chunk heard twice with one seq while its product is being built (sent again for another
 // receiver) is that chunk again, not the product started over by its sender: the product is
 // made once, whole, with no error.

@@ -348,9 +348,10 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
     return decoded;
   }
   const StageReport& report = work.stages.back();
-  std::vector<correspondence_t> chunks =
-      ToMessages(id, decoded_, scan.sequence.projector_size, work.context, work.stages);
-  node_->PublishChunks(channel::kCorrespondence, &chunks);
+  // Each chunk made as it is sent, into one message.
+  static_cast<void>(node_->PublishChunks(
+      channel::kCorrespondence,
+      CorrespondenceChunks(id, decoded_, scan.sequence.projector_size, work.context, work.stages)));
   node_->Count("scans decoded");
   AnnounceHandedOn(node_, id, channel::kCorrespondence);
   node_->Log("scan " + std::to_string(id) + ": decoded " + std::to_string(decoded_.stats.valid) +

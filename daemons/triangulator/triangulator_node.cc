@@ -112,10 +112,12 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
   s = Pipeline(options).Run(Step::kTriangulate, Step::kTriangulate, &work);
   std::swap(work.map, map_);
   if (!s.ok()) return node_->FailScan(id, s.message());
-  std::vector<point_cloud_t> chunks = ToMessages(id, map_.points, amplitude, context, work.stages);
-  // Its files (points.ply, the pictures) are written while the points travel, and are on disk
-  // before their last chunk goes: before the next stage can start.
-  s = node_->PublishChunks(channel::kPointCloud, &chunks, [&work] { return work.writes->Wait(); });
+  // Each chunk made as it is sent, into one message. Its files (points.ply, the pictures) are
+  // written while the points travel, and are on disk before their last chunk goes: before the
+  // next stage can start.
+  s = node_->PublishChunks(channel::kPointCloud,
+                           PointCloudChunks(id, map_.points, amplitude, context, work.stages),
+                           [&work] { return work.writes->Wait(); });
   if (!s.ok()) return node_->FailScan(id, s.message());
   node_->Count("scans triangulated");
   AnnounceHandedOn(node_, id, channel::kPointCloud);
