@@ -931,22 +931,33 @@ cv::Mat RandomTexture(cv::Size size = {1600, 1200}) {
   return texture;
 }
 
-// A daemon receiving TEXTURE on `bus` (asking again after 1 s, giving up after 10 s, by a clock
-// the test steps), and the products it made whole.
-struct TextureReceiver {
-  explicit TextureReceiver(lcm::LCM* bus)
+// A product as a test keeps it: its own pixels, which the receiver's next product cannot change.
+cv::Mat Copied(const cv::Mat& image) { return image.clone(); }
+using PointsAndAmplitude = std::pair<cv::Mat, cv::Mat>;
+PointsAndAmplitude Copied(const PointsAndAmplitude& map) {
+  return {map.first.clone(), map.second.clone()};
+}
+
+// A daemon receiving `channel`'s chunks on `bus` with `add` (asking again after 1 s, giving up
+// after 10 s, by a clock the test steps): the products it made whole, and its statuses.
+template <class Msg, class Product>
+struct ChunkReceiver {
+  ChunkReceiver(lcm::LCM* bus, const std::string& channel,
+                typename Assembler<Msg, Product>::AddFn add)
       : node("vellum-unit", bus, &clock),
         assembler(
-            &node, "TEXTURE", [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); },
-            [this](int64_t, cv::Mat* image, const texture_t&) {
+            &node, channel, std::move(add),
+            [this](int64_t, Product* product, const Msg&) {
               const std::lock_guard<std::mutex> lock(mutex);
-              products.push_back(image->clone());
+              products.push_back(Copied(*product));
             },
-            /*timeout_s=*/10, /*ask_after_s=*/1) {}
+            /*timeout_s=*/10, /*ask_after_s=*/1) {
+    node.Subscribe<status_t>("STATUS_UNIT", [this](const status_t& m) { statuses.push_back(m); });
+  }
   // Handles the bus and ticks until a product is whole or `seconds` have passed on the clock,
   // which moves a quarter of a second whenever the bus and the worker are quiet (so that what
   // was asked again comes before the next ask, however slow the machine); the products.
-  std::vector<cv::Mat> TickUntilWhole(lcm::LCM* bus, double seconds = 30) {
+  std::vector<Product> TickUntilWhole(lcm::LCM* bus, double seconds = 30) {
     const Clock::time_point end = clock.Now() + Seconds(seconds);
     while (Products().empty() && clock.Now() < end) {
       const int handled = bus->handleTimeout(10);
@@ -957,16 +968,38 @@ struct TextureReceiver {
     node.Drain();
     return Products();
   }
-  std::vector<cv::Mat> Products() {
+  // Handles the bus and the worker until `done` (at most 3000 rounds), the clock standing still.
+  void HandleUntil(lcm::LCM* bus, const std::function<bool()>& done) {
+    for (int round = 0; round < 3000 && !done(); ++round) {
+      bus->handleTimeout(10);
+      node.Drain();
+    }
+  }
+  std::vector<Product> Products() {
     const std::lock_guard<std::mutex> lock(mutex);
     return products;
   }
+  // The errors on the node's status, asked for now ("asked by the test"): none is -1.
+  int64_t ErrorsNow(lcm::LCM* bus) {
+    const size_t before = statuses.size();
+    node.SetState("idle", 0, "asked by the test");
+    for (int round = 0; round < 3000 && statuses.size() == before; ++round) bus->handleTimeout(10);
+    return statuses.size() == before ? -1 : statuses.back().errors;
+  }
+  std::string LastError() const { return statuses.empty() ? "" : statuses.back().last_error; }
 
   SteppedClock clock;
-  Node node;
   std::mutex mutex;
-  std::vector<cv::Mat> products;  // Guarded by mutex (the worker adds).
-  Assembler<texture_t, cv::Mat> assembler;
+  std::vector<Product> products;   // Guarded by mutex (the worker adds).
+  std::vector<status_t> statuses;  // The node's, as heard on the bus (the test's thread).
+  Node node;
+  Assembler<Msg, Product> assembler;
+};
+
+struct TextureReceiver : ChunkReceiver<texture_t, cv::Mat> {
+  explicit TextureReceiver(lcm::LCM* bus)
+      : ChunkReceiver(bus, "TEXTURE",
+                      [](const texture_t& m, cv::Mat* image) { return AddChunk(m, image); }) {}
 };
 
 // Chunks the bus lost (a loaded machine, a receiver paused) are asked again on RESEND and sent
@@ -1012,17 +1045,11 @@ TEST(Assembler, TheLastChunkComingWithOneMissingAsksForItAtOnceAndTheRecoveredLo
   for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
 
   TextureReceiver r(&bus);
-  std::vector<status_t> statuses;
-  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
   const Clock::time_point start = r.clock.Now();
   for (size_t i = 0; i < chunks.size(); ++i) {
     if (i != 1) bus.publish("TEXTURE", &chunks[i]);  // Chunk 1 lost.
   }
-  // Wait for the condition on the bus and the worker, the clock never moved.
-  for (int round = 0; round < 3000 && r.Products().empty(); ++round) {
-    bus.handleTimeout(10);
-    r.node.Drain();
-  }
+  r.HandleUntil(&bus, [&] { return !r.Products().empty(); });
   const std::vector<cv::Mat> products = r.Products();
   ASSERT_EQ(products.size(), 1u) << "not recovered without the clock moving";
   EXPECT_EQ(r.clock.Now(), start);
@@ -1034,10 +1061,7 @@ TEST(Assembler, TheLastChunkComingWithOneMissingAsksForItAtOnceAndTheRecoveredLo
   // product not begun again nor asked for.
   bus.publish("TEXTURE", &chunks[0]);
   bus.publish("TEXTURE", &chunks[1]);
-  for (int round = 0; round < 3000 && r.node.Counter("chunks heard again") < 2; ++round) {
-    bus.handleTimeout(10);
-    r.node.Drain();
-  }
+  r.HandleUntil(&bus, [&] { return r.node.Counter("chunks heard again") >= 2; });
   EXPECT_EQ(r.node.Counter("chunks heard again"), 2);
   r.clock.Advance(5);  // Long past a second of quiet: nothing is being built, nothing asked.
   for (int k = 0; k < 5; ++k) {
@@ -1047,10 +1071,7 @@ TEST(Assembler, TheLastChunkComingWithOneMissingAsksForItAtOnceAndTheRecoveredLo
   }
   EXPECT_EQ(r.node.Counter("chunks asked again"), 1);
   EXPECT_EQ(r.Products().size(), 1u);
-  r.node.SetState("idle", 0, "asked by the test");  // A status now, with the errors so far.
-  for (int round = 0; round < 3000 && statuses.empty(); ++round) bus.handleTimeout(10);
-  ASSERT_FALSE(statuses.empty());
-  EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
+  EXPECT_EQ(r.ErrorsNow(&bus), 0) << r.LastError();
 }
 
 // A product's last chunk lost: nothing comes after it to show the loss but its sender's
@@ -1069,15 +1090,10 @@ TEST(Assembler, ALostLastChunkIsAskedForWhenItsSenderAnnouncesTheProductSent) {
 
   TextureReceiver r(&bus);
   r.assembler.AwaitAnnounced("TEXTURE");
-  std::vector<status_t> statuses;
-  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
   const Clock::time_point start = r.clock.Now();
   for (size_t i = 0; i + 1 < chunks.size(); ++i) bus.publish("TEXTURE", &chunks[i]);
   AnnounceHandedOn(&sender, 9, "TEXTURE");  // The last chunk lost on the way.
-  for (int round = 0; round < 3000 && r.Products().empty(); ++round) {
-    bus.handleTimeout(10);
-    r.node.Drain();
-  }
+  r.HandleUntil(&bus, [&] { return !r.Products().empty(); });
   const std::vector<cv::Mat> products = r.Products();
   ASSERT_EQ(products.size(), 1u) << "not recovered without the clock moving";
   EXPECT_EQ(r.clock.Now(), start);
@@ -1092,10 +1108,7 @@ TEST(Assembler, ALostLastChunkIsAskedForWhenItsSenderAnnouncesTheProductSent) {
   }
   EXPECT_EQ(r.node.Counter("chunks asked again"), 1);
   EXPECT_EQ(r.node.Counter("products asked again"), 0);
-  r.node.SetState("idle", 0, "asked by the test");  // A status now, with the errors so far.
-  for (int round = 0; round < 3000 && statuses.empty(); ++round) bus.handleTimeout(10);
-  ASSERT_FALSE(statuses.empty());
-  EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
+  EXPECT_EQ(r.ErrorsNow(&bus), 0) << r.LastError();
 }
 
 // A new send of a product comes while this receiver is asking for a chunk of the first (its
@@ -1114,10 +1127,7 @@ TEST(Assembler, ANewSendWhileAskingForALostChunkIsBuiltAloneNotMixedWithTheFirst
     b[i].seq = 200 + static_cast<int64_t>(i);
     if (i != 1) bus.publish("TEXTURE", &a[i]);  // Chunk 1 of the first send lost: asked for.
   }
-  for (int round = 0; round < 3000 && r.node.Counter("chunks asked again") < 1; ++round) {
-    bus.handleTimeout(10);
-    r.node.Drain();
-  }
+  r.HandleUntil(&bus, [&] { return r.node.Counter("chunks asked again") >= 1; });
   ASSERT_EQ(r.node.Counter("chunks asked again"), 1);
   for (const texture_t& m : b) bus.publish("TEXTURE", &m);  // The new send, whole.
   const std::vector<cv::Mat> products = r.TickUntilWhole(&bus);
@@ -1145,51 +1155,24 @@ TEST(Assembler, APointMapSentAsItsChunksAreMadeArrivesBitForBitAndIsSentAgainAsS
   maker.make(maker.count - 1, &last);
   ASSERT_LT(last.row_count, first.row_count) << "the test wants a shorter last chunk";
 
-  using Map = std::pair<cv::Mat, cv::Mat>;  // Points, amplitude.
-  struct Receiver {
-    explicit Receiver(lcm::LCM* bus)
-        : node("vellum-unit", bus, &clock),
-          assembler(
-              &node, "POINT_CLOUD",
-              [](const point_cloud_t& m, Map* map) {
-                return AddChunk(m, &map->first, &map->second);
-              },
-              [this](int64_t, Map* map, const point_cloud_t&) {
-                const std::lock_guard<std::mutex> lock(mutex);
-                maps.push_back({map->first.clone(), map->second.clone()});
-              }) {}
-    std::vector<Map> Maps() {
-      const std::lock_guard<std::mutex> lock(mutex);
-      return maps;
-    }
-    SteppedClock clock;
-    Node node;
-    std::mutex mutex;
-    std::vector<Map> maps;
-    Assembler<point_cloud_t, Map> assembler;
+  struct MapReceiver : ChunkReceiver<point_cloud_t, PointsAndAmplitude> {
+    explicit MapReceiver(lcm::LCM* bus)
+        : ChunkReceiver(bus, "POINT_CLOUD", [](const point_cloud_t& m, PointsAndAmplitude* map) {
+            return AddChunk(m, &map->first, &map->second);
+          }) {}
   };
-  auto until_whole = [&bus](Receiver* r) {
-    // The clock moves only while the bus is quiet, so a slow machine never makes chunks late.
-    for (int round = 0; round < 3000 && r->Maps().empty(); ++round) {
-      const int handled = bus.handleTimeout(10);
-      r->assembler.Tick();
-      r->node.Drain();
-      if (handled == 0) r->clock.Advance(0.25);
-    }
-    return r->Maps();
-  };
-  Receiver on_time(&bus);
+  MapReceiver on_time(&bus);
   ASSERT_TRUE(sender.PublishChunks("POINT_CLOUD", maker).ok());
-  std::vector<Map> maps = until_whole(&on_time);
+  std::vector<PointsAndAmplitude> maps = on_time.TickUntilWhole(&bus);
   ASSERT_EQ(maps.size(), 1u);
   EXPECT_TRUE(SameBits(maps[0].first, points));
   EXPECT_TRUE(SameBits(maps[0].second, amplitude));
   EXPECT_EQ(on_time.node.Counter("chunks asked again"), 0);
 
-  Receiver late(&bus);
+  MapReceiver late(&bus);
   late.assembler.AwaitAnnounced("POINT_CLOUD");
   AnnounceHandedOn(&sender, 5, "POINT_CLOUD");
-  maps = until_whole(&late);
+  maps = late.TickUntilWhole(&bus);
   ASSERT_EQ(maps.size(), 1u) << "not sent again";
   EXPECT_TRUE(SameBits(maps[0].first, points));
   EXPECT_TRUE(SameBits(maps[0].second, amplitude));
@@ -1209,8 +1192,6 @@ TEST(Assembler, AChunkSentAgainForAnotherReceiverMidProductIsNotTakenForANewSend
     chunks[i].seq = 500 + static_cast<int64_t>(i);
   }
   TextureReceiver r(&bus);
-  std::vector<status_t> statuses;
-  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
   bus.publish("TEXTURE", &chunks[0]);
   bus.publish("TEXTURE", &chunks[1]);
   bus.publish("TEXTURE", &chunks[0]);  // Again, for someone else.
@@ -1220,10 +1201,7 @@ TEST(Assembler, AChunkSentAgainForAnotherReceiverMidProductIsNotTakenForANewSend
   EXPECT_EQ(cv::norm(products[0], texture, cv::NORM_INF), 0.0);
   EXPECT_EQ(r.node.Counter("chunks heard again"), 1);
   EXPECT_EQ(r.node.Counter("chunks asked again"), 0);
-  r.node.SetState("idle", 0, "asked by the test");
-  for (int round = 0; round < 3000 && statuses.empty(); ++round) bus.handleTimeout(10);
-  ASSERT_FALSE(statuses.empty());
-  EXPECT_EQ(statuses.back().errors, 0) << statuses.back().last_error;
+  EXPECT_EQ(r.ErrorsNow(&bus), 0) << r.LastError();
 }
 
 // A sender's work before its last chunk (its files put on disk while the others travel) runs
@@ -1340,34 +1318,31 @@ TEST(Assembler, WhatNoOneSendsAgainIsGivenUpAfterTheTimeoutNamingWhatIsMissing) 
   ASSERT_GE(chunks.size(), 3u);
   TextureReceiver r(&bus);
   r.assembler.AwaitAnnounced("TEXTURE");
-  std::vector<status_t> statuses;
-  r.node.Subscribe<status_t>("STATUS_UNIT", [&](const status_t& m) { statuses.push_back(m); });
-  auto last_error = [&] { return statuses.empty() ? std::string() : statuses.back().last_error; };
   chunks[0].station = kDefaultStation;
   bus.publish("TEXTURE", &chunks[0]);  // One chunk of scan 14; no sender holds it.
   EXPECT_TRUE(r.TickUntilWhole(&bus, 9.5).empty());
-  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 0) << last_error();
+  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 0) << r.LastError();
   // Asked again about every second (each ask waits a second, the clock moves in quarters).
   EXPECT_GE(r.node.Counter("chunks asked again"), 6 * static_cast<int64_t>(chunks.size() - 1));
   EXPECT_TRUE(r.TickUntilWhole(&bus, 1).empty());
   for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
   EXPECT_EQ(r.node.Counter(counter::kProductsLost), 1);
-  EXPECT_NE(last_error().find("scan 14: TEXTURE incomplete (chunks 1, "), std::string::npos)
-      << last_error();
-  EXPECT_NE(last_error().find("after 10 s, asked again"), std::string::npos) << last_error();
+  EXPECT_NE(r.LastError().find("scan 14: TEXTURE incomplete (chunks 1, "), std::string::npos)
+      << r.LastError();
+  EXPECT_NE(r.LastError().find("after 10 s, asked again"), std::string::npos) << r.LastError();
 
   // Scan 15 announced by its sender; not a chunk comes.
   Node sender("vellum-sender", &bus);
   AnnounceHandedOn(&sender, 15, "TEXTURE");
   EXPECT_TRUE(r.TickUntilWhole(&bus, 9.5).empty());
-  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 1) << last_error();
+  EXPECT_EQ(r.node.Counter(counter::kProductsLost), 1) << r.LastError();
   EXPECT_GE(r.node.Counter("products asked again"), 6);
   EXPECT_TRUE(r.TickUntilWhole(&bus, 1).empty());
   for (int k = 0; k < 10; ++k) bus.handleTimeout(1);
   EXPECT_EQ(r.node.Counter(counter::kProductsLost), 2);
-  EXPECT_NE(last_error().find("scan 15: TEXTURE announced by its sender and never came"),
+  EXPECT_NE(r.LastError().find("scan 15: TEXTURE announced by its sender and never came"),
             std::string::npos)
-      << last_error();
+      << r.LastError();
 }
 
 // A hung job on the worker (a stage that never returns) is reported as stuck and
