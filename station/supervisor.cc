@@ -55,13 +55,15 @@ std::vector<int64_t> FindPending(const std::string& data_dir) {
   return ids;
 }
 
-void AnnounceHandedOn(Node* node, int64_t scan_id, const std::string& product) {
+void AnnounceHandedOn(Node* node, int64_t scan_id, const std::string& product,
+                      const std::string& counter) {
   scan_progress_t m{};
   m.scan_id = scan_id;
   m.process = node->process();
   m.pid = static_cast<int32_t>(getpid());
   m.product = product;
   node->Publish(channel::kScanProgress, &m);
+  if (!counter.empty()) node->Count(counter);
 }
 
 Supervisor::Supervisor(Node* node, std::string data_dir, Send send)
@@ -136,8 +138,7 @@ void Supervisor::OnStatus(const status_t& msg) {
     sent_at_start_ = true;
     for (const auto& [id, index] : reached_) {
       if (index >= 0 && static_cast<size_t>(index) + 1 < kChainLength) {
-        AnnounceHandedOn(node_, id, kChain[index].product);
-        node_->Count("products announced again");
+        AnnounceHandedOn(node_, id, kChain[index].product, "products announced again");
       }
     }
     SendAgain(

@@ -44,8 +44,13 @@ int PendingAttempts(const ScanFolder& folder);  // 0: not pending.
 void ClearPending(const ScanFolder& folder);
 std::vector<int64_t> FindPending(const std::string& data_dir);  // Ascending.
 
-// Announces on SCAN_PROGRESS that this process has handed `scan_id` on with `product`.
-void AnnounceHandedOn(Node* node, int64_t scan_id, const std::string& product);
+// Announces on SCAN_PROGRESS that this process has handed `scan_id` on with `product`, then
+// counts it in `counter` (when one is named). In that order, so that no status (a heartbeat may
+// go out between the two) counts a scan as handed on before its announcement is on the bus: a
+// daemon started by whoever waited for that count (systemd, a test) cannot hear it, and so cannot
+// take the scan up from the announcement instead of from the supervisor's ledger.
+void AnnounceHandedOn(Node* node, int64_t scan_id, const std::string& product,
+                      const std::string& counter = "");
 
 class Supervisor {
  public:

@@ -352,8 +352,7 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
   static_cast<void>(node_->PublishChunks(
       channel::kCorrespondence,
       CorrespondenceChunks(id, decoded_, scan.sequence.projector_size, work.context, work.stages)));
-  node_->Count("scans decoded");
-  AnnounceHandedOn(node_, id, channel::kCorrespondence);
+  AnnounceHandedOn(node_, id, channel::kCorrespondence, "scans decoded");
   node_->Log("scan " + std::to_string(id) + ": decoded " + std::to_string(decoded_.stats.valid) +
              " pixels in " + std::to_string(report.seconds) + " s");
   node_->SetState("idle");

@@ -105,8 +105,7 @@ void FlattenerNode::Process(int64_t id, const point_cloud_t& last) {
                std::to_string(page.flat.mean_strain) + " max " +
                std::to_string(page.flat.max_strain));
   }
-  node_->Count("scans flattened");
-  AnnounceHandedOn(node_, id, channel::kFlatMesh);
+  AnnounceHandedOn(node_, id, channel::kFlatMesh, "scans flattened");
   node_->SetState("idle");
 }
 

@@ -80,7 +80,8 @@ TEST_F(FlattenerNodeTest, FlattensTheSheetAsTheStagesDoAndHandsItOn) {
   EXPECT_EQ(stages[3].stage, "mesh");
   EXPECT_EQ(stages[4].stage, "flatten");
   EXPECT_TRUE(fs::exists(ScanFolder::For(options_.data_dir, 5).results() + "/flat.ply"));
-  EXPECT_EQ(node.Counter("scans flattened"), 1);
+  EXPECT_TRUE(bus_.RunUntil(
+      [&] { return node.Counter("scans flattened") == 1; }));  // Counted after it is announced.
 }
 
 // The report's picture of the texture is written as the texture comes, before the scan's
@@ -137,7 +138,8 @@ TEST_F(FlattenerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
   PublishTexture(9, SmallScan().texture);
   PublishPoints(9);
   EXPECT_TRUE(bus_.RunUntil([&] { return !progress->empty(); }));
-  EXPECT_EQ(node.Counter("scans flattened"), 1);
+  EXPECT_TRUE(bus_.RunUntil(
+      [&] { return node.Counter("scans flattened") == 1; }));  // Counted after it is announced.
 }
 
 TEST(FlattenerNodeOptions, NonsenseIsRefusedByName) {

@@ -311,9 +311,8 @@ void RestorerNode::Finish(int64_t id, Pages* pages) {
   // the sheet up to date).
   const Status sheet = WriteContactSheet(options_.data_dir, &contact_sheet_);
   if (!sheet.ok()) node_->Log("contact sheet: " + sheet.message());
-  node_->Count("scans restored");
   node_->Publish(channel::kRestored, &out);
-  AnnounceHandedOn(node_, id, channel::kRestored);
+  AnnounceHandedOn(node_, id, channel::kRestored, "scans restored");
   for (const std::string& w : out.warnings)
     node_->Log("scan " + std::to_string(id) + ": warning: " + w);
   node_->Log("scan " + std::to_string(id) + ": restored " + std::to_string(out.npages) +

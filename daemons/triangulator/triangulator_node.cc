@@ -119,8 +119,7 @@ void TriangulatorNode::Process(int64_t id, const correspondence_t& last) {
                            PointCloudChunks(id, map_.points, amplitude, context, work.stages),
                            [&work] { return work.writes->Wait(); });
   if (!s.ok()) return node_->FailScan(id, s.message());
-  node_->Count("scans triangulated");
-  AnnounceHandedOn(node_, id, channel::kPointCloud);
+  AnnounceHandedOn(node_, id, channel::kPointCloud, "scans triangulated");
   // Its files hashed while the flattener finds the leaf, long before the restorer writes the
   // scan's manifest, which then need not read them again (points.ply is most of a scan's
   // results). One that cannot be hashed now, or a record not saved, the manifest hashes itself.
