@@ -121,12 +121,12 @@ void Node::SubscribeRaw(const std::string& channel,
   subscriptions_.push_back(lcm_->subscribe(channel, &RawHandler::Handle, handlers_.back().get()));
 }
 
-int64_t StatusCounter(const status_t& msg, const std::string& name) {
+int64_t StatusCounter(const status_t& msg, const std::string& name, int64_t absent) {
   const size_t n = std::min(msg.counter_names.size(), msg.counter_values.size());
   for (size_t k = 0; k < n; ++k) {
     if (msg.counter_names[k] == name) return msg.counter_values[k];
   }
-  return 0;
+  return absent;
 }
 
 void Node::PublishBytes(const std::string& channel, const std::vector<uint8_t>& bytes) {

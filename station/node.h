@@ -82,10 +82,15 @@ inline constexpr char kProductsAskedAgain[] = "products asked again";
 // Scans this process failed (counted before the error that names the scan goes out): the
 // projector stops a scan the decoder failed.
 inline constexpr char kScansFailed[] = "scans failed";
+// 1 when the restorer makes the albedo (it has a flat field) and so needs the projector's light
+// (the decoder's amplitude) carried in CORRESPONDENCE and POINT_CLOUD, 0 when it does not: the
+// decoder then leaves the light out, a quarter of those products' bytes. Not a count, a flag;
+// a restorer that does not say is sent the light.
+inline constexpr char kLightWanted[] = "projector light wanted";
 }  // namespace counter
 
 // A counter of a status message (0 when it has none).
-int64_t StatusCounter(const status_t& msg, const std::string& name);
+int64_t StatusCounter(const status_t& msg, const std::string& name, int64_t absent = 0);
 
 // The station id when none is configured. Stations that share a network (and a multicast
 // group) need ids of their own (docs/station.md, "Several gantries in one room").

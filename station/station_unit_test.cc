@@ -29,6 +29,7 @@
 #include "station/scan_log.h"
 #include "station/scan_store.h"
 #include "station/supervisor.h"
+#include "station/testing.h"
 #include "vellum/calibration_v1_t.hpp"
 #include "vellum/pattern_shown_v1_t.hpp"
 #include "vellum/point_cloud_t.hpp"
@@ -45,13 +46,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-bool SameBits(const cv::Mat& a, const cv::Mat& b) {
-  if (a.size() != b.size() || a.type() != b.type()) return false;
-  for (int y = 0; y < a.rows; ++y) {
-    if (std::memcmp(a.ptr(y), b.ptr(y), a.cols * a.elemSize()) != 0) return false;
-  }
-  return true;
-}
+using testing::SameBits;
 
 // Gray and colour at 8 and 16 bits a sample (a deeper camera's texture) come back bit for bit,
 // each under its own FourCC; the 16-bit ones little-endian as V4L2's Y16 is.

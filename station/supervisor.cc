@@ -115,6 +115,9 @@ void Supervisor::Finished(int64_t scan_id) {
 void Supervisor::OnStatus(const status_t& msg) {
   const int index = ChainIndex(msg.process);
   if (index <= 0) return;
+  if (static_cast<size_t>(index) + 1 == kChainLength) {  // The restorer, the light's only user.
+    light_wanted_ = StatusCounter(msg, counter::kLightWanted, /*absent=*/1) != 0;
+  }
   if (daemons_.count(msg.process) == 0) node_->Count("processing daemons heard");
   Daemon& seen = daemons_[msg.process];
   if (seen.pid != 0 && msg.pid != seen.pid) {

@@ -70,6 +70,9 @@ class Supervisor {
   void Failed(int64_t scan_id, const std::string& why);
   // Worker thread. The scan being recorded (0: none): never sent again from under the recorder.
   void Recording(int64_t scan_id) { recording_ = scan_id; }
+  // Worker thread. Whether the restorer wants the projector's light (counter::kLightWanted) in
+  // the products: true until a restorer's status says otherwise.
+  bool LightWanted() const { return light_wanted_; }
 
  private:
   struct Daemon {
@@ -92,6 +95,7 @@ class Supervisor {
   // Worker thread only (every handler posts its work there):
   std::map<std::string, Daemon> daemons_;  // The processing daemons after the decoder.
   std::map<int64_t, int> reached_;         // Scan -> chain index of the last to hand it on.
+  bool light_wanted_ = true;
   bool sent_at_start_ = false;
   int64_t recording_ = 0;
 };

@@ -348,10 +348,13 @@ Status DecoderNode::Send(int64_t id, const Scan& scan) {
     return decoded;
   }
   const StageReport& report = work.stages.back();
+  // The projector's light goes only to a restorer that makes the albedo from it.
+  DecodeResult sent = decoded_;  // Its maps' headers: nothing copied.
+  if (!supervisor_.LightWanted()) sent.amplitude = cv::Mat();
   // Each chunk made as it is sent, into one message.
   static_cast<void>(node_->PublishChunks(
       channel::kCorrespondence,
-      CorrespondenceChunks(id, decoded_, scan.sequence.projector_size, work.context, work.stages)));
+      CorrespondenceChunks(id, sent, scan.sequence.projector_size, work.context, work.stages)));
   AnnounceHandedOn(node_, id, channel::kCorrespondence, "scans decoded");
   node_->Log("scan " + std::to_string(id) + ": decoded " + std::to_string(decoded_.stats.valid) +
              " pixels in " + std::to_string(report.seconds) + " s");

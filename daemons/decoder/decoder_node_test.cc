@@ -482,6 +482,57 @@ TEST_F(DecoderNodeTest, WhenTheChainIsFirstWholeTheScansOnTheirWayAreAnnouncedNo
   EXPECT_EQ(PendingAttempts(ScanFolder::For(data_, 51)), 1);  // The same attempt, made whole.
 }
 
+// The projector's light (the decoder's amplitude, 4 of CORRESPONDENCE's 13 bytes a pixel) goes
+// down the chain only while the restorer wants it for the albedo: sent before a restorer is
+// heard, left out once the restorer says it makes no albedo (the rest of the product bit for bit
+// the same), and sent again once a restorer started with a flat field says it does.
+TEST_F(DecoderNodeTest, TheProjectorsLightGoesDownTheChainOnlyWhileTheRestorerWantsIt) {
+  Node node("vellum-decoder", &bus_.lcm(), &bus_.clock());
+  DecoderNode decoder(&node, options_);
+  auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
+  auto restorer = [&](int32_t pid, int64_t wanted) {
+    status_t m{};
+    m.process = "vellum-restorer";
+    m.pid = pid;
+    m.state = "idle";
+    m.counter_names = {counter::kLightWanted};
+    m.counter_values = {wanted};
+    m.ncounters = 1;
+    bus_.probe().Publish(StatusChannel(m.process), &m);
+  };
+  // Scan `id` sent (once, every chunk), as it came: its correspondences and light.
+  auto sent = [&](int64_t id, DecodeResult* decoded) {
+    EXPECT_TRUE(bus_.RunUntil([&] {
+      const auto chunks = std::count_if(correspondence->begin(), correspondence->end(),
+                                        [&](const correspondence_t& m) { return m.scan_id == id; });
+      return chunks > 0 && chunks == correspondence->back().chunk_count;
+    })) << id;
+    EXPECT_EQ(Sent(*correspondence, id), 1) << id;
+    cv::Size projector;
+    for (const correspondence_t& m : *correspondence) {
+      if (m.scan_id != id) continue;
+      EXPECT_TRUE(AddChunk(m, decoded, &projector).ok()) << id;
+    }
+  };
+  DecodeResult with_light, without, again;
+  PublishScan(61);
+  sent(61, &with_light);
+  EXPECT_EQ(with_light.amplitude.size(), SmallScan().camera_size) << "no restorer heard yet";
+  restorer(300, 0);
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("processing daemons heard") == 1; }));
+  PublishScan(62);
+  sent(62, &without);
+  EXPECT_TRUE(without.amplitude.empty()) << "the light went to a restorer that makes no albedo";
+  EXPECT_TRUE(testing::SameBits(without.projector_x, with_light.projector_x));
+  EXPECT_TRUE(testing::SameBits(without.projector_y, with_light.projector_y));
+  EXPECT_TRUE(testing::SameBits(without.valid, with_light.valid));
+  restorer(301, 1);  // Restarted with a flat field.
+  ASSERT_TRUE(bus_.RunUntil([&] { return node.Counter("restarts seen") == 1; }));
+  PublishScan(63);
+  sent(63, &again);
+  EXPECT_TRUE(testing::SameBits(again.amplitude, with_light.amplitude));
+}
+
 // A scan that loses its daemon twice (a scan that crashes or hangs the restorer each time) is
 // parked: marked failed on disk with the reason, out of the ledger, reported, and not sent again
 // after another restart of the daemon or of the decoder itself.

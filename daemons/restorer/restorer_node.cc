@@ -64,6 +64,8 @@ RestorerNode::RestorerNode(Node* node, const RestorerNodeOptions& options)
             Process(id, last);
           }) {
   sheets_.AwaitAnnounced(channel::kFlatMesh);
+  // The decoder sends the projector's light only to a restorer that makes the albedo.
+  node->Count(counter::kLightWanted, options.pipeline.flat_field.empty() ? 0 : 1);
   // The archival master is the texture as captured: begun as soon as the texture and the scan's
   // identity are here, while the patterns are still projected.
   node->Subscribe<scan_started_t>(channel::kScanStarted, [this](const scan_started_t& m) {
@@ -174,6 +176,9 @@ void RestorerNode::Process(int64_t id, const mesh_t& last) {
     work.map.points = cloud.points;
     work.amplitude = cloud.amplitude;
     if (!options_.pipeline.flat_field.empty() && work.amplitude.empty()) {
+      // Sent before the decoder heard that this restorer wants it (one started since with a
+      // flat field): counted as a product lost, so that the decoder makes the scan again.
+      node_->Count(counter::kProductsLost);
       return node_->FailScan(id,
                              "POINT_CLOUD came without the projector's light (amplitude), "
                              "which the albedo is made from");

@@ -156,7 +156,9 @@ TEST_F(RestorerNodeTest, BadInputIsReportedAndTheNodeGoesOn) {
 
 // With a studio field the reflectance is made from the point map, which the restorer hears as
 // the flattener does: a page that comes before it waits for it, and is restored when it comes.
-// With a flat field, a point map without the projector's light is refused by name.
+// With a flat field, a point map without the projector's light is refused by name, and counted
+// as a product lost (the decoder's supervisor makes the scan again). Each restorer says on its
+// status whether it wants the light: only one with a flat field does.
 TEST_F(RestorerNodeTest, WithAFieldAPageWaitsForItsPointMapAndIsRestoredWhenItComes) {
   const Calibration rig = QuickRig();
   StudioField studio;
@@ -201,6 +203,10 @@ TEST_F(RestorerNodeTest, WithAFieldAPageWaitsForItsPointMapAndIsRestoredWhenItCo
   Publish(10, Sheet(10));
   EXPECT_TRUE(bus_.WaitForError("vellum-restorer-flat", "came without the projector's light"))
       << bus_.Status("vellum-restorer-flat").last_error;
+  EXPECT_EQ(StatusCounter(bus_.Status("vellum-restorer-flat"), counter::kProductsLost), 1);
+  EXPECT_EQ(StatusCounter(bus_.Status("vellum-restorer-flat"), counter::kLightWanted, -1), 1);
+  EXPECT_EQ(StatusCounter(bus_.Status("vellum-restorer"), counter::kLightWanted, -1), 0)
+      << "a studio field alone needs no projector's light";
 }
 
 // A page whose point map never comes (the bus lost it, the triangulator died) waits 30 s by the
