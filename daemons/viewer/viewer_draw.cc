@@ -16,6 +16,53 @@ namespace {
 const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60), kCyan(255, 220, 0);
 const int kFormFields = static_cast<int>(IdentityForm().size());
 
+// The panels' images as scaled at the last draw, so that an image is scaled once, not ten times
+// a second: the draws go on while the chain works, on the same cores. Each entry holds its
+// source image (a header: its pixels shared), so that no new image can take the source's
+// address while the entry stands; images in the state are replaced, never written in place.
+// An entry not used by one draw is gone at the next.
+class ScaledImages {
+ public:
+  // Starts a draw: drops what the draw before it did not use.
+  void NextDraw() {
+    entries_.erase(
+        std::remove_if(entries_.begin(), entries_.end(), [](const Entry& e) { return !e.used; }),
+        entries_.end());
+    for (Entry& e : entries_) e.used = false;
+  }
+  // `image` (8-bit gray or BGR) as BGR scaled by `s`.
+  const cv::Mat& Scaled(const cv::Mat& image, double s) {
+    for (Entry& e : entries_) {
+      if (e.source.data == image.data && e.source.size() == image.size() &&
+          e.source.type() == image.type() && e.scale == s) {
+        e.used = true;
+        return e.scaled;
+      }
+    }
+    Entry& e = entries_.emplace_back();
+    e.source = image;
+    e.scale = s;
+    e.used = true;
+    cv::Mat bgr = image;
+    if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
+    cv::resize(bgr, e.scaled, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+    return e.scaled;
+  }
+
+ private:
+  struct Entry {
+    cv::Mat source, scaled;
+    double scale = 0;
+    bool used = false;
+  };
+  std::vector<Entry> entries_;
+};
+
+ScaledImages& Scaler() {
+  thread_local ScaledImages scaled;
+  return scaled;
+}
+
 // Draws `image` scaled to fit `box` of `canvas` (centred), with a caption above.
 // Returns where the image went on the canvas (empty when there is none).
 cv::Rect Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::string& caption) {
@@ -28,12 +75,9 @@ cv::Rect Panel(cv::Mat& canvas, cv::Rect box, const cv::Mat& image, const std::s
                 cv::Scalar(140, 140, 140), 1, cv::LINE_AA);
     return cv::Rect();
   }
-  cv::Mat bgr = image;
-  if (bgr.channels() == 1) cv::cvtColor(bgr, bgr, cv::COLOR_GRAY2BGR);
-  const double s = std::min(static_cast<double>(inner.width) / bgr.cols,
-                            static_cast<double>(inner.height) / bgr.rows);
-  cv::Mat scaled;
-  cv::resize(bgr, scaled, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
+  const double s = std::min(static_cast<double>(inner.width) / image.cols,
+                            static_cast<double>(inner.height) / image.rows);
+  const cv::Mat& scaled = Scaler().Scaled(image, s);
   const cv::Rect at(inner.x + (inner.width - scaled.cols) / 2,
                     inner.y + (inner.height - scaled.rows) / 2, scaled.cols, scaled.rows);
   const cv::Rect shown = at & cv::Rect(0, 0, canvas.cols, canvas.rows);
@@ -492,6 +536,7 @@ void DrawFailure(const ViewerState& s, cv::Mat& canvas, cv::Rect area) {
 
 cv::Mat DrawViewer(const ViewerState& s, cv::Size size, Clock::time_point now,
                    ViewerLayout* layout) {
+  Scaler().NextDraw();
   cv::Mat canvas(size, CV_8UC3, cv::Scalar(30, 30, 30));
   const int w = size.width, h = size.height, top = 44;
   DrawHeader(s, canvas, top);

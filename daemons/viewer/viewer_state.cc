@@ -164,6 +164,9 @@ std::string ViewerState::FailureNextStep() const {
 void ViewerState::OnPreview(const cv::Mat& image, Clock::time_point now, bool of_capture) {
   last_preview_ = now;                   // The camera is alive...
   if (capturing_ || of_capture) return;  // ...but shows the patterns: the live frame is held.
+  // A picture of its own, never the last one's pixels: the draws keep what they scaled by the
+  // pixels' address (viewer_draw.cc), and hold the picture they scaled it from.
+  preview_shown_ = cv::Mat();
   preview_clipped_ = ClippingView(image, &preview_shown_, &preview_hist_);
   // The leaf as it is being placed: outlined green, red once it runs off the view.
   const Outline leaf = LeafInPreview(image);

@@ -573,5 +573,26 @@ TEST(ViewerDraw, ThePreviewIsWhereTheLayoutSaysAndNoSignalFollowsTheTimeGiven) {
   EXPECT_TRUE(layout.preview.empty());
 }
 
+// The draws scale each picture once and keep it while it is shown (ten draws a second share the
+// cores with the chain): a new preview of the same size and kind (gray, as a mono camera sends
+// it) is drawn as itself, not as the last one's picture, and the page shown is drawn again from
+// what was scaled, the same pixels.
+TEST(ViewerDraw, ANewPictureIsDrawnAsItselfAndAPictureShownAgainIsTheSame) {
+  ViewerState v;
+  const Clock::time_point t0 = Clock::Steady().Now();
+  const cv::Size size(960, 540);
+  ViewerLayout layout;
+  auto mean_of_preview = [&](const cv::Mat& drawn) { return cv::mean(drawn(layout.preview))[1]; };
+  v.OnPreview(cv::Mat(240, 320, CV_8UC1, cv::Scalar(40)), t0);
+  const cv::Mat dark = DrawViewer(v, size, t0, &layout);
+  ASSERT_FALSE(layout.preview.empty());
+  v.OnPreview(cv::Mat(240, 320, CV_8UC1, cv::Scalar(200)), t0);
+  const cv::Mat light = DrawViewer(v, size, t0, &layout);
+  EXPECT_LT(mean_of_preview(dark), 60);
+  EXPECT_GT(mean_of_preview(light), 180) << "the last preview's scaled picture was drawn again";
+  const cv::Mat again = DrawViewer(v, size, t0, &layout);
+  EXPECT_EQ(cv::norm(light, again, cv::NORM_INF), 0);
+}
+
 }  // namespace
 }  // namespace vellum::station
