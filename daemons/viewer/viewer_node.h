@@ -83,7 +83,10 @@ class ViewerNode {
   int64_t shown_ = 0;            // The scan whose restored page was last drawn (its status).
   ViewerLayout layout_;          // Of the last draw (the mouse reads it).
   cv::Point drag_from_{-1, -1};  // Where a drag on the preview began (window pixels).
-  std::chrono::steady_clock::time_point next_draw_;  // Real time: the drawing's pace.
+  // Real time: the drawing's pace (kPace), and its quickest for the operator (kQuickest).
+  static constexpr std::chrono::milliseconds kPace{250}, kQuickest{100};
+  std::chrono::steady_clock::time_point next_draw_, last_draw_;
+  bool operator_waits_ = false;  // Input or a focus view not yet drawn.
 };
 
 }  // namespace vellum::station
