@@ -1,7 +1,7 @@
 // vellum-viewer's node: what the operator at the gantry watches. The node is the glue: the bus
 // and the window's keys and mouse go into a ViewerState (viewer_state.h), which DrawViewer
-// (viewer_draw.h) draws at most ten times a second. A window with the live camera
-// preview (PREVIEW, never full frames), the scan's progress, every daemon's status from its
+// (viewer_draw.h) draws four times a second (ten while the operator acts). A window with the live
+// camera preview (PREVIEW, never full frames), the scan's progress, every daemon's status from its
 // heartbeat (alive, state, last error), and for each finished scan its texture, depth map,
 // strain map and the restored page side by side, with the leaf's outline over the texture and
 // a doubtful result's warnings in amber under the restored page, and its quality verdict
@@ -58,7 +58,7 @@ class ViewerNode {
   ViewerNode(Node* node, std::unique_ptr<display::Window> window,
              const ViewerNodeOptions& options = ViewerNodeOptions());
 
-  // On the LCM thread, often: handles keys and redraws (at most ten times a second).
+  // On the LCM thread, often: handles keys and redraws (see kPace).
   void Tick();
   const ViewerState& state() const { return state_; }
   // Where the preview was last drawn on the window (its pixels); empty before any.
