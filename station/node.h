@@ -89,7 +89,7 @@ inline constexpr char kScansFailed[] = "scans failed";
 inline constexpr char kLightWanted[] = "projector light wanted";
 }  // namespace counter
 
-// A counter of a status message (0 when it has none).
+// A counter of a status message (`absent` when it has none).
 int64_t StatusCounter(const status_t& msg, const std::string& name, int64_t absent = 0);
 
 // The station id when none is configured. Stations that share a network (and a multicast
