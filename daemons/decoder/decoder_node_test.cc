@@ -59,14 +59,23 @@ class DecoderNodeTest : public ::testing::Test {
     bus_.probe().Publish(channel::kScanStarted, &m);
   }
 
-  // A processing daemon's heartbeat (a new pid: it restarted).
-  void Heartbeat(const std::string& process, int32_t pid) {
+  // A processing daemon's status, idle, with one counter when `counter` is named.
+  static status_t DaemonStatus(const std::string& process, int32_t pid,
+                               const std::string& counter = "", int64_t value = 0) {
     status_t m{};
     m.process = process;
     m.pid = pid;
     m.state = "idle";
-    bus_.probe().Publish(StatusChannel(process), &m);
+    if (!counter.empty()) {
+      m.counter_names = {counter};
+      m.counter_values = {value};
+      m.ncounters = 1;
+    }
+    return m;
   }
+  void Publish(status_t m) { bus_.probe().Publish(StatusChannel(m.process), &m); }
+  // A processing daemon's heartbeat (a new pid: it restarted).
+  void Heartbeat(const std::string& process, int32_t pid) { Publish(DaemonStatus(process, pid)); }
   // How many times scan `id` was sent down the chain.
   static int Sent(const std::vector<correspondence_t>& correspondence, int64_t id) {
     int n = 0;
@@ -491,14 +500,7 @@ TEST_F(DecoderNodeTest, TheProjectorsLightGoesDownTheChainOnlyWhileTheRestorerWa
   DecoderNode decoder(&node, options_);
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
   auto restorer = [&](int32_t pid, int64_t wanted) {
-    status_t m{};
-    m.process = "vellum-restorer";
-    m.pid = pid;
-    m.state = "idle";
-    m.counter_names = {counter::kLightWanted};
-    m.counter_values = {wanted};
-    m.ncounters = 1;
-    bus_.probe().Publish(StatusChannel(m.process), &m);
+    Publish(DaemonStatus("vellum-restorer", pid, counter::kLightWanted, wanted));
   };
   // Scan `id` sent (once, every chunk), as it came: its correspondences and light.
   auto sent = [&](int64_t id, DecodeResult* decoded) {
@@ -590,17 +592,11 @@ TEST_F(DecoderNodeTest, AScanWhoseProductTheBusLostIsSentAgainAndOtherErrorsFail
   auto correspondence = bus_.Record<correspondence_t>(channel::kCorrespondence);
   auto sent = [&](int64_t id) { return Sent(*correspondence, id); };
   auto status = [&](int32_t pid, int64_t error_scan, int64_t error_utime, int64_t lost) {
-    status_t m{};
-    m.process = "vellum-flattener";
-    m.pid = pid;
-    m.state = "idle";
-    m.counter_names = {counter::kProductsLost};
-    m.counter_values = {lost};
-    m.ncounters = 1;
+    status_t m = DaemonStatus("vellum-flattener", pid, counter::kProductsLost, lost);
     m.last_error_scan_id = error_scan;
     m.last_error_utime = error_utime;
     m.last_error = error_scan ? "scan " + std::to_string(error_scan) + ": an error" : "";
-    bus_.probe().Publish(StatusChannel("vellum-flattener"), &m);
+    Publish(m);
   };
   Heartbeat("vellum-triangulator", 100);
   status(200, 0, 0, 0);

@@ -16,8 +16,8 @@ namespace {
 const cv::Scalar kRed(40, 40, 220), kAmber(0, 170, 255), kGreen(60, 190, 60), kCyan(255, 220, 0);
 const int kFormFields = static_cast<int>(IdentityForm().size());
 
-// The panels' images as scaled at the last draw, so that an image is scaled once, not ten times
-// a second: the draws go on while the chain works, on the same cores. Each entry holds its
+// The panels' images as scaled at the last draw, so that an image is scaled once, not at every
+// draw: the draws go on while the chain works, on the same cores. Each entry holds its
 // source image (a header: its pixels shared), so that no new image can take the source's
 // address while the entry stands; images in the state are replaced, never written in place.
 // An entry not used by one draw is gone at the next.
